@@ -377,7 +377,7 @@ def _runs_of(name: str) -> int:
     return int(re.match(r"L(\d+)", name).group(1))  # type: ignore[union-attr]
 
 
-_NAME_RE = re.compile(r"L\s*(\d+)\s*(B?)\s*\(?\s*([^()]*?)\s*\)?")
+_NAME_RE = re.compile(r"L\s*(\d+)\s*(B?)\s*(?:\(\s*([^()]*?)\s*\)|([^()]*?))\s*")
 
 
 def _resolve(name: str) -> str:
@@ -391,7 +391,8 @@ def _resolve(name: str) -> str:
     match = _NAME_RE.fullmatch(text)
     candidates: list[str] = []
     if match:
-        runs, alt, spec = int(match.group(1)), match.group(2), match.group(3)
+        runs, alt = int(match.group(1)), match.group(2)
+        spec = match.group(3) if match.group(3) is not None else match.group(4)
         same_runs = [n for n in _BUILDERS if _runs_of(n) == runs]
         terms = re.findall(r"(\d+)\s*\^\s*(\d+)", spec)
         leftover = re.sub(r"(\d+)\s*\^\s*(\d+)", "", spec).strip()
