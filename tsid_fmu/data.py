@@ -1,0 +1,345 @@
+"""Measured data: load a file (or take a DataFrame), derive channels, check it.
+
+Every problem is a :class:`~tsid_fmu.errors.DataError` whose message names the file
+and the column and row at fault, e.g.::
+
+    data.csv: column 'F_of' has non-numeric value 'n/a' in row 17
+
+Rows are counted like a spreadsheet user reads them: row 1 is the first data row.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from tsid_fmu.errors import DataError
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = ["MeasuredData", "load_data"]
+
+#: allowed relative deviation of a sampling interval from the median interval
+JITTER_TOLERANCE = 0.01
+
+#: functions an expression in ``derived`` may call (numpy ufuncs only)
+_FUNCTIONS = {"abs", "sqrt", "exp", "expm1", "log", "log1p", "log10", "sin", "cos",
+              "tan", "arcsin", "arccos", "arctan", "arctan2", "sinh", "cosh", "tanh",
+              "arcsinh", "arccosh", "arctanh"}
+_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z_0-9]*")
+
+
+@dataclass
+class MeasuredData:
+    """Measured time series on a uniform time grid.
+
+    Attributes
+    ----------
+    path : str
+        The source file (or ``"<frame>"`` for data given as a DataFrame).
+    time : numpy.ndarray
+        Sample times, ``float64``, strictly increasing and uniformly spaced.
+    frame : pandas.DataFrame
+        Every numeric column, including derived ones (the time column too).
+    sample_time : float
+        The sampling interval (mean of the intervals).
+    time_column : str
+        Name of the time column in ``frame``.
+    """
+
+    path: str
+    time: np.ndarray
+    frame: pd.DataFrame
+    sample_time: float
+    time_column: str = field(default="time")
+
+    @property
+    def names(self) -> list[str]:
+        """Names of all columns, including derived ones."""
+        return [str(c) for c in self.frame.columns]
+
+    def column(self, name: str) -> np.ndarray:
+        """Return one column as a ``float64`` array.
+
+        Raises
+        ------
+        DataError
+            No such column (the message lists the columns and close matches).
+        """
+        if name not in self.frame.columns:
+            close = difflib.get_close_matches(name, self.names, n=3, cutoff=0.6)
+            hint = f" Did you mean {', '.join(map(repr, close))}?" if close else ""
+            raise DataError(f"{self.path}: no column {name!r}; columns are "
+                            f"{', '.join(self.names)}.{hint}")
+        return self.frame[name].to_numpy(dtype=np.float64)
+
+    def columns(self, names: Sequence[str]) -> np.ndarray:
+        """Return the named columns as an ``(n, k)`` ``float64`` array."""
+        if not names:
+            return np.zeros((len(self.time), 0))
+        return np.column_stack([self.column(n) for n in names])
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Return a copy of the data as a DataFrame indexed by time."""
+        return self.frame.set_index(self.time_column, drop=True).copy()
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    @classmethod
+    def from_frame(
+        cls,
+        df: pd.DataFrame,
+        time_column: str = "time",
+        *,
+        source: str = "<frame>",
+        derived: Mapping[str, str] | None = None,
+        sample_time: float | None = None,
+    ) -> MeasuredData:
+        """Check a DataFrame and wrap it (for scripts and notebooks).
+
+        Parameters
+        ----------
+        df : pandas.DataFrame
+            One column per channel, one of them the time.
+        time_column : str, optional
+            Name of the time column.
+        source : str, optional
+            Name used in error messages.
+        derived : mapping of str to str, optional
+            New channels as expressions over the columns, e.g. ``{"F": "F_of - F_or"}``.
+        sample_time : float, optional
+            The sampling interval the study expects; a different one is an error.
+
+        Returns
+        -------
+        MeasuredData
+
+        Raises
+        ------
+        DataError
+            See :func:`load_data`.
+        """
+        import pandas as pd
+
+        if not isinstance(df, pd.DataFrame):
+            raise DataError(f"{source}: expected a pandas DataFrame, got {type(df).__name__}")
+        frame = df.copy()
+        frame.columns = [str(c).strip() for c in frame.columns]
+        if frame.shape[0] == 0 or frame.shape[1] == 0:
+            raise DataError(f"{source}: no data (the table is empty)")
+        if time_column not in frame.columns:
+            close = difflib.get_close_matches(time_column, list(frame.columns), n=3, cutoff=0.5)
+            hint = f" Did you mean {', '.join(map(repr, close))}?" if close else ""
+            raise DataError(f"{source}: time column {time_column!r} not found; columns are "
+                            f"{', '.join(frame.columns)}.{hint}")
+        frame = _to_numeric(frame, source)
+        _check_finite(frame, source)
+        if derived:
+            frame = _derive(frame, derived, source)
+            _check_finite(frame[list(derived)], source)
+        time = frame[time_column].to_numpy(dtype=np.float64)
+        dt = _check_time(time, time_column, source)
+        if sample_time is not None and not np.isclose(dt, sample_time, rtol=JITTER_TOLERANCE,
+                                                      atol=0.0):
+            raise DataError(f"{source}: sample time is {dt:g} s but the study expects "
+                            f"{sample_time:g} s")
+        return cls(path=source, time=time, frame=frame.reset_index(drop=True),
+                   sample_time=dt, time_column=time_column)
+
+
+def _to_numeric(frame: pd.DataFrame, source: str) -> pd.DataFrame:
+    import pandas as pd
+
+    out = {}
+    for name in frame.columns:
+        col = frame[name]
+        if pd.api.types.is_bool_dtype(col) or pd.api.types.is_numeric_dtype(col):
+            out[name] = col.astype(np.float64)
+            continue
+        converted = pd.to_numeric(col, errors="coerce")
+        bad = converted.isna() & col.notna() & (col.astype(str).str.strip() != "")
+        if bad.any():
+            pos = int(np.flatnonzero(bad.to_numpy())[0])
+            raise DataError(f"{source}: column {name!r} has non-numeric value "
+                            f"{col.iloc[pos]!r} in row {pos + 1}")
+        out[name] = converted.astype(np.float64)
+    return pd.DataFrame(out, index=frame.index)
+
+
+def _check_finite(frame: pd.DataFrame, source: str) -> None:
+    values = frame.to_numpy(dtype=np.float64)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        # first offending row, then its first offending column
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        col = int(np.flatnonzero(bad[row])[0])
+        what = "missing (NaN)" if np.isnan(values[row, col]) else f"{values[row, col]}"
+        raise DataError(f"{source}: column {frame.columns[col]!r} is {what} in row {row + 1}")
+
+
+def _derive(frame: pd.DataFrame, derived: Mapping[str, str], source: str) -> pd.DataFrame:
+    import pandas as pd
+
+    frame = frame.copy()
+    for name, expression in derived.items():
+        columns = list(frame.columns)
+        for token in _NAME_RE.findall(expression):
+            if token not in frame.columns and token not in _FUNCTIONS:
+                raise DataError(
+                    f"{source}: derived channel {name!r} = {expression!r} uses unknown name "
+                    f"{token!r}; columns are {', '.join(columns)} (functions: "
+                    f"{', '.join(sorted(_FUNCTIONS))})")
+        resolvers = ({c: frame[c] for c in columns},)
+        try:
+            value = pd.eval(expression, local_dict={}, global_dict={}, resolvers=resolvers,
+                            engine="python", parser="pandas")
+        except Exception as exc:  # pandas raises SyntaxError, ValueError, TypeError, ...
+            raise DataError(f"{source}: cannot evaluate derived channel {name!r} = "
+                            f"{expression!r}: {exc}") from exc
+        array = np.broadcast_to(np.asarray(value, dtype=np.float64), (len(frame),))
+        frame[name] = array.copy()
+    return frame
+
+
+def _check_time(time: np.ndarray, time_column: str, source: str) -> float:
+    if time.size < 2:
+        raise DataError(f"{source}: at least 2 samples are needed, got {time.size}")
+    dt = np.diff(time)
+    bad = np.flatnonzero(dt <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1  # 0-based index of the offending sample
+        kind = "repeats" if dt[i - 1] == 0 else "goes back from"
+        raise DataError(f"{source}: column {time_column!r} is not strictly increasing: row "
+                        f"{i + 1} {kind} the previous time ({time[i - 1]:g} -> {time[i]:g})")
+    median = float(np.median(dt))
+    jitter = np.abs(dt - median) / median
+    bad = np.flatnonzero(jitter > JITTER_TOLERANCE)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise DataError(
+            f"{source}: non-uniform sampling in column {time_column!r} at row {i + 1}: "
+            f"interval {dt[i - 1]:g} s differs from the sample time {median:g} s by "
+            f"{100 * jitter[i - 1]:.1f} % (tolerance {100 * JITTER_TOLERANCE:g} %)")
+    return float((time[-1] - time[0]) / (time.size - 1))
+
+
+def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) -> pd.DataFrame:
+    import pandas as pd
+
+    suffix = path.suffix.lower()
+    try:
+        if suffix in (".csv", ".dat", ""):
+            frame = pd.read_csv(path, **{"sep": None, "engine": "python", **options})
+        elif suffix in (".tsv", ".txt"):
+            frame = pd.read_csv(path, **{"sep": r"\s+|\t|,|;", "engine": "python", **options})
+        elif suffix == ".parquet":
+            frame = pd.read_parquet(path, **options)
+        elif suffix == ".feather":
+            frame = pd.read_feather(path, **options)
+        elif suffix in (".xlsx", ".xls"):
+            frame = pd.read_excel(path, **options)
+        elif suffix == ".mat":
+            frame = _read_mat(path, options)
+        else:
+            frame = pd.read_csv(path, **{"sep": None, "engine": "python", **options})
+    except ImportError as exc:
+        raise DataError(f"{path}: reading {suffix} files needs an optional package: "
+                        f"{exc}") from exc
+    except pd.errors.EmptyDataError as exc:
+        raise DataError(f"{path}: the file is empty") from exc
+    except DataError:
+        raise
+    except (OSError, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: cannot read the file: {exc}") from exc
+    if columns is not None:
+        missing = [c for c in columns if c not in frame.columns]
+        if missing:
+            raise DataError(f"{path}: column(s) {', '.join(map(repr, missing))} not found; "
+                            f"columns are {', '.join(map(str, frame.columns))}")
+        frame = frame[list(columns)]
+    return frame
+
+
+def _read_mat(path: Path, options: Mapping[str, Any]) -> pd.DataFrame:
+    import pandas as pd
+    from scipy.io import loadmat
+
+    content = loadmat(path, squeeze_me=True, **options)
+    arrays = {k: np.asarray(v) for k, v in content.items() if not k.startswith("__")}
+    vectors = {k: v.astype(np.float64) for k, v in arrays.items()
+               if v.ndim == 1 and np.issubdtype(v.dtype, np.number)}
+    if not vectors:
+        raise DataError(f"{path}: no 1-D numeric variables in the .mat file")
+    lengths = {len(v) for v in vectors.values()}
+    if len(lengths) > 1:
+        raise DataError(f"{path}: the .mat variables have different lengths: "
+                        + ", ".join(f"{k}={len(v)}" for k, v in vectors.items()))
+    return pd.DataFrame(vectors)
+
+
+def load_data(
+    path: str | os.PathLike[str],
+    *,
+    time_column: str = "time",
+    columns: Sequence[str] | None = None,
+    derived: Mapping[str, str] | None = None,
+    sample_time: float | None = None,
+    read_options: Mapping[str, Any] | None = None,
+) -> MeasuredData:
+    """Load measured data and check it.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The data file; the reader follows the extension: ``.csv`` (default, separator
+        sniffed), ``.tsv``/``.txt`` (whitespace, tab, comma or semicolon), ``.parquet``,
+        ``.feather`` (need ``pyarrow``), ``.xlsx`` (needs ``openpyxl``), ``.mat``
+        (1-D variables of equal length).
+    time_column : str, optional
+        Name of the time column (seconds).
+    columns : sequence of str, optional
+        Keep only these columns (the time column must be among them).
+    derived : mapping of str to str, optional
+        Extra channels computed from columns, e.g. ``{"F_o": "F_of - F_or"}`` for
+        compression-only load cells.  Expressions may use column names, numbers,
+        arithmetic and the numpy functions ``abs, sqrt, exp, log, sin, cos, ...``;
+        nothing else is evaluated.
+    sample_time : float, optional
+        Expected sampling interval; a file with another one is rejected.
+    read_options : mapping, optional
+        Passed to the pandas reader (e.g. ``{"sep": ";", "decimal": ","}``).
+
+    Returns
+    -------
+    MeasuredData
+
+    Raises
+    ------
+    DataError
+        The file is missing, unreadable or empty; the time column is missing; a value is
+        not numeric, NaN or infinite; time is not strictly increasing or not uniformly
+        sampled (more than 1 % jitter); the sample time differs from ``sample_time``; an
+        expression in ``derived`` uses an unknown name.  The message names the file,
+        column and row.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"data file not found: {path}")
+    if not path.is_file():
+        raise DataError(f"{path}: not a file")
+    if path.stat().st_size == 0:
+        raise DataError(f"{path}: the file is empty")
+    if columns is not None and time_column not in columns:
+        columns = [time_column, *columns]
+    frame = _read(path, columns, dict(read_options or {}))
+    return MeasuredData.from_frame(frame, time_column, source=str(path), derived=derived,
+                                   sample_time=sample_time)
