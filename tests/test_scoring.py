@@ -1,0 +1,39 @@
+import numpy as np
+import pytest
+
+from tsid_fmu.errors import StudyError
+from tsid_fmu.scoring import Cost, fit_percent, metrics
+
+
+def test_costs_on_known_signals():
+    t = np.linspace(0, 2, 2001)
+    y = np.sin(t)
+    s = y + 0.5
+    assert Cost("iae")(t, y, s) == pytest.approx(1.0)
+    assert Cost("sse")(t, y, s) == pytest.approx(0.25 * t.size)
+    assert Cost("rmse")(t, y, s) == pytest.approx(0.5)
+    assert Cost("ise")(t, y, s) == pytest.approx(0.5)
+
+
+def test_fit_percent_and_nrmse():
+    y = np.array([0.0, 1.0, 2.0, 3.0])
+    assert fit_percent(y, y)[0] == pytest.approx(100)
+    assert fit_percent(y, np.full(4, y.mean()))[0] == pytest.approx(0)
+    m = metrics(np.arange(4.0), y, y + 0.1, ["out"])
+    assert m["out"]["fit_percent"] == pytest.approx(100 * (1 - m["out"]["nrmse"]))
+
+
+def test_weights_and_non_finite():
+    t = np.arange(5.0)
+    y = np.zeros((5, 2))
+    s = np.column_stack([np.ones(5), 2 * np.ones(5)])
+    assert Cost("sse", weights=(1, 0.5))(t, y, s) == pytest.approx(5 + 0.5 * 20)
+    s[2, 1] = np.nan
+    assert Cost("sse")(t, y, s) == np.inf
+    with pytest.raises(StudyError, match="weights"):
+        Cost("sse", weights=(1,))(t, y, np.ones((5, 2)))
+
+
+def test_unknown_cost_is_named():
+    with pytest.raises(StudyError, match="unknown cost 'mae'"):
+        Cost("mae")

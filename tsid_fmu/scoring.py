@@ -1,0 +1,157 @@
+"""Cost functions that score a simulated output against the measured one.
+
+The SISO paper scores a row by the integral of the absolute error (IAE); the MISO
+paper by the sum of squared errors (SSE). RMSE, NRMSE and the fit percentage
+``100 * (1 - NRMSE)`` are offered for reporting and as alternatives. With several
+outputs the per-output costs are combined with weights.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tsid_fmu.errors import StudyError
+
+__all__ = ["COSTS", "Cost", "fit_percent", "metrics"]
+
+
+def _iae(t: np.ndarray, e: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.trapezoid(np.abs(e), t, axis=0)
+
+
+def _ise(t: np.ndarray, e: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.trapezoid(e * e, t, axis=0)
+
+
+def _sse(t: np.ndarray, e: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.sum(e * e, axis=0)
+
+
+def _rmse(t: np.ndarray, e: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(e * e, axis=0))
+
+
+def _nrmse(t: np.ndarray, e: np.ndarray, y: np.ndarray) -> np.ndarray:
+    spread = np.linalg.norm(y - y.mean(axis=0), axis=0)
+    spread = np.where(spread > 0, spread, 1.0)
+    return np.linalg.norm(e, axis=0) / spread
+
+
+COSTS = {
+    "iae": _iae,
+    "ise": _ise,
+    "sse": _sse,
+    "rmse": _rmse,
+    "nrmse": _nrmse,
+}
+"""Cost kinds by name: each maps (time, error, measured) to one value per output."""
+
+
+@dataclass(frozen=True)
+class Cost:
+    """A scalar cost of a simulated response against the measured one.
+
+    Parameters
+    ----------
+    kind : {"iae", "ise", "sse", "rmse", "nrmse"}
+        ``iae`` is the integral of the absolute error (SISO paper), ``sse`` the sum of
+        squared errors (MISO paper), ``nrmse`` the error norm over the norm of the
+        measured signal about its mean (so that ``fit % = 100 * (1 - nrmse)``).
+    weights : sequence of float, optional
+        Weight per output column; default 1 for each.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.linspace(0.0, 1.0, 11)
+    >>> Cost("iae")(t, np.zeros(11), np.ones(11))
+    1.0
+    """
+
+    kind: str = "iae"
+    weights: tuple[float, ...] | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        kind = self.kind.lower()
+        if kind not in COSTS:
+            raise StudyError(
+                f"unknown cost {self.kind!r}; choose one of {', '.join(sorted(COSTS))}"
+            )
+        object.__setattr__(self, "kind", kind)
+        if self.weights is not None:
+            w = tuple(float(v) for v in self.weights)
+            if any(not np.isfinite(v) or v < 0 for v in w):
+                raise StudyError(f"cost weights must be finite and >= 0, got {w}")
+            object.__setattr__(self, "weights", w)
+
+    def per_output(
+        self, time: np.ndarray, measured: np.ndarray, simulated: np.ndarray
+    ) -> np.ndarray:
+        """Return the unweighted cost of each output column."""
+        y = _as_2d(measured)
+        e = _as_2d(simulated) - y
+        return COSTS[self.kind](np.asarray(time, dtype=float), e, y)
+
+    def __call__(self, time: np.ndarray, measured: np.ndarray, simulated: np.ndarray) -> float:
+        """Return the weighted total cost; ``inf`` if the simulation is not finite."""
+        sim = _as_2d(simulated)
+        if not np.all(np.isfinite(sim)):
+            return float("inf")
+        values = self.per_output(time, measured, sim)
+        if self.weights is None:
+            return float(np.sum(values))
+        if len(self.weights) != values.size:
+            raise StudyError(
+                f"cost has {len(self.weights)} weights but the study has {values.size} outputs"
+            )
+        return float(np.dot(values, self.weights))
+
+
+def fit_percent(measured: np.ndarray, simulated: np.ndarray) -> np.ndarray:
+    """Return the fit percentage ``100 * (1 - NRMSE)`` of each output column."""
+    y = _as_2d(measured)
+    return 100.0 * (1.0 - _nrmse(np.empty(0), _as_2d(simulated) - y, y))
+
+
+def metrics(
+    time: np.ndarray,
+    measured: np.ndarray,
+    simulated: np.ndarray,
+    names: Sequence[str] | None = None,
+) -> dict[str, dict[str, float]]:
+    """Return every cost kind and the fit percentage for each output.
+
+    Parameters
+    ----------
+    time : numpy.ndarray
+        Sample times, shape ``(n,)``.
+    measured, simulated : numpy.ndarray
+        Signals, shape ``(n,)`` or ``(n, k)``.
+    names : sequence of str, optional
+        Output names; default ``y0, y1, ...``.
+
+    Returns
+    -------
+    dict
+        ``{output name: {"iae": ..., "sse": ..., "rmse": ..., "nrmse": ..., "fit_percent": ...}}``.
+    """
+    y = _as_2d(measured)
+    s = _as_2d(simulated)
+    e = s - y
+    t = np.asarray(time, dtype=float)
+    names = list(names) if names is not None else [f"y{i}" for i in range(y.shape[1])]
+    out: dict[str, dict[str, float]] = {n: {} for n in names}
+    for kind, fn in COSTS.items():
+        for n, v in zip(names, fn(t, e, y), strict=True):
+            out[n][kind] = float(v)
+    for n, v in zip(names, fit_percent(y, s), strict=True):
+        out[n]["fit_percent"] = float(v)
+    return out
+
+
+def _as_2d(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    return a[:, None] if a.ndim == 1 else a
