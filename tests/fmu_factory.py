@@ -188,11 +188,13 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     for (size_t i = 0; i < n; i++) { if (vr[i] != 7) return fmi2Error; M->offset_on = v[i]; }
     return fmi2OK; }
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n,
-                         const fmi2String v[]) { (void)c; (void)vr; (void)n; (void)v; return fmi2Error; }
+                         const fmi2String v[]) {
+    (void)c; (void)vr; (void)n; (void)v; return fmi2Error; }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)c; (void)s; return fmi2Error; }
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { (void)c; (void)s; return fmi2Error; }
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)c; (void)s; return fmi2Error; }
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) {
+    (void)c; (void)s; return fmi2Error; }
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *n) {
     (void)c; (void)s; (void)n; return fmi2Error; }
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t n) {
@@ -418,7 +420,8 @@ def build_stub_library(tmp_dir: Path, name: str = "tsiddep") -> Path:
     tmp_dir = Path(tmp_dir)
     tmp_dir.mkdir(parents=True, exist_ok=True)
     src = tmp_dir / f"{name}.c"
-    src.write_text("int tsid_dep_value(void) { return 0; }\n")
+    src.write_text('__attribute__((visibility("default")))\n'
+                   "int tsid_dep_value(void) { return 0; }\n")
     lib = tmp_dir / f"lib{name}.so"
     _compile(src, lib, [], [])
     return lib
