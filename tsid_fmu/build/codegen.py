@@ -101,12 +101,39 @@ class Causalized:
         Variable layout.
     n_implicit : int
         Number of blocks solved by Newton iteration at run time.
+    zc : casadi.Function or None
+        ``(t, x, u, p) -> z``: event indicators, one per distinct relation ``a < b`` /
+        ``a <= b`` in the explicit equations (``z = b - a``; the relation holds when
+        ``z > 0``, resp. ``z >= 0``). ``None`` if there are none.
     """
 
     ode: Any
     eval: Any
     layout: Layout
     n_implicit: int
+    zc: Any = None
+
+
+def _relations(ca: Any, exprs: list[Any]) -> list[Any]:
+    """Distinct relations ``a < b``, ``a <= b`` in SX expressions, as indicators ``b - a``."""
+    seen: set[int] = set()
+    found: dict[str, Any] = {}
+    stack = [e for e in exprs]
+    while stack:
+        e = stack.pop()
+        h = e.element_hash()
+        if h in seen:
+            continue
+        seen.add(h)
+        if e.is_op(ca.OP_LT) or e.is_op(ca.OP_LE):
+            ind = ca.simplify(e.dep(1) - e.dep(0))
+            if not ind.is_constant():
+                key = str(ind)
+                if key not in found and str(-ind) not in found:
+                    found[key] = ind
+        for i in range(e.n_dep()):
+            stack.append(e.dep(i))
+    return list(found.values())
 
 
 def _tarjan(n: int, succ: list[list[int]]) -> list[list[int]]:
@@ -252,8 +279,11 @@ def causalize(model: FlatModel) -> Causalized:
         w = ca.vertcat(*vals[nx:]) if len(vals) > nx else ca.SX(0, 1)
         f_ode = ca.Function("ode", args, [dx], names, ["dx"])
         f_eval = ca.Function("eval", args, [dx, w], names, ["dx", "w"])
+        scalars = [dx[i] for i in range(dx.numel())] + [w[i] for i in range(w.numel())]
+        rel = _relations(ca, scalars)
+        f_zc = ca.Function("zc", args, [ca.vertcat(*rel)], names, ["z"]) if rel else None
         return Causalized(f_ode, f_eval, Layout(model.states, model.inputs, model.outputs,
-                                                model.parameters, model.locals), 0)
+                                                model.parameters, model.locals), 0, f_zc)
     return _causalize_implicit(model, unknowns, known_syms, known_vals, implicit, args, names)
 
 
@@ -331,6 +361,34 @@ def _causalize_implicit(
     return Causalized(f_ode, f_eval, layout, len(implicit))
 
 
+def _zc_adapter(zc: Any, ident: str) -> str:
+    if zc is None:
+        return """
+int model_zc(double t, const double *x, const double *u, const double *p, double *z) {
+    (void)t;
+    (void)x;
+    (void)u;
+    (void)p;
+    (void)z;
+    return 0;
+}
+"""
+    return f"""
+int model_zc(double t, const double *x, const double *u, const double *p, double *z) {{
+    const double *arg[{max(zc.sz_arg(), 1)}];
+    double *res[{max(zc.sz_res(), 1)}];
+    long long int iw[{max(zc.sz_iw(), 1)}];
+    double w[{max(zc.sz_w(), 1)}];
+    arg[0] = &t;
+    arg[1] = x;
+    arg[2] = u;
+    arg[3] = p;
+    res[0] = z;
+    return {ident}_zc(arg, res, iw, w, 0);
+}}
+"""
+
+
 def _c_double(v: float | None) -> str:
     if v is None:
         return "0.0"
@@ -392,6 +450,13 @@ def generate_c(
     )
     cg.add(ode)
     cg.add(ev)
+    nz = 0
+    zc = None
+    if causal.zc is not None:
+        zc = ca.Function(f"{ident}_zc", causal.zc.sx_in(), causal.zc.call(causal.zc.sx_in()),
+                         causal.zc.name_in(), causal.zc.name_out())
+        nz = zc.numel_out(0)
+        cg.add(zc)
     cg.generate(str(outdir) + "/")
 
     n_alg = len(lay.outputs) + len(lay.locals)
@@ -418,6 +483,7 @@ def generate_c(
 #define NY {len(lay.outputs)}
 #define NW {n_alg}
 #define NP {len(lay.parameters)}
+#define NZ {nz}
 #define X_OFF {lay.x_off}
 #define DX_OFF {lay.dx_off}
 #define U_OFF {lay.u_off}
@@ -435,6 +501,8 @@ int model_ode(double t, const double *x, const double *u, const double *p, doubl
 /* Derivatives and algebraic variables w = [outputs, locals]. Returns 0 on success. */
 int model_eval(double t, const double *x, const double *u, const double *p,
                double *dx, double *w);
+/* Event indicators z (NZ of them): one per relation a < b / a <= b, z = b - a. */
+int model_zc(double t, const double *x, const double *u, const double *p, double *z);
 
 #endif
 """
@@ -488,6 +556,6 @@ int model_eval(double t, const double *x, const double *u, const double *p,
     res[1] = wout;
     return {fun_eval}(arg, res, iw, w, 0);
 }}
-"""
+""" + _zc_adapter(zc, ident)
     (outdir / "model.c").write_text(c)
     return ["model.c", "model_casadi.c"]

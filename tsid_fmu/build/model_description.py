@@ -134,7 +134,9 @@ def model_description_xml(
             "description": model.description,
             "generationTool": generation_tool,
             "variableNamingConvention": "structured",
-            "numberOfEventIndicators": "0",
+            "numberOfEventIndicators": str(
+                causal.zc.numel_out(0) if causal.zc is not None else 0
+            ),
         },
     )
     caps = {

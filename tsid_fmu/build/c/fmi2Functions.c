@@ -13,12 +13,17 @@
  *
  * Co-Simulation integrates with the classical fourth-order Runge-Kutta method at
  * the fixed internal step fixedStepSize, inputs held constant over a communication
- * step. Time is taken from a step counter (t = t0 + n*h), not accumulated. A step
- * that produces a non-finite state or output returns fmi2Error with a log message.
+ * step. Time is taken from a step counter (t = t0 + n*h), not accumulated. The
+ * event indicators of the model (one per relation in its if-conditions) are
+ * checked after every internal step; when one changes sign, the step is cut at the
+ * crossing (bisection on the step length) and continued from there, so that e.g.
+ * the stick/slip switching of dry friction happens at the right state, not one
+ * step late. A step that produces a non-finite state or output returns fmi2Error
+ * with a log message.
  *
- * Model Exchange provides states and derivatives; the models have no event
- * indicators (numberOfEventIndicators = 0): discontinuities (e.g. dry friction)
- * are left to the integrator's step size control.
+ * Model Exchange provides states, derivatives and the same event indicators
+ * (numberOfEventIndicators = NZ); there are no discrete states, so event
+ * iteration is trivial.
  *
  * SPDX-License-Identifier: BSD-3-Clause
  */
@@ -50,7 +55,13 @@ typedef struct {
     double startTime;   /* time base of the step counter */
     long long nSteps;   /* internal steps since startTime (Co-Simulation) */
     int dirty;          /* derived variables (derivatives, outputs) must be recomputed */
+    double z[NZ + 1];   /* event indicators at the current state (Co-Simulation) */
 } InstanceData;
+
+/* Event location: bisection until the bracket is this short [s], at most this many
+ * located events per internal step (the rest of the step is then taken as is). */
+#define EVENT_TIME_TOL 1e-10
+#define MAX_EVENTS_PER_STEP 8
 
 typedef struct {
     InstanceData d;
@@ -161,6 +172,57 @@ static int rk4Step(InstanceData *d, double t, double h) {
     if (model_ode(t + h, xt, u, p, k4)) return 1;
     for (i = 0; i < NX; i++) x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     return 0;
+}
+
+#if NZ > 0
+/* Index of the first indicator whose sign class (z >= 0) differs, or -1. */
+static int crossed(const double *z0, const double *z1) {
+    int i;
+    for (i = 0; i < NZ; i++) {
+        if ((z0[i] >= 0.0) != (z1[i] >= 0.0)) return i;
+    }
+    return -1;
+}
+#endif
+
+/* One internal step of size h from t with event location. d->z must hold the event
+ * indicators at (t, x); on return it holds them at the new state. */
+static int stepWithEvents(InstanceData *d, double t, double h) {
+#if NZ > 0
+    double x0[NX + 1], z1[NZ + 1];
+    const double *u = U(d), *p = P(d);
+    double tau = 0.0; /* part of the step already taken */
+    int events = 0;
+    while (h - tau > 0.0) {
+        double rest = h - tau;
+        memcpy(x0, X(d), sizeof(double) * (NX + 1));
+        if (rk4Step(d, t + tau, rest)) return 1;
+        if (model_zc(t + h, X(d), u, p, z1)) return 1;
+        if (events < MAX_EVENTS_PER_STEP && crossed(d->z, z1) >= 0) {
+            double lo = 0.0, hi = rest;
+            while (hi - lo > EVENT_TIME_TOL) {
+                double mid = 0.5 * (lo + hi);
+                memcpy(X(d), x0, sizeof(double) * (NX + 1));
+                if (rk4Step(d, t + tau, mid)) return 1;
+                if (model_zc(t + tau + mid, X(d), u, p, z1)) return 1;
+                if (crossed(d->z, z1) >= 0) hi = mid; else lo = mid;
+            }
+            /* advance to just past the first crossing and continue from there */
+            memcpy(X(d), x0, sizeof(double) * (NX + 1));
+            if (rk4Step(d, t + tau, hi)) return 1;
+            if (model_zc(t + tau + hi, X(d), u, p, z1)) return 1;
+            memcpy(d->z, z1, sizeof(double) * NZ);
+            tau += hi;
+            events++;
+            continue;
+        }
+        memcpy(d->z, z1, sizeof(double) * NZ);
+        break;
+    }
+    return 0;
+#else
+    return rk4Step(d, t, h);
+#endif
 }
 
 /* ------------------------------------------------------------- common functions */
@@ -528,9 +590,17 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
     Instance *comp = (Instance *)c;
-    (void)eventIndicators;
+    InstanceData *d;
+    size_t i;
+    double z[NZ + 1];
     CHECK("fmi2GetEventIndicators", ANY_STATE);
-    if (ni != 0) return fail(comp, "fmi2GetEventIndicators: %s", "the model has none");
+    d = &comp->d;
+    if (ni != NZ) return fail(comp, "fmi2GetEventIndicators: %s", "wrong number of indicators");
+    if (NZ == 0) return fmi2OK;
+    if (model_zc(d->time, X(d), U(d), P(d), z)) {
+        return fail(comp, "fmi2GetEventIndicators: %s", "evaluation failed");
+    }
+    for (i = 0; i < ni; i++) eventIndicators[i] = z[i];
     return fmi2OK;
 }
 
@@ -602,13 +672,15 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
         return fmi2Error;
     }
     tEnd = currentCommunicationPoint + communicationStepSize;
+    /* inputs may have changed since the last step: indicators at the current point */
+    if (NZ > 0 && model_zc(d->time, X(d), U(d), P(d), d->z)) goto evalfail;
     nReal = communicationStepSize / h;
     n = (long long)floor(nReal + 0.5);
     if (n >= 1 && fabs(nReal - (double)n) <= 1e-9 * nReal) {
         /* communication step is a multiple of the internal step: t = t0 + k*h */
         for (k = 0; k < n; k++) {
             double t = d->startTime + (double)d->nSteps * h;
-            if (rk4Step(d, t, h)) goto evalfail;
+            if (stepWithEvents(d, t, h)) goto evalfail;
             d->nSteps++;
             if (!allFinite(X(d), NX, &bad)) goto nonfinite;
         }
@@ -619,7 +691,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
         if (n < 1) n = 1;
         hSub = communicationStepSize / (double)n;
         for (k = 0; k < n; k++) {
-            if (rk4Step(d, currentCommunicationPoint + (double)k * hSub, hSub)) goto evalfail;
+            if (stepWithEvents(d, currentCommunicationPoint + (double)k * hSub, hSub)) {
+                goto evalfail;
+            }
             if (!allFinite(X(d), NX, &bad)) goto nonfinite;
         }
         d->time = tEnd;
