@@ -134,9 +134,9 @@ def model_description_xml(
             "description": model.description,
             "generationTool": generation_tool,
             "variableNamingConvention": "structured",
-            "numberOfEventIndicators": str(
-                causal.zc.numel_out(0) if causal.zc is not None else 0
-            ),
+            # The event indicators are used inside Co-Simulation only: exposed to an ME
+            # solver, the stick band of dry friction makes it chatter at the band edge.
+            "numberOfEventIndicators": "0",
         },
     )
     caps = {
