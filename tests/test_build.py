@@ -1,0 +1,178 @@
+"""Tests of the Modelica -> FMU build (needs pymoca, casadi and a C compiler)."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pymoca")
+pytest.importorskip("casadi")
+if shutil.which("cc") is None and shutil.which("gcc") is None:  # pragma: no cover
+    pytest.skip("no C compiler", allow_module_level=True)
+
+from fmpy import read_model_description, simulate_fmu  # noqa: E402
+from fmpy.validation import validate_fmu  # noqa: E402
+
+from tsid_fmu.build import build_all, build_fmu, find_models, main  # noqa: E402
+from tsid_fmu.errors import BuildError  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "models"
+FMUS = ROOT / "fmus"
+DT = 1e-3
+
+OSC = """
+model Osc "Damped oscillator, written only in a test"
+  parameter Real k(unit = "N/m") = 400 "Stiffness";
+  parameter Real m(unit = "kg") = 1 "Mass";
+  parameter Real d(unit = "N.s/m") = 2 "Damping";
+  input Real F(unit = "N", start = 0) "Force";
+  output Real y(unit = "m") "Position";
+  Real x(unit = "m", start = 0.1, fixed = true) "Position state";
+  Real v(unit = "m/s", start = 0, fixed = true) "Velocity";
+equation
+  der(x) = v;
+  m * der(v) = F - k * x - d * v;
+  y = x;
+end Osc;
+"""
+
+LOOP = """
+model Loop "Nonlinear algebraic loop (solved by Newton at run time)"
+  parameter Real a = 0.5 "Cubic coefficient";
+  input Real u(start = 2) "Drive";
+  output Real y "Solution of y + a*y^3 = x";
+  Real x(start = 1, fixed = true) "State";
+equation
+  der(x) = u - x;
+  y + a * y^3 = x;
+end Loop;
+"""
+
+
+def _inputs(names, t, values):
+    sig = np.zeros(len(t), dtype=[("time", float)] + [(n, float) for n in names])
+    sig["time"] = t
+    for n, v in zip(names, values, strict=True):
+        sig[n] = v
+    return sig
+
+
+@pytest.fixture(scope="module")
+def rebuilt(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fmus")
+    assert main(["--models-dir", str(MODELS), "--out", str(out)]) == 0
+    return out
+
+
+def test_find_models():
+    assert list(find_models(MODELS)) == ["LSEA_MISO", "LSEA_SISO"]
+
+
+@pytest.mark.parametrize("name", ["LSEA_SISO", "LSEA_MISO"])
+def test_rebuilt_fmus_simulate_identically_to_committed(rebuilt, name):
+    new, old = rebuilt / f"{name}.fmu", FMUS / f"{name}.fmu"
+    assert validate_fmu(str(new)) == []
+    md = read_model_description(str(new))
+    inputs = [v.name for v in md.modelVariables if v.causality == "input"]
+    t = np.arange(0, 5.0 + DT / 2, DT)
+    F = np.where((t % 1.0) < 0.5, 1.0, -1.0) * (150 + 50 * np.floor(t))
+    vals = [F if n == "F_m" else 1e-3 * np.sin(2 * np.pi * t) for n in inputs]
+    sig = _inputs(inputs, t, vals)
+    kw = {"stop_time": 5.0, "step_size": DT, "output_interval": DT, "input": sig}
+    a = simulate_fmu(str(new), **kw)
+    b = simulate_fmu(str(old), **kw)
+    np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-12, atol=1e-9)
+
+
+def test_model_description_from_declarations(rebuilt):
+    md = read_model_description(str(rebuilt / "LSEA_SISO.fmu"))
+    v = {x.name: x for x in md.modelVariables}
+    assert v["K_s"].causality == "parameter" and v["K_s"].variability == "fixed"
+    assert v["K_s"].unit == "N/m" and float(v["K_s"].start) == 8600.0
+    assert v["F_cm"].description.startswith("Coulomb")
+    assert v["F_m"].causality == "input" and v["F_o"].causality == "output"
+    assert float(v["V_z"].start) == 0.001
+    assert v["fixedStepSize"].causality == "parameter"
+    assert md.coSimulation is not None and md.modelExchange is not None
+    srcs = md.buildConfigurations[0].sourceFileSets[0].sourceFiles
+    assert "fmi2Functions.c" in srcs and "model_casadi.c" in srcs
+    out = md.outputs[0]
+    assert out.variable.name == "F_o"
+    assert sorted(d.name for d in out.dependencies) == ["v_m", "x_m"]
+    miso = read_model_description(str(rebuilt / "LSEA_MISO.fmu"))
+    deps = sorted(d.name for d in miso.outputs[0].dependencies)
+    assert deps == ["a_o", "v", "v_o", "x", "x_o"]
+
+
+def test_extra_model_built_from_test_source(tmp_path):
+    mo = tmp_path / "Osc.mo"
+    mo.write_text(OSC)
+    fmu = build_fmu(mo, "Osc", tmp_path / "Osc.fmu")
+    assert validate_fmu(str(fmu)) == []
+    k, m, d = 400.0, 1.0, 2.0
+    t = np.arange(0, 2.0 + DT / 2, DT)
+    wd = np.sqrt(k / m - (d / (2 * m)) ** 2)
+    sigma = d / (2 * m)
+    exact = 0.1 * np.exp(-sigma * t) * (np.cos(wd * t) + sigma / wd * np.sin(wd * t))
+    for fmi_type in ("CoSimulation", "ModelExchange"):
+        r = simulate_fmu(str(fmu), fmi_type=fmi_type, stop_time=2.0, step_size=DT,
+                         output_interval=DT, output=["y"], relative_tolerance=1e-9)
+        np.testing.assert_allclose(r["y"], exact, atol=1e-3 * 0.1 * 2)
+    # parameter change through start_values follows the equations: 4k -> 2x frequency
+    r4 = simulate_fmu(str(fmu), stop_time=2.0, step_size=DT, output_interval=DT,
+                      output=["y"], start_values={"k": 4 * k})
+    wd4 = np.sqrt(4 * k / m - sigma**2)
+    exact4 = 0.1 * np.exp(-sigma * t) * (np.cos(wd4 * t) + sigma / wd4 * np.sin(wd4 * t))
+    np.testing.assert_allclose(r4["y"], exact4, atol=1e-3 * 0.1 * 2)
+
+
+def test_algebraic_loop_solved_by_newton(tmp_path):
+    mo = tmp_path / "Loop.mo"
+    mo.write_text(LOOP)
+    fmu = build_fmu(mo, "Loop", tmp_path)
+    assert fmu == tmp_path / "Loop.fmu"
+    r = simulate_fmu(str(fmu), stop_time=1.0, step_size=DT, output=["y", "x"])
+    np.testing.assert_allclose(r["y"] + 0.5 * r["y"] ** 3, r["x"], atol=1e-10)
+    assert r["x"][-1] == pytest.approx(2 - np.exp(-1.0), rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("source", "fragment"),
+    [
+        ("model Bad\n  Real x(start=0, fixed=true);\nequation\n  der(x) = ;\nend Bad;\n",
+         "parse error"),
+        ("model Bad\n  Real x(start=0, fixed=true);\n  Real y;\nequation\n"
+         "  der(x) = -x;\nend Bad;\n", "not balanced"),
+        ("model Bad\n  Real x(start=0, fixed=true);\nequation\n  der(x) = foo(x);\nend Bad;\n",
+         "foo"),
+        ("model Bad\n  Integer n = 1;\n  Real x(start=0, fixed=true);\nequation\n"
+         "  der(x) = -x;\nend Bad;\n", "only Real"),
+    ],
+    ids=["syntax", "unbalanced", "unknown-function", "integer"],
+)
+def test_build_errors_name_the_fault(tmp_path, source, fragment):
+    mo = tmp_path / "Bad.mo"
+    mo.write_text(source)
+    with pytest.raises(BuildError) as info:
+        build_fmu(mo, "Bad", tmp_path)
+    msg = str(info.value)
+    assert fragment in msg and "Bad.mo" in msg
+
+
+def test_missing_model_and_cli_exit_code(tmp_path, capsys):
+    with pytest.raises(BuildError, match="not found"):
+        build_all(MODELS, tmp_path, ["NoSuchModel"])
+    assert main(["--models-dir", str(MODELS), "--out", str(tmp_path), "NoSuchModel"]) == 1
+    assert "NoSuchModel" in capsys.readouterr().err
+
+
+def test_compiler_error_names_command(tmp_path, monkeypatch):
+    mo = tmp_path / "Osc.mo"
+    mo.write_text(OSC)
+    monkeypatch.setenv("CC", "cc -DNX=oops")
+    with pytest.raises(BuildError, match="compiler command failed"):
+        build_fmu(mo, "Osc", tmp_path)
