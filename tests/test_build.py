@@ -13,11 +13,11 @@ pytest.importorskip("casadi")
 if shutil.which("cc") is None and shutil.which("gcc") is None:  # pragma: no cover
     pytest.skip("no C compiler", allow_module_level=True)
 
-from fmpy import read_model_description, simulate_fmu  # noqa: E402
-from fmpy.validation import validate_fmu  # noqa: E402
+from fmpy import read_model_description, simulate_fmu
+from fmpy.validation import validate_fmu
 
-from tsid_fmu.build import build_all, build_fmu, find_models, main  # noqa: E402
-from tsid_fmu.errors import BuildError  # noqa: E402
+from tsid_fmu.build import build_all, build_fmu, find_models, main
+from tsid_fmu.errors import BuildError
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
@@ -119,12 +119,25 @@ def test_extra_model_built_from_test_source(tmp_path):
     sigma = d / (2 * m)
     exact = 0.1 * np.exp(-sigma * t) * (np.cos(wd * t) + sigma / wd * np.sin(wd * t))
     for fmi_type in ("CoSimulation", "ModelExchange"):
-        r = simulate_fmu(str(fmu), fmi_type=fmi_type, stop_time=2.0, step_size=DT,
-                         output_interval=DT, output=["y"], relative_tolerance=1e-9)
+        r = simulate_fmu(
+            str(fmu),
+            fmi_type=fmi_type,
+            stop_time=2.0,
+            step_size=DT,
+            output_interval=DT,
+            output=["y"],
+            relative_tolerance=1e-9,
+        )
         np.testing.assert_allclose(r["y"], exact, atol=1e-3 * 0.1 * 2)
     # parameter change through start_values follows the equations: 4k -> 2x frequency
-    r4 = simulate_fmu(str(fmu), stop_time=2.0, step_size=DT, output_interval=DT,
-                      output=["y"], start_values={"k": 4 * k})
+    r4 = simulate_fmu(
+        str(fmu),
+        stop_time=2.0,
+        step_size=DT,
+        output_interval=DT,
+        output=["y"],
+        start_values={"k": 4 * k},
+    )
     wd4 = np.sqrt(4 * k / m - sigma**2)
     exact4 = 0.1 * np.exp(-sigma * t) * (np.cos(wd4 * t) + sigma / wd4 * np.sin(wd4 * t))
     np.testing.assert_allclose(r4["y"], exact4, atol=1e-3 * 0.1 * 2)
@@ -143,14 +156,24 @@ def test_algebraic_loop_solved_by_newton(tmp_path):
 @pytest.mark.parametrize(
     ("source", "fragment"),
     [
-        ("model Bad\n  Real x(start=0, fixed=true);\nequation\n  der(x) = ;\nend Bad;\n",
-         "parse error"),
-        ("model Bad\n  Real x(start=0, fixed=true);\n  Real y;\nequation\n"
-         "  der(x) = -x;\nend Bad;\n", "not balanced"),
-        ("model Bad\n  Real x(start=0, fixed=true);\nequation\n  der(x) = foo(x);\nend Bad;\n",
-         "foo"),
-        ("model Bad\n  Integer n = 1;\n  Real x(start=0, fixed=true);\nequation\n"
-         "  der(x) = -x;\nend Bad;\n", "only Real"),
+        (
+            "model Bad\n  Real x(start=0, fixed=true);\nequation\n  der(x) = ;\nend Bad;\n",
+            "parse error",
+        ),
+        (
+            "model Bad\n  Real x(start=0, fixed=true);\n  Real y;\nequation\n"
+            "  der(x) = -x;\nend Bad;\n",
+            "not balanced",
+        ),
+        (
+            "model Bad\n  Real x(start=0, fixed=true);\nequation\n  der(x) = foo(x);\nend Bad;\n",
+            "foo",
+        ),
+        (
+            "model Bad\n  Integer n = 1;\n  Real x(start=0, fixed=true);\nequation\n"
+            "  der(x) = -x;\nend Bad;\n",
+            "only Real",
+        ),
     ],
     ids=["syntax", "unbalanced", "unknown-function", "integer"],
 )

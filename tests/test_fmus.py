@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 from pathlib import Path
 
@@ -41,8 +42,13 @@ class Runner:
         self.fmu.instantiate()
         self.fresh = True
 
-    def run(self, inputs: dict[str, np.ndarray], outputs: list[str],
-            params: dict[str, float] | None = None, before_init: bool = True) -> np.ndarray:
+    def run(
+        self,
+        inputs: dict[str, np.ndarray],
+        outputs: list[str],
+        params: dict[str, float] | None = None,
+        before_init: bool = True,
+    ) -> np.ndarray:
         """Set inputs k, doStep(k*DT), read outputs; row 0 is right after initialization."""
         f, vr = self.fmu, self.vr
         if not self.fresh:
@@ -119,10 +125,19 @@ def siso_reference(F: np.ndarray, p: dict[str, float]) -> np.ndarray:
     bounds = np.concatenate([[0], change, [len(F)]])
     state = np.zeros(2)
     out = np.zeros((len(F) + 1, 2))
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for a, b in itertools.pairwise(bounds):
         t_eval = np.arange(a + 1, b + 1) * DT
-        sol = solve_ivp(rhs, (a * DT, b * DT), state, args=(F[a],), method="RK45",
-                        t_eval=t_eval, rtol=1e-10, atol=1e-12, max_step=2e-3)
+        sol = solve_ivp(
+            rhs,
+            (a * DT, b * DT),
+            state,
+            args=(F[a],),
+            method="RK45",
+            t_eval=t_eval,
+            rtol=1e-10,
+            atol=1e-12,
+            max_step=2e-3,
+        )
         assert sol.success
         out[a + 1 : b + 1] = sol.y.T
         state = sol.y[:, -1]
@@ -147,7 +162,7 @@ def miso_reference(U: np.ndarray, p: dict[str, float]) -> np.ndarray:
     Fo = np.empty(len(U) + 1)
 
     def out(s, u):
-        Fm, xo, vo, ao = u
+        _fm, xo, vo, ao = u
         return K * (s[0] - xo) + Cd * (s[1] - vo) - C2 * vo - m2 * ao
 
     Fo[0] = out(s, U[0])
@@ -160,8 +175,11 @@ def miso_reference(U: np.ndarray, p: dict[str, float]) -> np.ndarray:
 def stage_motion(amp: float = 2e-3, f: float = 1.5) -> dict[str, np.ndarray]:
     t = np.arange(N) * DT
     w = 2 * np.pi * f
-    return {"x_o": amp * np.sin(w * t), "v_o": amp * w * np.cos(w * t),
-            "a_o": -amp * w * w * np.sin(w * t)}
+    return {
+        "x_o": amp * np.sin(w * t),
+        "v_o": amp * w * np.cos(w * t),
+        "a_o": -amp * w * w * np.sin(w * t),
+    }
 
 
 # --------------------------------------------------------------------------- tests
@@ -179,17 +197,25 @@ def test_simulates_with_fmpy_in_cs_and_me(path, fmi_type):
     sig = np.zeros(len(t), dtype=[("time", float), ("F_m", float)])
     sig["time"] = t
     sig["F_m"] = np.where(t < 1.0, 200.0, -200.0)
-    kw = {"input": sig} if path == SISO else {
-        "input": _with_zero_motion(sig)}
-    res = simulate_fmu(str(path), fmi_type=fmi_type, stop_time=2.0, step_size=DT,
-                       output_interval=DT, output=["F_o"], **kw)
+    kw = {"input": sig} if path == SISO else {"input": _with_zero_motion(sig)}
+    res = simulate_fmu(
+        str(path),
+        fmi_type=fmi_type,
+        stop_time=2.0,
+        step_size=DT,
+        output_interval=DT,
+        output=["F_o"],
+        **kw,
+    )
     assert np.all(np.isfinite(res["F_o"]))
     assert res["F_o"].max() > 100 and res["F_o"].min() < -100
 
 
 def _with_zero_motion(sig):
-    out = np.zeros(len(sig), dtype=[("time", float), ("F_m", float), ("x_o", float),
-                                    ("v_o", float), ("a_o", float)])
+    out = np.zeros(
+        len(sig),
+        dtype=[("time", float), ("F_m", float), ("x_o", float), ("v_o", float), ("a_o", float)],
+    )
     out["time"], out["F_m"] = sig["time"], sig["F_m"]
     return out
 
@@ -200,8 +226,7 @@ def test_me_and_cs_agree_for_miso():
     sig["time"] = t
     sig["F_m"] = 50.0 * np.sin(2 * np.pi * 3 * t)
     sig = _with_zero_motion(sig)
-    kw = {"stop_time": 2.0, "step_size": DT, "output_interval": DT, "input": sig,
-          "output": ["F_o"]}
+    kw = {"stop_time": 2.0, "step_size": DT, "output_interval": DT, "input": sig, "output": ["F_o"]}
     cs = simulate_fmu(str(MISO), fmi_type="CoSimulation", **kw)
     me = simulate_fmu(str(MISO), fmi_type="ModelExchange", relative_tolerance=1e-8, **kw)
     # fmpy feeds inputs to CS (sampled) and ME (interpolated) slightly differently
@@ -238,8 +263,7 @@ def test_miso_matches_independent_solution(miso, case):
     else:
         U = {"F_m": force, **motion}
     Y = miso.run(U, ["F_o"])[:, 0]
-    ref = miso_reference(np.column_stack([U[k] for k in ("F_m", "x_o", "v_o", "a_o")]),
-                         MISO_P)
+    ref = miso_reference(np.column_stack([U[k] for k in ("F_m", "x_o", "v_o", "a_o")]), MISO_P)
     err = np.max(np.abs(Y - ref))
     assert err <= 0.005 * np.ptp(ref), (err, np.ptp(ref))
 
@@ -281,8 +305,12 @@ def test_reset_restores_start_values(siso):
 
 
 def test_outputs_valid_right_after_initialization(miso):
-    U = {"F_m": np.zeros(1), "x_o": np.full(1, 1e-3), "v_o": np.full(1, 0.01),
-         "a_o": np.full(1, 2.0)}
+    U = {
+        "F_m": np.zeros(1),
+        "x_o": np.full(1, 1e-3),
+        "v_o": np.full(1, 0.01),
+        "a_o": np.full(1, 2.0),
+    }
     Y = miso.run(U, ["F_o"])
     # x = v = 0 at t = 0: F_o = K_s*(0 - x_o) + C_d*(0 - v_o) - C_2*v_o - m2*a_o
     expected = -5e4 * 1e-3 - 5.0 * 0.01 - 2.0 * 0.01 - 0.2 * 2.0

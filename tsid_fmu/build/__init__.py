@@ -148,8 +148,10 @@ def build_fmu(
     ident = model.short_name
     if not re.fullmatch(r"[A-Za-z_]\w*", ident):
         raise BuildError(f"{model_file}: model name {ident!r} is not a valid C identifier")
-    names = {v.name for v in model.states + model.inputs + model.outputs + model.parameters
-             + model.locals}
+    names = {
+        v.name
+        for v in model.states + model.inputs + model.outputs + model.parameters + model.locals
+    }
     if FIXED_STEP_NAME in names:
         raise BuildError(
             f"{model_file}: model {model.name} declares '{FIXED_STEP_NAME}', "
@@ -186,7 +188,11 @@ def build_fmu(
         generated = generate_c(model, causal, src, guid=guid, step_size=step_size)
         source_files = ["fmi2Functions.c", *generated]
         xml = model_description_xml(
-            model, causal, guid=guid, step_size=step_size, source_files=source_files,
+            model,
+            causal,
+            guid=guid,
+            step_size=step_size,
+            source_files=source_files,
             generation_tool=f"tsid-fmu {_version()}",
         )
         (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
@@ -247,11 +253,10 @@ def build_all(
     for name in wanted:
         short = name.rsplit(".", 1)[-1]
         if short not in models:
-            raise BuildError(
-                f"model {name!r} not found in {mdir} (available: {', '.join(models)})"
-            )
-        out.append(build_fmu(models[short], name, odir / f"{short}.fmu",
-                             package_dir=models[short].parent))
+            raise BuildError(f"model {name!r} not found in {mdir} (available: {', '.join(models)})")
+        out.append(
+            build_fmu(models[short], name, odir / f"{short}.fmu", package_dir=models[short].parent)
+        )
     return out
 
 
@@ -272,13 +277,16 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m tsid_fmu.build",
         description="Build FMI 2.0 FMUs (CS + ME) from the Modelica models in models/.",
     )
-    parser.add_argument("models", nargs="*", metavar="MODEL",
-                        help="model names to build (default: all)")
+    parser.add_argument(
+        "models", nargs="*", metavar="MODEL", help="model names to build (default: all)"
+    )
     parser.add_argument("--all", action="store_true", help="build every model (default)")
-    parser.add_argument("--models-dir", type=Path, default=None,
-                        help="Modelica directory (default: ./models)")
-    parser.add_argument("--out", type=Path, default=None,
-                        help="output directory (default: fmus/ next to models/)")
+    parser.add_argument(
+        "--models-dir", type=Path, default=None, help="Modelica directory (default: ./models)"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output directory (default: fmus/ next to models/)"
+    )
     args = parser.parse_args(argv)
     if args.all and args.models:
         parser.error("give either --all or model names, not both")

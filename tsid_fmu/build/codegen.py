@@ -282,8 +282,13 @@ def causalize(model: FlatModel) -> Causalized:
         scalars = [dx[i] for i in range(dx.numel())] + [w[i] for i in range(w.numel())]
         rel = _relations(ca, scalars)
         f_zc = ca.Function("zc", args, [ca.vertcat(*rel)], names, ["z"]) if rel else None
-        return Causalized(f_ode, f_eval, Layout(model.states, model.inputs, model.outputs,
-                                                model.parameters, model.locals), 0, f_zc)
+        return Causalized(
+            f_ode,
+            f_eval,
+            Layout(model.states, model.inputs, model.outputs, model.parameters, model.locals),
+            0,
+            f_zc,
+        )
     return _causalize_implicit(model, unknowns, known_syms, known_vals, implicit, args, names)
 
 
@@ -340,12 +345,15 @@ def _causalize_implicit(
         g = ca.Function(f"g{n_blk}", [zs, pvec], [res])
         try:
             rf = ca.rootfinder(
-                f"newton{n_blk}", "fast_newton", g,
+                f"newton{n_blk}",
+                "fast_newton",
+                g,
                 {"abstol": 1e-12, "max_iter": 50, "error_on_fail": False},
             )
         except RuntimeError as exc:
-            raise BuildError(f"{where}: cannot set up the Newton solve of block {n_blk}: {exc}") \
-                from exc
+            raise BuildError(
+                f"{where}: cannot set up the Newton solve of block {n_blk}: {exc}"
+            ) from exc
         guess = ca.DM([start.get(id(z), 0.0) for z in (unknowns[j] for j in idx)])
         pval = ca.vertcat(flat_mx, *[value[id(z)] for z in deps])
         sol = rf(guess, pval)
@@ -437,24 +445,42 @@ def generate_c(
     ode, ev = causal.ode, causal.eval
     if causal.n_implicit == 0:
         ode, ev = ode.expand(), ev.expand()
-    ode = ca.Function(fun_ode, ode.mx_in() if ode.is_a("MXFunction") else ode.sx_in(),
-                      ode.call(ode.mx_in() if ode.is_a("MXFunction") else ode.sx_in()),
-                      ode.name_in(), ode.name_out())
-    ev = ca.Function(fun_eval, ev.mx_in() if ev.is_a("MXFunction") else ev.sx_in(),
-                     ev.call(ev.mx_in() if ev.is_a("MXFunction") else ev.sx_in()),
-                     ev.name_in(), ev.name_out())
+    ode = ca.Function(
+        fun_ode,
+        ode.mx_in() if ode.is_a("MXFunction") else ode.sx_in(),
+        ode.call(ode.mx_in() if ode.is_a("MXFunction") else ode.sx_in()),
+        ode.name_in(),
+        ode.name_out(),
+    )
+    ev = ca.Function(
+        fun_eval,
+        ev.mx_in() if ev.is_a("MXFunction") else ev.sx_in(),
+        ev.call(ev.mx_in() if ev.is_a("MXFunction") else ev.sx_in()),
+        ev.name_in(),
+        ev.name_out(),
+    )
     cg = ca.CodeGenerator(
         "model_casadi.c",
-        {"with_header": True, "with_export": False, "casadi_real": "double",
-         "casadi_int": "long long int", "verbose": False},
+        {
+            "with_header": True,
+            "with_export": False,
+            "casadi_real": "double",
+            "casadi_int": "long long int",
+            "verbose": False,
+        },
     )
     cg.add(ode)
     cg.add(ev)
     nz = 0
     zc = None
     if causal.zc is not None:
-        zc = ca.Function(f"{ident}_zc", causal.zc.sx_in(), causal.zc.call(causal.zc.sx_in()),
-                         causal.zc.name_in(), causal.zc.name_out())
+        zc = ca.Function(
+            f"{ident}_zc",
+            causal.zc.sx_in(),
+            causal.zc.call(causal.zc.sx_in()),
+            causal.zc.name_in(),
+            causal.zc.name_out(),
+        )
         nz = zc.numel_out(0)
         cg.add(zc)
     cg.generate(str(outdir) + "/")

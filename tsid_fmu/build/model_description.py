@@ -69,7 +69,7 @@ def unit_base(unit: str) -> tuple[dict[str, int], float] | None:
 
 
 def der_unit(unit: str) -> str | None:
-    """Unit of the time derivative of a variable with unit ``unit`` (``"m/s"`` -> ``"m/s2"``).
+    """Return the unit of the time derivative of a variable (``"m/s"`` -> ``"m/s2"``).
 
     Parameters
     ----------
@@ -204,29 +204,54 @@ def model_description_xml(
         return {"unit": du} if du else {}
 
     for v in lay.states:
-        add(v.name, {"causality": "local", "variability": "continuous", "initial": "exact"},
-            v.description, {**unit_of(v), "start": _fmt(v.start or 0.0)})
+        add(
+            v.name,
+            {"causality": "local", "variability": "continuous", "initial": "exact"},
+            v.description,
+            {**unit_of(v), "start": _fmt(v.start or 0.0)},
+        )
     for k, v in enumerate(lay.states):
-        add(f"der({v.name})", {"causality": "local", "variability": "continuous",
-                               "initial": "calculated"},
+        add(
+            f"der({v.name})",
+            {"causality": "local", "variability": "continuous", "initial": "calculated"},
             f"Time derivative of {v.name}",
-            {**unit_of(v, der=True), "derivative": str(index[lay.x_off + k])})
+            {**unit_of(v, der=True), "derivative": str(index[lay.x_off + k])},
+        )
     for v in lay.inputs:
-        add(v.name, {"causality": "input", "variability": "continuous"}, v.description,
-            {**unit_of(v), "start": _fmt(v.start or 0.0)})
+        add(
+            v.name,
+            {"causality": "input", "variability": "continuous"},
+            v.description,
+            {**unit_of(v), "start": _fmt(v.start or 0.0)},
+        )
     for v in lay.outputs:
-        add(v.name, {"causality": "output", "variability": "continuous",
-                     "initial": "calculated"}, v.description, unit_of(v))
+        add(
+            v.name,
+            {"causality": "output", "variability": "continuous", "initial": "calculated"},
+            v.description,
+            unit_of(v),
+        )
     for v in lay.locals:
-        add(v.name, {"causality": "local", "variability": "continuous",
-                     "initial": "calculated"}, v.description, unit_of(v))
+        add(
+            v.name,
+            {"causality": "local", "variability": "continuous", "initial": "calculated"},
+            v.description,
+            unit_of(v),
+        )
     for v in lay.parameters:
-        add(v.name, {"causality": "parameter", "variability": "fixed", "initial": "exact"},
-            v.description, {**unit_of(v), "start": _fmt(v.start)})
-    add(FIXED_STEP_NAME, {"causality": "parameter", "variability": "fixed", "initial": "exact"},
+        add(
+            v.name,
+            {"causality": "parameter", "variability": "fixed", "initial": "exact"},
+            v.description,
+            {**unit_of(v), "start": _fmt(v.start)},
+        )
+    add(
+        FIXED_STEP_NAME,
+        {"causality": "parameter", "variability": "fixed", "initial": "exact"},
         "Internal step of the fixed-step RK4 integrator in Co-Simulation "
         "(communication steps are split into steps of this size)",
-        {"unit": "s", "start": _fmt(step_size)})
+        {"unit": "s", "start": _fmt(step_size)},
+    )
 
     # Dependencies from the Jacobian sparsity of (der(x), w) w.r.t. (x, u).
     ev = causal.eval
@@ -255,12 +280,18 @@ def model_description_xml(
     ms = ET.SubElement(root, "ModelStructure")
     outs = ET.SubElement(ms, "Outputs")
     for k in range(len(lay.outputs)):
-        ET.SubElement(outs, "Unknown", {"index": str(index[lay.y_off + k]),
-                                        "dependencies": " ".join(map(str, dep_w[k]))})
+        ET.SubElement(
+            outs,
+            "Unknown",
+            {"index": str(index[lay.y_off + k]), "dependencies": " ".join(map(str, dep_w[k]))},
+        )
     ders = ET.SubElement(ms, "Derivatives")
     for k in range(nx):
-        ET.SubElement(ders, "Unknown", {"index": str(index[lay.dx_off + k]),
-                                        "dependencies": " ".join(map(str, dep_dx[k]))})
+        ET.SubElement(
+            ders,
+            "Unknown",
+            {"index": str(index[lay.dx_off + k]), "dependencies": " ".join(map(str, dep_dx[k]))},
+        )
     init = ET.SubElement(ms, "InitialUnknowns")
     for k in range(len(lay.outputs)):
         ET.SubElement(init, "Unknown", {"index": str(index[lay.y_off + k])})

@@ -29,8 +29,14 @@ WRAPPER_FILES = [
 # Own, hand-written code must compile without any warning.
 _STRICT = ["-Wall", "-Wextra", "-Wpedantic", "-Werror"]
 # CasADi-generated code: warnings on, the harmless ones it is known to trigger tolerated.
-_TOLERANT = ["-Wall", "-Wextra", "-Wno-unused-parameter", "-Wno-unused-function",
-             "-Wno-unused-variable", "-Wno-unused-but-set-variable"]
+_TOLERANT = [
+    "-Wall",
+    "-Wextra",
+    "-Wno-unused-parameter",
+    "-Wno-unused-function",
+    "-Wno-unused-variable",
+    "-Wno-unused-but-set-variable",
+]
 
 
 def fmi_platform() -> tuple[str, str]:
@@ -84,8 +90,9 @@ def _run(cmd: list[str], cwd: Path) -> None:
         )
 
 
-def compile_binary(sources_dir: Path, model_identifier: str, out_dir: Path,
-                   generated: list[str]) -> Path:
+def compile_binary(
+    sources_dir: Path, model_identifier: str, out_dir: Path, generated: list[str]
+) -> Path:
     """Compile the wrapper and the generated model part into a shared library.
 
     Parameters
