@@ -199,3 +199,23 @@ def test_compiler_error_names_command(tmp_path, monkeypatch):
     monkeypatch.setenv("CC", "cc -DNX=oops")
     with pytest.raises(BuildError, match="compiler command failed"):
         build_fmu(mo, "Osc", tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("cmake") is None, reason="fmpy compile needs cmake")
+def test_fmu_sources_recompile_with_fmpy(tmp_path):
+    import subprocess
+    import sys
+
+    fmu = tmp_path / "LSEA_SISO.fmu"
+    shutil.copy2(FMUS / "LSEA_SISO.fmu", fmu)
+    proc = subprocess.run(
+        [sys.executable, "-m", "fmpy", "compile", str(fmu)], capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    t = np.arange(0, 2.0 + DT / 2, DT)
+    sig = _inputs(["F_m"], t, [np.where(t < 1.0, 300.0, -300.0)])
+    kw = {"stop_time": 2.0, "step_size": DT, "output_interval": DT, "input": sig}
+    a = simulate_fmu(str(fmu), **kw)
+    b = simulate_fmu(str(FMUS / "LSEA_SISO.fmu"), **kw)
+    np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-9, atol=1e-6)
