@@ -66,8 +66,7 @@ def test_reset_gives_identical_runs_and_parameters_take_effect(fmus, grid):
 
 def test_start_values_applied_every_run(fmus, grid):
     t, u = grid
-    with FMUSession(fmus["fmi2"], ["u"], ["y"], parameters=["tau"],
-                    start_values={"x0": 1.0}) as s:
+    with FMUSession(fmus["fmi2"], ["u"], ["y"], parameters=["tau"], start_values={"x0": 1.0}) as s:
         for _ in range(2):
             y = s.simulate(t, u, {"tau": 0.1})
             assert y[0, 0] == 1.0
@@ -100,8 +99,10 @@ def test_unknown_names_suggest(fmus):
         FMUSession(fmus["fmi2"], ["uu"], ["y"])
     with pytest.raises(FMUError, match=r"unknown output 'yy'"):
         FMUSession(fmus["fmi2"], ["u"], ["yy"])
-    with FMUSession(fmus["fmi2"], ["u"], ["y"]) as s, \
-            pytest.raises(FMUError, match="unknown parameter 'tauu'"):
+    with (
+        FMUSession(fmus["fmi2"], ["u"], ["y"]) as s,
+        pytest.raises(FMUError, match="unknown parameter 'tauu'"),
+    ):
         s.simulate(np.arange(3.0), np.zeros(3), {"tauu": 1.0})
 
 
@@ -132,9 +133,12 @@ def test_missing_platform_binary(tmp_path, fmus):
     import fmpy
 
     stripped = copy_without(fmus["fmi2"], tmp_path / "nobin.fmu", f"binaries/{fmpy.platform}")
-    with pytest.raises(FMUError, match=rf"nobin.fmu: no binary for this platform: expected "
-                                       rf"binaries/{fmpy.platform}/Lag2.so; platforms present: "
-                                       r"none.*sources"):
+    with pytest.raises(
+        FMUError,
+        match=rf"nobin.fmu: no binary for this platform: expected "
+        rf"binaries/{fmpy.platform}/Lag2.so; platforms present: "
+        r"none.*sources",
+    ):
         FMUSession(stripped, ["u"], ["y"])
 
 
@@ -142,8 +146,11 @@ def test_unloadable_library_names_dependency(tmp_path):
     stub = build_stub_library(tmp_path / "dep", "tsidmissingdep")
     fmu = build_c_fmu(tmp_path, "NeedsDep", link_library=stub)
     shutil.rmtree(stub.parent)
-    with pytest.raises(FMUError, match=r"NeedsDep.fmu: cannot load binaries/.*NeedsDep.so: it "
-                                       r"needs libtsidmissingdep.so, which cannot be found"):
+    with pytest.raises(
+        FMUError,
+        match=r"NeedsDep.fmu: cannot load binaries/.*NeedsDep.so: it "
+        r"needs libtsidmissingdep.so, which cannot be found",
+    ):
         FMUSession(fmu, ["u"], ["y"])
 
 
@@ -151,8 +158,11 @@ def test_unloadable_library_names_dependency(tmp_path):
 def test_fmi_error_mid_run_then_reusable(fmus, grid, kind):
     t, u = grid
     with FMUSession(fmus[kind], ["u"], ["y"], parameters=["tau", "t_fail"]) as s:
-        with pytest.raises(SimulationError, match=r"DoStep returned Error at step 2[0-9]{2}, "
-                                                  r"t=0\.2.*time limit t_fail=0\.25"):
+        with pytest.raises(
+            SimulationError,
+            match=r"DoStep returned Error at step 2[0-9]{2}, "
+            r"t=0\.2.*time limit t_fail=0\.25",
+        ):
             s.simulate(t, u, {"tau": 0.1, "t_fail": 0.25})
         good = s.simulate(t, u, {"tau": 0.1})
         np.testing.assert_allclose(good[:, 0], lag_response(t, u, 0.1), atol=1e-12)
@@ -231,8 +241,16 @@ def test_variables_and_info(fmus):
         assert s.model_description.modelName == "Lag2"
         assert "FMI 2.0" in repr(s)
     text = fmu_info(fmus["fmi2"])
-    for part in ("FMI version      2.0", "Co-Simulation, Model Exchange", "linux64",
-                 "tau", "time constant", "start=1.0", "Inputs (1)", "Outputs (1)"):
+    for part in (
+        "FMI version      2.0",
+        "Co-Simulation, Model Exchange",
+        "linux64",
+        "tau",
+        "time constant",
+        "start=1.0",
+        "Inputs (1)",
+        "Outputs (1)",
+    ):
         assert part in text
     assert "3.0" in fmu_info(fmus["fmi3"])
 
@@ -272,3 +290,45 @@ def test_project_fmus_if_present(name):
         b = s.simulate(t, u, {})
     assert np.isfinite(a).all()
     np.testing.assert_array_equal(a, b)
+
+
+def test_log_messages_reach_their_own_session_and_outlive_closed_ones(fmus, grid):
+    """Two sessions at once each get their own FMU messages; once a session is closed and
+    collected, an FMU that logs (here through plain FMPy) must not call into freed memory.
+    FMPy's native log proxy keeps one global target, which used to be the newest session's
+    callback: a dangling pointer and a segfault after that session was gone."""
+    import gc
+
+    from fmpy import extract
+    from fmpy.fmi2 import FMU2Slave
+    from fmpy.model_description import read_model_description
+
+    t, u = grid
+    failing = {"tau": 0.1, "t_fail": 0.25}
+    with (
+        FMUSession(fmus["fmi2"], ["u"], ["y"], parameters=["tau", "t_fail"]) as a,
+        FMUSession(fmus["fmi2"], ["u"], ["y"], parameters=["tau", "t_fail"]) as b,
+    ):
+        with pytest.raises(SimulationError, match=r"time limit t_fail=0\.25"):
+            a.simulate(t, u, failing)
+        with pytest.raises(SimulationError, match=r"time limit t_fail=0\.15"):
+            b.simulate(t, u, {"tau": 0.1, "t_fail": 0.15})
+        assert not any("0.15" in m for m in a._log.messages)
+        assert not any("0.25" in m for m in b._log.messages)
+    del a, b
+    gc.collect()
+    md = read_model_description(str(fmus["fmi2"]))
+    fmu = FMU2Slave(
+        guid=md.guid,
+        unzipDirectory=extract(str(fmus["fmi2"])),
+        modelIdentifier=md.coSimulation.modelIdentifier,
+    )
+    fmu.instantiate()
+    fmu.setReal([2, 4], [0.1, 0.01])
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    with pytest.raises(Exception, match="fmi2DoStep"):  # FMPy raises its own exception type
+        for k in range(100):
+            fmu.doStep(k * 1e-3, 1e-3)  # logs "time limit t_fail exceeded"
+    fmu.freeInstance()

@@ -31,9 +31,28 @@ __all__ = ["MeasuredData", "load_data"]
 JITTER_TOLERANCE = 0.01
 
 #: functions an expression in ``derived`` may call (numpy ufuncs only)
-_FUNCTIONS = {"abs", "sqrt", "exp", "expm1", "log", "log1p", "log10", "sin", "cos",
-              "tan", "arcsin", "arccos", "arctan", "arctan2", "sinh", "cosh", "tanh",
-              "arcsinh", "arccosh", "arctanh"}
+_FUNCTIONS = {
+    "abs",
+    "sqrt",
+    "exp",
+    "expm1",
+    "log",
+    "log1p",
+    "log10",
+    "sin",
+    "cos",
+    "tan",
+    "arcsin",
+    "arccos",
+    "arctan",
+    "arctan2",
+    "sinh",
+    "cosh",
+    "tanh",
+    "arcsinh",
+    "arccosh",
+    "arctanh",
+}
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z_0-9]*")
 
 
@@ -77,8 +96,9 @@ class MeasuredData:
         if name not in self.frame.columns:
             close = difflib.get_close_matches(name, self.names, n=3, cutoff=0.6)
             hint = f" Did you mean {', '.join(map(repr, close))}?" if close else ""
-            raise DataError(f"{self.path}: no column {name!r}; columns are "
-                            f"{', '.join(self.names)}.{hint}")
+            raise DataError(
+                f"{self.path}: no column {name!r}; columns are {', '.join(self.names)}.{hint}"
+            )
         return self.frame[name].to_numpy(dtype=np.float64)
 
     def columns(self, names: Sequence[str]) -> np.ndarray:
@@ -139,8 +159,10 @@ class MeasuredData:
         if time_column not in frame.columns:
             close = difflib.get_close_matches(time_column, list(frame.columns), n=3, cutoff=0.5)
             hint = f" Did you mean {', '.join(map(repr, close))}?" if close else ""
-            raise DataError(f"{source}: time column {time_column!r} not found; columns are "
-                            f"{', '.join(frame.columns)}.{hint}")
+            raise DataError(
+                f"{source}: time column {time_column!r} not found; columns are "
+                f"{', '.join(frame.columns)}.{hint}"
+            )
         frame = _to_numeric(frame, source)
         _check_finite(frame, source)
         if derived:
@@ -148,12 +170,19 @@ class MeasuredData:
             _check_finite(frame[list(derived)], source)
         time = frame[time_column].to_numpy(dtype=np.float64)
         dt = _check_time(time, time_column, source)
-        if sample_time is not None and not np.isclose(dt, sample_time, rtol=JITTER_TOLERANCE,
-                                                      atol=0.0):
-            raise DataError(f"{source}: sample time is {dt:g} s but the study expects "
-                            f"{sample_time:g} s")
-        return cls(path=source, time=time, frame=frame.reset_index(drop=True),
-                   sample_time=dt, time_column=time_column)
+        if sample_time is not None and not np.isclose(
+            dt, sample_time, rtol=JITTER_TOLERANCE, atol=0.0
+        ):
+            raise DataError(
+                f"{source}: sample time is {dt:g} s but the study expects {sample_time:g} s"
+            )
+        return cls(
+            path=source,
+            time=time,
+            frame=frame.reset_index(drop=True),
+            sample_time=dt,
+            time_column=time_column,
+        )
 
 
 def _to_numeric(frame: pd.DataFrame, source: str) -> pd.DataFrame:
@@ -169,8 +198,10 @@ def _to_numeric(frame: pd.DataFrame, source: str) -> pd.DataFrame:
         bad = converted.isna() & col.notna() & (col.astype(str).str.strip() != "")
         if bad.any():
             pos = int(np.flatnonzero(bad.to_numpy())[0])
-            raise DataError(f"{source}: column {name!r} has non-numeric value "
-                            f"{col.iloc[pos]!r} in row {pos + 1}")
+            raise DataError(
+                f"{source}: column {name!r} has non-numeric value "
+                f"{col.iloc[pos]!r} in row {pos + 1}"
+            )
         out[name] = converted.astype(np.float64)
     return pd.DataFrame(out, index=frame.index)
 
@@ -197,14 +228,22 @@ def _derive(frame: pd.DataFrame, derived: Mapping[str, str], source: str) -> pd.
                 raise DataError(
                     f"{source}: derived channel {name!r} = {expression!r} uses unknown name "
                     f"{token!r}; columns are {', '.join(columns)} (functions: "
-                    f"{', '.join(sorted(_FUNCTIONS))})")
+                    f"{', '.join(sorted(_FUNCTIONS))})"
+                )
         resolvers = ({c: frame[c] for c in columns},)
         try:
-            value = pd.eval(expression, local_dict={}, global_dict={}, resolvers=resolvers,
-                            engine="python", parser="pandas")
+            value = pd.eval(
+                expression,
+                local_dict={},
+                global_dict={},
+                resolvers=resolvers,
+                engine="python",
+                parser="pandas",
+            )
         except Exception as exc:  # pandas raises SyntaxError, ValueError, TypeError, ...
-            raise DataError(f"{source}: cannot evaluate derived channel {name!r} = "
-                            f"{expression!r}: {exc}") from exc
+            raise DataError(
+                f"{source}: cannot evaluate derived channel {name!r} = {expression!r}: {exc}"
+            ) from exc
         array = np.broadcast_to(np.asarray(value, dtype=np.float64), (len(frame),))
         frame[name] = array.copy()
     return frame
@@ -218,8 +257,10 @@ def _check_time(time: np.ndarray, time_column: str, source: str) -> float:
     if bad.size:
         i = int(bad[0]) + 1  # 0-based index of the offending sample
         kind = "repeats" if dt[i - 1] == 0 else "goes back from"
-        raise DataError(f"{source}: column {time_column!r} is not strictly increasing: row "
-                        f"{i + 1} {kind} the previous time ({time[i - 1]:g} -> {time[i]:g})")
+        raise DataError(
+            f"{source}: column {time_column!r} is not strictly increasing: row "
+            f"{i + 1} {kind} the previous time ({time[i - 1]:g} -> {time[i]:g})"
+        )
     median = float(np.median(dt))
     jitter = np.abs(dt - median) / median
     bad = np.flatnonzero(jitter > JITTER_TOLERANCE)
@@ -228,7 +269,8 @@ def _check_time(time: np.ndarray, time_column: str, source: str) -> float:
         raise DataError(
             f"{source}: non-uniform sampling in column {time_column!r} at row {i + 1}: "
             f"interval {dt[i - 1]:g} s differs from the sample time {median:g} s by "
-            f"{100 * jitter[i - 1]:.1f} % (tolerance {100 * JITTER_TOLERANCE:g} %)")
+            f"{100 * jitter[i - 1]:.1f} % (tolerance {100 * JITTER_TOLERANCE:g} %)"
+        )
     return float((time[-1] - time[0]) / (time.size - 1))
 
 
@@ -252,8 +294,7 @@ def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) ->
         else:
             frame = pd.read_csv(path, **{"sep": None, "engine": "python", **options})
     except ImportError as exc:
-        raise DataError(f"{path}: reading {suffix} files needs an optional package: "
-                        f"{exc}") from exc
+        raise DataError(f"{path}: reading {suffix} files needs an optional package: {exc}") from exc
     except pd.errors.EmptyDataError as exc:
         raise DataError(f"{path}: the file is empty") from exc
     except DataError:
@@ -263,8 +304,10 @@ def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) ->
     if columns is not None:
         missing = [c for c in columns if c not in frame.columns]
         if missing:
-            raise DataError(f"{path}: column(s) {', '.join(map(repr, missing))} not found; "
-                            f"columns are {', '.join(map(str, frame.columns))}")
+            raise DataError(
+                f"{path}: column(s) {', '.join(map(repr, missing))} not found; "
+                f"columns are {', '.join(map(str, frame.columns))}"
+            )
         frame = frame[list(columns)]
     return frame
 
@@ -275,14 +318,19 @@ def _read_mat(path: Path, options: Mapping[str, Any]) -> pd.DataFrame:
 
     content = loadmat(path, squeeze_me=True, **options)
     arrays = {k: np.asarray(v) for k, v in content.items() if not k.startswith("__")}
-    vectors = {k: v.astype(np.float64) for k, v in arrays.items()
-               if v.ndim == 1 and np.issubdtype(v.dtype, np.number)}
+    vectors = {
+        k: v.astype(np.float64)
+        for k, v in arrays.items()
+        if v.ndim == 1 and np.issubdtype(v.dtype, np.number)
+    }
     if not vectors:
         raise DataError(f"{path}: no 1-D numeric variables in the .mat file")
     lengths = {len(v) for v in vectors.values()}
     if len(lengths) > 1:
-        raise DataError(f"{path}: the .mat variables have different lengths: "
-                        + ", ".join(f"{k}={len(v)}" for k, v in vectors.items()))
+        raise DataError(
+            f"{path}: the .mat variables have different lengths: "
+            + ", ".join(f"{k}={len(v)}" for k, v in vectors.items())
+        )
     return pd.DataFrame(vectors)
 
 
@@ -341,5 +389,6 @@ def load_data(
     if columns is not None and time_column not in columns:
         columns = [time_column, *columns]
     frame = _read(path, columns, dict(read_options or {}))
-    return MeasuredData.from_frame(frame, time_column, source=str(path), derived=derived,
-                                   sample_time=sample_time)
+    return MeasuredData.from_frame(
+        frame, time_column, source=str(path), derived=derived, sample_time=sample_time
+    )

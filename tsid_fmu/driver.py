@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import ctypes
 import difflib
+import itertools
 import logging
 import os
 import re
@@ -58,8 +59,18 @@ _CALL_SET, _CALL_STEP, _CALL_GET = 1, 2, 3
 _N_LOG = 8
 
 _REAL_TYPES = {"Real", "Float64"}
-_INT_TYPES = {"Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32",
-              "UInt32", "Int64", "UInt64"}
+_INT_TYPES = {
+    "Integer",
+    "Enumeration",
+    "Int8",
+    "UInt8",
+    "Int16",
+    "UInt16",
+    "Int32",
+    "UInt32",
+    "Int64",
+    "UInt64",
+}
 _BOOL_TYPES = {"Boolean"}
 
 Logger = logging.Logger | Callable[[str], None]
@@ -97,8 +108,9 @@ class VariableInfo:
 _FMI2_SETGET = CFUNCTYPE(c_int, c_void_p, c_void_p, c_size_t, c_void_p)
 _FMI2_DOSTEP = CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)
 _FMI3_SETGET = CFUNCTYPE(c_int, c_void_p, c_void_p, c_size_t, c_void_p, c_size_t)
-_FMI3_DOSTEP = CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_bool,
-                         c_void_p, c_void_p, c_void_p, c_void_p)
+_FMI3_DOSTEP = CFUNCTYPE(
+    c_int, c_void_p, c_double, c_double, c_bool, c_void_p, c_void_p, c_void_p, c_void_p
+)
 
 
 def _raw(dll: ctypes.CDLL, name: str, prototype: Any) -> Any:
@@ -197,8 +209,9 @@ def _cs_loop_fmi3(
     a_out, s_out = out.ctypes.data, out.strides[0]
     flags = (c_bool * 3)()
     last = c_double()
-    a_event, a_term, a_early = (ctypes.addressof(flags) + i * ctypes.sizeof(c_bool)
-                                for i in range(3))
+    a_event, a_term, a_early = (
+        ctypes.addressof(flags) + i * ctypes.sizeof(c_bool) for i in range(3)
+    )
     a_last = ctypes.addressof(last)
     status = get_real(component, a_vout, n_out, a_out, n_out)
     if status >= _FMI_DISCARD:
@@ -208,8 +221,7 @@ def _cs_loop_fmi3(
             status = set_real(component, a_vin, n_in, a_in + k * s_in, n_in)
             if status >= _FMI_DISCARD:
                 return status, k, _CALL_SET
-        status = do_step(component, t[k], t[k + 1] - t[k], True, a_event, a_term, a_early,
-                         a_last)
+        status = do_step(component, t[k], t[k + 1] - t[k], True, a_event, a_term, a_early, a_last)
         if status >= _FMI_DISCARD:
             return status, k, _CALL_STEP
         if flags[1]:
@@ -275,12 +287,71 @@ def _parse_start(info: VariableInfo) -> float | None:
         return None
 
 
+# FMI 2.0 loggers are variadic, which ctypes cannot receive; FMPy's native proxy formats
+# the message and forwards it to *one* Python callback that it keeps in a static C
+# variable. Installing a callback per session would redirect every FMU's messages in
+# the process to the newest session and leave a dangling pointer (a segfault on the
+# next message) once that session is gone. So one dispatcher, alive for the whole
+# process, is installed once; each session's callbacks carry their own id as the
+# componentEnvironment, and the dispatcher hands a message to the session with that id.
+# Messages of FMUs not opened by a session (plain FMPy use) go to FMPy's printer.
+_LOG_TARGETS: dict[int, _LogCapture] = {}
+_LOG_IDS = itertools.count(1)
+_FMI2_PROXY: Any = None
+
+
+def _fmi2_dispatch(env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+    target = _LOG_TARGETS.get(env or 0)
+    if target is not None:
+        target.add(status, category, message)
+    else:
+        from fmpy.fmi2 import printLogMessage
+
+        printLogMessage(env, instance, status, category, message)
+
+
+def _fmi2_callbacks(capture: _LogCapture) -> Any:
+    """Return FMI 2.0 callbacks whose log messages reach ``capture``."""
+    global _FMI2_PROXY
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (
+        fmi2CallbackAllocateMemoryTYPE,
+        fmi2CallbackFreeMemoryTYPE,
+        fmi2CallbackFunctions,
+        fmi2CallbackLoggerTYPE,
+    )
+
+    if _FMI2_PROXY is None:
+        from fmpy.logging import addLoggerProxy
+
+        dispatcher = fmi2CallbackLoggerTYPE(_fmi2_dispatch)
+        holder = fmi2CallbackFunctions()
+        holder.logger = dispatcher
+        addLoggerProxy(byref(holder))  # holder.logger is now the native proxy
+        _FMI2_PROXY = (holder, dispatcher)  # both stay alive for the whole process
+    if capture.env_id == 0:
+        capture.env_id = next(_LOG_IDS)
+        _LOG_TARGETS[capture.env_id] = capture
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = _FMI2_PROXY[0].logger
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    callbacks.componentEnvironment = capture.env_id
+    return callbacks
+
+
 class _LogCapture:
     """Receive the FMU's log messages, keep the last few, forward them to a logger."""
 
     def __init__(self, logger: Logger | None) -> None:
         self.messages: deque[str] = deque(maxlen=_N_LOG)
         self.logger = logger
+        self.env_id = 0  # key of this capture in _LOG_TARGETS (FMI 2.0), once registered
+
+    def release(self) -> None:
+        """Stop receiving FMI 2.0 messages (after the instance is freed)."""
+        _LOG_TARGETS.pop(self.env_id, None)
+        self.env_id = 0
 
     def add(self, status: int, category: bytes | None, message: bytes | None) -> None:
         label = _STATUS_NAMES[status] if 0 <= status < len(_STATUS_NAMES) else str(status)
@@ -296,8 +367,7 @@ class _LogCapture:
         else:
             self.logger(line)
 
-    def fmi2(self, env: Any, instance: bytes, status: int, category: bytes,
-             message: bytes) -> None:
+    def fmi2(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
         self.add(status, category, message)
 
     def fmi3(self, env: Any, status: int, category: bytes, message: bytes) -> None:
@@ -381,8 +451,9 @@ class FMUSession:
         self._log = _LogCapture(logger)
         self._setters: dict[str, tuple[str, int]] = {}
         if interface not in ("auto", "cs", "me"):
-            raise FMUError(f"{self.path.name}: interface must be 'auto', 'cs' or 'me', "
-                           f"not {interface!r}")
+            raise FMUError(
+                f"{self.path.name}: interface must be 'auto', 'cs' or 'me', not {interface!r}"
+            )
         try:
             self._open(interface, dict(start_values or {}))
         except BaseException:
@@ -405,30 +476,36 @@ class FMUSession:
         self.model_description = md
         self.fmi_version = md.fmiVersion
         if not (md.fmiVersion == "2.0" or md.fmiVersion.startswith("3.")):
-            raise FMUError(f"{self.path}: FMI version {md.fmiVersion} is not supported "
-                           "(FMI 2.0 and 3.0 are)")
+            raise FMUError(
+                f"{self.path}: FMI version {md.fmiVersion} is not supported (FMI 2.0 and 3.0 are)"
+            )
         self._major = 2 if md.fmiVersion == "2.0" else 3
         self.variables: dict[str, VariableInfo] = {v.name: _info(v) for v in md.modelVariables}
 
         available = [k for k, d in (("cs", md.coSimulation), ("me", md.modelExchange)) if d]
         if interface == "auto":
             if not available:
-                raise FMUError(f"{self.path}: the FMU declares neither Co-Simulation "
-                               "nor Model Exchange")
+                raise FMUError(
+                    f"{self.path}: the FMU declares neither Co-Simulation nor Model Exchange"
+                )
             interface = available[0]
         elif interface not in available:
             names = {"cs": "Co-Simulation", "me": "Model Exchange"}
             raise FMUError(
                 f"{self.path}: interface {interface!r} requested but the FMU only supports "
                 + (", ".join(names[a] for a in available) or "no interface")
-                + f" (use interface={available[0]!r})" * bool(available))
+                + f" (use interface={available[0]!r})" * bool(available)
+            )
         self.interface = interface
 
         # variables
-        self._vr_in = np.array([self._check_real(n, "input", want_causality="input")
-                                for n in self.input_names], dtype=np.uint32)
-        self._vr_out = np.array([self._check_real(n, "output") for n in self.output_names],
-                                dtype=np.uint32)
+        self._vr_in = np.array(
+            [self._check_real(n, "input", want_causality="input") for n in self.input_names],
+            dtype=np.uint32,
+        )
+        self._vr_out = np.array(
+            [self._check_real(n, "output") for n in self.output_names], dtype=np.uint32
+        )
         if not self.output_names:
             raise FMUError(f"{self.path}: at least one output is needed")
         for name in self.parameter_names:
@@ -458,18 +535,24 @@ class FMUSession:
     def _variable(self, name: str, role: str) -> VariableInfo:
         info = self.variables.get(name)
         if info is None:
-            raise FMUError(f"{self.path.name}: unknown {role} {name!r}: the model has no "
-                           f"variable of that name.{_suggest(name, list(self.variables))}")
+            raise FMUError(
+                f"{self.path.name}: unknown {role} {name!r}: the model has no "
+                f"variable of that name.{_suggest(name, list(self.variables))}"
+            )
         return info
 
     def _check_real(self, name: str, role: str, want_causality: str | None = None) -> int:
         info = self._variable(name, role)
         if want_causality is not None and info.causality != want_causality:
-            raise FMUError(f"{self.path.name}: {role} {name!r} has causality "
-                           f"{info.causality!r}, not {want_causality!r}")
+            raise FMUError(
+                f"{self.path.name}: {role} {name!r} has causality "
+                f"{info.causality!r}, not {want_causality!r}"
+            )
         if info.type not in _REAL_TYPES:
-            raise FMUError(f"{self.path.name}: {role} {name!r} is of type {info.type}, "
-                           "but a Real (Float64) variable is needed")
+            raise FMUError(
+                f"{self.path.name}: {role} {name!r} is of type {info.type}, "
+                "but a Real (Float64) variable is needed"
+            )
         return info.value_reference
 
     def _setter(self, name: str, role: str) -> tuple[str, int]:
@@ -480,15 +563,23 @@ class FMUSession:
         if info.variability == "constant":
             raise FMUError(f"{self.path.name}: {role} {name!r} is a constant and cannot be set")
         if role == "parameter" and info.causality != "parameter":
-            hint = (" (a calculated parameter is computed by the FMU)"
-                    if info.causality == "calculatedParameter" else "")
-            raise FMUError(f"{self.path.name}: parameter {name!r} has causality "
-                           f"{info.causality!r}, not 'parameter'; it cannot be "
-                           f"identified{hint}")
+            hint = (
+                " (a calculated parameter is computed by the FMU)"
+                if info.causality == "calculatedParameter"
+                else ""
+            )
+            raise FMUError(
+                f"{self.path.name}: parameter {name!r} has causality "
+                f"{info.causality!r}, not 'parameter'; it cannot be "
+                f"identified{hint}"
+            )
         if info.causality == "independent" or (
-                info.causality != "input" and info.initial == "calculated"):
-            raise FMUError(f"{self.path.name}: {role} {name!r} (causality "
-                           f"{info.causality!r}, initial {info.initial!r}) cannot be set")
+            info.causality != "input" and info.initial == "calculated"
+        ):
+            raise FMUError(
+                f"{self.path.name}: {role} {name!r} (causality "
+                f"{info.causality!r}, initial {info.initial!r}) cannot be set"
+            )
         if info.type in _REAL_TYPES:
             kind = "real"
         elif info.type in _INT_TYPES:
@@ -496,8 +587,10 @@ class FMUSession:
         elif info.type in _BOOL_TYPES:
             kind = "bool"
         else:
-            raise FMUError(f"{self.path.name}: {role} {name!r} is of type {info.type}; only "
-                           "Real, Integer and Boolean variables can be set")
+            raise FMUError(
+                f"{self.path.name}: {role} {name!r} is of type {info.type}; only "
+                "Real, Integer and Boolean variables can be set"
+            )
         self._setters[name] = (kind, info.value_reference)
         return self._setters[name]
 
@@ -516,74 +609,83 @@ class FMUSession:
                 f"{self.path.name}: no binary for this platform: expected "
                 f"binaries/{platform_dir}/{library.name}; platforms present: "
                 f"{', '.join(present) if present else 'none'}"
-                + (" (the FMU only contains sources; compile it for this platform)"
-                   if (unzipdir / "sources").is_dir() else ""))
+                + (
+                    " (the FMU only contains sources; compile it for this platform)"
+                    if (unzipdir / "sources").is_dir()
+                    else ""
+                )
+            )
         try:
             probe = ctypes.CDLL(str(library))
         except OSError as exc:
             dep = _missing_dependency(str(exc), library)
-            reason = (f"it needs {dep}, which cannot be found (install it or add its "
-                      "folder to LD_LIBRARY_PATH)" if dep else str(exc))
-            raise FMUError(f"{self.path.name}: cannot load binaries/{platform_dir}/"
-                           f"{library.name}: {reason}") from exc
+            reason = (
+                f"it needs {dep}, which cannot be found (install it or add its "
+                "folder to LD_LIBRARY_PATH)"
+                if dep
+                else str(exc)
+            )
+            raise FMUError(
+                f"{self.path.name}: cannot load binaries/{platform_dir}/{library.name}: {reason}"
+            ) from exc
 
         cwd = os.getcwd()
         try:
             cls = self._fmpy_class()
-            self._fmu = cls(guid=md.guid, modelIdentifier=identifier,
-                            unzipDirectory=str(unzipdir), instanceName=identifier)
+            self._fmu = cls(
+                guid=md.guid,
+                modelIdentifier=identifier,
+                unzipDirectory=str(unzipdir),
+                instanceName=identifier,
+            )
         except Exception as exc:  # FMPy raises bare Exception, AttributeError on symbols
-            raise FMUError(f"{self.path.name}: cannot load binaries/{platform_dir}/"
-                           f"{library.name}: {exc}") from exc
+            raise FMUError(
+                f"{self.path.name}: cannot load binaries/{platform_dir}/{library.name}: {exc}"
+            ) from exc
         finally:
             os.chdir(cwd)
             from fmpy import freeLibrary
+
             freeLibrary(probe._handle)
 
         dll = self._fmu.dll
         if self.interface == "cs":
             if self._major == 2:
-                self._loop_funcs = (_raw(dll, "fmi2SetReal", _FMI2_SETGET),
-                                    _raw(dll, "fmi2DoStep", _FMI2_DOSTEP),
-                                    _raw(dll, "fmi2GetReal", _FMI2_SETGET))
+                self._loop_funcs = (
+                    _raw(dll, "fmi2SetReal", _FMI2_SETGET),
+                    _raw(dll, "fmi2DoStep", _FMI2_DOSTEP),
+                    _raw(dll, "fmi2GetReal", _FMI2_SETGET),
+                )
             else:
-                self._loop_funcs = (_raw(dll, "fmi3SetFloat64", _FMI3_SETGET),
-                                    _raw(dll, "fmi3DoStep", _FMI3_DOSTEP),
-                                    _raw(dll, "fmi3GetFloat64", _FMI3_SETGET))
+                self._loop_funcs = (
+                    _raw(dll, "fmi3SetFloat64", _FMI3_SETGET),
+                    _raw(dll, "fmi3DoStep", _FMI3_DOSTEP),
+                    _raw(dll, "fmi3GetFloat64", _FMI3_SETGET),
+                )
         self._instantiate()
 
     def _fmpy_class(self) -> type:
         if self._major == 2:
             from fmpy.fmi2 import FMU2Model, FMU2Slave
+
             return FMU2Slave if self.interface == "cs" else FMU2Model
         from fmpy.fmi3 import FMU3Model, FMU3Slave
+
         return FMU3Slave if self.interface == "cs" else FMU3Model
 
     def _instantiate(self) -> None:
         fmu = self._fmu
         try:
             if self._major == 2:
-                from fmpy.fmi2 import (
-                    fmi2CallbackAllocateMemoryTYPE,
-                    fmi2CallbackFreeMemoryTYPE,
-                    fmi2CallbackFunctions,
-                    fmi2CallbackLoggerTYPE,
-                )
-                from fmpy.logging import addLoggerProxy
-
-                callbacks = fmi2CallbackFunctions()
-                callbacks.logger = fmi2CallbackLoggerTYPE(self._log.fmi2)
-                from fmpy import calloc, free
-                callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-                callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-                addLoggerProxy(byref(callbacks))
-                self._callbacks = callbacks  # keep alive
+                callbacks = _fmi2_callbacks(self._log)
+                self._callbacks = callbacks  # keep alive as long as the instance
                 fmu.instantiate(callbacks=callbacks)
             else:
                 fmu.instantiate(logMessage=self._log.fmi3)
         except Exception as exc:  # FMPy raises bare Exception on a NULL instance
-            raise FMUError(f"{self.path.name}: instantiation failed: {exc}."
-                           f"{self._log.text()}") from exc
+            raise FMUError(
+                f"{self.path.name}: instantiation failed: {exc}.{self._log.text()}"
+            ) from exc
         if not fmu.component:
             raise FMUError(f"{self.path.name}: instantiation failed.{self._log.text()}")
         self._component = fmu.component
@@ -661,8 +763,10 @@ class FMUSession:
         if self._fmu is None:
             raise SimulationError(f"{self.path.name}: the session is closed")
         t, u = self._check_arrays(time, inputs)
-        values = [(name, *self._setter(name, "parameter"), value)
-                  for name, value in {**self._start_values, **parameters}.items()]
+        values = [
+            (name, *self._setter(name, "parameter"), value)
+            for name, value in {**self._start_values, **parameters}.items()
+        ]
         if self._needs_reset:
             self._reset()
         self._log.messages.clear()
@@ -675,13 +779,15 @@ class FMUSession:
         self._check_finite(t, out)
         return out
 
-    def _check_arrays(self, time: np.ndarray,
-                      inputs: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    def _check_arrays(
+        self, time: np.ndarray, inputs: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
         t = np.ascontiguousarray(time, dtype=np.float64)
         name = self.path.name
         if t.ndim != 1 or t.size < 2:
-            raise SimulationError(f"{name}: time must be a 1-D array of at least 2 samples, "
-                                  f"got shape {t.shape}")
+            raise SimulationError(
+                f"{name}: time must be a 1-D array of at least 2 samples, got shape {t.shape}"
+            )
         if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
             raise SimulationError(f"{name}: time must be finite and strictly increasing")
         n_in = len(self.input_names)
@@ -694,12 +800,16 @@ class FMUSession:
             if u.ndim == 1 and n_in == 1:
                 u = u[:, None]
             if u.shape != (t.size, n_in):
-                raise SimulationError(f"{name}: inputs must have shape ({t.size}, {n_in}) "
-                                      f"for {list(self.input_names)}, got {u.shape}")
+                raise SimulationError(
+                    f"{name}: inputs must have shape ({t.size}, {n_in}) "
+                    f"for {list(self.input_names)}, got {u.shape}"
+                )
             if not np.all(np.isfinite(u)):
                 row, col = np.argwhere(~np.isfinite(u))[0]
-                raise SimulationError(f"{name}: input {self.input_names[col]!r} is not finite "
-                                      f"at t={t[row]:g} (row {row})")
+                raise SimulationError(
+                    f"{name}: input {self.input_names[col]!r} is not finite "
+                    f"at t={t[row]:g} (row {row})"
+                )
             u = np.ascontiguousarray(u)
         return t, u
 
@@ -709,7 +819,8 @@ class FMUSession:
             row, col = np.argwhere(bad)[0]
             raise SimulationError(
                 f"{self.path.name}: output {self.output_names[col]!r} is {out[row, col]} at "
-                f"t={t[row]:g} (step {row}); check the parameters of this run")
+                f"t={t[row]:g} (step {row}); check the parameters of this run"
+            )
 
     def _apply(self, values: list[tuple[str, str, int, float]], t0: float) -> None:
         fmu = self._fmu
@@ -719,12 +830,16 @@ class FMUSession:
                     (fmu.setReal if self._major == 2 else fmu.setFloat64)([vr], [float(value)])
                 elif kind == "int":
                     if float(value) != round(float(value)):
-                        raise SimulationError(f"{self.path.name}: {name!r} is an Integer "
-                                              f"variable, got non-integer {value!r}")
+                        raise SimulationError(
+                            f"{self.path.name}: {name!r} is an Integer "
+                            f"variable, got non-integer {value!r}"
+                        )
                     vtype = self.variables[name].type
-                    setter = (fmu.setInteger if self._major == 2 else
-                              getattr(fmu, "set" + ("Int64" if vtype == "Enumeration"
-                                                    else vtype)))
+                    setter = (
+                        fmu.setInteger
+                        if self._major == 2
+                        else getattr(fmu, "set" + ("Int64" if vtype == "Enumeration" else vtype))
+                    )
                     setter([vr], [round(float(value))])
                 else:
                     fmu.setBoolean([vr], [bool(value)])
@@ -733,19 +848,26 @@ class FMUSession:
             except Exception as exc:  # FMICallException
                 raise self._fmi_error(exc, f"setting {name!r} = {value!r}", 0, t0) from exc
 
-    def _fmi_error(self, exc: Exception, what: str, step: int | str, t: float,
-                   status: int | None = None) -> SimulationError:
+    def _fmi_error(
+        self, exc: Exception, what: str, step: int | str, t: float, status: int | None = None
+    ) -> SimulationError:
         function = getattr(exc, "function", None) or what
         status = getattr(exc, "status", status)
-        label = (f" returned {_STATUS_NAMES[status]}"
-                 if status is not None and 0 <= status < len(_STATUS_NAMES) else " failed")
+        label = (
+            f" returned {_STATUS_NAMES[status]}"
+            if status is not None and 0 <= status < len(_STATUS_NAMES)
+            else " failed"
+        )
         if status is not None and status >= _FMI_FATAL:
             self._free_instance()
-        return SimulationError(f"{self.path.name}: {function}{label} at step {step}, "
-                               f"t={t:g} ({what}).{self._log.text()}")
+        return SimulationError(
+            f"{self.path.name}: {function}{label} at step {step}, "
+            f"t={t:g} ({what}).{self._log.text()}"
+        )
 
-    def _setup(self, t0: float, t_end: float, values: list[tuple[str, str, int, float]],
-               u0: np.ndarray) -> None:
+    def _setup(
+        self, t0: float, t_end: float, values: list[tuple[str, str, int, float]], u0: np.ndarray
+    ) -> None:
         fmu = self._fmu
         try:
             if self._major == 2:
@@ -766,15 +888,18 @@ class FMUSession:
         except Exception as exc:  # FMICallException from FMPy's checked wrappers
             raise self._fmi_error(exc, "initialization", 0, t0) from exc
 
-    def _simulate_cs(self, t: np.ndarray, u: np.ndarray,
-                     values: list[tuple[str, str, int, float]]) -> np.ndarray:
+    def _simulate_cs(
+        self, t: np.ndarray, u: np.ndarray, values: list[tuple[str, str, int, float]]
+    ) -> np.ndarray:
         # optional sub-steps: refine the grid, hold the input, keep the original rows
         keep = None
         if self.step_size is not None:
             n_sub = np.maximum(np.ceil(np.diff(t) / self.step_size - 1e-9), 1).astype(int)
             if n_sub.max() > 1:
-                fine = [np.linspace(a, b, m, endpoint=False)
-                        for a, b, m in zip(t[:-1], t[1:], n_sub, strict=True)]
+                fine = [
+                    np.linspace(a, b, m, endpoint=False)
+                    for a, b, m in zip(t[:-1], t[1:], n_sub, strict=True)
+                ]
                 keep = np.concatenate([[0], np.cumsum(n_sub)])
                 u = np.ascontiguousarray(np.repeat(u[:-1], n_sub, axis=0).reshape(-1, u.shape[1]))
                 u = np.vstack([u, np.zeros((1, u.shape[1]))])
@@ -782,17 +907,22 @@ class FMUSession:
         self._setup(t[0], t[-1], values, u[0])
         out = np.empty((t.size, self._vr_out.size))
         loop = _cs_loop_fmi2 if self._major == 2 else _cs_loop_fmi3
-        status, k, call = loop(self._loop_funcs, self._component, self._vr_in, self._vr_out,
-                               t, u, out)
+        status, k, call = loop(
+            self._loop_funcs, self._component, self._vr_in, self._vr_out, t, u, out
+        )
         if status:
             fname = _LOOP_CALLS[call].format(v=self._major)
             if status == _STATUS_TERMINATE:
                 raise SimulationError(
                     f"{self.path.name}: the FMU requested termination in fmi3DoStep at step "
-                    f"{k}, t={t[k]:g}.{self._log.text()}")
+                    f"{k}, t={t[k]:g}.{self._log.text()}"
+                )
             step_t = t[k]
-            what = (f"step from t={t[k]:g} to t={t[k + 1]:g}" if call == _CALL_STEP
-                    else "communication point")
+            what = (
+                f"step from t={t[k]:g} to t={t[k + 1]:g}"
+                if call == _CALL_STEP
+                else "communication point"
+            )
             err = _StatusError(fname, status)
             raise self._fmi_error(err, what, k, step_t)
         try:
@@ -804,15 +934,18 @@ class FMUSession:
             t = t_orig
         return out
 
-    def _simulate_me(self, t: np.ndarray, u: np.ndarray,
-                     values: list[tuple[str, str, int, float]]) -> np.ndarray:
+    def _simulate_me(
+        self, t: np.ndarray, u: np.ndarray, values: list[tuple[str, str, int, float]]
+    ) -> np.ndarray:
         from fmpy import simulate_fmu
 
         if self.input_names:
             # zero-order hold as FMPy input events: repeat each time stamp
             n = t.size
-            signal = np.zeros(2 * n - 1, dtype=[("time", np.float64)]
-                              + [(name, np.float64) for name in self.input_names])
+            signal = np.zeros(
+                2 * n - 1,
+                dtype=[("time", np.float64)] + [(name, np.float64) for name in self.input_names],
+            )
             signal["time"][0::2] = t
             signal["time"][1::2] = t[1:]
             for j, name in enumerate(self.input_names):
@@ -827,9 +960,10 @@ class FMUSession:
             current["t"] = time
             return True
 
-        start_values = {name: (bool(v) if kind == "bool" else
-                               round(v) if kind == "int" else float(v))
-                        for name, kind, _vr, v in values}
+        start_values = {
+            name: (bool(v) if kind == "bool" else round(v) if kind == "int" else float(v))
+            for name, kind, _vr, v in values
+        }
         try:
             result = simulate_fmu(
                 str(self._fmu.unzipDirectory),
@@ -847,8 +981,9 @@ class FMUSession:
                 step_finished=step_finished,
             )
         except Exception as exc:  # FMICallException or bare Exception from FMPy's solver
-            raise self._fmi_error(exc, f"Model Exchange simulation: {exc}",
-                                  "?", current["t"]) from exc
+            raise self._fmi_error(
+                exc, f"Model Exchange simulation: {exc}", "?", current["t"]
+            ) from exc
         rt = result["time"]
         return np.column_stack([np.interp(t, rt, result[name]) for name in self.output_names])
 
@@ -866,6 +1001,7 @@ class FMUSession:
                     finally:
                         self._fmu = None
         finally:
+            self._log.release()
             if self._tempdir is not None:
                 shutil.rmtree(self._tempdir, ignore_errors=True)
                 self._tempdir = None
@@ -895,9 +1031,11 @@ class FMUSession:
 
     def __repr__(self) -> str:
         state = "closed" if self.closed else f"FMI {self.fmi_version} {self.interface}"
-        return (f"FMUSession({str(self.path)!r}, inputs={list(self.input_names)}, "
-                f"outputs={list(self.output_names)}, parameters={list(self.parameter_names)}, "
-                f"{state}, nfev={self.nfev})")
+        return (
+            f"FMUSession({str(self.path)!r}, inputs={list(self.input_names)}, "
+            f"outputs={list(self.output_names)}, parameters={list(self.parameter_names)}, "
+            f"{state}, nfev={self.nfev})"
+        )
 
 
 class _StatusError(Exception):
@@ -946,8 +1084,11 @@ def fmu_info(path: str | os.PathLike[str]) -> str:
         platforms = supported_platforms(str(path))
     except Exception as exc:  # FMPy raises bare Exception, KeyError for a missing member
         raise FMUError(f"{path}: cannot read modelDescription.xml: {exc}") from exc
-    interfaces = [name for name, d in (("Co-Simulation", md.coSimulation),
-                                       ("Model Exchange", md.modelExchange)) if d]
+    interfaces = [
+        name
+        for name, d in (("Co-Simulation", md.coSimulation), ("Model Exchange", md.modelExchange))
+        if d
+    ]
     lines = [
         f"FMU              {path}",
         f"FMI version      {md.fmiVersion}",
@@ -959,12 +1100,15 @@ def fmu_info(path: str | os.PathLike[str]) -> str:
     ]
     exp = md.defaultExperiment
     if exp is not None:
-        lines.append(f"Experiment       start={exp.startTime} stop={exp.stopTime} "
-                     f"step={exp.stepSize} tolerance={exp.tolerance}")
-    groups = (("Inputs", lambda v: v.causality == "input"),
-              ("Outputs", lambda v: v.causality == "output"),
-              ("Parameters", lambda v: v.causality == "parameter"
-               and v.variability != "constant"))
+        lines.append(
+            f"Experiment       start={exp.startTime} stop={exp.stopTime} "
+            f"step={exp.stepSize} tolerance={exp.tolerance}"
+        )
+    groups = (
+        ("Inputs", lambda v: v.causality == "input"),
+        ("Outputs", lambda v: v.causality == "output"),
+        ("Parameters", lambda v: v.causality == "parameter" and v.variability != "constant"),
+    )
     for title, keep in groups:
         chosen = [_info(v) for v in md.modelVariables if keep(v)]
         lines.append("")
@@ -972,7 +1116,9 @@ def fmu_info(path: str | os.PathLike[str]) -> str:
         if chosen:
             width = max(len(v.name) for v in chosen)
             for v in chosen:
-                lines.append(f"  {v.name:<{width}}  {v.type:<8} {v.unit or '':<8} "
-                             f"start={v.start if v.start is not None else '-':<10} "
-                             f"{v.description or ''}".rstrip())
+                lines.append(
+                    f"  {v.name:<{width}}  {v.type:<8} {v.unit or '':<8} "
+                    f"start={v.start if v.start is not None else '-':<10} "
+                    f"{v.description or ''}".rstrip()
+                )
     return "\n".join(lines)
