@@ -242,6 +242,8 @@ def relevel(
     sn_means: Mapping[str, Sequence[float]],
     options: LevelingOptions | None = None,
     bounds: Mapping[str, tuple[float, float]] | None = None,
+    centre: Mapping[str, float] | None = None,
+    shrink: float | None = None,
 ) -> LevelingDecision:
     """Choose the levels of the next iteration from the S/N main effects.
 
@@ -255,6 +257,14 @@ def relevel(
         Thresholds and rules; defaults documented on :class:`LevelingOptions`.
     bounds : mapping of str to (float, float), optional
         Physical bounds ``(min, max)`` of each parameter.
+    centre : mapping of str to float, optional
+        Run-based selection: centre the next levels on these values (e.g. the best run
+        seen) instead of on each parameter's best S/N level. A value at or beyond the
+        lowest or highest level counts as a boundary best. Flatness is still judged from
+        the S/N main effects.
+    shrink : float, optional
+        Override of ``options.shrink`` for interior recentring (1 keeps the width, to move
+        a range without narrowing it).
 
     Returns
     -------
@@ -304,7 +314,17 @@ def relevel(
         half = 0.5 * (u[-1] - u[0])
         optimum_u = u[best]
         interior = 0 < best < len(lv) - 1
-        if options.refine and interior and np.all(np.isfinite(sn[best - 1 : best + 2])):
+        if centre is not None and name in centre:
+            c = float(centre[name])
+            if log and c <= 0:
+                log, u = False, lv
+                half = 0.5 * (u[-1] - u[0])
+            optimum_u = math.log10(c) if log else c
+            best = int(np.argmin(np.abs(u - optimum_u)))
+            interior = u[0] < optimum_u < u[-1]
+            if not interior:
+                best = 0 if optimum_u <= u[0] else len(lv) - 1
+        elif options.refine and interior and np.all(np.isfinite(sn[best - 1 : best + 2])):
             vertex = _parabola_vertex(u[best - 1 : best + 2], sn[best - 1 : best + 2])
             if vertex is not None:
                 optimum_u = min(max(vertex, u[best - 1]), u[best + 1])
@@ -327,7 +347,7 @@ def relevel(
             reason = f"S/N flat ({delta:.3g} dB) but levels far apart: narrowed about the best"
         elif interior:
             case = "recentre"
-            new_half = options.shrink * half
+            new_half = (options.shrink if shrink is None else shrink) * half
             new = _levels_about(optimum_u, new_half, n_next, log, (bmin, bmax), options)
             reason = (
                 f"S/N changes by {delta:.3g} dB with its best at interior level {best + 1}: "
@@ -339,7 +359,7 @@ def relevel(
             if at_bound:
                 case = "narrow"
                 new = _levels_about(
-                    u[best], options.shrink * half, n_next, log, (bmin, bmax), options
+                    optimum_u, options.shrink * half, n_next, log, (bmin, bmax), options
                 )
                 reason = (
                     f"S/N best at the {side} level, which is the physical bound: "
@@ -347,11 +367,13 @@ def relevel(
                 )
             else:
                 case = "shift"
-                new = _levels_about(u[best], half, n_next, log, (bmin, bmax), options)
+                new = _levels_about(optimum_u, half, n_next, log, (bmin, bmax), options)
                 reason = (
                     f"S/N changes by {delta:.3g} dB with its best at the {side} level: "
                     f"range moved {'up' if side == 'upper' else 'down'}"
                 )
+        if centre is not None and name in centre and case != "converged":
+            reason = f"centred on the best run ({optimum:.6g}); {reason}"
         decisions.append(
             ParameterDecision(
                 name=name,

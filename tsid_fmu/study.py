@@ -118,7 +118,7 @@ class Experiment:
     outputs : mapping of str to str
         FMU output name -> data column it is compared with.
     name : str
-        Label used in reports.
+        Label used in reports; default the data file's stem.
     time_column : str
         Name of the time column.
     derived : mapping of str to str
@@ -134,7 +134,7 @@ class Experiment:
     data: Any
     inputs: dict[str, str] = field(default_factory=dict)
     outputs: dict[str, str] = field(default_factory=dict)
-    name: str = "experiment"
+    name: str = ""
     time_column: str = "time"
     derived: dict[str, str] = field(default_factory=dict)
     weights: dict[str, float] | None = None
@@ -142,6 +142,9 @@ class Experiment:
     sample_time: float | None = None
 
     def __post_init__(self) -> None:
+        if not self.name:
+            is_path = isinstance(self.data, (str, Path))
+            self.name = Path(self.data).stem if is_path else "experiment"
         if not self.outputs:
             raise StudyError(f"experiment {self.name!r}: no outputs to compare with the data")
         if self.weights is not None:
@@ -178,6 +181,12 @@ class Study:
         Seed of the replicate noise, so a study is reproducible.
     max_iterations : int
         Upper bound on iterations, default 12.
+    selection : {"auto", "main_effects", "best_run"}
+        How the next levels are centred. ``main_effects`` takes each parameter's best
+        S/N level (SISO paper); ``best_run`` the levels of the best run seen (MISO paper,
+        Table 3); ``auto`` (default) takes the main-effects optimum unless its
+        confirmation run is worse than the best run, which shows that interactions
+        mislead the additive model, and then continues from the best run.
     leveling : LevelingOptions
         Re-leveling thresholds.
     start_values : mapping of str to float
@@ -201,6 +210,7 @@ class Study:
     input_noise: float = 0.01
     seed: int = 0
     max_iterations: int = 12
+    selection: str = "auto"
     leveling: LevelingOptions = field(default_factory=LevelingOptions)
     start_values: dict[str, float] = field(default_factory=dict)
     interface: str = "auto"
@@ -232,6 +242,11 @@ class Study:
             raise StudyError(
                 f"{where}max_iterations must be a positive integer, got {self.max_iterations}"
             )
+        if self.selection not in ("auto", "main_effects", "best_run"):
+            raise StudyError(
+                f"{where}selection must be 'auto', 'main_effects' or 'best_run', "
+                f"not {self.selection!r}"
+            )
         if self.interface not in ("auto", "cs", "me"):
             raise StudyError(
                 f"{where}interface must be 'auto', 'cs' or 'me', not {self.interface!r}"
@@ -262,7 +277,9 @@ _DATA = {
     "file", "name", "time", "derived", "inputs", "outputs", "weights", "start_values",
     "sample_time",
 }  # fmt: skip
-_METHOD = {"array", "cost", "replicates", "input_noise", "seed", "max_iterations"}
+_METHOD = {
+    "array", "cost", "replicates", "input_noise", "seed", "max_iterations", "selection",
+}  # fmt: skip
 _PARAM = {"levels", "min", "max", "unit"}
 
 
@@ -379,6 +396,7 @@ def study_from_dict(
             input_noise=_get(method, "input_noise", float, where, "[method]", default=0.01),
             seed=_get(method, "seed", int, where, "[method]", default=0),
             max_iterations=_get(method, "max_iterations", int, where, "[method]", default=12),
+            selection=_get(method, "selection", str, where, "[method]", default="auto"),
             leveling=leveling,
             start_values=_number_map(st, "start_values", where, "[study]"),
             interface=_get(st, "interface", str, where, "[study]", default="auto"),

@@ -1,0 +1,105 @@
+"""The identification loop on a small real FMU: accuracy, failed rows, audit trail, resume."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from fmu_factory import build_c_fmu, lag_response
+
+from tsid_fmu.engine import identify
+from tsid_fmu.errors import StudyError
+from tsid_fmu.study import Experiment, Parameter, Study
+
+TAU, X0 = 0.37, 0.8
+
+
+@pytest.fixture(scope="module")
+def lag(tmp_path_factory):
+    d = tmp_path_factory.mktemp("lag")
+    fmu = build_c_fmu(d)
+    t = np.arange(0, 5.0 + 1e-9, 0.01)
+    u = np.where((t % 2.0) < 1.0, 1.0, -0.5) + 0.3 * np.sin(3 * t)
+    y = lag_response(t, u, TAU, X0)
+    y = y + np.random.default_rng(0).normal(0, 0.01 * np.std(y), y.shape)
+    data = d / "lag.csv"
+    pd.DataFrame({"time": t, "u": u, "y_meas": y}).to_csv(data, index=False)
+    return fmu, data
+
+
+def make_study(lag, **kw):
+    fmu, data = lag
+    return Study(
+        fmu=fmu,
+        parameters=[
+            Parameter("tau", kw.pop("tau_levels", [0.05, 0.5, 2.0]), min=0.0),
+            Parameter("x0", [-1.0, 0.0, 2.0]),
+        ],
+        experiments=[Experiment(data=data, inputs={"u": "u"}, outputs={"y": "y_meas"})],
+        replicates=2,
+        input_noise=0.01,
+        seed=7,
+        **kw,
+    )
+
+
+def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
+    out = tmp_path / "out"
+    res = identify(make_study(lag), out, plots=True)
+    assert res.success and res.status == 0, res.message
+    assert res.x["tau"] == pytest.approx(TAU, rel=0.01)
+    assert res.x["x0"] == pytest.approx(X0, rel=0.05)
+    assert res.nit <= 12 and res.nfev > 9 * res.nit
+    # the answer is never worse than any row evaluated
+    assert res.fun <= min(float(r.mean_costs.min()) for r in res.iterations)
+    runs = res.to_pandas()
+    assert len(runs) == 9 * res.nit and {"tau", "x0", "S/N [dB]", "mean cost"} <= set(runs)
+    first = out / "iteration_01"
+    for f in ("levels.csv", "runs.csv", "response.csv", "anova.csv", "decision.json",
+              "next_levels.toml", "main_effects.png", "fit.png", "record.json"):  # fmt: skip
+        assert (first / f).is_file(), f
+    for f in ("result.json", "parameters.csv", "parameters.ssv", "report.md", "fit.png"):
+        assert (out / f).is_file(), f
+    summary = json.loads((out / "result.json").read_text())
+    assert summary["x"] == res.x
+    assert "tau" in (out / "parameters.ssv").read_text()
+    assert res.fit["lag"]["y"]["fit_percent"] > 98
+
+
+def test_failed_rows_are_reported_and_do_not_stop_the_study(lag, tmp_path):
+    # tau = 0 makes the FMU return fmi2Error for every row that uses it
+    res = identify(make_study(lag, tau_levels=[0.0, 0.4, 1.0]), tmp_path / "o", plots=False)
+    first = res.iterations[0]
+    failed = [e for e in first.errors if e]
+    assert len(failed) == 3 and all("tau" in e or "Error" in e or "error" in e for e in failed)
+    assert np.isinf(first.costs[[e is not None for e in first.errors]]).all()
+    assert res.x["tau"] == pytest.approx(TAU, rel=0.02)
+    assert "error" in pd.read_csv(tmp_path / "o" / "iteration_01" / "runs.csv").columns
+
+
+def test_pause_edit_resume_matches_uninterrupted(lag, tmp_path):
+    full = identify(make_study(lag), tmp_path / "full", plots=False)
+    out = tmp_path / "paused"
+    part = identify(make_study(lag), out, pause_after=2, plots=False)
+    assert part.status == 2 and part.nit == 2
+    # the same folder without --resume is refused, so nothing is overwritten
+    with pytest.raises(StudyError, match="--resume"):
+        identify(make_study(lag), out, plots=False)
+    # an iteration interrupted half-way (no record.json) is redone
+    (out / "iteration_03").mkdir()
+    (out / "iteration_03" / "runs.csv").write_text("partial")
+    resumed = identify(make_study(lag), out, resume=True, plots=False)
+    assert resumed.x == full.x and resumed.nit == full.nit and resumed.nfev == full.nfev
+
+
+def test_a_person_can_edit_the_next_levels(lag, tmp_path):
+    out = tmp_path / "edit"
+    identify(make_study(lag), out, pause_after=1, plots=False)
+    nxt = out / "iteration_01" / "next_levels.toml"
+    nxt.write_text("[levels]\ntau = [0.3, 0.35, 0.4]\nx0 = [0.7, 0.8, 0.9]\n")
+    res = identify(make_study(lag), out, resume=True, max_iterations=2, plots=False)
+    assert res.iterations[1].levels == {"tau": [0.3, 0.35, 0.4], "x0": [0.7, 0.8, 0.9]}
+    nxt.write_text("[levels]\ntau = [-1, 0.35]\nx0 = [0.7, 0.8, 0.9]\n")
+    (out / "iteration_02" / "record.json").unlink()
+    with pytest.raises(StudyError, match=r"next_levels.toml: tau levels .* leave the bounds"):
+        identify(make_study(lag), out, resume=True, plots=False)

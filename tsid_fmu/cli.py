@@ -1,0 +1,169 @@
+"""Command line: ``tsid identify | simulate | info | build``.
+
+Errors of the package (:class:`~tsid_fmu.errors.TsidError`) are printed as one line
+naming what is wrong, with exit status 2; an interrupted study exits with 130 and says
+how to resume.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from tsid_fmu.errors import StudyError, TsidError
+
+__all__ = ["main"]
+
+
+def _parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            raise StudyError(f"{what} must look like NAME=VALUE, got {item!r}")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def _cmd_identify(args: argparse.Namespace) -> int:
+    from tsid_fmu.engine import identify
+
+    out = Path(args.out) if args.out else Path(args.study).with_suffix("").parent / "results"
+    result = identify(
+        args.study,
+        out,
+        resume=args.resume,
+        max_iterations=args.max_iterations,
+        pause_after=args.pause_after,
+        progress=not args.quiet,
+        plots=not args.no_plots,
+    )
+    print(result.parameters_frame().to_string())
+    print()
+    print(f"{result.message}")
+    print(f"best cost {result.fun:.6g} at {result.best_source}; {result.nfev} simulations")
+    for name, reason in result.weak.items():
+        print(f"weakly constrained: {name}: {reason}")
+    print(f"report, tables and plots: {out}/report.md")
+    return 0 if result.status in (0, 2) else 1
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    import json
+
+    import numpy as np
+
+    from tsid_fmu.report import fit_plot
+    from tsid_fmu.runner import Evaluator
+    from tsid_fmu.scoring import metrics
+    from tsid_fmu.study import load_study
+
+    study = load_study(args.study)
+    values: dict[str, float] = {}
+    if args.result:
+        path = Path(args.result)
+        path = path / "result.json" if path.is_dir() else path
+        try:
+            values.update(json.loads(path.read_text())["x"])
+        except (OSError, ValueError, KeyError) as exc:
+            raise StudyError(f"{path}: cannot read identified parameters ({exc})") from None
+    for name, text in _parse_assignments(args.set, "--set").items():
+        try:
+            values[name] = float(text)
+        except ValueError:
+            raise StudyError(f"--set {name}={text}: not a number") from None
+    for p in study.parameters:
+        values.setdefault(p.name, float(np.median(p.levels)))
+    unknown = sorted(set(values) - set(study.parameter_names))
+    if unknown:
+        raise StudyError(f"--set: {unknown} are not parameters of the study")
+    with Evaluator(study) as ev:
+        simulated = ev.simulate_clean(values)
+    print("parameters: " + ", ".join(f"{k}={v:.6g}" for k, v in values.items()))
+    for prep, y, err in simulated:
+        if y is None:
+            print(f"{prep.experiment.name}: simulation failed: {err}")
+            continue
+        for out_name, m in metrics(prep.time, prep.measured, y, prep.output_names).items():
+            print(
+                f"{prep.experiment.name} / {out_name}: fit {m['fit_percent']:.3f} %, "
+                f"IAE {m['iae']:.6g}, SSE {m['sse']:.6g}, RMSE {m['rmse']:.6g}"
+            )
+    plot = Path(args.plot)
+    fit_plot(simulated, plot, title="tsid simulate")
+    print(f"plot: {plot}")
+    return 0 if all(err is None for _, _, err in simulated) else 1
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from tsid_fmu.driver import fmu_info
+
+    print(fmu_info(args.fmu))
+    return 0
+
+
+def _cmd_build(args: argparse.Namespace) -> int:
+    try:
+        from tsid_fmu.build import main as build_main
+    except ImportError as exc:  # pragma: no cover - depends on the install
+        raise StudyError(f"the FMU build is not available ({exc})") from None
+    return int(build_main(list(args.build_args)) or 0)
+
+
+def make_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``tsid``."""
+    parser = argparse.ArgumentParser(
+        prog="tsid", description="Taguchi-method identification of FMU parameters."
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("identify", help="run a study file")
+    p.add_argument("study", help="study file (TOML)")
+    p.add_argument("--out", help="output folder (default: results/ beside the study)")
+    p.add_argument("--resume", action="store_true", help="continue the study in --out")
+    p.add_argument("--max-iterations", type=int, help="override the study's limit")
+    p.add_argument(
+        "--pause-after", type=int, metavar="N",
+        help="stop after N iterations to review/edit next_levels.toml, then --resume",
+    )  # fmt: skip
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+    p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("simulate", help="simulate one parameter set against a study's data")
+    p.add_argument("study", help="study file (TOML)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    p.add_argument("--result", help="use the parameters of a result folder or result.json")
+    p.add_argument("--plot", default="simulate.png", help="PNG to write (default simulate.png)")
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("info", help="describe an FMU")
+    p.add_argument("fmu")
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("build", help="build FMUs from models/ (needs tsid-fmu[build])")
+    p.add_argument("build_args", nargs=argparse.REMAINDER, help="arguments of tsid_fmu.build")
+    p.set_defaults(func=_cmd_build)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit status."""
+    args = make_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except TsidError as exc:
+        print(f"tsid: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(
+            "\ntsid: interrupted; finished iterations are kept - continue with --resume",
+            file=sys.stderr,
+        )
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

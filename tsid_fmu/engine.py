@@ -1,0 +1,568 @@
+"""The recursive Taguchi identification loop (SISO paper, Section III, Steps II-V).
+
+Each iteration builds the orthogonal array of the current levels (Step III), simulates
+every row against the measured data with noise replicates, computes the
+smaller-the-better S/N ratio of each row, the response table and the ANOVA, re-levels
+(Step IV, :mod:`tsid_fmu.leveling`), confirms the predicted optimum with one more
+simulation, and keeps the best parameter set seen so far, so the answer is never
+worse than the best row evaluated. The loop stops in Case 3 (Step V) or after
+``max_iterations``.
+
+Every finished iteration is written to the output folder before the next starts
+(:mod:`tsid_fmu.trail`), so an interrupted study resumes, and a person can edit the
+proposed levels of the next iteration and continue.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.analysis import AnovaTable, ResponseTable, anova, response_table
+from tsid_fmu.analysis import sn_smaller_the_better as sn_stb
+from tsid_fmu.arrays import select_array
+from tsid_fmu.errors import StudyError
+from tsid_fmu.leveling import LevelingDecision, ParameterDecision, relative_span, relevel
+from tsid_fmu.runner import Evaluator
+from tsid_fmu.scoring import metrics
+from tsid_fmu.study import Study, load_study
+
+__all__ = ["IdentificationResult", "IterationRecord", "identify", "run_iteration"]
+
+WEAK_CONTRIBUTION = 1.0
+"""Percent ANOVA contribution below which a parameter is reported as weakly constrained."""
+
+
+@dataclass
+class IterationRecord:
+    """Everything one iteration did, enough to re-create its tables and to resume.
+
+    Attributes
+    ----------
+    index : int
+        1-based iteration number.
+    array : str
+        Orthogonal array used (e.g. ``"L25"``).
+    columns : list of int
+        0-based array column of each parameter.
+    names : list of str
+        Parameters, in column order.
+    levels : dict
+        Levels of each parameter in this iteration.
+    level_index : numpy.ndarray
+        0-based level of each parameter in each run, shape ``(runs, parameters)``.
+    costs : numpy.ndarray
+        Cost of each run and replicate, shape ``(runs, replicates)`` (``inf``: failed).
+    errors : list of str or None
+        Failure reason of each run.
+    decision : LevelingDecision
+        Re-leveling outcome (case, proposed next levels, predicted optimum).
+    optimum_cost : float
+        Mean cost of the confirmation run at the predicted optimum.
+    best_x, best_cost, best_source : dict, float, str
+        Best parameter set seen so far, its mean cost and where it was found.
+    nfev : int
+        Simulations run so far, including this iteration.
+    """
+
+    index: int
+    array: str
+    columns: list[int]
+    names: list[str]
+    levels: dict[str, list[float]]
+    level_index: np.ndarray
+    costs: np.ndarray
+    errors: list[str | None]
+    decision: LevelingDecision
+    optimum_cost: float
+    optimum_error: str | None
+    best_x: dict[str, float]
+    best_cost: float
+    best_source: str
+    nfev: int
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def values(self) -> np.ndarray:
+        """Parameter value of each run, shape ``(runs, parameters)``."""
+        cols = [
+            np.asarray(self.levels[n])[self.level_index[:, j]] for j, n in enumerate(self.names)
+        ]
+        return np.column_stack(cols)
+
+    @property
+    def mean_costs(self) -> np.ndarray:
+        """Mean cost over replicates of each run."""
+        return self.costs.mean(axis=1)
+
+    @property
+    def sn(self) -> np.ndarray:
+        """Smaller-the-better S/N ratio of each run (dB)."""
+        return sn_stb(self.costs)
+
+    @property
+    def response(self) -> ResponseTable:
+        """Mean S/N per level of each parameter (the response table)."""
+        return response_table(
+            self.level_index,
+            self.sn,
+            self.names,
+            n_levels=[len(self.levels[n]) for n in self.names],
+        )
+
+    @property
+    def anova(self) -> AnovaTable:
+        """ANOVA of the S/N ratios, with pooling when the array is saturated."""
+        return anova(
+            self.level_index,
+            self.sn,
+            self.names,
+            n_levels=[len(self.levels[n]) for n in self.names],
+        )
+
+    @property
+    def optimum(self) -> dict[str, float]:
+        """Main-effects optimum of this iteration (the confirmation run's parameters)."""
+        return dict(self.extra.get("optimum", self.decision.optimum()))
+
+    def sn_means(self) -> dict[str, list[float]]:
+        """Mean S/N per level by parameter."""
+        rt = self.response
+        return {n: [float(v) for v in rt.means[n]] for n in self.names}
+
+    def runs_frame(self):
+        """Return the runs of this iteration as a :class:`pandas.DataFrame`."""
+        import pandas as pd
+
+        values = self.values
+        data: dict[str, Any] = {"iteration": self.index, "run": np.arange(1, len(values) + 1)}
+        for j, n in enumerate(self.names):
+            data[f"{n} level"] = self.level_index[:, j] + 1
+        for j, n in enumerate(self.names):
+            data[n] = values[:, j]
+        for r in range(self.costs.shape[1]):
+            data[f"cost r{r + 1}"] = self.costs[:, r]
+        data["mean cost"] = self.mean_costs
+        data["S/N [dB]"] = self.sn
+        data["error"] = [e or "" for e in self.errors]
+        return pd.DataFrame(data)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return a JSON-serialisable copy (``inf`` written as ``None``)."""
+        return {
+            "index": self.index,
+            "array": self.array,
+            "columns": list(self.columns),
+            "names": list(self.names),
+            "levels": self.levels,
+            "level_index": self.level_index.tolist(),
+            "costs": [[_json_float(c) for c in row] for row in self.costs],
+            "errors": self.errors,
+            "decision": self.decision.to_dict(),
+            "optimum_cost": _json_float(self.optimum_cost),
+            "optimum_error": self.optimum_error,
+            "best_x": self.best_x,
+            "best_cost": _json_float(self.best_cost),
+            "best_source": self.best_source,
+            "nfev": self.nfev,
+            "extra": self.extra,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> IterationRecord:
+        """Re-create a record written by :meth:`to_dict`."""
+        dec = d["decision"]
+        decision = LevelingDecision(
+            parameters=[ParameterDecision(**p) for p in dec["parameters"]],
+            converged=bool(dec["converged"]),
+            message=dec["message"],
+        )
+        return cls(
+            index=int(d["index"]),
+            array=d["array"],
+            columns=list(d["columns"]),
+            names=list(d["names"]),
+            levels={k: [float(v) for v in vs] for k, vs in d["levels"].items()},
+            level_index=np.asarray(d["level_index"], dtype=int),
+            costs=np.array([[_from_json_float(c) for c in row] for row in d["costs"]]),
+            errors=list(d["errors"]),
+            decision=decision,
+            optimum_cost=_from_json_float(d["optimum_cost"]),
+            optimum_error=d.get("optimum_error"),
+            best_x={k: float(v) for k, v in d["best_x"].items()},
+            best_cost=_from_json_float(d["best_cost"]),
+            best_source=d["best_source"],
+            nfev=int(d["nfev"]),
+            extra=dict(d.get("extra", {})),
+        )
+
+
+def _json_float(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _from_json_float(x: float | None) -> float:
+    return math.inf if x is None else float(x)
+
+
+class IdentificationResult(dict):
+    """Outcome of an identification, in the style of :class:`scipy.optimize.OptimizeResult`.
+
+    Attributes
+    ----------
+    x : dict
+        Identified value of each parameter (the best parameter set seen).
+    fun : float
+        Its mean cost over the replicates.
+    success : bool
+        True if the study converged (Case 3) before ``max_iterations``.
+    status : int
+        0 converged, 1 iteration limit reached, 2 paused by request.
+    message : str
+        Why the loop stopped.
+    nfev : int
+        Simulations run.
+    nit : int
+        Iterations run.
+    iterations : list of IterationRecord
+        The audit trail, one record per iteration.
+    weak : dict
+        Parameters the data constrain weakly, with the reason.
+    contribution : dict
+        ANOVA percent contribution of each parameter per iteration.
+    fit : dict
+        Cost kinds and fit percentage per experiment and output at ``x``, noise-free.
+    out_dir : Path or None
+        Where the audit trail and report were written.
+    """
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self[name]
+        except KeyError as exc:
+            raise AttributeError(name) from exc
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        self[name] = value
+
+    def __dir__(self) -> list[str]:
+        return list(self.keys())
+
+    def __repr__(self) -> str:
+        order = ["message", "success", "status", "fun", "x", "nfev", "nit", "weak"]
+        width = max(len(k) for k in order)
+        lines = [f"{k.rjust(width)}: {self[k]!r}" for k in order if k in self]
+        return "\n".join(lines)
+
+    def to_pandas(self):
+        """Return every run of every iteration as one :class:`pandas.DataFrame`."""
+        import pandas as pd
+
+        frames = [rec.runs_frame() for rec in self["iterations"]]
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+    def parameters_frame(self):
+        """Return the identified parameters with units, ranges and flags."""
+        import pandas as pd
+
+        study: Study = self["study"]
+        rows = []
+        first = self["iterations"][0] if self["iterations"] else None
+        last = self["iterations"][-1] if self["iterations"] else None
+        for p in study.parameters:
+            rows.append(
+                {
+                    "parameter": p.name,
+                    "value": self["x"][p.name],
+                    "unit": p.unit,
+                    "first levels": f"{min(first.levels[p.name]):.6g} .. "
+                    f"{max(first.levels[p.name]):.6g}"
+                    if first
+                    else "",
+                    "last levels": f"{min(last.levels[p.name]):.6g} .. "
+                    f"{max(last.levels[p.name]):.6g}"
+                    if last
+                    else "",
+                    "contribution first [%]": self["contribution"].get(p.name, [math.nan])[0],
+                    "contribution last [%]": self["contribution"].get(p.name, [math.nan])[-1],
+                    "weakly constrained": self["weak"].get(p.name, ""),
+                }
+            )
+        return pd.DataFrame(rows).set_index("parameter")
+
+
+ProgressCallback = Callable[[str, dict[str, Any]], None]
+
+
+def run_iteration(
+    index: int,
+    levels: Mapping[str, list[float]],
+    study: Study,
+    evaluator: Evaluator,
+    best: tuple[dict[str, float], float, str] | None,
+    nfev_before: int,
+    progress: ProgressCallback | None = None,
+) -> IterationRecord:
+    """Run one iteration: array, simulations, S/N analysis, re-leveling, confirmation.
+
+    Parameters
+    ----------
+    index : int
+        1-based iteration number.
+    levels : mapping
+        Levels of each parameter for this iteration.
+    study : Study
+        The study.
+    evaluator : Evaluator
+        Runs and scores parameter sets.
+    best : tuple or None
+        Best ``(x, cost, source)`` seen before this iteration.
+    nfev_before : int
+        Simulations run before this iteration.
+    progress : callable, optional
+        Receives ``("row", {...})`` events while rows run.
+
+    Returns
+    -------
+    IterationRecord
+        The finished iteration.
+    """
+    names = study.parameter_names
+    n_levels = [len(levels[n]) for n in names]
+    array, columns = select_array(n_levels, name=study.array)
+    level_index = np.asarray(array.table[:, columns], dtype=int)
+    sets = [
+        {n: float(levels[n][level_index[i, j]]) for j, n in enumerate(names)}
+        for i in range(array.n_runs)
+    ]
+
+    def row_progress(done: int, total: int) -> None:
+        if progress is not None:
+            progress("row", {"iteration": index, "done": done, "total": total})
+
+    ev = evaluator.evaluate(sets, progress=row_progress)
+    if all(e is not None for e in ev.errors):
+        raise StudyError(
+            f"iteration {index}: every run of {array.name} failed; first reason: {ev.errors[0]}"
+        )
+    sn = sn_stb(ev.costs)
+    rt = response_table(level_index, sn, names, n_levels=n_levels)
+    means = {n: [float(v) for v in rt.means[n]] for n in names}
+    current = {n: list(levels[n]) for n in names}
+    decision = relevel(current, means, study.leveling, bounds=study.bounds())
+    optimum = decision.optimum()
+    conf = evaluator.evaluate([optimum])
+    optimum_cost = float(conf.mean_costs[0])
+
+    candidates: list[tuple[dict[str, float], float, str]] = []
+    if best is not None:
+        candidates.append(best)
+    row_means = ev.mean_costs
+    i_best = int(np.argmin(row_means))
+    source = f"iteration {index}, run {i_best + 1}"
+    candidates.append((sets[i_best], float(row_means[i_best]), source))
+    candidates.append((optimum, optimum_cost, f"iteration {index}, predicted optimum"))
+    best_x, best_cost, best_source = min(candidates, key=lambda c: c[1])
+
+    selection = "main effects"
+    if study.selection == "best_run" or (
+        study.selection == "auto" and not decision.converged and optimum_cost > best_cost
+    ):
+        # The additive main-effects model did not predict a better set (interactions):
+        # continue from the best run seen, as the MISO paper does.
+        decision = relevel(current, means, study.leveling, bounds=study.bounds(), centre=best_x)
+        selection = (
+            "best run"
+            if study.selection == "best_run"
+            else f"best run (predicted optimum cost {optimum_cost:.6g} > best {best_cost:.6g})"
+        )
+    return IterationRecord(
+        index=index,
+        array=array.name,
+        columns=list(columns),
+        names=names,
+        levels={n: [float(v) for v in levels[n]] for n in names},
+        level_index=level_index,
+        costs=ev.costs,
+        errors=ev.errors,
+        decision=decision,
+        optimum_cost=optimum_cost,
+        optimum_error=conf.errors[0],
+        best_x=dict(best_x),
+        best_cost=best_cost,
+        best_source=best_source,
+        nfev=nfev_before + ev.nfev + conf.nfev,
+        extra={"selection": selection, "optimum": optimum},
+    )
+
+
+def weak_parameters(
+    records: list[IterationRecord], study: Study, threshold: float = WEAK_CONTRIBUTION
+) -> tuple[dict[str, str], dict[str, list[float]]]:
+    """Find the parameters the data constrain weakly.
+
+    A parameter is flagged if its S/N was flat while its levels were still far apart
+    (Case 2 narrowing with a range wider than ten times the tolerance), or if its ANOVA
+    percent contribution in the last iteration is below ``threshold``.
+
+    Returns
+    -------
+    weak : dict
+        Parameter name -> reason.
+    contribution : dict
+        Parameter name -> percent contribution in each iteration.
+    """
+    contribution: dict[str, list[float]] = {n: [] for n in study.parameter_names}
+    weak: dict[str, str] = {}
+    wide = 10 * study.leveling.tolerance
+    for rec in records:
+        table = rec.anova
+        for n in rec.names:
+            contribution[n].append(float(table.contribution[n]))
+        for d in rec.decision.parameters:
+            flat = d.delta_db < study.leveling.significance_db
+            if flat and d.case in ("narrow", "keep") and relative_span(rec.levels[d.name]) > wide:
+                weak.setdefault(
+                    d.name,
+                    f"flat S/N ({d.delta_db:.3g} dB) over a wide range in iteration {rec.index}",
+                )
+    if records:
+        for n in study.parameter_names:
+            last = contribution[n][-1]
+            if last < threshold and n not in weak:
+                weak[n] = f"ANOVA contribution {last:.2g} % in the last iteration"
+    return weak, contribution
+
+
+def identify(
+    study: Study | str | Path,
+    out: str | Path | None = None,
+    *,
+    resume: bool = False,
+    max_iterations: int | None = None,
+    pause_after: int | None = None,
+    progress: bool | ProgressCallback = False,
+    plots: bool = True,
+) -> IdentificationResult:
+    """Identify the parameters of a study's FMU from its measured data.
+
+    Parameters
+    ----------
+    study : Study or path
+        The study, or the path of its TOML file.
+    out : path, optional
+        Folder for the audit trail, plots and report; written as each iteration ends.
+    resume : bool
+        Continue the study already in ``out`` (after an interruption, or after a person
+        edited ``next_levels.toml`` of the last iteration).
+    max_iterations : int, optional
+        Override the study's iteration limit.
+    pause_after : int, optional
+        Stop after this many iterations in this call (to review and edit the proposed
+        levels, then continue with ``resume=True``).
+    progress : bool or callable
+        True prints progress to stderr; a callable receives ``(event, info)``.
+    plots : bool
+        Write the per-iteration plots (main effects, fit) into ``out``.
+
+    Returns
+    -------
+    IdentificationResult
+        ``x``, ``fun``, ``success``, ``message``, ``nfev``, ``nit``, the per-iteration
+        records and ``to_pandas()``.
+    """
+    from tsid_fmu import trail
+    from tsid_fmu.progress import ConsoleProgress
+
+    if not isinstance(study, Study):
+        study = load_study(study)
+    limit = max_iterations or study.max_iterations
+    callback: ProgressCallback | None
+    if progress is True:
+        callback = ConsoleProgress()
+    elif callable(progress):
+        callback = progress
+    else:
+        callback = None
+
+    audit = trail.Trail(out, study) if out is not None else None
+    records: list[IterationRecord] = []
+    levels = study.first_levels()
+    if audit is not None:
+        records = audit.open(resume=resume)
+        if records:
+            levels = audit.next_levels(records[-1])
+    elif resume:
+        raise StudyError("resume needs the output folder of the study (out=...)")
+
+    best = (records[-1].best_x, records[-1].best_cost, records[-1].best_source) if records else None
+    nfev = records[-1].nfev if records else 0
+    status, message = 1, f"iteration limit ({limit}) reached before the levels converged"
+    with Evaluator(study) as evaluator:
+        evaluator.nfev = nfev
+        if records and records[-1].decision.converged and levels == records[-1].levels:
+            status, message = 0, records[-1].decision.message
+        else:
+            ran = 0
+            for index in range(len(records) + 1, limit + 1):
+                if callback:
+                    callback("iteration", {"iteration": index, "limit": limit, "levels": levels})
+                rec = run_iteration(index, levels, study, evaluator, best, nfev, callback)
+                records.append(rec)
+                best = (rec.best_x, rec.best_cost, rec.best_source)
+                nfev = rec.nfev
+                if audit is not None:
+                    audit.write_iteration(rec, evaluator if plots else None)
+                if callback:
+                    callback("iteration done", {"record": rec})
+                ran += 1
+                if rec.decision.converged:
+                    status, message = 0, rec.decision.message
+                    break
+                levels = rec.decision.next_levels()
+                if pause_after is not None and ran >= pause_after and index < limit:
+                    status = 2
+                    message = (
+                        f"paused after iteration {index}: review the proposed levels and "
+                        "continue with resume"
+                    )
+                    break
+        if not records:
+            raise StudyError("no iteration was run (max_iterations is 0?)")
+        best_x = records[-1].best_x
+        fit: dict[str, Any] = {}
+        simulated = evaluator.simulate_clean(best_x)
+        for prep, y, err in simulated:
+            if y is None:
+                fit[prep.experiment.name] = {"error": err}
+            else:
+                fit[prep.experiment.name] = metrics(prep.time, prep.measured, y, prep.output_names)
+        nfev = evaluator.nfev
+
+    weak, contribution = weak_parameters(records, study)
+    result = IdentificationResult(
+        x=dict(best_x),
+        fun=records[-1].best_cost,
+        success=status == 0,
+        status=status,
+        message=message,
+        nfev=nfev,
+        nit=len(records),
+        iterations=records,
+        weak=weak,
+        contribution=contribution,
+        fit=fit,
+        best_source=records[-1].best_source,
+        study=study,
+        out_dir=Path(out) if out is not None else None,
+    )
+    if audit is not None:
+        audit.write_result(result, simulated if plots else None)
+    if callback:
+        callback("done", {"result": result})
+    return result
