@@ -45,6 +45,7 @@ from typing import Any, Literal
 import numpy as np
 
 from tsid_fmu.errors import FMUError, SimulationError
+from tsid_fmu.safety import safe_extract
 
 __all__ = ["FMUSession", "VariableInfo", "fmu_info"]
 
@@ -525,11 +526,8 @@ class FMUSession:
         if not zipfile.is_zipfile(self.path):
             raise FMUError(f"{self.path}: not an FMU (an FMU is a ZIP archive)")
         self._tempdir = Path(tempfile.mkdtemp(prefix="tsid-fmu-"))
-        try:
-            with zipfile.ZipFile(self.path) as archive:
-                archive.extractall(self._tempdir)
-        except (zipfile.BadZipFile, OSError) as exc:
-            raise FMUError(f"{self.path}: cannot extract the FMU: {exc}") from exc
+        # checks member names, types and sizes; FMUError names the member at fault
+        safe_extract(self.path, self._tempdir)
         return self._tempdir
 
     def _variable(self, name: str, role: str) -> VariableInfo:

@@ -1,0 +1,226 @@
+r"""Extract FMU archives without trusting them.
+
+An FMU is a ZIP archive that a study downloads from a colleague, a vendor or a model
+exchange.  :func:`zipfile.ZipFile.extractall` would write whatever the archive says:
+members named ``../../.bashrc`` or ``/etc/...``, Windows paths such as
+``C:\evil.dll`` or ``..\..\x``, symbolic links pointing anywhere, and "zip bombs"
+whose few kilobytes expand to gigabytes.  :func:`safe_extract` checks every member
+first and refuses the archive with an :class:`~tsid_fmu.errors.FMUError` naming the
+FMU file and the member at fault, then extracts while counting the bytes actually
+written, so a header that lies about a member's size cannot fill the disk either.
+
+Examples
+--------
+>>> safe_extract("plant.fmu", "/tmp/plant")            # doctest: +SKIP
+PosixPath('/tmp/plant')
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import stat
+import zipfile
+import zlib
+from pathlib import Path, PurePosixPath
+
+from tsid_fmu.errors import FMUError
+
+__all__ = ["MAX_BYTES", "MAX_MEMBERS", "safe_extract"]
+
+#: default limit on the total uncompressed size of an FMU (bytes)
+MAX_BYTES = 2 * 1024**3
+#: default limit on the number of members of an FMU
+MAX_MEMBERS = 100_000
+
+_CHUNK = 1 << 20
+_DRIVE_RE = re.compile(r"^[A-Za-z]:")
+#: ``create_system`` values whose ``external_attr`` high word is a Unix mode
+_UNIX_SYSTEMS = {3, 19}  # Unix, OS X
+
+
+def _member_path(fmu: Path, info: zipfile.ZipInfo) -> PurePosixPath | None:
+    """Return the checked relative path of a member (None for the archive root).
+
+    Raises
+    ------
+    FMUError
+        The name is absolute, has a drive letter, a ``..`` component or a NUL byte.
+    """
+    raw = info.filename
+    if "\x00" in raw:
+        raise FMUError(f"{fmu}: member {raw!r} has a NUL byte in its name; refusing the FMU")
+    # FMI requires '/', but archives zipped on Windows may use '\'; treat both alike so
+    # that neither 'C:\x' nor '..\x' slips through as a plain file name.
+    name = raw.replace("\\", "/")
+    if name.startswith("/") or _DRIVE_RE.match(name):
+        raise FMUError(
+            f"{fmu}: member {raw!r} has an absolute path (it would be written outside the "
+            "extraction folder); refusing the FMU"
+        )
+    parts = [p for p in name.split("/") if p not in ("", ".")]
+    if ".." in parts:
+        raise FMUError(
+            f"{fmu}: member {raw!r} has a '..' path component (it would be written "
+            "outside the extraction folder); refusing the FMU"
+        )
+    if any(_DRIVE_RE.match(p) for p in parts):
+        raise FMUError(f"{fmu}: member {raw!r} has a drive letter in its path; refusing the FMU")
+    return PurePosixPath(*parts) if parts else None
+
+
+def _check_type(fmu: Path, info: zipfile.ZipInfo) -> None:
+    """Refuse symbolic links and special files (devices, pipes, sockets)."""
+    mode = info.external_attr >> 16
+    # many zip writers store only the permission bits (file type 0): a regular file
+    if info.create_system not in _UNIX_SYSTEMS or stat.S_IFMT(mode) == 0:
+        return
+    if stat.S_ISLNK(mode):
+        raise FMUError(f"{fmu}: member {info.filename!r} is a symbolic link; refusing the FMU")
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise FMUError(
+            f"{fmu}: member {info.filename!r} is a special file (mode {stat.filemode(mode)}); "
+            "refusing the FMU"
+        )
+
+
+def _too_big(fmu: Path, what: str, size: int, limit: int) -> FMUError:
+    return FMUError(
+        f"{fmu}: {what} expands to {size:,} bytes, more than the limit of {limit:,} bytes "
+        "(a damaged archive or a 'zip bomb'); refusing the FMU"
+    )
+
+
+def safe_extract(
+    fmu_path: str | os.PathLike[str],
+    dest: str | os.PathLike[str],
+    *,
+    max_bytes: int | None = None,
+    max_members: int | None = None,
+) -> Path:
+    """Extract an FMU archive into ``dest`` after checking every member.
+
+    Parameters
+    ----------
+    fmu_path : str or pathlib.Path
+        The ``.fmu`` file.
+    dest : str or pathlib.Path
+        Folder to extract into (created if missing).  Nothing is written outside it.
+    max_bytes : int, optional
+        Limit on the total uncompressed size; default :data:`MAX_BYTES` (2 GiB).
+    max_members : int, optional
+        Limit on the number of members; default :data:`MAX_MEMBERS`.
+
+    Returns
+    -------
+    pathlib.Path
+        ``dest``, resolved.
+
+    Raises
+    ------
+    FMUError
+        The file is missing or not a ZIP archive; it has no ``modelDescription.xml`` at
+        its root; a member's name is absolute, has a drive letter, ``..`` or a NUL byte;
+        a member is a symbolic link or a special file; the declared sizes, or the bytes
+        actually decompressed, exceed ``max_bytes``; there is not enough free disk space;
+        a member is corrupt, encrypted or uses an unsupported compression.  The message
+        names the FMU file and the member at fault.  ``dest`` may hold part of the
+        archive afterwards; the caller owns and removes it.
+    """
+    fmu = Path(fmu_path)
+    limit = MAX_BYTES if max_bytes is None else int(max_bytes)
+    member_limit = MAX_MEMBERS if max_members is None else int(max_members)
+    if not fmu.is_file():
+        raise FMUError(f"FMU file not found: {fmu}")
+    if not zipfile.is_zipfile(fmu):
+        raise FMUError(f"{fmu}: not an FMU (an FMU is a ZIP archive)")
+    try:
+        archive = zipfile.ZipFile(fmu)
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+        raise FMUError(f"{fmu}: cannot read the ZIP archive: {exc}") from exc
+    with archive:
+        members = archive.infolist()
+        if len(members) > member_limit:
+            raise FMUError(
+                f"{fmu}: the archive has {len(members):,} members, more than the limit of "
+                f"{member_limit:,}; refusing the FMU"
+            )
+        # 1. check everything before writing anything
+        plan: list[tuple[zipfile.ZipInfo, PurePosixPath]] = []
+        total = 0
+        for info in members:
+            rel = _member_path(fmu, info)
+            _check_type(fmu, info)
+            if rel is None:
+                continue
+            if info.file_size > limit:
+                raise _too_big(fmu, f"member {info.filename!r}", info.file_size, limit)
+            total += info.file_size
+            plan.append((info, rel))
+        if total > limit:
+            largest = max(plan, key=lambda p: p[0].file_size)[0]
+            raise _too_big(fmu, f"the archive (largest member {largest.filename!r})", total, limit)
+        if not any(rel == PurePosixPath("modelDescription.xml") for _, rel in plan):
+            raise FMUError(
+                f"{fmu}: not a valid FMU, modelDescription.xml is missing (no such member "
+                "at the root of the archive)"
+            )
+        root = Path(dest)
+        root.mkdir(parents=True, exist_ok=True)
+        root = root.resolve()
+        free = shutil.disk_usage(root).free
+        if total > free:
+            raise FMUError(
+                f"{fmu}: extracting needs {total:,} bytes but only {free:,} are free in {root}"
+            )
+        # 2. extract, counting the bytes actually produced
+        written = 0
+        for info, rel in plan:
+            target = root.joinpath(*rel.parts)
+            # defence in depth: the joined path must stay inside root
+            if os.path.commonpath([root, target.parent.resolve()]) != str(root):
+                raise FMUError(
+                    f"{fmu}: member {info.filename!r} would be written outside the "
+                    "extraction folder; refusing the FMU"
+                )
+            try:
+                if info.is_dir() or info.filename.endswith("\\"):
+                    target.mkdir(parents=True, exist_ok=True)
+                    continue
+                target.parent.mkdir(parents=True, exist_ok=True)
+                if target.is_symlink() or target.is_dir():
+                    raise FMUError(
+                        f"{fmu}: member {info.filename!r} clashes with another member of "
+                        "the same path; refusing the FMU"
+                    )
+                size = 0
+                with archive.open(info) as src, open(target, "wb") as out:
+                    while chunk := src.read(_CHUNK):
+                        size += len(chunk)
+                        written += len(chunk)
+                        if size > info.file_size:
+                            raise FMUError(
+                                f"{fmu}: member {info.filename!r} expands beyond its declared "
+                                f"size of {info.file_size:,} bytes (a forged header); "
+                                "refusing the FMU"
+                            )
+                        if written > limit:
+                            raise _too_big(fmu, f"member {info.filename!r}", written, limit)
+                        out.write(chunk)
+            except FMUError:
+                raise
+            except (
+                zipfile.BadZipFile,
+                zlib.error,
+                EOFError,
+                RuntimeError,  # encrypted member
+                NotImplementedError,  # unsupported compression method
+                ValueError,
+            ) as exc:
+                raise FMUError(f"{fmu}: member {info.filename!r} is damaged: {exc}") from exc
+            except OSError as exc:
+                raise FMUError(
+                    f"{fmu}: cannot extract member {info.filename!r} to {target}: {exc}"
+                ) from exc
+    return root
