@@ -54,7 +54,7 @@ def _member_path(fmu: Path, info: zipfile.ZipInfo) -> PurePosixPath | None:
     # FMI requires '/', but archives zipped on Windows may use '\'; treat both alike so
     # that neither 'C:\x' nor '..\x' slips through as a plain file name.
     name = raw.replace("\\", "/")
-    if name.startswith("/") or _DRIVE_RE.match(name):
+    if name.startswith("/"):
         raise FMUError(
             f"{fmu}: member {raw!r} has an absolute path (it would be written outside the "
             "extraction folder); refusing the FMU"
@@ -66,7 +66,10 @@ def _member_path(fmu: Path, info: zipfile.ZipInfo) -> PurePosixPath | None:
             "outside the extraction folder); refusing the FMU"
         )
     if any(_DRIVE_RE.match(p) for p in parts):
-        raise FMUError(f"{fmu}: member {raw!r} has a drive letter in its path; refusing the FMU")
+        raise FMUError(
+            f"{fmu}: member {raw!r} has a Windows drive letter in its path (it could be "
+            "written outside the extraction folder); refusing the FMU"
+        )
     return PurePosixPath(*parts) if parts else None
 
 
@@ -162,9 +165,16 @@ def safe_extract(
             largest = max(plan, key=lambda p: p[0].file_size)[0]
             raise _too_big(fmu, f"the archive (largest member {largest.filename!r})", total, limit)
         if not any(rel == PurePosixPath("modelDescription.xml") for _, rel in plan):
+            nested = [str(rel) for _, rel in plan if rel.name == "modelDescription.xml"]
+            hint = (
+                f"; the archive holds {nested[0]!r}: zip the contents of the FMU folder, "
+                "not the folder itself"
+                if nested
+                else ""
+            )
             raise FMUError(
                 f"{fmu}: not a valid FMU, modelDescription.xml is missing (no such member "
-                "at the root of the archive)"
+                f"at the root of the archive){hint}"
             )
         root = Path(dest)
         root.mkdir(parents=True, exist_ok=True)
@@ -210,14 +220,17 @@ def safe_extract(
                         out.write(chunk)
             except FMUError:
                 raise
-            except (
-                zipfile.BadZipFile,
-                zlib.error,
-                EOFError,
-                RuntimeError,  # encrypted member
-                NotImplementedError,  # unsupported compression method
-                ValueError,
-            ) as exc:
+            except NotImplementedError as exc:  # before RuntimeError, its base
+                raise FMUError(
+                    f"{fmu}: member {info.filename!r} uses ZIP compression method "
+                    f"{info.compress_type}, which cannot be read (FMUs use deflate or none)"
+                ) from exc
+            except RuntimeError as exc:  # zipfile: "... is encrypted, password required"
+                raise FMUError(
+                    f"{fmu}: member {info.filename!r} is encrypted; an FMU must not be "
+                    "password-protected"
+                ) from exc
+            except (zipfile.BadZipFile, zlib.error, EOFError, ValueError) as exc:
                 raise FMUError(f"{fmu}: member {info.filename!r} is damaged: {exc}") from exc
             except OSError as exc:
                 raise FMUError(
