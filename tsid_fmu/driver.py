@@ -233,6 +233,16 @@ def _cs_loop_fmi3(
     return 0, len(t) - 1, 0
 
 
+def _cs_loop(major: int) -> Callable[..., tuple[int, int, int]]:
+    """Return the step loop to use: Numba-compiled if available, else the Python one above.
+
+    See :mod:`tsid_fmu.fastloop` (``TSID_FMU_LOOP=python`` forces the Python loop).
+    """
+    from tsid_fmu.fastloop import cs_loop
+
+    return cs_loop(major)
+
+
 # ---------------------------------------------------------------------------------------
 # Helpers
 # ---------------------------------------------------------------------------------------
@@ -904,7 +914,7 @@ class FMUSession:
                 t_orig, t = t, np.concatenate([*fine, t[-1:]])
         self._setup(t[0], t[-1], values, u[0])
         out = np.empty((t.size, self._vr_out.size))
-        loop = _cs_loop_fmi2 if self._major == 2 else _cs_loop_fmi3
+        loop = _cs_loop(self._major)
         status, k, call = loop(
             self._loop_funcs, self._component, self._vr_in, self._vr_out, t, u, out
         )
