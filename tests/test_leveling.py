@@ -128,3 +128,35 @@ def test_options_are_validated():
         LevelingOptions(tolerance=0)
     with pytest.raises(StudyError, match="scale"):
         LevelingOptions(scale="cubic")
+
+
+def test_run_based_centre_overrides_the_best_sn_level():
+    lv = {"k": [1, 2, 3, 4, 5]}
+    sn = {"k": [-10, -20, -30, -40, -50]}  # main effects say: lowest level
+    inner = relevel(lv, sn, centre={"k": 3.4}).parameters[0]
+    assert inner.case == "recentre" and inner.optimum == pytest.approx(3.4)
+    assert inner.levels == pytest.approx([2.4, 2.9, 3.4, 3.9, 4.4])
+    assert "best run" in inner.reason
+    edge = relevel(lv, sn, centre={"k": 5.0}).parameters[0]
+    assert edge.case == "shift" and edge.levels == pytest.approx([3, 4, 5, 6, 7])
+
+
+def test_expand_scales_a_boundary_move():
+    lv = {"k": [1, 2, 3, 4, 5]}
+    sn = {"k": [-50, -40, -30, -20, -10]}
+    wide = relevel(lv, sn, LevelingOptions(expand=2.0)).parameters[0]
+    assert wide.levels == pytest.approx([1, 3, 5, 7, 9])
+    narrow = relevel(lv, sn, LevelingOptions(expand=0.5)).parameters[0]
+    assert narrow.levels == pytest.approx([4, 4.5, 5, 5.5, 6])
+
+
+def test_minor_contributors_keep_their_levels_when_selective():
+    lv = {"a": [1, 2, 3], "b": [10, 20, 30]}
+    sn = {"a": [-30, -20, -25], "b": [-21, -20, -22]}  # b moves 2 dB, but only by confounding
+    opts = LevelingOptions(selective=True, min_contribution=5.0)
+    d = relevel(lv, sn, opts, contribution={"a": 97.0, "b": 1.0})
+    cases = {p.name: p.case for p in d.parameters}
+    assert cases == {"a": "recentre", "b": "keep"}
+    assert "ANOVA contribution 1 %" in d.parameters[1].reason
+    # without the contribution the 2 dB effect counts as significant
+    assert {p.name: p.case for p in relevel(lv, sn, opts).parameters}["b"] == "recentre"

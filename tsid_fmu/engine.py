@@ -27,10 +27,17 @@ from tsid_fmu.analysis import AnovaTable, ResponseTable, anova, response_table
 from tsid_fmu.analysis import sn_smaller_the_better as sn_stb
 from tsid_fmu.arrays import select_array
 from tsid_fmu.errors import StudyError
-from tsid_fmu.leveling import LevelingDecision, ParameterDecision, relative_span, relevel
+from tsid_fmu.leveling import (
+    LevelingDecision,
+    ParameterDecision,
+    relative_span,
+    relevel,
+    use_log_scale,
+)
 from tsid_fmu.runner import Evaluator
 from tsid_fmu.scoring import metrics
 from tsid_fmu.study import Study, load_study
+from tsid_fmu.surrogate import quadratic_optimum
 
 __all__ = ["IdentificationResult", "IterationRecord", "identify", "run_iteration"]
 
@@ -354,9 +361,26 @@ def run_iteration(
     rt = response_table(level_index, sn, names, n_levels=n_levels)
     means = {n: [float(v) for v in rt.means[n]] for n in names}
     current = {n: list(levels[n]) for n in names}
-    decision = relevel(current, means, study.leveling, bounds=study.bounds())
+    contribution = anova(level_index, sn, names, n_levels=n_levels).contribution
+    decision = relevel(
+        current, means, study.leveling, bounds=study.bounds(), contribution=contribution
+    )
     optimum = decision.optimum()
-    conf = evaluator.evaluate([optimum])
+    # Confirmation runs. Besides the main-effects optimum (t = 1), "auto" also tries the
+    # point halfway to it from the centre of the current ranges: when two parameters
+    # interact along a valley (cost ~ f(u - v), as K_s and M_m do through the natural
+    # frequency), main effects average over the other factor and the optimum they
+    # predict overshoots to the mirror side of the valley, while the halfway point lands
+    # in it.
+    steps = (1.0, 0.5) if study.selection == "auto" else (1.0,)
+    trial_sets = [_towards(current, optimum, t, study) for t in steps]
+    labels = ["predicted optimum", "halfway to the predicted optimum"][: len(steps)]
+    if study.selection == "auto":
+        surface = _surface_optimum(current, level_index, sn, names, study)
+        if surface is not None:
+            trial_sets.append(surface)
+            labels.append("optimum of the quadratic response surface")
+    conf = evaluator.evaluate(trial_sets)
     optimum_cost = float(conf.mean_costs[0])
 
     candidates: list[tuple[dict[str, float], float, str]] = []
@@ -364,22 +388,31 @@ def run_iteration(
         candidates.append(best)
     row_means = ev.mean_costs
     i_best = int(np.argmin(row_means))
-    source = f"iteration {index}, run {i_best + 1}"
-    candidates.append((sets[i_best], float(row_means[i_best]), source))
-    candidates.append((optimum, optimum_cost, f"iteration {index}, predicted optimum"))
+    candidates.append(
+        (sets[i_best], float(row_means[i_best]), f"iteration {index}, run {i_best + 1}")
+    )
+    for label, x, c in zip(labels, trial_sets, conf.mean_costs, strict=True):
+        candidates.append((x, float(c), f"iteration {index}, {label}"))
     best_x, best_cost, best_source = min(candidates, key=lambda c: c[1])
 
     selection = "main effects"
     if study.selection == "best_run" or (
-        study.selection == "auto" and not decision.converged and optimum_cost > best_cost
+        study.selection == "auto" and not decision.converged and best_cost < optimum_cost
     ):
-        # The additive main-effects model did not predict a better set (interactions):
-        # continue from the best run seen, as the MISO paper does.
-        decision = relevel(current, means, study.leveling, bounds=study.bounds(), centre=best_x)
+        # The additive main-effects model did not predict the best set (interactions):
+        # continue from the best set seen, as the MISO paper continues from its best run.
+        decision = relevel(
+            current,
+            means,
+            study.leveling,
+            bounds=study.bounds(),
+            centre=best_x,
+            contribution=contribution,
+        )
         selection = (
             "best run"
             if study.selection == "best_run"
-            else f"best run (predicted optimum cost {optimum_cost:.6g} > best {best_cost:.6g})"
+            else f"{best_source} (predicted optimum cost {optimum_cost:.6g} > {best_cost:.6g})"
         )
     return IterationRecord(
         index=index,
@@ -399,6 +432,60 @@ def run_iteration(
         nfev=nfev_before + ev.nfev + conf.nfev,
         extra={"selection": selection, "optimum": optimum},
     )
+
+
+def _towards(
+    levels: Mapping[str, list[float]], optimum: Mapping[str, float], t: float, study: Study
+) -> dict[str, float]:
+    """Return the point a fraction ``t`` of the way from the range centres to ``optimum``.
+
+    The centre and the interpolation are geometric for log-spaced levels.
+    """
+    out = {}
+    bounds = study.bounds()
+    for name, lv in levels.items():
+        lo, hi = min(lv), max(lv)
+        target = optimum[name]
+        if use_log_scale(lv, study.leveling) and target > 0:
+            centre = math.sqrt(lo * hi)
+            value = centre * (target / centre) ** t
+        else:
+            centre = 0.5 * (lo + hi)
+            value = centre + t * (target - centre)
+        bmin, bmax = bounds[name]
+        out[name] = float(min(max(value, bmin), bmax))
+    return out
+
+
+def _surface_optimum(
+    levels: Mapping[str, list[float]],
+    level_index: np.ndarray,
+    sn: np.ndarray,
+    names: list[str],
+    study: Study,
+) -> dict[str, float] | None:
+    """Maximiser of a quadratic S/N model over the runs, within the current ranges."""
+    z = np.empty(level_index.shape)
+    spans = []
+    for j, name in enumerate(names):
+        lv = np.asarray(levels[name], dtype=float)
+        log = use_log_scale(lv, study.leveling)
+        u = np.log10(lv) if log else lv
+        lo, hi = u.min(), u.max()
+        z[:, j] = (2 * u[level_index[:, j]] - lo - hi) / (hi - lo)
+        spans.append((lo, hi, log))
+    best = quadratic_optimum(z, sn)
+    if best is None:
+        return None
+    bounds = study.bounds()
+    out = {}
+    for j, name in enumerate(names):
+        lo, hi, log = spans[j]
+        u = 0.5 * (lo + hi) + 0.5 * best[j] * (hi - lo)
+        value = 10.0**u if log else u
+        bmin, bmax = bounds[name]
+        out[name] = float(min(max(value, bmin), bmax))
+    return out
 
 
 def weak_parameters(

@@ -63,7 +63,20 @@ class LevelingOptions:
         Spacing of generated levels. ``auto`` spaces logarithmically when all levels are
         positive and the range spans at least a factor ``log_ratio``.
     log_ratio : float
-        Ratio max/min above which ``auto`` uses logarithmic spacing. Default 10.
+        Ratio max/min from which ``auto`` uses logarithmic spacing. Default 10 (a range
+        spanning a decade or more).
+    expand : float
+        Factor applied to the half-width when a range moves because its best is on the
+        boundary (Case 1, shift): the new range is centred on that boundary level. 1
+        keeps the width, below 1 narrows as the SISO paper's Tables I-III do, above 1
+        recovers faster from a range narrowed too early. Default 1.
+    min_contribution : float
+        ANOVA percent contribution below which a parameter is treated as flat when
+        choosing new levels, even if its S/N moves by more than ``significance_db``
+        (its apparent effect is then mostly other parameters' interactions). With
+        ``selective`` such a parameter keeps its range until the dominant ones have
+        settled - the MISO paper's reason for identifying parameters in groups.
+        Default 0 (off). The stop rule (Case 3) uses ``significance_db`` only.
     """
 
     significance_db: float = 0.1
@@ -74,6 +87,8 @@ class LevelingOptions:
     selective: bool = False
     scale: str = "auto"
     log_ratio: float = 10.0
+    min_contribution: float = 0.0
+    expand: float = 1.0
 
     def __post_init__(self) -> None:
         if not self.significance_db >= 0:
@@ -88,6 +103,12 @@ class LevelingOptions:
             raise StudyError(f"scale must be 'auto', 'linear' or 'log', got {self.scale!r}")
         if not self.log_ratio > 1:
             raise StudyError(f"log_ratio must be > 1, got {self.log_ratio}")
+        if not self.expand > 0:
+            raise StudyError(f"expand must be > 0, got {self.expand}")
+        if not 0 <= self.min_contribution < 100:
+            raise StudyError(
+                f"min_contribution must be a percentage in [0, 100), got {self.min_contribution}"
+            )
 
 
 @dataclass
@@ -244,6 +265,7 @@ def relevel(
     bounds: Mapping[str, tuple[float, float]] | None = None,
     centre: Mapping[str, float] | None = None,
     shrink: float | None = None,
+    contribution: Mapping[str, float] | None = None,
 ) -> LevelingDecision:
     """Choose the levels of the next iteration from the S/N main effects.
 
@@ -265,6 +287,9 @@ def relevel(
     shrink : float, optional
         Override of ``options.shrink`` for interior recentring (1 keeps the width, to move
         a range without narrowing it).
+    contribution : mapping of str to float, optional
+        ANOVA percent contribution of each parameter, compared with
+        ``options.min_contribution``.
 
     Returns
     -------
@@ -295,8 +320,14 @@ def relevel(
         flat[name] = deltas[name] < options.significance_db
         small[name] = relative_span(levels[name]) <= options.tolerance
 
+    converged = all(flat.values()) and all(small.values())
+    minor = {
+        n: contribution is not None and contribution.get(n, 100.0) < options.min_contribution
+        for n in names
+    }
+    # for choosing levels, a minor contributor counts as flat (its main effect is noise)
+    flat = {n: flat[n] or minor[n] for n in names}
     all_flat = all(flat.values())
-    converged = all_flat and all(small.values())
     any_significant = not all_flat
 
     decisions = []
@@ -339,7 +370,12 @@ def relevel(
             reason = f"S/N flat ({delta:.3g} dB) and levels within the tolerance"
         elif flat[name] and options.selective and any_significant:
             case, new = "keep", list(map(float, lv))
-            reason = f"S/N flat ({delta:.3g} dB); levels kept while other parameters move"
+            why = (
+                f"ANOVA contribution {contribution[name]:.2g} %"
+                if minor[name] and contribution is not None
+                else f"S/N flat ({delta:.3g} dB)"
+            )
+            reason = f"{why}; levels kept while other parameters move"
         elif flat[name]:
             case = "narrow"
             new_half = options.shrink * half
@@ -367,7 +403,8 @@ def relevel(
                 )
             else:
                 case = "shift"
-                new = _levels_about(optimum_u, half, n_next, log, (bmin, bmax), options)
+                new_half = options.expand * half
+                new = _levels_about(optimum_u, new_half, n_next, log, (bmin, bmax), options)
                 reason = (
                     f"S/N changes by {delta:.3g} dB with its best at the {side} level: "
                     f"range moved {'up' if side == 'upper' else 'down'}"

@@ -355,6 +355,7 @@ def study_from_dict(
     lev_types = {
         "significance_db": float, "tolerance": float, "shrink": float, "n_levels": int,
         "refine": bool, "selective": bool, "scale": str, "log_ratio": float,
+        "min_contribution": float, "expand": float,
     }  # fmt: skip
     lev_args = {k: _get(lev, k, lev_types[k], where, "[leveling]") for k in lev}
     try:
