@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["LOOP_ENV", "backend", "cs_loop", "numba_available"]
+__all__ = ["LOOP_ENV", "backend", "cs_loop", "numba_available", "warm_up"]
 
 LOOP_ENV = "TSID_FMU_LOOP"
 """Environment variable: ``python`` forces the Python loops, ``numba`` (default) the compiled."""
@@ -160,3 +160,34 @@ def _reset_for_tests() -> None:
     global _compiled, _failed
     _compiled = None
     _failed = None
+
+
+def warm_up() -> str:
+    """Load (or compile) the compiled loops now, without touching any FMU.
+
+    Worker processes call this while they start, so that the first simulation of a
+    worker does not pay Numba's import and cache loading (which would count against
+    a per-simulation time limit).  The loops are called once with stand-in function
+    pointers of the FMI prototypes that return ``fmi2Error`` at once.
+
+    Returns
+    -------
+    str
+        :func:`backend` after the warm-up.
+    """
+    if backend() != "numba":
+        return "python"
+    from tsid_fmu import driver
+
+    def fail(*args: Any) -> int:
+        return 3
+
+    dummies = {
+        2: (driver._FMI2_SETGET(fail), driver._FMI2_DOSTEP(fail), driver._FMI2_SETGET(fail)),
+        3: (driver._FMI3_SETGET(fail), driver._FMI3_DOSTEP(fail), driver._FMI3_SETGET(fail)),
+    }
+    vr = np.zeros(1, dtype=np.uint32)
+    time = np.array([0.0, 1.0])
+    for major, funcs in dummies.items():
+        cs_loop(major)(funcs, 0, vr, vr, time, np.zeros((2, 1)), np.zeros((2, 1)))
+    return backend()
