@@ -103,3 +103,79 @@ def test_a_person_can_edit_the_next_levels(lag, tmp_path):
     (out / "iteration_02" / "record.json").unlink()
     with pytest.raises(StudyError, match=r"next_levels.toml: tau levels .* leave the bounds"):
         identify(make_study(lag), out, resume=True, plots=False)
+
+
+class FakeEvaluator:
+    """Scores parameter sets with a Python function instead of an FMU."""
+
+    n_replicates = 1
+
+    def __init__(self, f):
+        self.f, self.nfev, self.prepared = f, 0, []
+
+    def evaluate(self, sets, progress=None):
+        from tsid_fmu.runner import Evaluation
+
+        costs = np.array([[self.f(**s)] for s in sets])
+        self.nfev += len(sets)
+        return Evaluation(costs=costs, errors=[None] * len(sets), nfev=len(sets))
+
+    def simulate_clean(self, params):
+        return []
+
+    def close(self):
+        pass
+
+
+def two_basins(a, b):
+    local = 0.5 + 5.0 * (a**2 + b**2)  # the best run of iteration 1 sits in this trap
+    deep = 0.1 + 3.0 * ((a - 2.5) ** 2 + (b - 2.5) ** 2)  # its next-best run leads here
+    return min(local, deep)
+
+
+def synthetic_study(tmp_path, **kw):
+    (tmp_path / "none.fmu").write_bytes(b"PK")
+    return Study(
+        fmu=tmp_path / "none.fmu",
+        parameters=[Parameter("a", [0, 1, 2]), Parameter("b", [0, 1, 2])],
+        experiments=[Experiment(data="unused.csv", outputs={"y": "y"})],
+        replicates=1,
+        **kw,
+    )
+
+
+@pytest.mark.parametrize("selection", ["best_run", "auto"])
+def test_next_best_rerun_is_taken_and_lowers_the_cost(tmp_path, selection):
+    study = synthetic_study(tmp_path, selection=selection, max_iterations=6)
+    res = identify(study, evaluator=FakeEvaluator(two_basins), plots=False)
+    costs = [r.best_cost for r in res.iterations]
+    reruns = [r for r in res.iterations if "rerun" in r.extra]
+    assert reruns, "no re-run was taken"
+    first = reruns[0]
+    assert "did not lower the cost" in first.extra["rerun"] and "next best" in first.extra["rerun"]
+    before = costs[first.index - 2]
+    assert before == pytest.approx(0.5)  # stuck in the trap
+    assert first.best_cost < before and res.fun == pytest.approx(0.1, abs=1e-6)
+    assert res.x == pytest.approx({"a": 2.5, "b": 2.5}, abs=1e-3)
+    # without re-runs the study stays in the trap
+    stuck = identify(
+        synthetic_study(tmp_path, selection=selection, max_iterations=6, max_reruns=0),
+        evaluator=FakeEvaluator(two_basins),
+        plots=False,
+    )
+    assert stuck.fun == pytest.approx(0.5)
+
+
+def test_a_person_can_pick_the_run_to_continue_from(tmp_path):
+    study = synthetic_study(tmp_path, selection="best_run", max_iterations=3, max_reruns=0)
+    out = tmp_path / "picked"
+    first = identify(study, out, evaluator=FakeEvaluator(two_basins), pause_after=1, plots=False)
+    runs = first.iterations[0].runs_frame()
+    pick = int(runs.loc[(runs["a"] == 2) & (runs["b"] == 2), "run"].iloc[0])
+    res = identify(
+        study, out, resume=True, continue_from_run=pick, evaluator=FakeEvaluator(two_basins),
+        plots=False,
+    )  # fmt: skip
+    assert "chosen" in res.iterations[1].extra["rerun"]
+    assert res.iterations[1].levels["a"][1] == 2  # centred on run (2, 2)
+    assert res.fun < 0.5

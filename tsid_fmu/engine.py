@@ -41,6 +41,10 @@ from tsid_fmu.surrogate import quadratic_optimum
 
 __all__ = ["IdentificationResult", "IterationRecord", "identify", "run_iteration"]
 
+RERUN_AFTER = 2
+"""Iterations without a lower cost after which the next-best run is re-conducted (the
+MISO paper continued two iterations from its run 7 before going back to run 4)."""
+
 WEAK_CONTRIBUTION = 1.0
 """Percent ANOVA contribution below which a parameter is reported as weakly constrained."""
 
@@ -434,6 +438,46 @@ def run_iteration(
     )
 
 
+def _levels_from_run(rec: IterationRecord, run: int, study: Study) -> dict[str, list[float]]:
+    """Levels of the iteration after ``rec`` centred on its run ``run`` (0-based)."""
+    centre = {n: float(v) for n, v in zip(rec.names, rec.values[run], strict=True)}
+    decision = relevel(
+        rec.levels,
+        rec.sn_means(),
+        study.leveling,
+        bounds=study.bounds(),
+        centre=centre,
+        contribution=rec.anova.contribution,
+    )
+    return decision.next_levels()
+
+
+def _next_best(
+    records: list[IterationRecord], tried: set[tuple[int, int]], study: Study
+) -> tuple[IterationRecord, int] | None:
+    """Return the run to re-conduct from when the last iteration did not lower the cost.
+
+    Returns the next-best (untried) run of the iteration whose choice was followed by
+    ``RERUN_AFTER`` iterations that did not lower the cost, or None if the cost went
+    down, the ranges are already small, or nothing is left to try.
+    """
+    if len(records) < RERUN_AFTER + 1:
+        return None
+    last, src = records[-1], records[-1 - RERUN_AFTER]
+    if last.best_cost < src.best_cost or last.decision.converged:
+        return None
+    if any("rerun" in r.extra for r in records[-RERUN_AFTER:]):
+        return None  # give a re-run its own iterations before judging it
+    wide = 10 * study.leveling.tolerance
+    if all(relative_span(v) <= wide for v in last.levels.values()):
+        return None  # near convergence a flat iteration is expected, not a wrong turn
+    order = [int(i) for i in np.argsort(src.mean_costs, kind="stable")]
+    for run in order[1:]:
+        if np.isfinite(src.mean_costs[run]) and (src.index, run) not in tried:
+            return src, run
+    return None
+
+
 def _towards(
     levels: Mapping[str, list[float]], optimum: Mapping[str, float], t: float, study: Study
 ) -> dict[str, float]:
@@ -535,6 +579,8 @@ def identify(
     pause_after: int | None = None,
     progress: bool | ProgressCallback = False,
     plots: bool = True,
+    continue_from_run: int | None = None,
+    evaluator: Any = None,
 ) -> IdentificationResult:
     """Identify the parameters of a study's FMU from its measured data.
 
@@ -556,6 +602,14 @@ def identify(
         True prints progress to stderr; a callable receives ``(event, info)``.
     plots : bool
         Write the per-iteration plots (main effects, fit) into ``out``.
+    continue_from_run : int, optional
+        With ``resume``: centre the next levels on this (1-based) run of the last
+        iteration instead of the proposed levels - a person picking the run to continue
+        from, as the MISO paper does with its runs 7 and 4.
+    evaluator : object, optional
+        Something with the interface of :class:`~tsid_fmu.runner.Evaluator` to score
+        parameter sets (e.g. a parallel one); default a serial Evaluator of the study.
+        It is not closed here.
 
     Returns
     -------
@@ -586,20 +640,45 @@ def identify(
             levels = audit.next_levels(records[-1])
     elif resume:
         raise StudyError("resume needs the output folder of the study (out=...)")
+    pending_note: str | None = None
+    pending_from: tuple[int, int] | None = None
+    if continue_from_run is not None:
+        if not records:
+            raise StudyError("continue_from_run needs a study to resume (no iteration found)")
+        last = records[-1]
+        if not 1 <= continue_from_run <= len(last.errors):
+            raise StudyError(
+                f"continue_from_run {continue_from_run}: iteration {last.index} has runs "
+                f"1..{len(last.errors)}"
+            )
+        levels = _levels_from_run(last, continue_from_run - 1, study)
+        pending_note = f"continued from iteration {last.index}, run {continue_from_run} (chosen)"
 
     best = (records[-1].best_x, records[-1].best_cost, records[-1].best_source) if records else None
     nfev = records[-1].nfev if records else 0
     status, message = 1, f"iteration limit ({limit}) reached before the levels converged"
-    with Evaluator(study) as evaluator:
+    owned = evaluator is None
+    evaluator = Evaluator(study) if owned else evaluator
+    try:
         evaluator.nfev = nfev
-        if records and records[-1].decision.converged and levels == records[-1].levels:
+        converged_before = bool(records) and records[-1].decision.converged
+        if converged_before and levels == records[-1].levels and pending_note is None:
             status, message = 0, records[-1].decision.message
         else:
             ran = 0
+            tried: set[tuple[int, int]] = {
+                tuple(r.extra["rerun_from"]) for r in records if "rerun_from" in r.extra
+            }
+            reruns = len(tried)
             for index in range(len(records) + 1, limit + 1):
                 if callback:
                     callback("iteration", {"iteration": index, "limit": limit, "levels": levels})
                 rec = run_iteration(index, levels, study, evaluator, best, nfev, callback)
+                if pending_note is not None:
+                    rec.extra["rerun"] = pending_note
+                    if pending_from is not None:
+                        rec.extra["rerun_from"] = list(pending_from)
+                    pending_note, pending_from = None, None
                 records.append(rec)
                 best = (rec.best_x, rec.best_cost, rec.best_source)
                 nfev = rec.nfev
@@ -612,6 +691,22 @@ def identify(
                     status, message = 0, rec.decision.message
                     break
                 levels = rec.decision.next_levels()
+                alt = _next_best(records, tried, study) if reruns < study.max_reruns else None
+                if alt is not None:
+                    # Continuing from the best choice did not lower the cost (the MISO
+                    # paper's "results did not meet expectations"): re-conduct from the
+                    # next-best run of the iteration that chose it.
+                    src, run = alt
+                    tried.add((src.index, run))
+                    reruns += 1
+                    levels = _levels_from_run(src, run, study)
+                    pending_from = (src.index, run)
+                    pending_note = (
+                        f"iteration {index} did not lower the cost ({rec.best_cost:.6g}); "
+                        f"re-conducted from iteration {src.index}, run {run + 1} (next best)"
+                    )
+                    if callback:
+                        callback("rerun", {"message": pending_note})
                 if pause_after is not None and ran >= pause_after and index < limit:
                     status = 2
                     message = (
@@ -630,6 +725,9 @@ def identify(
             else:
                 fit[prep.experiment.name] = metrics(prep.time, prep.measured, y, prep.output_names)
         nfev = evaluator.nfev
+    finally:
+        if owned:
+            evaluator.close()
 
     weak, contribution = weak_parameters(records, study)
     result = IdentificationResult(

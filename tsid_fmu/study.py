@@ -47,7 +47,14 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.leveling import LevelingOptions
 from tsid_fmu.scoring import COSTS
 
-__all__ = ["Experiment", "Parameter", "Study", "load_study"]
+__all__ = [
+    "ContributionOptions",
+    "Experiment",
+    "Parameter",
+    "Phase",
+    "Study",
+    "load_study",
+]
 
 
 @dataclass
@@ -129,6 +136,10 @@ class Experiment:
         FMU values fixed for this experiment only.
     sample_time : float, optional
         Expected sample time; a file with another one is refused.
+    role : {"identify", "validate"}
+        ``validate`` experiments are not fitted; after identification the model is
+        simulated against them and their cost reported (the MISO paper's check with
+        both inputs together, its Fig. 18).
     """
 
     data: Any
@@ -140,8 +151,11 @@ class Experiment:
     weights: dict[str, float] | None = None
     start_values: dict[str, float] = field(default_factory=dict)
     sample_time: float | None = None
+    role: str = "identify"
 
     def __post_init__(self) -> None:
+        if self.role not in ("identify", "validate"):
+            raise StudyError(f"experiment role must be 'identify' or 'validate', not {self.role!r}")
         if not self.name:
             is_path = isinstance(self.data, (str, Path))
             self.name = Path(self.data).stem if is_path else "experiment"
@@ -154,6 +168,69 @@ class Experiment:
                     f"experiment {self.name!r}: weights given for {sorted(unknown)}, "
                     f"which are not outputs ({sorted(self.outputs)})"
                 )
+
+
+@dataclass
+class Phase:
+    """One phase of a phased identification: a group of parameters, some experiments.
+
+    Parameters
+    ----------
+    parameters : list of str
+        Parameters identified in this phase; the others stay at their current values.
+    experiments : list of str
+        Names of the experiments fitted in this phase (default: every ``identify`` one).
+    name : str
+        Label (default ``phase N``).
+    array : str, optional
+        Orthogonal array of this phase (default: the smallest that fits).
+    max_iterations : int, optional
+        Iteration limit of this phase (default: the study's).
+    """
+
+    parameters: list[str]
+    experiments: list[str] = field(default_factory=list)
+    name: str = ""
+    array: str | None = None
+    max_iterations: int | None = None
+
+
+@dataclass
+class ContributionOptions:
+    """Contribution analyses of the MISO paper that plan the phases automatically.
+
+    Parameters
+    ----------
+    enabled : bool
+        Run the input and parameter contribution analyses and identify in phases.
+    group_ratio : float
+        Gap between the contributions of consecutive parameters that starts a new group
+        (see :func:`tsid_fmu.contribution.group_parameters`). Default 1.75.
+    min_percent : float
+        A parameter contributing less than this (% of error variation) to an
+        experiment is left for the next experiment's phases. Default 1.
+    values : mapping of str to list of float
+        Three values per parameter for the one-at-a-time runs (default: lowest,
+        middle and highest first-iteration level).
+    compare_ungrouped : bool
+        Also identify all parameters in one array on all experiments and report the
+        difference in cost and simulations (why grouping exists).
+    """
+
+    enabled: bool = False
+    group_ratio: float = 1.75
+    min_percent: float = 1.0
+    values: dict[str, list[float]] = field(default_factory=dict)
+    compare_ungrouped: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.group_ratio > 1:
+            raise StudyError(f"group_ratio must be > 1, got {self.group_ratio}")
+        if not self.min_percent >= 0:
+            raise StudyError(f"min_percent must be >= 0, got {self.min_percent}")
+        for name, vals in self.values.items():
+            if len(vals) != 3 or len(set(vals)) != 3:
+                raise StudyError(f"contribution values of {name!r} must be 3 distinct numbers")
 
 
 @dataclass
@@ -217,6 +294,9 @@ class Study:
     step_size: float | None = None
     name: str = "study"
     source: Path | None = None
+    phases: list[Phase] = field(default_factory=list)
+    contribution: ContributionOptions = field(default_factory=ContributionOptions)
+    max_reruns: int = 2
 
     def __post_init__(self) -> None:
         where = f"{self.source}: " if self.source else ""
@@ -251,6 +331,25 @@ class Study:
             raise StudyError(
                 f"{where}interface must be 'auto', 'cs' or 'me', not {self.interface!r}"
             )
+        exp_names = [e.name for e in self.experiments]
+        dupes = sorted({n for n in exp_names if exp_names.count(n) > 1})
+        if dupes:
+            raise StudyError(f"{where}experiment name(s) used twice: {', '.join(dupes)}")
+        if not any(e.role == "identify" for e in self.experiments):
+            raise StudyError(f"{where}no experiment has role 'identify'")
+        for i, ph in enumerate(self.phases):
+            ph.name = ph.name or f"phase {i + 1}"
+            unknown = sorted(set(ph.parameters) - set(names))
+            if unknown or not ph.parameters:
+                raise StudyError(
+                    f"{where}{ph.name}: parameters {unknown or '[]'} are not study parameters"
+                )
+            bad = sorted(set(ph.experiments) - set(exp_names))
+            if bad:
+                raise StudyError(f"{where}{ph.name}: unknown experiments {bad}; have {exp_names}")
+        unknown_values = sorted(set(self.contribution.values) - set(names))
+        if unknown_values:
+            raise StudyError(f"{where}[contribution] values for unknown {unknown_values}")
         clash = sorted(set(names) & set(self.start_values))
         if clash:
             raise StudyError(f"{where}{', '.join(clash)} both identified and fixed in start_values")
@@ -271,14 +370,20 @@ class Study:
 
 # --------------------------------------------------------------------------- TOML
 
-_TOP = {"study", "data", "experiments", "method", "leveling", "parameters"}
+_TOP = {
+    "study", "data", "experiments", "method", "leveling", "parameters", "phases",
+    "contribution",
+}  # fmt: skip
+_PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
+_CONTRIB = {"enabled", "group_ratio", "min_percent", "values", "compare_ungrouped"}
 _STUDY = {"name", "fmu", "start_values", "interface", "step_size"}
 _DATA = {
     "file", "name", "time", "derived", "inputs", "outputs", "weights", "start_values",
-    "sample_time",
+    "sample_time", "role",
 }  # fmt: skip
 _METHOD = {
     "array", "cost", "replicates", "input_noise", "seed", "max_iterations", "selection",
+    "max_reruns",
 }  # fmt: skip
 _PARAM = {"levels", "min", "max", "unit"}
 
@@ -386,6 +491,47 @@ def study_from_dict(
         except StudyError as exc:
             raise StudyError(f"{where}: {exc}") from None
 
+    phases = []
+    raw_phases = doc.get("phases", [])
+    if not isinstance(raw_phases, list) or not all(isinstance(p, dict) for p in raw_phases):
+        raise StudyError(f"{where}: phases must be given as [[phases]] tables")
+    for i, ph in enumerate(raw_phases):
+        label = f"[[phases]] #{i + 1}"
+        _check_keys(ph, _PHASE, where, label)
+        plist = _get(ph, "parameters", list, where, label, required=True)
+        elist = _get(ph, "experiments", list, where, label, default=[])
+        if not all(isinstance(x, str) for x in plist + elist):
+            raise StudyError(f"{where}: {label} parameters and experiments must be names")
+        phases.append(
+            Phase(
+                parameters=plist,
+                experiments=elist,
+                name=_get(ph, "name", str, where, label, default=""),
+                array=_get(ph, "array", str, where, label, default=None),
+                max_iterations=_get(ph, "max_iterations", int, where, label, default=None),
+            )
+        )
+    ct = _table(doc, "contribution", where)
+    _check_keys(ct, _CONTRIB, where, "[contribution]")
+    raw_values = ct.get("values", {})
+    if not isinstance(raw_values, dict) or not all(
+        isinstance(v, list) and all(isinstance(x, (int, float)) for x in v)
+        for v in raw_values.values()
+    ):
+        raise StudyError(f"{where}: [contribution] values must map names to lists of numbers")
+    try:
+        contribution = ContributionOptions(
+            enabled=_get(ct, "enabled", bool, where, "[contribution]", default=bool(ct)),
+            group_ratio=_get(ct, "group_ratio", float, where, "[contribution]", default=1.75),
+            min_percent=_get(ct, "min_percent", float, where, "[contribution]", default=1.0),
+            values={k: [float(x) for x in v] for k, v in raw_values.items()},
+            compare_ungrouped=_get(
+                ct, "compare_ungrouped", bool, where, "[contribution]", default=False
+            ),
+        )
+    except StudyError as exc:
+        raise StudyError(f"{where}: [contribution] {exc}") from None
+
     try:
         return Study(
             fmu=fmu,
@@ -404,6 +550,9 @@ def study_from_dict(
             step_size=_get(st, "step_size", float, where, "[study]", default=None),
             name=_get(st, "name", str, where, "[study]", default=fmu.stem),
             source=source,
+            phases=phases,
+            contribution=contribution,
+            max_reruns=_get(method, "max_reruns", int, where, "[method]", default=2),
         )
     except StudyError as exc:
         msg = str(exc)
@@ -430,6 +579,7 @@ def _experiment(e: Mapping[str, Any], base: Path, where: str, label: str, index:
             weights=weights,
             start_values=_number_map(e, "start_values", where, label),
             sample_time=_get(e, "sample_time", float, where, label, default=None),
+            role=_get(e, "role", str, where, label, default="identify"),
         )
     except StudyError as exc:
         raise StudyError(f"{where}: {label}: {exc}") from None
