@@ -39,6 +39,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         pause_after=args.pause_after,
         progress=not args.quiet,
         plots=not args.no_plots,
+        continue_from_run=args.continue_from_run,
     )
     print(result.parameters_frame().to_string())
     print()
@@ -46,6 +47,16 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     print(f"best cost {result.fun:.6g} at {result.best_source}; {result.nfev} simulations")
     for name, reason in result.weak.items():
         print(f"weakly constrained: {name}: {reason}")
+    for name, v in (result.get("validation") or {}).items():
+        if isinstance(v, dict) and "cost" in v:
+            print(f"validation {name}: {v['cost_kind']} cost {v['cost']:.6g}")
+    if result.get("comparison"):
+        c = result["comparison"]
+        print(
+            f"grouped phases: cost {c['phased']['cost']:.6g} with {c['phased']['nfev']} "
+            f"simulations; all at once: cost {c['ungrouped']['cost']:.6g} with "
+            f"{c['ungrouped']['nfev']} simulations"
+        )
     print(f"report, tables and plots: {out}/report.md")
     return 0 if result.status in (0, 2) else 1
 
@@ -127,6 +138,10 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--pause-after", type=int, metavar="N",
         help="stop after N iterations to review/edit next_levels.toml, then --resume",
+    )  # fmt: skip
+    p.add_argument(
+        "--continue-from-run", type=int, metavar="N",
+        help="with --resume: centre the next levels on run N of the last iteration",
     )  # fmt: skip
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress display")

@@ -283,9 +283,10 @@ class IdentificationResult(dict):
 
         study: Study = self["study"]
         rows = []
-        first = self["iterations"][0] if self["iterations"] else None
-        last = self["iterations"][-1] if self["iterations"] else None
         for p in study.parameters:
+            mine = [r for r in self["iterations"] if p.name in r.levels]
+            first = mine[0] if mine else None
+            last = mine[-1] if mine else None
             rows.append(
                 {
                     "parameter": p.name,
@@ -622,6 +623,19 @@ def identify(
 
     if not isinstance(study, Study):
         study = load_study(study)
+    if study.phases or study.contribution.enabled:
+        from tsid_fmu.phases import identify_phased
+
+        if continue_from_run is not None or evaluator is not None or pause_after is not None:
+            raise StudyError(
+                "continue_from_run, pause_after and evaluator apply to single-phase studies; "
+                "a phased study resumes phase by phase"
+            )
+        callback_p = ConsoleProgress() if progress is True else (progress or None)
+        return identify_phased(
+            study, out, resume=resume, progress=callback_p, plots=plots,
+            max_iterations=max_iterations,
+        )  # fmt: skip
     limit = max_iterations or study.max_iterations
     callback: ProgressCallback | None
     if progress is True:

@@ -50,6 +50,10 @@ class ConsoleProgress:
                 f"best cost {rec.best_cost:.6g}; {rec.decision.message} "
                 f"[{rec.nfev} simulations, {now - self.t0:.1f} s]"
             )
+        elif event == "phase":
+            self._print(f"== {info['message']}")
+        elif event == "rerun":
+            self._print(f"  {info['message']}")
         elif event == "done":
             res = info["result"]
             self._print(f"{res.message} after {res.nit} iterations, {res.nfev} simulations")

@@ -28,6 +28,7 @@ __all__ = [
     "main_effects_plot",
     "parameter_set_ssv",
     "write_outputs",
+    "write_phased_outputs",
 ]
 
 
@@ -245,3 +246,119 @@ def write_outputs(result: IdentificationResult, out: Path, simulated: Sequence[A
     if simulated is not None:
         lines += ["", "![fit](fit.png)", "", "![convergence](convergence.png)"]
     atomic_write(out / "report.md", "\n".join(lines) + "\n")
+
+
+def write_phased_outputs(result: IdentificationResult, out: Path) -> None:
+    """Write the files of a phased study: result, parameter sets and ``report.md``."""
+    study = result["study"]
+    out = Path(out)
+    params = result.parameters_frame()
+    atomic_write(out / "parameters.csv", params.to_csv())
+    units = {p.name: p.unit for p in study.parameters}
+    values = dict(result["x"])
+    values.update({k: v for k, v in study.start_values.items() if k not in values})
+    desc = {
+        k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in result["x"]
+    }
+    desc.update({k: "fixed in the study" for k in study.start_values})
+    atomic_write(out / "parameters.ssv", parameter_set_ssv(values, desc, name=study.name))
+
+    def clean(v: Any) -> Any:
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [clean(x) for x in v]
+        return v
+
+    summary = {
+        "study": study.name,
+        "fmu": str(study.fmu),
+        "x": result["x"],
+        "fun": result["fun"],
+        "success": result["success"],
+        "message": result["message"],
+        "nfev": result["nfev"],
+        "nit": result["nit"],
+        "phases": result["phases"],
+        "groups": result["groups"],
+        "weak": result["weak"],
+        "validation": result["validation"],
+        "comparison": result["comparison"],
+    }
+    atomic_write(out / "result.json", json.dumps(clean(summary), indent=2) + "\n")
+    lines = [
+        f"# Phased identification report: {study.name}",
+        "",
+        f"- FMU: `{study.fmu}`",
+        f"- Result: **{result['message']}** ({result['nit']} iterations, "
+        f"{result['nfev']} simulations)",
+        f"- Cost ({study.cost}) at the identified parameters, identification experiments, "
+        f"no added noise: {result['fun']:.6g}",
+        "",
+    ]
+    inc = result["input_contribution"]
+    if inc is not None:
+        lines += [
+            "## Input contribution (Step i)",
+            "",
+            _markdown_table(inc.to_pandas()),
+            "",
+            f"Main contributor: **{inc.experiments[0]}** (identified first).",
+            "",
+        ]
+    if result["parameter_contribution"]:
+        lines += ["## Parameter contribution (Step ii, % of error variation)", ""]
+        for exp, pc in result["parameter_contribution"].items():
+            ranked = sorted(pc.percent.items(), key=lambda kv: -kv[1])
+            lines.append(
+                f"- {exp}: "
+                + ", ".join(f"{k} {v:.3g} %" for k, v in ranked)
+                + f"; groups {result['groups'].get(exp, [])}"
+            )
+        lines.append("")
+    lines += ["## Phases", "", "| phase | parameters | experiments | iterations | "
+              "simulations | cost | outcome |", "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for i, ph in enumerate(result["phases"], start=1):
+        lines.append(
+            f"| [{ph['name']}](phase_{i:02d}/report.md) | {', '.join(ph['parameters'])} | "
+            f"{', '.join(ph['experiments'])} | {ph['nit']} | {ph['nfev']} | {ph['fun']:.6g} | "
+            f"{ph['message']} |"
+        )
+    lines += ["", "## Identified parameters", "", _markdown_table(params), ""]
+    if result["weak"]:
+        lines += ["## Weakly constrained parameters", ""]
+        lines += [f"- **{k}**: {v}" for k, v in result["weak"].items()]
+        lines.append("")
+    val = result["validation"]
+    if val:
+        lines += ["## Superposition check (all inputs together)", ""]
+        for name, v in val.items():
+            if name.startswith("_"):
+                continue
+            if "error" in v:
+                lines.append(f"- {name}: simulation failed: {v['error']}")
+                continue
+            fits = ", ".join(f"{o} fit {m['fit_percent']:.2f} %" for o, m in v["fit"].items())
+            lines.append(f"- {name}: {v['cost_kind']} cost {v['cost']:.6g}; {fits}")
+        lines += ["", "![validation](validation/fit.png)", ""]
+    comp = result["comparison"]
+    if comp:
+        ph, un = comp["phased"], comp["ungrouped"]
+        lines += [
+            "## Why grouping: the same study without it",
+            "",
+            "| | cost (identification experiments) | validation cost | simulations |",
+            "|---|---|---|---|",
+            f"| grouped, in phases | {ph['cost']:.6g} | {_num(ph['validation_cost'])} | "
+            f"{ph['nfev']} |",
+            f"| all parameters in one array | {un['cost']:.6g} | {_num(un['validation_cost'])} | "
+            f"{un['nfev']} |",
+            "",
+        ]
+    atomic_write(out / "report.md", "\n".join(lines) + "\n")
+
+
+def _num(v: Any) -> str:
+    return f"{v:.6g}" if isinstance(v, (int, float)) else "-"
