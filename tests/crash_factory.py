@@ -10,7 +10,8 @@ highest threshold crossed wins):
 * ``gain > hang_above``: never returns (sleeps in a loop);
 * ``gain > segv_above``: writes through a NULL pointer (SIGSEGV);
 * ``gain > abort_above``: calls ``abort()`` (the process dies of SIGABRT);
-* ``delay`` > 0: busy-waits ``delay`` seconds in every step (a deliberately slow FMU).
+* ``delay`` > 0: busy-waits ``delay`` seconds in every step (a deliberately slow FMU);
+  ``delay`` < 0 sleeps ``-delay`` seconds per step instead (slow without using the CPU).
 
 All thresholds default to ``1e300`` and ``delay`` to 0, so by default the FMU is the
 trivial feed-through used by the loop benchmark. The C source does not include the FMI
@@ -100,6 +101,7 @@ int fmi2DoStep(void *c, double t, double h, int ns) {
     else if (gain > M->v[5]) { volatile int *p = NULL; *p = 1; }
     else if (gain > M->v[4]) abort();
     if (M->v[7] > 0) { double end = now() + M->v[7]; while (now() < end) {} }
+    if (M->v[7] < 0) { struct timespec ts = {0, (long)(-M->v[7] * 1e9)}; nanosleep(&ts, NULL); }
     return 0;
 }
 """

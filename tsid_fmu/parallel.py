@@ -50,6 +50,7 @@ import tempfile
 import threading
 import time
 import warnings
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
@@ -65,6 +66,7 @@ __all__ = ["ParallelEvaluator", "available_cores", "make_evaluator"]
 
 Progress = Callable[[int, int], None]
 _SHUTDOWN_GRACE = 2.0  # seconds a worker gets to close its FMU before it is killed
+_PREFETCH = 2  # tasks in flight per local worker
 
 
 def available_cores() -> int:
@@ -231,7 +233,7 @@ def _exit_reason(code: int | None) -> str:
 
 
 class _Worker:
-    """One worker process and the task it is running."""
+    """One worker process and the tasks sent to it (the first one is running)."""
 
     def __init__(self, ctx: Any, study: Study, indices: list[int], number: int) -> None:
         self.conn, child = ctx.Pipe()
@@ -244,13 +246,15 @@ class _Worker:
         self.process.start()
         child.close()
         self.ready = False
-        self.task: Any = None
-        self.deadline = math.inf
-        self.done = 0
+        self.inflight: deque[tuple] = deque()  # messages sent, oldest (running) first
+        self.deadline = math.inf  # for the running task
+        self.sent = 0
 
-    def send(self, msg: tuple, deadline: float) -> None:
-        self.task = msg[1]
-        self.deadline = deadline
+    def send(self, msg: tuple, limit: float | None) -> None:
+        if not self.inflight:
+            self.deadline = math.inf if limit is None else time.monotonic() + limit
+        self.inflight.append(msg)
+        self.sent += 1
         self.conn.send(msg)
 
     def kill(self) -> None:
@@ -344,68 +348,73 @@ class _LocalPool:
         w.kill()
         self._spawn()
 
-    def run(
-        self,
-        tasks: list[tuple],
-        on_result: Callable[[Any, tuple], None],
-    ) -> None:
+    def run(self, tasks: list[tuple], on_result: Callable[[Any, tuple], None]) -> None:
         """Run ``tasks`` (messages ``(kind, id, ...)``); call ``on_result(id, reply)``.
 
-        A crash or time-out replies ``("failed", id, reason)``.
+        Each worker has up to ``_PREFETCH`` tasks in flight, so it never waits for this
+        process between tasks. A crash or time-out fails the running task with
+        ``("failed", id, reason)``; the worker's queued tasks go to another worker.
         """
         pending = list(reversed(tasks))
         limit = None if self.timeout is None else self.timeout * self.sims_per_task
-        while pending or any(w.task is not None for w in self.workers):
+        quota = self.recycle_after
+        while pending or any(w.inflight for w in self.workers):
             for w in list(self.workers):
-                if w.ready and w.task is None and pending:
+                while (
+                    w.ready
+                    and pending
+                    and len(w.inflight) < _PREFETCH
+                    and (quota is None or w.sent < quota)
+                ):
                     msg = pending.pop()
-                    deadline = math.inf if limit is None else time.monotonic() + limit
                     try:
-                        w.send(msg, deadline)
-                    except (OSError, BrokenPipeError):  # died while idle: not this task's fault
-                        pending.append(msg)
-                        self._replace(w)
+                        w.send(msg, limit)
+                    except (OSError, BrokenPipeError):  # died: the sentinel tells below
+                        break
             if not self.workers:
                 for msg in pending:
                     on_result(msg[1], ("failed", msg[1], "no worker process is left"))
                 return
-            busy = [w for w in self.workers if w.task is not None or not w.ready]
-            now = time.monotonic()
-            wait_for = min((w.deadline for w in busy), default=math.inf) - now
+            busy = [w for w in self.workers if w.inflight or not w.ready]
+            wait_for = min((w.deadline for w in busy), default=math.inf) - time.monotonic()
             ready = wait(
                 [w.conn for w in busy] + [w.process.sentinel for w in busy],
                 timeout=None if math.isinf(wait_for) else max(wait_for, 0.0),
             )
-            for w in list(busy):
+            for w in busy:
                 if not w.ready:
                     if w.conn in ready or w.process.sentinel in ready:
                         self._handle_startup(w, raise_errors=False)
                     continue
-                if w.conn in ready:
+                while w.inflight and w.conn.poll():
                     try:
                         reply = w.conn.recv()
                     except (EOFError, OSError):
-                        reply = None
-                    if reply is not None:
-                        task, w.task, w.deadline = w.task, None, math.inf
-                        w.done += 1
-                        on_result(task, reply)
-                        if self.recycle_after is not None and w.done >= self.recycle_after:
-                            self.workers.remove(w)
-                            w.stop()
-                            self._spawn()
-                        continue
-                if w.conn in ready or w.process.sentinel in ready:
-                    w.process.join(5)
-                    reason = _exit_reason(w.process.exitcode)
-                    on_result(w.task, ("failed", w.task, f"{reason}; the worker was replaced"))
-                    self._replace(w)
-                elif time.monotonic() >= w.deadline:
-                    reason = (
-                        f"time limit of {self.timeout:g} s per simulation exceeded; "
-                        "the worker was killed and replaced"
-                    )
-                    on_result(w.task, ("failed", w.task, reason))
+                        break
+                    msg = w.inflight.popleft()
+                    w.deadline = math.inf if limit is None else time.monotonic() + limit
+                    on_result(msg[1], reply)
+                if not w.inflight and quota is not None and w.sent >= quota:
+                    self.workers.remove(w)  # recycle: a fresh process for the next tasks
+                    w.stop()
+                    self._spawn()
+                    continue
+                if not w.inflight:
+                    continue
+                dead = w.process.sentinel in ready or not w.process.is_alive()
+                if dead or time.monotonic() >= w.deadline:
+                    if dead:
+                        w.process.join(5)
+                        reason = f"{_exit_reason(w.process.exitcode)}; the worker was replaced"
+                    else:
+                        reason = (
+                            f"time limit of {self.timeout:g} s per simulation exceeded; "
+                            "the worker was killed and replaced"
+                        )
+                    running = w.inflight.popleft()
+                    pending.extend(w.inflight)  # queued behind the failed task: run elsewhere
+                    w.inflight.clear()
+                    on_result(running[1], ("failed", running[1], reason))
                     self._replace(w)
 
     def close(self) -> None:
@@ -426,51 +435,65 @@ class _LocalPool:
 # Dask
 # ---------------------------------------------------------------------------------------
 
-_DASK_RUNNERS: dict[tuple[str, int], tuple[_Runner, str]] = {}
+_DASK_IDLE: dict[str, list[_Runner]] = {}  # token -> runners not in use (this process)
+_DASK_FOLDERS: dict[str, list[str]] = {}
 _DASK_LOCK = threading.Lock()
 
 
-def _dask_runner(token: str, payload: tuple[Study, list[int], str, bytes]) -> _Runner:
-    """Return this worker thread's runner for ``token``, building it on first use."""
-    key = (token, threading.get_ident())
+def _dask_acquire(token: str, payload: tuple[Study, list[int], str, bytes]) -> _Runner:
+    """Take an idle runner for ``token`` in this worker process, or build one."""
     with _DASK_LOCK:
-        entry = _DASK_RUNNERS.get(key)
-    if entry is not None:
-        return entry[0]
+        idle = _DASK_IDLE.setdefault(token, [])
+        if idle:
+            return idle.pop()
     study, indices, fmu_name, fmu_bytes = payload
     folder = tempfile.mkdtemp(prefix="tsid-dask-")
     path = Path(folder) / fmu_name
     path.write_bytes(fmu_bytes)
-    runner = _Runner(dataclasses.replace(study, fmu=path), indices)
     with _DASK_LOCK:
-        _DASK_RUNNERS[key] = (runner, folder)
-    return runner
+        _DASK_FOLDERS.setdefault(token, []).append(folder)
+    return _Runner(dataclasses.replace(study, fmu=path), indices)
+
+
+def _dask_release_runner(token: str, runner: _Runner) -> None:
+    with _DASK_LOCK:
+        _DASK_IDLE.setdefault(token, []).append(runner)
+
+
+def _dask_warm(token: str, payload: Any) -> int:
+    """Build one runner on this worker before the first batch (run by ``Client.run``)."""
+    _dask_release_runner(token, _dask_acquire(token, payload))
+    return os.getpid()
 
 
 def _dask_task(token: str, payload: Any, kind: str, params: Mapping[str, float], r: int) -> Any:
     """Run one task on a Dask worker (the FMU arrives with ``payload``)."""
-    runner = _dask_runner(token, payload)
-    if kind == "check":
-        return None
-    if kind == "clean":
-        return runner.clean(params)
+    runner = _dask_acquire(token, payload)
     try:
-        return runner.replicate(params, r)
-    except TsidError as exc:
-        return math.inf, str(exc), 0, 1
+        if kind == "check":
+            return None
+        if kind == "clean":
+            return runner.clean(params)
+        try:
+            return runner.replicate(params, r)
+        except TsidError as exc:
+            return math.inf, str(exc), 0, 1
+    finally:
+        _dask_release_runner(token, runner)
 
 
 def _dask_release(token: str) -> int:
-    """Close this worker's runners of ``token``; return how many."""
+    """Close this worker's runners of ``token`` and delete their FMU copies."""
     import shutil
 
     with _DASK_LOCK:
-        keys = [k for k in _DASK_RUNNERS if k[0] == token]
-        entries = [_DASK_RUNNERS.pop(k) for k in keys]
-    for runner, folder in entries:
+        runners = _DASK_IDLE.pop(token, [])
+        folders = _DASK_FOLDERS.pop(token, [])
+    for runner in runners:
         runner.close()
+    for folder in folders:
         shutil.rmtree(folder, ignore_errors=True)
-    return len(entries)
+    return len(runners)
 
 
 class _DaskPool:
@@ -504,6 +527,13 @@ class _DaskPool:
         self.token = hashlib.sha256(blob + fmu_bytes).hexdigest()[:16] + f"-{os.getpid()}"
         payload = (study, indices, Path(study.fmu).name, fmu_bytes)
         self.payload = self.client.scatter(payload, broadcast=True, hash=False)
+        try:  # one runner per worker now: start-up is not paid inside the first batch
+            self.client.run(_dask_warm, self.token, payload)
+        except TsidError:
+            self.close()
+            raise
+        except Exception:
+            pass  # a worker that cannot build it reports the reason on its first task
         self.timeout = timeout
         self.sims_per_task = len(indices)
         self.fmu_name = Path(study.fmu).name
