@@ -320,6 +320,40 @@ def identify_phased(
         nfev += res.nfev
         results.append((ph, res))
 
+    ident = [e.name for e in study.experiments if e.role == "identify"]
+    if study.contribution.refine_jointly and (len(phases) > 1 or len(ident) > 1):
+        ph = Phase(parameters=study.parameter_names, experiments=ident, name="joint refinement")
+        if progress:
+            progress("phase", {"message": f"{ph.name}: all parameters on {', '.join(ident)}"})
+        span = study.contribution.refine_span
+        params = []
+        for p in study.parameters:
+            lo = max(current[p.name] * (1 - span), p.min)
+            hi = min(current[p.name] * (1 + span), p.max)
+            mid = min(max(current[p.name], p.min), p.max)
+            lv = sorted({lo, mid, hi})
+            if len(lv) < 3:  # a value at zero or on a bound: spread from the bound instead
+                width = max(abs(current[p.name]), 1e-9) * span
+                lv = [mid, mid + width, mid + 2 * width] if mid == p.min else lv
+                lv = [mid - 2 * width, mid - width, mid] if mid == p.max else lv
+            params.append(Parameter(p.name, lv, p.min, p.max, p.unit))
+        sub = _sub_study(
+            study,
+            study.parameter_names,
+            ident,
+            current,
+            max_iterations=max_iterations or study.max_iterations,
+            name=f"{study.name} - {ph.name}",
+        )
+        sub.parameters = params
+        pdir = out_dir / f"phase_{len(phases) + 1:02d}" if out_dir is not None else None
+        again = pdir is not None and any(pdir.glob("iteration_*/record.json"))
+        res = identify(sub, pdir, resume=again, progress=progress, plots=plots)
+        current.update(res.x)
+        nfev += res.nfev
+        phases = [*phases, ph]
+        results.append((ph, res))
+
     cost, n_extra = _identification_cost(study, current)
     nfev += n_extra
     validation = _validate(study, current, out_dir, plots)

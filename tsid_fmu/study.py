@@ -215,6 +215,15 @@ class ContributionOptions:
     compare_ungrouped : bool
         Also identify all parameters in one array on all experiments and report the
         difference in cost and simulations (why grouping exists).
+    refine_jointly : bool
+        After the phases, one more phase refines all parameters together on all
+        identification experiments, from three levels within ``refine_span`` of the
+        phase results. Single-input experiments often fix only ratios of parameters (a
+        force-only test of a spring-mass plant is unchanged when mass, damping and
+        stiffness scale together); fitting the experiments together pins them down.
+        Default true.
+    refine_span : float
+        Relative half-width of the joint refinement's first levels. Default 0.2.
     """
 
     enabled: bool = False
@@ -222,8 +231,12 @@ class ContributionOptions:
     min_percent: float = 1.0
     values: dict[str, list[float]] = field(default_factory=dict)
     compare_ungrouped: bool = False
+    refine_jointly: bool = True
+    refine_span: float = 0.2
 
     def __post_init__(self) -> None:
+        if not 0 < self.refine_span < 1:
+            raise StudyError(f"refine_span must be between 0 and 1, got {self.refine_span}")
         if not self.group_ratio > 1:
             raise StudyError(f"group_ratio must be > 1, got {self.group_ratio}")
         if not self.min_percent >= 0:
@@ -375,7 +388,10 @@ _TOP = {
     "contribution",
 }  # fmt: skip
 _PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
-_CONTRIB = {"enabled", "group_ratio", "min_percent", "values", "compare_ungrouped"}
+_CONTRIB = {
+    "enabled", "group_ratio", "min_percent", "values", "compare_ungrouped", "refine_jointly",
+    "refine_span",
+}  # fmt: skip
 _STUDY = {"name", "fmu", "start_values", "interface", "step_size"}
 _DATA = {
     "file", "name", "time", "derived", "inputs", "outputs", "weights", "start_values",
@@ -528,6 +544,8 @@ def study_from_dict(
             compare_ungrouped=_get(
                 ct, "compare_ungrouped", bool, where, "[contribution]", default=False
             ),
+            refine_jointly=_get(ct, "refine_jointly", bool, where, "[contribution]", default=True),
+            refine_span=_get(ct, "refine_span", float, where, "[contribution]", default=0.2),
         )
     except StudyError as exc:
         raise StudyError(f"{where}: [contribution] {exc}") from None
