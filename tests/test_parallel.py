@@ -147,7 +147,7 @@ def test_hanging_row_is_stopped_by_the_time_limit(crash_study):
     assert np.all(np.isfinite(got.costs[[0, 2]]))
 
 
-def test_whole_study_is_bit_identical_serial_and_parallel(lag_study, monkeypatch):
+def test_whole_study_is_bit_identical_serial_and_parallel(lag_study):
     import tsid_fmu.engine as engine
 
     study = Study(
@@ -158,8 +158,8 @@ def test_whole_study_is_bit_identical_serial_and_parallel(lag_study, monkeypatch
         seed=2,
     )
     serial = engine.identify(study, plots=False)
-    monkeypatch.setattr(engine, "Evaluator", lambda s: ParallelEvaluator(s, workers=2))
-    parallel = engine.identify(study, plots=False)
+    with ParallelEvaluator(study, workers=2) as pe:
+        parallel = engine.identify(study, plots=False, evaluator=pe)
     assert parallel.x == serial.x and parallel.fun == serial.fun
     for a, b in zip(serial.iterations, parallel.iterations, strict=True):
         np.testing.assert_array_equal(a.costs, b.costs)
@@ -183,3 +183,28 @@ def test_dask_local_cluster_gives_the_same_costs(lag_study, serial, tmp_path):
     np.testing.assert_array_equal(got.costs, expected.costs)
     assert got.errors == expected.errors
     np.testing.assert_array_equal(sim[0][1], clean[0][1])
+
+
+def test_script_without_main_guard_can_run_workers(fmus, tmp_path):
+    """Workers do not re-run the user's script (no ``if __name__ == "__main__"`` needed)."""
+    import subprocess
+    from pathlib import Path
+
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        "import numpy as np, pandas as pd\n"
+        "from tsid_fmu.parallel import ParallelEvaluator\n"
+        "from tsid_fmu.study import Experiment, Parameter, Study\n"
+        "t = np.arange(101) * 1e-2\n"
+        "df = pd.DataFrame({'time': t, 'u': np.sin(t), 'y': np.sin(t)})\n"
+        f"st = Study(fmu={str(fmus['lag'])!r}, parameters=[Parameter('tau', [0.1, 0.2])],\n"
+        "           experiments=[Experiment(data=df, inputs={'u': 'u'}, outputs={'y': 'y'})])\n"
+        "with ParallelEvaluator(st, workers=2) as pe:\n"
+        "    print('COST', pe.evaluate([{'tau': 0.1}]).costs[0, 0])\n"
+    )
+    repo = Path(__file__).resolve().parents[1]
+    proc = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, cwd=repo, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("COST") == 1

@@ -39,6 +39,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import math
@@ -46,12 +47,14 @@ import multiprocessing as mp
 import os
 import pickle
 import signal
+import sys
 import tempfile
 import threading
 import time
+import types
 import warnings
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
@@ -232,6 +235,24 @@ def _exit_reason(code: int | None) -> str:
 # ---------------------------------------------------------------------------------------
 
 
+@contextlib.contextmanager
+def _main_module_hidden() -> Iterator[None]:
+    """Start a process without it re-importing the ``__main__`` script.
+
+    ``spawn``/``forkserver`` children normally re-run the parent's main script, which
+    starts the study again in a script without an ``if __name__ == "__main__":``
+    guard. Workers need nothing from ``__main__`` (their target and arguments are
+    tsid-fmu objects), so the main module is hidden while the process starts.
+    """
+    main = sys.modules.get("__main__")
+    sys.modules["__main__"] = types.ModuleType("__tsid_worker_main__")
+    try:
+        yield
+    finally:
+        if main is not None:
+            sys.modules["__main__"] = main
+
+
 class _Worker:
     """One worker process and the tasks sent to it (the first one is running)."""
 
@@ -243,7 +264,8 @@ class _Worker:
             name=f"tsid-worker-{number}",
             daemon=True,
         )
-        self.process.start()
+        with _main_module_hidden():
+            self.process.start()
         child.close()
         self.ready = False
         self.inflight: deque[tuple] = deque()  # messages sent, oldest (running) first
