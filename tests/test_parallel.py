@@ -208,3 +208,18 @@ def test_script_without_main_guard_can_run_workers(fmus, tmp_path):
     )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.count("COST") == 1
+
+
+def test_dask_isolates_crashes_and_hangs(crash_study):
+    distributed = pytest.importorskip("distributed")
+    sets = [{"gain": 1.0}, {"gain": 25.0}, {"gain": 35.0}, {"gain": 2.0}]
+    with Evaluator(crash_study) as ev:
+        good = ev.evaluate([sets[0], sets[3]])
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        with ParallelEvaluator(crash_study, scheduler=cluster.scheduler_address, timeout=1.0) as pe:
+            got = pe.evaluate(sets)
+    np.testing.assert_array_equal(got.costs[[0, 3]], good.costs)
+    assert "worker crashed (signal 11 SIGSEGV)" in got.errors[1]
+    assert "time limit of 1 s per simulation exceeded" in got.errors[2]

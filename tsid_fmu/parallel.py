@@ -28,7 +28,10 @@ Neither ever raises out of :meth:`ParallelEvaluator.evaluate`.
 With ``scheduler`` (the address of a ``dask.distributed`` scheduler, or a
 ``distributed.Client``), tasks go to that cluster instead. The FMU file and the loaded
 measured data travel with the tasks, so the workers need only ``tsid-fmu`` installed,
-not the study's files. Dask is optional: ``pip install tsid-fmu[dask]``.
+not the study's files. On each Dask worker the FMU runs in a child process of the
+worker, so crashes and the time limit are handled there exactly as locally, and a
+crashing FMU never takes a Dask worker down. Dask is optional:
+``pip install tsid-fmu[dask]``.
 
 Examples
 --------
@@ -191,15 +194,24 @@ def _worker_main(conn: Connection, study: Study, indices: list[int]) -> None:
             if kind == "run":
                 _, task, params, r = msg
                 try:
-                    conn.send(("done", task, *runner.replicate(params, r)))
-                except TsidError as exc:
-                    conn.send(("done", task, math.inf, str(exc), 0, 1))
+                    reply = ("done", task, *runner.replicate(params, r))
+                except Exception as exc:  # never lose the reason of a failed row
+                    reply = ("done", task, math.inf, _reason(exc), 0, 1)
+                conn.send(reply)
             elif kind == "clean":
-                conn.send(("clean", msg[1], runner.clean(msg[2])))
+                try:
+                    conn.send(("clean", msg[1], runner.clean(msg[2])))
+                except Exception as exc:
+                    conn.send(("failed", msg[1], _reason(exc)))
             else:  # "stop"
                 return
     finally:
         runner.close()
+
+
+def _reason(exc: BaseException) -> str:
+    """Text of an exception for a row's error (type named unless it is our own)."""
+    return str(exc) if isinstance(exc, TsidError) else f"{type(exc).__name__}: {exc}"
 
 
 def _portable_error(exc: BaseException) -> TsidError:
@@ -457,27 +469,78 @@ class _LocalPool:
 # Dask
 # ---------------------------------------------------------------------------------------
 
-_DASK_IDLE: dict[str, list[_Runner]] = {}  # token -> runners not in use (this process)
+_DASK_IDLE: dict[str, list[Any]] = {}  # token -> runners not in use (this process)
 _DASK_FOLDERS: dict[str, list[str]] = {}
 _DASK_LOCK = threading.Lock()
 
 
-def _dask_acquire(token: str, payload: tuple[Study, list[int], str, bytes]) -> _Runner:
+class _IsolatedRunner:
+    """A :class:`_Runner` in a child process of the Dask worker (crash and hang isolation).
+
+    An FMU that crashes would otherwise kill the Dask worker, and Dask would retry the
+    task on other workers until they are all gone; here only the child dies, the task
+    returns a failed row, and the next task gets a new child.
+    """
+
+    def __init__(self, study: Study, indices: list[int], timeout: float | None) -> None:
+        self.n_exp = len(indices)
+        with _children_allowed():
+            self.pool = _LocalPool(study, indices, 1, timeout, None, None)
+
+    def _run(self, msg: tuple) -> tuple:
+        box: list[tuple] = []
+        with _children_allowed():
+            self.pool.run([msg], lambda task, reply: box.append(reply))
+        return box[0]
+
+    def replicate(self, params: Mapping[str, float], r: int) -> tuple[float, str | None, int, int]:
+        reply = self._run(("run", 0, dict(params), r))
+        if reply[0] == "done":
+            return reply[2], reply[3], reply[4], reply[5]
+        return math.inf, f"replicate {r + 1}: {reply[2]}", self.n_exp, 1
+
+    def clean(self, params: Mapping[str, float]) -> list[tuple[np.ndarray | None, str | None]]:
+        reply = self._run(("clean", 0, dict(params)))
+        if reply[0] == "clean":
+            return reply[2]
+        return [(None, reply[2])] * self.n_exp
+
+    def close(self) -> None:
+        self.pool.close()
+
+
+@contextlib.contextmanager
+def _children_allowed() -> Iterator[None]:
+    """Let a daemonic process (a Dask worker) start worker processes of its own."""
+    config = mp.current_process()._config  # type: ignore[attr-defined]
+    daemon = config.get("daemon")
+    config["daemon"] = False
+    try:
+        yield
+    finally:
+        if daemon is not None:
+            config["daemon"] = daemon
+
+
+def _dask_acquire(token: str, payload: tuple) -> _Runner | _IsolatedRunner:
     """Take an idle runner for ``token`` in this worker process, or build one."""
     with _DASK_LOCK:
         idle = _DASK_IDLE.setdefault(token, [])
         if idle:
             return idle.pop()
-    study, indices, fmu_name, fmu_bytes = payload
+    study, indices, fmu_name, fmu_bytes, timeout, isolate = payload
     folder = tempfile.mkdtemp(prefix="tsid-dask-")
     path = Path(folder) / fmu_name
     path.write_bytes(fmu_bytes)
     with _DASK_LOCK:
         _DASK_FOLDERS.setdefault(token, []).append(folder)
-    return _Runner(dataclasses.replace(study, fmu=path), indices)
+    study = dataclasses.replace(study, fmu=path)
+    if isolate:
+        return _IsolatedRunner(study, indices, timeout)
+    return _Runner(study, indices)
 
 
-def _dask_release_runner(token: str, runner: _Runner) -> None:
+def _dask_release_runner(token: str, runner: Any) -> None:
     with _DASK_LOCK:
         _DASK_IDLE.setdefault(token, []).append(runner)
 
@@ -498,8 +561,8 @@ def _dask_task(token: str, payload: Any, kind: str, params: Mapping[str, float],
             return runner.clean(params)
         try:
             return runner.replicate(params, r)
-        except TsidError as exc:
-            return math.inf, str(exc), 0, 1
+        except Exception as exc:
+            return math.inf, _reason(exc), 0, 1
     finally:
         _dask_release_runner(token, runner)
 
@@ -522,7 +585,12 @@ class _DaskPool:
     """Send tasks to a ``dask.distributed`` cluster."""
 
     def __init__(
-        self, study: Study, indices: list[int], scheduler: Any, timeout: float | None
+        self,
+        study: Study,
+        indices: list[int],
+        scheduler: Any,
+        timeout: float | None,
+        isolate: bool = True,
     ) -> None:
         try:
             from distributed import Client
@@ -547,7 +615,7 @@ class _DaskPool:
             raise FMUError(f"cannot read the FMU {study.fmu}: {exc}") from exc
         blob = pickle.dumps((study, indices))
         self.token = hashlib.sha256(blob + fmu_bytes).hexdigest()[:16] + f"-{os.getpid()}"
-        payload = (study, indices, Path(study.fmu).name, fmu_bytes)
+        payload = (study, indices, Path(study.fmu).name, fmu_bytes, timeout, isolate)
         self.payload = self.client.scatter(payload, broadcast=True, hash=False)
         try:  # one runner per worker now: start-up is not paid inside the first batch
             self.client.run(_dask_warm, self.token, payload)
@@ -586,29 +654,33 @@ class _DaskPool:
                 _dask_task, self.token, self.payload, kind, msg[2], r, pure=False, retries=0
             )
             futures[fut] = (kind, task)
-        deadline = math.inf
+        budget = None
         if self.timeout is not None:
+            # the limit is enforced on the Dask workers (_IsolatedRunner); this is only a
+            # backstop for a worker that stops answering altogether
             rounds = math.ceil(len(tasks) / self.n_slots)
-            deadline = time.monotonic() + self.timeout * self.sims_per_task * rounds + 5.0
-        remaining = set(futures)
-        seq = as_completed(list(futures), with_results=False)
-        for fut in seq:
-            remaining.discard(fut)
-            kind, task = futures[fut]
-            try:
-                value = fut.result()
-            except Exception as exc:  # KilledWorker when the FMU crashed the worker
-                on_result(task, ("failed", task, f"Dask task failed: {type(exc).__name__}: {exc}"))
-            else:
-                reply = ("clean", task, value) if kind == "clean" else ("done", task, *value)
-                on_result(task, reply)
-            if time.monotonic() > deadline:
-                break
-        if remaining:
-            self.client.cancel(list(remaining))
-            for fut in remaining:
-                task = futures[fut][1]
-                on_result(task, ("failed", task, "time limit exceeded on the Dask cluster"))
+            budget = 2 * self.timeout * self.sims_per_task * rounds + 30.0
+        finished = set()
+        try:
+            for fut in as_completed(list(futures), timeout=budget):
+                finished.add(fut)
+                kind, task = futures[fut]
+                try:
+                    value = fut.result()
+                except Exception as exc:  # KilledWorker when the FMU crashed the worker
+                    reason = f"Dask task failed: {type(exc).__name__}: {exc}"
+                    on_result(task, ("failed", task, reason))
+                else:
+                    reply = ("clean", task, value) if kind == "clean" else ("done", task, *value)
+                    on_result(task, reply)
+        except TimeoutError:
+            pass
+        late = [fut for fut in futures if fut not in finished]
+        for fut in late:
+            task = futures[fut][1]
+            on_result(task, ("failed", task, "time limit exceeded on the Dask cluster"))
+        if late:
+            self.client.cancel(late)
 
     def close(self) -> None:
         try:
@@ -637,8 +709,8 @@ class ParallelEvaluator:
         Local worker processes; default the number of available cores. Ignored with
         ``scheduler``.
     timeout : float, optional
-        Time limit per simulation, seconds. Locally, a task past it is stopped (its
-        worker killed and replaced) and its row fails; on Dask it bounds the batch.
+        Time limit per simulation, seconds: a task past it is stopped (its worker
+        process killed and replaced) and its row fails.
     scheduler : str or distributed.Client, optional
         Run on this Dask cluster instead of local processes.
     recycle_after : int, optional
