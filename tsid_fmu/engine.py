@@ -45,6 +45,12 @@ RERUN_AFTER = 2
 """Iterations without a lower cost after which the next-best run is re-conducted (the
 MISO paper continued two iterations from its run 7 before going back to run 4)."""
 
+SENSITIVITY_STEP = 0.05
+"""Relative move of each parameter in :func:`local_sensitivity`."""
+
+WEAK_SENSITIVITY = 1.0
+"""Percent cost rise for a 5 % move below which a parameter is reported as weak."""
+
 WEAK_CONTRIBUTION = 1.0
 """Percent ANOVA contribution below which a parameter is reported as weakly constrained."""
 
@@ -302,6 +308,7 @@ class IdentificationResult(dict):
                     else "",
                     "contribution first [%]": self["contribution"].get(p.name, [math.nan])[0],
                     "contribution last [%]": self["contribution"].get(p.name, [math.nan])[-1],
+                    "cost rise at +/-5 % [%]": self.get("sensitivity", {}).get(p.name, math.nan),
                     "weakly constrained": self["weak"].get(p.name, ""),
                 }
             )
@@ -540,7 +547,10 @@ def weak_parameters(
 
     A parameter is flagged if its S/N was flat while its levels were still far apart
     (Case 2 narrowing with a range wider than ten times the tolerance), or if its ANOVA
-    percent contribution in the last iteration is below ``threshold``.
+    percent contribution in the first iteration - over the user's rough ranges - is
+    below ``threshold``. (Later iterations are not used: once every range is small one
+    parameter dominates the ANOVA and the others' shares say nothing about the data.)
+    :func:`local_sensitivity` adds a check at the answer itself.
 
     Returns
     -------
@@ -565,10 +575,35 @@ def weak_parameters(
                 )
     if records:
         for n in study.parameter_names:
-            last = contribution[n][-1]
-            if last < threshold and n not in weak:
-                weak[n] = f"ANOVA contribution {last:.2g} % in the last iteration"
+            first = contribution[n][0]
+            if first < threshold and n not in weak:
+                weak[n] = f"ANOVA contribution {first:.2g} % over the first-iteration ranges"
     return weak, contribution
+
+
+def local_sensitivity(
+    evaluator: Any, x: Mapping[str, float], step: float = SENSITIVITY_STEP
+) -> dict[str, float]:
+    """Percent rise of the cost when each parameter moves by ``+/- step`` from ``x``.
+
+    The mean over both directions is returned; a parameter whose value barely changes
+    the cost is weakly constrained by the data, whatever the ANOVA said.
+    """
+    names = list(x)
+    sets = [dict(x)]
+    for n in names:
+        for sign in (-1.0, 1.0):
+            trial = dict(x)
+            trial[n] = x[n] * (1 + sign * step) if x[n] != 0 else sign * step
+            sets.append(trial)
+    costs = evaluator.evaluate(sets).mean_costs
+    base = float(costs[0])
+    out = {}
+    for i, n in enumerate(names):
+        pair = costs[1 + 2 * i : 3 + 2 * i]
+        rise = float(np.mean(pair)) - base
+        out[n] = 100.0 * rise / base if base > 0 and np.isfinite(rise) else float("inf")
+    return out
 
 
 def identify(
@@ -731,6 +766,7 @@ def identify(
         if not records:
             raise StudyError("no iteration was run (max_iterations is 0?)")
         best_x = records[-1].best_x
+        sensitivity = local_sensitivity(evaluator, best_x)
         fit: dict[str, Any] = {}
         simulated = evaluator.simulate_clean(best_x)
         for prep, y, err in simulated:
@@ -744,6 +780,11 @@ def identify(
             evaluator.close()
 
     weak, contribution = weak_parameters(records, study)
+    for n, rise in sensitivity.items():
+        if rise < WEAK_SENSITIVITY and n not in weak:
+            weak[n] = (
+                f"moving it by {100 * SENSITIVITY_STEP:.0f} % raises the cost by only {rise:.2g} %"
+            )
     result = IdentificationResult(
         x=dict(best_x),
         fun=records[-1].best_cost,
@@ -757,6 +798,7 @@ def identify(
         contribution=contribution,
         fit=fit,
         best_source=records[-1].best_source,
+        sensitivity=sensitivity,
         study=study,
         out_dir=Path(out) if out is not None else None,
     )

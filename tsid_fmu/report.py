@@ -76,7 +76,9 @@ def main_effects_plot(rec: IterationRecord, path: Path) -> None:
         )
         ax.grid(True, alpha=0.3)
     axes[0][0].set_ylabel("mean S/N [dB]")
-    fig.suptitle(f"Iteration {rec.index}: main effects of the S/N ratio ({rec.array})", fontsize=10)
+    fig.suptitle(
+        f"Iteration {rec.index}: main effects of the S/N ratio ({rec.array})", fontsize=10, y=1.06
+    )
     _save(fig, path)
 
 
