@@ -72,9 +72,6 @@ def run_cli(tmp_path: Path, text: str, capsys) -> str:
 
 # ---------------------------------------------------------------------------- data files
 
-XFAIL_CSV = pytest.mark.xfail(
-    strict=True, reason="data._read lets csv.Error (no delimiter) escape; see report"
-)
 BAD_DATA = [
     ("nan.csv", "time,u,y\n0,1,0\n0.01,,0.1\n0.02,1,0.2\n",
      r"nan\.csv: column 'u' is missing \(NaN\) in row 2"),
@@ -87,8 +84,7 @@ BAD_DATA = [
     ("ttext.csv", "time,u,y\n0,1,0\nsoon,1,0\n0.02,1,0\n",
      r"column 'time' has non-numeric value 'soon'"),
     ("empty.csv", "", r"empty\.csv: the file is empty"),
-    pytest.param("blank.csv", "\n\n\n", r"blank\.csv: (the file is empty|no data)",
-                 marks=XFAIL_CSV),
+    ("blank.csv", "\n\n\n", r"blank\.csv: (the file is empty|no data|cannot read)"),
     ("header.csv", "time,u,y\n", r"header\.csv: (no data|at least 2 samples)"),
     ("one.csv", "time,u,y\n0,1,0\n", r"one\.csv: at least 2 samples are needed, got 1"),
     ("rate.csv", "time,u,y\n0,1,0\n0.02,1,0\n0.04,1,0\n",
@@ -214,7 +210,7 @@ def test_array_too_small_for_the_factors(lag, tmp_path, capsys):
     assert "unknown orthogonal array 'L7'" in err
 
 
-NOT_CHECKED_YET = [
+CHECKED_AT_LOAD = [
     ("seed = -1", "[method] seed", "numpy raises ValueError in runner.prepare_experiment"),
     ("replicates = 100000000000", "[method] replicates", "Evaluator builds 1e11 inputs: hangs"),
     ("input_noise = 0.01\n[leveling]\nn_levels = 9", "[leveling] n_levels",
@@ -222,11 +218,7 @@ NOT_CHECKED_YET = [
 ]  # fmt: skip
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="study.py/leveling.py do not bound seed, replicates, n_levels at load (see report)",
-)
-@pytest.mark.parametrize(("line", "key", "why"), NOT_CHECKED_YET, ids=["seed", "reps", "n_levels"])
+@pytest.mark.parametrize(("line", "key", "why"), CHECKED_AT_LOAD, ids=["seed", "reps", "n_levels"])
 def test_method_values_checked_at_load(lag, tmp_path, line, key, why):
     path = tmp_path / "s.toml"
     path.write_text(study_text(lag, method=line + "\n"))
@@ -245,9 +237,6 @@ NON_FINITE = [
 ]  # fmt: skip
 
 
-@pytest.mark.xfail(
-    strict=True, reason="study.py accepts non-finite/negative numbers here (see report)"
-)
 @pytest.mark.parametrize(("edit", "key"), NON_FINITE, ids=[k for _, k in NON_FINITE])
 def test_non_finite_or_negative_numbers_refused_at_load(lag, tmp_path, edit, key):
     path = tmp_path / "s.toml"
@@ -377,7 +366,6 @@ def test_fuzz_study_bytes(fuzz_dir, content):
 _CSV_CHARS = "0123456789.,;-+eEnaifNAIFxt \t\n\r\"'#"
 
 
-@XFAIL_CSV
 @_FUZZ
 @example(content="\n+", suffix=".dat", sample_time=None)  # found by this test
 @given(

@@ -10,6 +10,7 @@ Rows are counted like a spreadsheet user reads them: row 1 is the first data row
 
 from __future__ import annotations
 
+import csv
 import difflib
 import os
 import re
@@ -299,7 +300,7 @@ def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) ->
         raise DataError(f"{path}: the file is empty") from exc
     except DataError:
         raise
-    except (OSError, ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+    except (OSError, ValueError, pd.errors.ParserError, UnicodeDecodeError, csv.Error) as exc:
         raise DataError(f"{path}: cannot read the file: {exc}") from exc
     if columns is not None:
         missing = [c for c in columns if c not in frame.columns]

@@ -97,8 +97,11 @@ class LevelingOptions:
             raise StudyError(f"tolerance must be > 0, got {self.tolerance}")
         if not 0 < self.shrink < 1:
             raise StudyError(f"shrink must be between 0 and 1, got {self.shrink}")
-        if self.n_levels is not None and self.n_levels < 2:
-            raise StudyError(f"n_levels must be at least 2, got {self.n_levels}")
+        if self.n_levels is not None and not 2 <= self.n_levels <= 5:
+            raise StudyError(
+                f"n_levels must be from 2 to 5 (the standard arrays have 2-, 3-, 4- and "
+                f"5-level columns), got {self.n_levels}"
+            )
         if self.scale not in ("auto", "linear", "log"):
             raise StudyError(f"scale must be 'auto', 'linear' or 'log', got {self.scale!r}")
         if not self.log_ratio > 1:

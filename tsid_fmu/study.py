@@ -43,11 +43,16 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from tsid_fmu.errors import StudyError
+from tsid_fmu.arrays import select_array
+from tsid_fmu.errors import ArrayError, StudyError
 from tsid_fmu.leveling import LevelingOptions
 from tsid_fmu.scoring import COSTS
 
+MAX_REPLICATES = 1000
+"""Upper bound on noise replicates per row."""
+
 __all__ = [
+    "MAX_REPLICATES",
     "ContributionOptions",
     "Experiment",
     "Parameter",
@@ -96,6 +101,10 @@ class Parameter:
         if len(set(self.levels)) != len(self.levels):
             raise StudyError(f"parameter {self.name!r}: levels must be distinct, got {self.levels}")
         self.levels = sorted(self.levels)
+        if not math.isfinite(self.levels[-1] - self.levels[0]):
+            raise StudyError(
+                f"parameter {self.name!r}: levels {self.levels} span beyond float range"
+            )
         self.min, self.max = float(self.min), float(self.max)
         if self.min >= self.max:
             raise StudyError(f"parameter {self.name!r}: min {self.min} is not below max {self.max}")
@@ -154,6 +163,14 @@ class Experiment:
     role: str = "identify"
 
     def __post_init__(self) -> None:
+        if self.weights is not None:
+            bad = {k: v for k, v in self.weights.items() if not (math.isfinite(v) and v >= 0)}
+            if bad:
+                raise StudyError(f"weights must be finite and >= 0, got {bad}")
+        if self.sample_time is not None and not (
+            math.isfinite(self.sample_time) and self.sample_time > 0
+        ):
+            raise StudyError(f"sample_time must be a finite time > 0, got {self.sample_time}")
         if self.role not in ("identify", "validate"):
             raise StudyError(f"experiment role must be 'identify' or 'validate', not {self.role!r}")
         if not self.name:
@@ -327,8 +344,23 @@ class Study:
                 f"{where}unknown cost {self.cost!r}; choose one of {', '.join(sorted(COSTS))}"
             )
         self.cost = self.cost.lower()
-        if int(self.replicates) != self.replicates or self.replicates < 1:
-            raise StudyError(f"{where}replicates must be a positive integer, got {self.replicates}")
+        if int(self.replicates) != self.replicates or not 1 <= self.replicates <= MAX_REPLICATES:
+            raise StudyError(
+                f"{where}[method] replicates must be an integer from 1 to {MAX_REPLICATES}, "
+                f"got {self.replicates}"
+            )
+        if int(self.seed) != self.seed or self.seed < 0:
+            raise StudyError(f"{where}[method] seed must be an integer >= 0, got {self.seed}")
+        if self.step_size is not None and not (
+            math.isfinite(self.step_size) and self.step_size >= 1e-9
+        ):
+            raise StudyError(
+                f"{where}[study] step_size must be a finite time of at least 1e-9 s, "
+                f"got {self.step_size}"
+            )
+        bad_start = {k: v for k, v in self.start_values.items() if not math.isfinite(v)}
+        if bad_start:
+            raise StudyError(f"{where}[study] start_values must be finite numbers: {bad_start}")
         if not (self.input_noise >= 0 and math.isfinite(self.input_noise)):
             raise StudyError(f"{where}input_noise must be >= 0, got {self.input_noise}")
         if int(self.max_iterations) != self.max_iterations or self.max_iterations < 1:
@@ -366,6 +398,10 @@ class Study:
         clash = sorted(set(names) & set(self.start_values))
         if clash:
             raise StudyError(f"{where}{', '.join(clash)} both identified and fixed in start_values")
+        try:
+            select_array([len(p.levels) for p in self.parameters], name=self.array)
+        except ArrayError as exc:
+            raise ArrayError(f"{where}[method] array: {exc}") from None
 
     @property
     def parameter_names(self) -> list[str]:

@@ -56,7 +56,12 @@ def quadratic_optimum(z: np.ndarray, response: np.ndarray) -> np.ndarray | None:
         interactions = False
     else:
         return None
-    coef, *_ = np.linalg.lstsq(_features(z, interactions), y, rcond=None)
+    try:
+        coef, *_ = np.linalg.lstsq(_features(z, interactions), y, rcond=None)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(coef)):
+        return None
 
     def negative(x: np.ndarray) -> float:
         return -float((_features(x[None, :], interactions) @ coef)[0])
