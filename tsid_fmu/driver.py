@@ -298,6 +298,13 @@ def _parse_start(info: VariableInfo) -> float | None:
         return None
 
 
+_MAX_DESCRIPTION_BYTES = 256 * 1024**2
+"""Largest modelDescription.xml that ``fmu_info`` reads into memory."""
+
+_MAX_SUBSTEPS = 1_000_000
+"""Largest number of communication steps a ``step_size`` may split one sample into."""
+
+
 # FMI 2.0 loggers are variadic, which ctypes cannot receive; FMPy's native proxy formats
 # the message and forwards it to *one* Python callback that it keeps in a static C
 # variable. Installing a callback per session would redirect every FMU's messages in
@@ -902,7 +909,13 @@ class FMUSession:
         # optional sub-steps: refine the grid, hold the input, keep the original rows
         keep = None
         if self.step_size is not None:
-            n_sub = np.maximum(np.ceil(np.diff(t) / self.step_size - 1e-9), 1).astype(int)
+            ratio = np.diff(t) / self.step_size
+            if not np.all(ratio <= _MAX_SUBSTEPS):
+                raise SimulationError(
+                    f"{self.path.name}: step_size {self.step_size:g} s would split a sample "
+                    f"interval into more than {_MAX_SUBSTEPS} steps"
+                )
+            n_sub = np.maximum(np.ceil(ratio - 1e-9), 1).astype(int)
             if n_sub.max() > 1:
                 fine = [
                     np.linspace(a, b, m, endpoint=False)
@@ -1087,6 +1100,18 @@ def fmu_info(path: str | os.PathLike[str]) -> str:
         raise FMUError(f"FMU file not found: {path}")
     if not zipfile.is_zipfile(path):
         raise FMUError(f"{path}: not an FMU (an FMU is a ZIP archive)")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            size = archive.getinfo("modelDescription.xml").file_size
+    except KeyError:
+        raise FMUError(f"{path}: not a valid FMU, modelDescription.xml is missing") from None
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise FMUError(f"{path}: cannot read the FMU: {exc}") from None
+    if size > _MAX_DESCRIPTION_BYTES:
+        raise FMUError(
+            f"{path}: modelDescription.xml expands to {size} bytes, more than the limit of "
+            f"{_MAX_DESCRIPTION_BYTES}; refusing the FMU"
+        )
     try:
         md = read_model_description(str(path), validate=False)
         platforms = supported_platforms(str(path))
