@@ -40,6 +40,9 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         plots=not args.no_plots,
         continue_from_run=args.continue_from_run,
+        workers=args.workers,
+        timeout=args.timeout,
+        scheduler=args.scheduler,
     )
     print(result.parameters_frame().to_string())
     print()
@@ -142,6 +145,17 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--continue-from-run", type=int, metavar="N",
         help="with --resume: centre the next levels on run N of the last iteration",
+    )  # fmt: skip
+    p.add_argument(
+        "--workers", type=int, metavar="N", help="worker processes (default: all cores; 1 = serial)"
+    )
+    p.add_argument(
+        "--timeout", type=float, metavar="SECONDS",
+        help="time limit per simulation; a run past it fails and the study goes on",
+    )  # fmt: skip
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS",
+        help="run simulations on this dask.distributed scheduler (needs tsid-fmu[dask])",
     )  # fmt: skip
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress display")

@@ -617,6 +617,9 @@ def identify(
     plots: bool = True,
     continue_from_run: int | None = None,
     evaluator: Any = None,
+    workers: int | None = None,
+    timeout: float | None = None,
+    scheduler: Any = None,
 ) -> IdentificationResult:
     """Identify the parameters of a study's FMU from its measured data.
 
@@ -646,6 +649,15 @@ def identify(
         Something with the interface of :class:`~tsid_fmu.runner.Evaluator` to score
         parameter sets (e.g. a parallel one); default a serial Evaluator of the study.
         It is not closed here.
+    workers : int, optional
+        Worker processes that run the rows in parallel (default: all available cores;
+        1 runs serially in this process). Results are identical either way.
+    timeout : float, optional
+        Time limit in seconds per simulation; a row past it is stopped and fails, and
+        the study goes on (needs worker processes).
+    scheduler : str or distributed.Client, optional
+        Address of a ``dask.distributed`` scheduler to send the rows to (needs
+        ``tsid-fmu[dask]``).
 
     Returns
     -------
@@ -670,6 +682,7 @@ def identify(
         return identify_phased(
             study, out, resume=resume, progress=callback_p, plots=plots,
             max_iterations=max_iterations,
+            runner={"workers": workers, "timeout": timeout, "scheduler": scheduler},
         )  # fmt: skip
     limit = max_iterations or study.max_iterations
     callback: ProgressCallback | None
@@ -707,7 +720,10 @@ def identify(
     nfev = records[-1].nfev if records else 0
     status, message = 1, f"iteration limit ({limit}) reached before the levels converged"
     owned = evaluator is None
-    evaluator = Evaluator(study) if owned else evaluator
+    if owned:
+        from tsid_fmu.parallel import make_evaluator
+
+        evaluator = make_evaluator(study, workers=workers, timeout=timeout, scheduler=scheduler)
     try:
         evaluator.nfev = nfev
         converged_before = bool(records) and records[-1].decision.converged

@@ -37,7 +37,7 @@ from tsid_fmu.contribution import (
     parameter_contribution,
 )
 from tsid_fmu.errors import StudyError
-from tsid_fmu.runner import Evaluator
+from tsid_fmu.parallel import make_evaluator
 from tsid_fmu.scoring import metrics
 from tsid_fmu.study import Parameter, Phase, Study
 from tsid_fmu.trail import atomic_write
@@ -100,7 +100,9 @@ def _active_inputs(prepared: Any) -> list[str]:
     return [n for n, s in zip(prepared.input_names, std, strict=True) if s > 0]
 
 
-def plan_phases(study: Study, out: Path | None = None) -> tuple[list[Phase], dict[str, Any]]:
+def plan_phases(
+    study: Study, out: Path | None = None, runner: dict[str, Any] | None = None
+) -> tuple[list[Phase], dict[str, Any]]:
     """Plan the phases from the input and parameter contribution analyses.
 
     Parameters
@@ -109,6 +111,9 @@ def plan_phases(study: Study, out: Path | None = None) -> tuple[list[Phase], dic
         The study (its ``contribution`` options apply).
     out : Path, optional
         Folder to write the contribution tables into.
+    runner : dict, optional
+        ``workers``, ``timeout`` and ``scheduler`` for
+        :func:`tsid_fmu.parallel.make_evaluator`.
 
     Returns
     -------
@@ -126,7 +131,7 @@ def plan_phases(study: Study, out: Path | None = None) -> tuple[list[Phase], dic
     order = list(ident)
     if len(ident) > 1:
         probe = _sub_study(study, study.parameter_names, ident, centre, **clean)
-        with Evaluator(probe) as ev:
+        with make_evaluator(probe, **(runner or {})) as ev:
             measured = {p.experiment.name: p.measured for p in ev.prepared}
             active = {p.experiment.name: _active_inputs(p) for p in ev.prepared}
         inc = input_contribution(measured, active)
@@ -147,7 +152,7 @@ def plan_phases(study: Study, out: Path | None = None) -> tuple[list[Phase], dic
                 sets.append({m: s[m] for m in remaining})
         fixed = {m: centre[m] for m in study.parameter_names if m not in remaining}
         sub = _sub_study(study, remaining, [exp], fixed, **clean)
-        with Evaluator(sub) as ev:
+        with make_evaluator(sub, **(runner or {})) as ev:
             result = ev.evaluate(sets)
         analysis["nfev"] += result.nfev
         pc = parameter_contribution(values, {m: centre[m] for m in remaining}, result.mean_costs)
@@ -197,7 +202,7 @@ def _identification_cost(study: Study, x: dict[str, float]) -> tuple[float, int]
     """Noise-free cost of ``x`` summed over the identification experiments."""
     ident = [e.name for e in study.experiments if e.role == "identify"]
     sub = _sub_study(study, study.parameter_names, ident, {}, replicates=1, input_noise=0.0)
-    with Evaluator(sub) as ev:
+    with make_evaluator(sub, workers=1) as ev:
         res = ev.evaluate([x])
     return float(res.mean_costs[0]), res.nfev
 
@@ -209,7 +214,7 @@ def _validate(study: Study, x: dict[str, float], out: Path | None, plots: bool) 
         return {}
     sub = _sub_study(study, study.parameter_names, names, {}, replicates=1, input_noise=0.0)
     report: dict[str, Any] = {}
-    with Evaluator(sub) as ev:
+    with make_evaluator(sub, workers=1) as ev:
         cost = ev.evaluate([x])
         simulated = ev.simulate_clean(x)
     for prep, y, err in simulated:
@@ -242,6 +247,7 @@ def identify_phased(
     progress: Any = None,
     plots: bool = True,
     max_iterations: int | None = None,
+    runner: dict[str, Any] | None = None,
 ) -> Any:
     """Identify a study in phases (explicit ``[[phases]]`` or planned by contribution).
 
@@ -260,6 +266,8 @@ def identify_phased(
         Write plots.
     max_iterations : int, optional
         Override the iteration limit of every phase.
+    runner : dict, optional
+        ``workers``, ``timeout`` and ``scheduler`` (see :func:`tsid_fmu.engine.identify`).
 
     Returns
     -------
@@ -291,7 +299,7 @@ def identify_phased(
     else:
         if progress:
             progress("phase", {"message": "contribution analysis (inputs and parameters)"})
-        phases, analysis = plan_phases(study, out_dir)
+        phases, analysis = plan_phases(study, out_dir, runner)
     covered = {n for p in phases for n in p.parameters}
     missing = [n for n in study.parameter_names if n not in covered]
     if missing:
@@ -315,7 +323,7 @@ def identify_phased(
         )
         pdir = out_dir / f"phase_{i + 1:02d}" if out_dir is not None else None
         again = pdir is not None and any(pdir.glob("iteration_*/record.json"))
-        res = identify(sub, pdir, resume=again, progress=progress, plots=plots)
+        res = identify(sub, pdir, resume=again, progress=progress, plots=plots, **(runner or {}))
         current.update(res.x)
         nfev += res.nfev
         results.append((ph, res))
@@ -348,7 +356,7 @@ def identify_phased(
         sub.parameters = params
         pdir = out_dir / f"phase_{len(phases) + 1:02d}" if out_dir is not None else None
         again = pdir is not None and any(pdir.glob("iteration_*/record.json"))
-        res = identify(sub, pdir, resume=again, progress=progress, plots=plots)
+        res = identify(sub, pdir, resume=again, progress=progress, plots=plots, **(runner or {}))
         current.update(res.x)
         nfev += res.nfev
         phases = [*phases, ph]
@@ -360,7 +368,7 @@ def identify_phased(
     comparison = None
     if study.contribution.compare_ungrouped:
         comparison = _compare_ungrouped(
-            study, out_dir, current, cost, nfev, validation, resume, progress, plots
+            study, out_dir, current, cost, nfev, validation, progress, plots, runner or {}
         )
 
     records = [rec for _, r in results for rec in r.iterations]
@@ -422,9 +430,9 @@ def _compare_ungrouped(
     cost_phased: float,
     nfev_phased: int,
     validation: dict,
-    resume: bool,
     progress: Any,
     plots: bool,
+    runner: dict[str, Any],
 ) -> dict[str, Any]:
     """Identify all parameters in one array on all experiments; compare with the phases."""
     from tsid_fmu.engine import identify
@@ -435,7 +443,7 @@ def _compare_ungrouped(
         progress("phase", {"message": "comparison: all parameters in one array (no grouping)"})
     udir = out / "ungrouped" if out is not None else None
     again = udir is not None and any(udir.glob("iteration_*/record.json"))
-    res = identify(sub, udir, resume=again, progress=progress, plots=plots)
+    res = identify(sub, udir, resume=again, progress=progress, plots=plots, **runner)
     cost, _ = _identification_cost(study, res.x)
     val = _validate(study, res.x, None, False)
     return {
