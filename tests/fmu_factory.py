@@ -121,10 +121,13 @@ static int model_step(Model *m, double t, double h) {
 }
 """
 
-_C_FMI2 = r"""
+_C_FMI2 = (
+    r"""
 #include "fmi2Functions.h"
 #define LOGGER_FIELD fmi2CallbackFunctions cb;
-""" + _C_COMMON + r"""
+"""
+    + _C_COMMON
+    + r"""
 #define M ((Model *)c)
 #define LOG(status, ...) do { if (M->cb.logger) M->cb.logger(M->cb.componentEnvironment, \
     M->name, status, "logStatusError", __VA_ARGS__); } while (0)
@@ -257,6 +260,7 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boo
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) {
     (void)c; (void)k; (void)v; return fmi2Error; }
 """
+)
 
 # FMI 3.0: only the functions FMPy's FMU3Slave calls on a Co-Simulation FMU are real; every
 # other fmi3* symbol FMPy looks up is a stub returning fmi3Error (FMPy requires the symbols).
@@ -279,13 +283,16 @@ fmi3GetNumberOfContinuousStates fmi3EnterStepMode fmi3GetOutputDerivatives
 fmi3ActivateModelPartition
 """.split()
 
-_C_FMI3 = r"""
+_C_FMI3 = (
+    r"""
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 typedef void (*logfn)(void *env, int status, const char *category, const char *message);
 #define LOGGER_FIELD logfn log;
-""" + _C_COMMON + r"""
+"""
+    + _C_COMMON
+    + r"""
 #define EXPORT __attribute__((visibility("default")))
 #define M ((Model *)c)
 #define LOG(status, ...) do { if (M->log) { char buf_[256]; snprintf(buf_, sizeof buf_, \
@@ -338,7 +345,9 @@ EXPORT int fmi3DoStep(void *c, double t, double h, bool ns, bool *event, bool *t
     default: *last = t + h; return 0;
     }
 }
-""" + "".join(f"EXPORT int {name}(void) {{ return 3; }}\n" for name in _FMI3_STUBS)
+"""
+    + "".join(f"EXPORT int {name}(void) {{ return 3; }}\n" for name in _FMI3_STUBS)
+)
 
 
 def _model_description_fmi2(name: str, guid: str, interfaces: Sequence[str]) -> str:
@@ -355,13 +364,21 @@ def _model_description_fmi2(name: str, guid: str, interfaces: Sequence[str]) -> 
             type_attrs += ' derivative="9"'
         if vname == "tau":
             type_attrs += ' unit="s"'
-        rows.append(f"    <ScalarVariable {attrs}>\n      <{vtype}{type_attrs}/>\n"
-                    "    </ScalarVariable>")
-    cs = (f'  <CoSimulation modelIdentifier="{name}" '
-          'canHandleVariableCommunicationStepSize="true"/>\n') if "cs" in interfaces else ""
+        rows.append(
+            f"    <ScalarVariable {attrs}>\n      <{vtype}{type_attrs}/>\n    </ScalarVariable>"
+        )
+    cs = (
+        (
+            f'  <CoSimulation modelIdentifier="{name}" '
+            'canHandleVariableCommunicationStepSize="true"/>\n'
+        )
+        if "cs" in interfaces
+        else ""
+    )
     me = f'  <ModelExchange modelIdentifier="{name}"/>\n' if "me" in interfaces else ""
-    derivatives = ("    <Derivatives><Unknown index=\"10\"/></Derivatives>\n"
-                   if "me" in interfaces else "")
+    derivatives = (
+        '    <Derivatives><Unknown index="10"/></Derivatives>\n' if "me" in interfaces else ""
+    )
     return (
         '<?xml version="1.0" encoding="UTF-8"?>\n'
         f'<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{guid}" '
@@ -371,17 +388,20 @@ def _model_description_fmi2(name: str, guid: str, interfaces: Sequence[str]) -> 
         '  <UnitDefinitions><Unit name="s"><BaseUnit s="1"/></Unit></UnitDefinitions>\n'
         '  <DefaultExperiment startTime="0" stopTime="1" stepSize="0.001"/>\n'
         "  <ModelVariables>\n" + "\n".join(rows) + "\n  </ModelVariables>\n"
-        "  <ModelStructure>\n    <Outputs><Unknown index=\"2\"/></Outputs>\n" + derivatives
-        + "    <InitialUnknowns><Unknown index=\"2\"/><Unknown index=\"9\"/>"
-        "<Unknown index=\"10\"/></InitialUnknowns>\n"
+        '  <ModelStructure>\n    <Outputs><Unknown index="2"/></Outputs>\n'
+        + derivatives
+        + '    <InitialUnknowns><Unknown index="2"/><Unknown index="9"/>'
+        '<Unknown index="10"/></InitialUnknowns>\n'
         "  </ModelStructure>\n</fmiModelDescription>\n"
     )
 
 
 def _model_description_fmi3(name: str, guid: str) -> str:
     type3 = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
-    rows = ['    <Float64 name="time" valueReference="99" causality="independent" '
-            'variability="continuous"/>']
+    rows = [
+        '    <Float64 name="time" valueReference="99" causality="independent" '
+        'variability="continuous"/>'
+    ]
     for vname, vr, vtype, causality, variability, initial, start, desc in VARIABLES:
         if vname == "der_x":
             continue
@@ -408,8 +428,20 @@ def _model_description_fmi3(name: str, guid: str) -> str:
 
 
 def _compile(source: Path, output: Path, defines: Sequence[str], libs: Sequence[str]) -> None:
-    cmd = ["gcc", "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-I{HEADERS}",
-           "-o", str(output), str(source), *defines, *libs, "-lm"]
+    cmd = [
+        "gcc",
+        "-shared",
+        "-fPIC",
+        "-O2",
+        "-fvisibility=hidden",
+        f"-I{HEADERS}",
+        "-o",
+        str(output),
+        str(source),
+        *defines,
+        *libs,
+        "-lm",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise RuntimeError(f"gcc failed:\n{' '.join(cmd)}\n{proc.stderr}")
@@ -420,8 +452,9 @@ def build_stub_library(tmp_dir: Path, name: str = "tsiddep") -> Path:
     tmp_dir = Path(tmp_dir)
     tmp_dir.mkdir(parents=True, exist_ok=True)
     src = tmp_dir / f"{name}.c"
-    src.write_text('__attribute__((visibility("default")))\n'
-                   "int tsid_dep_value(void) { return 0; }\n")
+    src.write_text(
+        '__attribute__((visibility("default")))\nint tsid_dep_value(void) { return 0; }\n'
+    )
     lib = tmp_dir / f"lib{name}.so"
     _compile(src, lib, [], [])
     return lib
@@ -541,7 +574,9 @@ def build_pythonfmu(tmp_dir: Path, name: str = "PyLag") -> Path:
     script.write_text(textwrap.dedent(_PYTHONFMU_SLAVE.format(name=name)))
     proc = subprocess.run(
         [sys.executable, "-m", "pythonfmu", "build", "-f", str(script), "-d", str(tmp_dir)],
-        capture_output=True, text=True, check=False,
+        capture_output=True,
+        text=True,
+        check=False,
     )
     fmu = tmp_dir / f"{name}.fmu"
     if proc.returncode != 0 or not fmu.exists():

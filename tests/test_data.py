@@ -31,8 +31,9 @@ def test_load_csv_and_accessors(tmp_path):
 
 
 def test_derived_channels(tmp_path):
-    data = load_data(write(tmp_path, GOOD),
-                     derived={"F_o": "F_of - F_or", "mag": "abs(F_o) * 2 + sin(0 * x)"})
+    data = load_data(
+        write(tmp_path, GOOD), derived={"F_o": "F_of - F_or", "mag": "abs(F_o) * 2 + sin(0 * x)"}
+    )
     np.testing.assert_allclose(data.column("F_o"), [1, -2, 3, -4])
     np.testing.assert_allclose(data.column("mag"), [2, 4, 6, 8])
 
@@ -74,8 +75,11 @@ def test_time_column_missing(tmp_path):
 
 def test_non_numeric(tmp_path):
     text = "time,x\n0,1\n0.1,2\n0.2,1.2.3\n0.3,4\n"
-    with pytest.raises(DataError, match=r"data.csv: column 'x' has non-numeric value "
-                                        r"'1.2.3' in row 3"):
+    with pytest.raises(
+        DataError,
+        match=r"data.csv: column 'x' has non-numeric value "
+        r"'1.2.3' in row 3",
+    ):
         load_data(write(tmp_path, text))
 
 
@@ -109,8 +113,10 @@ def test_expected_sample_time(tmp_path):
 def test_tsv_and_read_options(tmp_path):
     data = load_data(write(tmp_path, "time\tx\n0\t1\n0.5\t2\n1\t3\n", "d.tsv"))
     assert data.sample_time == 0.5
-    data = load_data(write(tmp_path, "time;x\n0;1,5\n1;2,5\n", "eu.csv"),
-                     read_options={"sep": ";", "decimal": ","})
+    data = load_data(
+        write(tmp_path, "time;x\n0;1,5\n1;2,5\n", "eu.csv"),
+        read_options={"sep": ";", "decimal": ","},
+    )
     np.testing.assert_allclose(data.column("x"), [1.5, 2.5])
 
 
@@ -124,8 +130,11 @@ def test_mat_file(tmp_path):
 
 def test_column_missing_lists_columns(tmp_path):
     data = load_data(write(tmp_path, GOOD))
-    with pytest.raises(DataError, match=r"data.csv: no column 'F_o'; columns are time, F_of.*"
-                                        r"Did you mean"):
+    with pytest.raises(
+        DataError,
+        match=r"data.csv: no column 'F_o'; columns are time, F_of.*"
+        r"Did you mean",
+    ):
         data.column("F_o")
 
 
