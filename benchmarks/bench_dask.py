@@ -39,11 +39,21 @@ def make_study(fmu: Path, ms: float, sleep: bool) -> Study:
     )
 
 
-def timed(ev, sets) -> tuple[float, np.ndarray]:
+def timed(ev, sets, repeat: int = 3) -> tuple[float, np.ndarray]:
+    """Best wall time of ``repeat`` evaluations of ``sets`` (after a warm-up call).
+
+    A study calls ``evaluate`` once per iteration, so the one-time start-up of workers
+    (instances, compiled-loop cache) is like loading the FMU; the best of several calls
+    measures the throughput on this shared, noisy machine.
+    """
     ev.evaluate(sets[:2])  # warm: instances made, caches loaded
-    t0 = time.perf_counter()
-    result = ev.evaluate(sets)
-    return time.perf_counter() - t0, result.costs
+    best, costs = float("inf"), None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = ev.evaluate(sets)
+        best = min(best, time.perf_counter() - t0)
+        costs = result.costs
+    return best, costs
 
 
 def main() -> None:
