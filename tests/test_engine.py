@@ -75,6 +75,8 @@ def test_failed_rows_are_reported_and_do_not_stop_the_study(lag, tmp_path):
     assert np.isinf(first.costs[[e is not None for e in first.errors]]).all()
     assert res.x["tau"] == pytest.approx(TAU, rel=0.02)
     assert "error" in pd.read_csv(tmp_path / "o" / "iteration_01" / "runs.csv").columns
+    report = (tmp_path / "o" / "report.md").read_text()
+    assert "## Failed runs (3," in report and "| 1 |" in report
 
 
 def test_pause_edit_resume_matches_uninterrupted(lag, tmp_path):

@@ -238,6 +238,7 @@ def write_outputs(result: IdentificationResult, out: Path, simulated: Sequence[A
     if result["weak"]:
         lines += ["", "## Weakly constrained parameters", ""]
         lines += [f"- **{k}**: {v}" for k, v in result["weak"].items()]
+    lines += _failed_runs(result["iterations"])
     lines += ["", "## Iterations", "", "| iteration | array | case | best cost | simulations |",
               "|---|---|---|---|---|"]  # fmt: skip
     for rec in result["iterations"]:
@@ -333,6 +334,7 @@ def write_phased_outputs(result: IdentificationResult, out: Path) -> None:
         lines += ["## Weakly constrained parameters", ""]
         lines += [f"- **{k}**: {v}" for k, v in result["weak"].items()]
         lines.append("")
+    lines += _failed_runs(result["iterations"])
     val = result["validation"]
     if val:
         lines += ["## Superposition check (all inputs together)", ""]
@@ -364,3 +366,16 @@ def write_phased_outputs(result: IdentificationResult, out: Path) -> None:
 
 def _num(v: Any) -> str:
     return f"{v:.6g}" if isinstance(v, (int, float)) else "-"
+
+
+def _failed_runs(records: Sequence[IterationRecord]) -> list[str]:
+    """Markdown lines listing every run that failed (scored worst), with its reason."""
+    rows = [
+        (rec.index, run + 1, err) for rec in records for run, err in enumerate(rec.errors) if err
+    ]
+    if not rows:
+        return []
+    out = ["", f"## Failed runs ({len(rows)}, each scored worst; the study went on)", ""]
+    out += ["| iteration | run | reason |", "|---|---|---|"]
+    out += [f"| {i} | {r} | {e.replace('|', '/')} |" for i, r, e in rows]
+    return out
