@@ -223,3 +223,22 @@ def test_dask_isolates_crashes_and_hangs(crash_study):
     np.testing.assert_array_equal(got.costs[[0, 3]], good.costs)
     assert "worker crashed (signal 11 SIGSEGV)" in got.errors[1]
     assert "time limit of 1 s per simulation exceeded" in got.errors[2]
+
+
+def test_a_study_survives_crashing_rows_and_reports_them(crash_study, tmp_path):
+    """Rows whose FMU segfaults are scored worst, the workers are replaced, the study
+    finishes, and report.md lists the crashed rows with the signal."""
+    import dataclasses
+
+    import tsid_fmu.engine as engine
+
+    study = dataclasses.replace(
+        crash_study, parameters=[Parameter("gain", [0.5, 1.0, 25.0])], max_iterations=2
+    )
+    res = engine.identify(study, tmp_path / "out", plots=False, workers=2, timeout=20.0)
+    first = res.iterations[0]
+    crashed = [e for e in first.errors if e]
+    assert len(crashed) == 3 and all("SIGSEGV" in e for e in crashed)
+    assert math.isfinite(res.fun) and res.x["gain"] < 25.0
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "## Failed runs" in report and "worker crashed (signal 11 SIGSEGV)" in report
