@@ -24,9 +24,10 @@ def rel_err(x, truth):
     return {k: abs(x[k] / truth[k] - 1) for k in truth}
 
 
-def test_siso_force_alone_fixes_only_ratios_to_k_s():
-    """Scaling M_m, F_vm, K_s and B_s together leaves F_o unchanged (within the noise),
-    while the motor position x_m scales: why the example records the encoder."""
+def test_siso_force_alone_hardly_sees_the_scale():
+    """Scaling M_m, F_vm, K_s and B_s together leaves F_o unchanged within the noise (only
+    the dry-friction stick threshold carries the scale), while the motor position x_m
+    scales: why the example records the encoder."""
     data = pd.read_csv(EXAMPLES / "lsea_siso" / "measured.csv")
     t, u = data["time"].to_numpy(), data[["F_m"]].to_numpy()
     scaled = dict(SISO_TRUTH)

@@ -27,6 +27,7 @@ from tsid_fmu.analysis import AnovaTable, ResponseTable, anova, response_table
 from tsid_fmu.analysis import sn_smaller_the_better as sn_stb
 from tsid_fmu.arrays import select_array
 from tsid_fmu.errors import StudyError
+from tsid_fmu.identifiability import standard_errors
 from tsid_fmu.leveling import (
     LevelingDecision,
     ParameterDecision,
@@ -48,8 +49,9 @@ MISO paper continued two iterations from its run 7 before going back to run 4)."
 SENSITIVITY_STEP = 0.05
 """Relative move of each parameter in :func:`local_sensitivity`."""
 
-WEAK_SENSITIVITY = 1.0
-"""Percent cost rise for a 5 % move below which a parameter is reported as weak."""
+WEAK_STD_ERROR = 5.0
+"""Relative standard error (percent, Cramer-Rao bound at the answer) above which a
+parameter is reported as weakly constrained by the data."""
 
 WEAK_CONTRIBUTION = 1.0
 """Percent ANOVA contribution below which a parameter is reported as weakly constrained."""
@@ -309,6 +311,11 @@ class IdentificationResult(dict):
                     "contribution first [%]": self["contribution"].get(p.name, [math.nan])[0],
                     "contribution last [%]": self["contribution"].get(p.name, [math.nan])[-1],
                     "cost rise at +/-5 % [%]": self.get("sensitivity", {}).get(p.name, math.nan),
+                    "std error [%]": (
+                        self["identifiability"].relative.get(p.name, math.nan)
+                        if self.get("identifiability") is not None
+                        else math.nan
+                    ),
                     "weakly constrained": self["weak"].get(p.name, ""),
                 }
             )
@@ -783,6 +790,7 @@ def identify(
             raise StudyError("no iteration was run (max_iterations is 0?)")
         best_x = records[-1].best_x
         sensitivity = local_sensitivity(evaluator, best_x)
+        precision = standard_errors(evaluator, best_x)
         fit: dict[str, Any] = {}
         simulated = evaluator.simulate_clean(best_x)
         for prep, y, err in simulated:
@@ -796,11 +804,13 @@ def identify(
             evaluator.close()
 
     weak, contribution = weak_parameters(records, study)
-    for n, rise in sensitivity.items():
-        if rise < WEAK_SENSITIVITY and n not in weak:
-            weak[n] = (
-                f"moving it by {100 * SENSITIVITY_STEP:.0f} % raises the cost by only {rise:.2g} %"
-            )
+    if precision is not None:
+        for n, rel in precision.relative.items():
+            if rel > WEAK_STD_ERROR:
+                weak[n] = (
+                    f"the data determine it only to +/-{rel:.2g} % (standard error, "
+                    "Cramer-Rao bound)" + (f"; {weak[n]}" if n in weak else "")
+                )
     result = IdentificationResult(
         x=dict(best_x),
         fun=records[-1].best_cost,
@@ -815,6 +825,7 @@ def identify(
         fit=fit,
         best_source=records[-1].best_source,
         sensitivity=sensitivity,
+        identifiability=precision,
         study=study,
         out_dir=Path(out) if out is not None else None,
     )

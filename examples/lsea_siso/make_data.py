@@ -6,9 +6,10 @@ sequence of square waves of several amplitudes (the paper's Fig. 6a), 10 s at 1 
 split into the two compression-only load cells of the test bed: F_o = F_of - F_or.
 
 The motor encoder's nut position x_m is recorded as well (with the same 1 % noise):
-from the force F_o alone only the ratios M_m/K_s, F_vm/K_s and B_s/K_s are
-identifiable (scaling M_m, F_vm, K_s and B_s together leaves F_o unchanged, see
-tests/test_siso_example.py), so the study needs the encoder to pin down K_s.
+in the force F_o the linear dynamics depend only on the ratios M_m/K_s, F_vm/K_s and
+B_s/K_s (scaling all four together changes F_o by less than the noise, see
+tests/test_examples.py); only the dry-friction stick threshold carries the scale, so
+the study uses the encoder to pin down K_s.
 
 Run:  python examples/lsea_siso/make_data.py   (writes measured.csv beside this file)
 """

@@ -1,0 +1,125 @@
+"""How precisely the data determine each parameter: standard errors at the answer.
+
+For outputs with white Gaussian noise of standard deviation ``sigma``, no unbiased
+estimator can do better than the covariance ``sigma^2 (J^T J)^-1`` (the Cramer-Rao
+bound), where ``J`` holds the sensitivities of the simulated outputs to the parameters.
+:func:`standard_errors` computes ``J`` by central differences at the identified
+parameters, estimates ``sigma`` of each output from the residuals, and returns the
+relative standard error of each parameter and their correlations. A parameter with a
+large relative standard error, or one that is almost perfectly correlated with others,
+is weakly constrained by the data whatever the search found.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Identifiability", "standard_errors"]
+
+STEP = 1e-3
+"""Relative step of the central differences."""
+
+
+@dataclass
+class Identifiability:
+    """Standard errors and correlations of the parameters at the answer.
+
+    Attributes
+    ----------
+    values : dict
+        The parameter values analysed.
+    std_error : dict
+        Standard error of each parameter (Cramer-Rao bound, same unit as the value).
+    relative : dict
+        Standard error relative to the value, in percent.
+    correlation : dict of dict
+        Correlation coefficients between the parameters' estimates.
+    condition : float
+        Condition number of the (whitened) Fisher information ``J^T J``.
+    sigma : dict
+        Noise standard deviation estimated for each experiment's outputs.
+    """
+
+    values: dict[str, float]
+    std_error: dict[str, float] = field(default_factory=dict)
+    relative: dict[str, float] = field(default_factory=dict)
+    correlation: dict[str, dict[str, float]] = field(default_factory=dict)
+    condition: float = float("nan")
+    sigma: dict[str, list[float]] = field(default_factory=dict)
+
+    def to_pandas(self):
+        """Return value, standard error and relative error per parameter."""
+        import pandas as pd
+
+        rows = [
+            {
+                "parameter": n,
+                "value": self.values[n],
+                "std error": self.std_error.get(n, float("nan")),
+                "std error [%]": self.relative.get(n, float("nan")),
+            }
+            for n in self.values
+        ]
+        return pd.DataFrame(rows).set_index("parameter")
+
+
+def standard_errors(evaluator: Any, x: Mapping[str, float]) -> Identifiability | None:
+    """Estimate the standard errors of the parameters ``x`` from the study's data.
+
+    Parameters
+    ----------
+    evaluator : Evaluator
+        The study's evaluator (its :meth:`simulate_clean` is used: measured inputs, no
+        added noise).
+    x : mapping of str to float
+        Identified parameter values.
+
+    Returns
+    -------
+    Identifiability or None
+        None if a simulation failed or the outputs do not depend on the parameters.
+    """
+    names = list(x)
+    base = evaluator.simulate_clean(dict(x))
+    if not base or any(y is None for _, y, _ in base):
+        return None
+    sigma = {}
+    scale = []
+    for prep, y, _ in base:
+        resid = np.asarray(prep.measured) - y
+        s = np.sqrt(np.mean(resid**2, axis=0))
+        s = np.where(s > 0, s, 1.0)
+        sigma[prep.experiment.name] = [float(v) for v in s]
+        scale.append(s)
+    columns = []
+    for n in names:
+        h = STEP * abs(x[n]) if x[n] != 0 else STEP
+        plus = evaluator.simulate_clean({**x, n: x[n] + h})
+        minus = evaluator.simulate_clean({**x, n: x[n] - h})
+        parts = []
+        for (_, yp, _), (_, ym, _), s in zip(plus, minus, scale, strict=True):
+            if yp is None or ym is None:
+                return None
+            parts.append(((yp - ym) / (2 * h) / s).ravel())
+        columns.append(np.concatenate(parts))
+    jac = np.column_stack(columns)
+    fisher = jac.T @ jac
+    try:
+        cov = np.linalg.inv(fisher)
+    except np.linalg.LinAlgError:
+        return None
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    if not np.all(np.isfinite(se)):
+        return None
+    corr = cov / np.outer(se, se)
+    out = Identifiability(values={n: float(x[n]) for n in names}, sigma=sigma)
+    out.condition = float(np.linalg.cond(fisher))
+    for i, n in enumerate(names):
+        out.std_error[n] = float(se[i])
+        out.relative[n] = float(100 * se[i] / abs(x[n])) if x[n] else float("inf")
+        out.correlation[n] = {m: float(corr[i, j]) for j, m in enumerate(names)}
+    return out
