@@ -181,3 +181,25 @@ def test_a_person_can_pick_the_run_to_continue_from(tmp_path):
     assert "chosen" in res.iterations[1].extra["rerun"]
     assert res.iterations[1].levels["a"][1] == 2  # centred on run (2, 2)
     assert res.fun < 0.5
+
+
+def test_resume_right_after_a_rerun_decision_continues_the_same_way(tmp_path):
+    """The re-run is decided before the iteration is written, so pausing (or being
+    killed) at that point resumes into the re-run, exactly like the uninterrupted study."""
+
+    def study():
+        return synthetic_study(tmp_path, selection="best_run", max_iterations=6)
+
+    full = identify(study(), evaluator=FakeEvaluator(two_basins), plots=False)
+    first_rerun = next(r.index for r in full.iterations if "rerun" in r.extra)
+    out = tmp_path / "paused"
+    identify(
+        study(), out, evaluator=FakeEvaluator(two_basins), pause_after=first_rerun - 1,
+        plots=False,
+    )  # fmt: skip
+    nxt = (out / f"iteration_{first_rerun - 1:02d}" / "next_levels.toml").read_text()
+    assert "re-conducted from" in nxt
+    resumed = identify(study(), out, resume=True, evaluator=FakeEvaluator(two_basins), plots=False)
+    assert [r.best_cost for r in resumed.iterations] == [r.best_cost for r in full.iterations]
+    assert resumed.x == full.x
+    assert "rerun" in resumed.iterations[first_rerun - 1].extra

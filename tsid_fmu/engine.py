@@ -722,6 +722,10 @@ def identify(
             )
         levels = _levels_from_run(last, continue_from_run - 1, study)
         pending_note = f"continued from iteration {last.index}, run {continue_from_run} (chosen)"
+    elif records and "next" in records[-1].extra:
+        # the interrupted study had decided to re-conduct from a next-best run
+        pending_note = records[-1].extra["next"]["note"]
+        pending_from = tuple(records[-1].extra["next"]["from"])
 
     best = (records[-1].best_x, records[-1].best_cost, records[-1].best_source) if records else None
     nfev = records[-1].nfev if records else 0
@@ -754,16 +758,12 @@ def identify(
                 records.append(rec)
                 best = (rec.best_x, rec.best_cost, rec.best_source)
                 nfev = rec.nfev
-                if audit is not None:
-                    audit.write_iteration(rec, evaluator if plots else None)
-                if callback:
-                    callback("iteration done", {"record": rec})
-                ran += 1
-                if rec.decision.converged:
-                    status, message = 0, rec.decision.message
-                    break
+                # Decide the next levels before the iteration is written, so that a study
+                # interrupted here resumes exactly as it would have continued.
                 levels = rec.decision.next_levels()
-                alt = _next_best(records, tried, study) if reruns < study.max_reruns else None
+                alt = None
+                if not rec.decision.converged and reruns < study.max_reruns:
+                    alt = _next_best(records, tried, study)
                 if alt is not None:
                     # Continuing from the best choice did not lower the cost (the MISO
                     # paper's "results did not meet expectations"): re-conduct from the
@@ -772,13 +772,22 @@ def identify(
                     tried.add((src.index, run))
                     reruns += 1
                     levels = _levels_from_run(src, run, study)
-                    pending_from = (src.index, run)
-                    pending_note = (
+                    note = (
                         f"iteration {index} did not lower the cost ({rec.best_cost:.6g}); "
                         f"re-conducted from iteration {src.index}, run {run + 1} (next best)"
                     )
+                    rec.extra["next"] = {"levels": levels, "note": note, "from": [src.index, run]}
+                    pending_note, pending_from = note, (src.index, run)
                     if callback:
-                        callback("rerun", {"message": pending_note})
+                        callback("rerun", {"message": note})
+                if audit is not None:
+                    audit.write_iteration(rec, evaluator if plots else None)
+                if callback:
+                    callback("iteration done", {"record": rec})
+                ran += 1
+                if rec.decision.converged:
+                    status, message = 0, rec.decision.message
+                    break
                 if pause_after is not None and ran >= pause_after and index < limit:
                     status = 2
                     message = (

@@ -193,6 +193,16 @@ class Trail:
             f"{p.name} = {_fmt_list(p.levels)}  # {p.case}: {p.reason}\n"
             for p in rec.decision.parameters
         )
+        rerun = rec.extra.get("next")
+        if rerun is not None:
+            header = (
+                f"# Levels for iteration {rec.index + 1}: {rerun['note']}.\n"
+                "# Edit them if your judgement differs, then continue with:"
+                " tsid identify STUDY --out DIR --resume\n"
+            )
+            body = "[levels]\n" + "".join(
+                f"{n} = {_fmt_list(v)}\n" for n, v in rerun["levels"].items()
+            )
         atomic_write(d / "next_levels.toml", header + body)
         if evaluator is not None:
             report.main_effects_plot(rec, d / "main_effects.png")
