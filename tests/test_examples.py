@@ -78,3 +78,8 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
         assert err[name] < 0.10 or name in res.weak, (name, err[name], res.weak)
     report = (tmp_path / "out" / "report.md").read_text()
     assert "Input contribution" in report and "Superposition check" in report
+    # the same study without grouping, side by side (cost and simulations)
+    comp = res.comparison
+    assert comp["phased"]["nfev"] > 0 and comp["ungrouped"]["nfev"] > 0
+    assert np.isfinite(comp["phased"]["cost"]) and np.isfinite(comp["ungrouped"]["cost"])
+    assert "Why grouping: the same study without it" in report

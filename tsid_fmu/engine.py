@@ -816,8 +816,13 @@ def identify(
     if precision is not None:
         for n, rel in precision.relative.items():
             if rel > WEAK_STD_ERROR:
+                spread = (
+                    f"+/-{rel:.2g} %"
+                    if math.isfinite(rel)
+                    else f"+/-{precision.std_error[n]:.3g} (about a value of 0)"
+                )
                 weak[n] = (
-                    f"the data determine it only to +/-{rel:.2g} % (standard error, "
+                    f"the data determine it only to {spread} (standard error, "
                     "Cramer-Rao bound)" + (f"; {weak[n]}" if n in weak else "")
                 )
     result = IdentificationResult(

@@ -372,7 +372,11 @@ def identify_phased(
         )
 
     records = [rec for _, r in results for rec in r.iterations]
-    weak = {k: f"{ph.name}: {v}" for ph, r in results for k, v in r.weak.items()}
+    # the verdict on each parameter comes from the last phase that identified it (the
+    # joint refinement, when it ran, sees every parameter on every experiment)
+    last_phase = {n: (ph, r) for ph, r in results for n in ph.parameters}
+    weak = {n: f"{ph.name}: {r.weak[n]}" for n, (ph, r) in last_phase.items() if n in r.weak}
+    final = results[-1][1] if results else None
     contribution = {k: v for _, r in results for k, v in r.contribution.items()}
     success = all(r.success for _, r in results)
     message = f"{len(phases)} phases identified" + (
@@ -393,6 +397,8 @@ def identify_phased(
         contribution=contribution,
         fit={name: r.fit for (ph, r) in results for name in [ph.name]},
         best_source="phases",
+        sensitivity=final.get("sensitivity", {}) if final is not None else {},
+        identifiability=final.get("identifiability") if final is not None else None,
         study=study,
         out_dir=out_dir,
         phases=[
