@@ -168,6 +168,20 @@ def parameter_set_ssv(
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
+def _write_parameter_sets(result: IdentificationResult, out: Path) -> Any:
+    """Write ``parameters.csv`` and ``parameters.ssv``; return the parameter table."""
+    study = result["study"]
+    params = result.parameters_frame()
+    atomic_write(out / "parameters.csv", params.to_csv())
+    units = {p.name: p.unit for p in study.parameters}
+    values = dict(result["x"])
+    values.update({k: v for k, v in study.start_values.items() if k not in values})
+    desc = {k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in values}
+    desc.update({k: "fixed in the study" for k in study.start_values})
+    atomic_write(out / "parameters.ssv", parameter_set_ssv(values, desc, name=study.name))
+    return params
+
+
 def _markdown_table(frame: Any) -> str:
     cols = [frame.index.name or ""] + [str(c) for c in frame.columns]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
@@ -181,16 +195,7 @@ def write_outputs(result: IdentificationResult, out: Path, simulated: Sequence[A
     """Write ``result.json``, ``parameters.csv``, ``parameters.ssv``, plots and ``report.md``."""
     study = result["study"]
     out = Path(out)
-    params = result.parameters_frame()
-    atomic_write(out / "parameters.csv", params.to_csv())
-    units = {p.name: p.unit for p in study.parameters}
-    values = dict(result["x"])
-    values.update({k: v for k, v in study.start_values.items() if k not in values})
-    desc = {
-        k: (f"identified, unit {units[k]}" if units.get(k) else "identified") for k in result["x"]
-    }
-    desc.update({k: "fixed in the study" for k in study.start_values})
-    atomic_write(out / "parameters.ssv", parameter_set_ssv(values, desc, name=study.name))
+    params = _write_parameter_sets(result, out)
     summary = {
         "study": study.name,
         "fmu": str(study.fmu),
@@ -255,16 +260,7 @@ def write_phased_outputs(result: IdentificationResult, out: Path) -> None:
     """Write the files of a phased study: result, parameter sets and ``report.md``."""
     study = result["study"]
     out = Path(out)
-    params = result.parameters_frame()
-    atomic_write(out / "parameters.csv", params.to_csv())
-    units = {p.name: p.unit for p in study.parameters}
-    values = dict(result["x"])
-    values.update({k: v for k, v in study.start_values.items() if k not in values})
-    desc = {
-        k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in result["x"]
-    }
-    desc.update({k: "fixed in the study" for k in study.start_values})
-    atomic_write(out / "parameters.ssv", parameter_set_ssv(values, desc, name=study.name))
+    params = _write_parameter_sets(result, out)
 
     def clean(v: Any) -> Any:
         if isinstance(v, float) and not math.isfinite(v):
