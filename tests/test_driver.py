@@ -204,6 +204,34 @@ def test_bad_arrays(fmus):
             s.simulate(np.arange(3.0), None, {})
 
 
+def test_read_only_arrays_checked_once_writeable_ones_every_time(fmus, monkeypatch):
+    """Frozen time/input arrays skip the re-check; anything that can change does not."""
+    t = np.arange(5.0)
+    u = np.ones((5, 1))
+    calls = []
+    with FMUSession(fmus["fmi2"], ["u"], ["y"]) as s:
+        real = s._validate_arrays
+        monkeypatch.setattr(s, "_validate_arrays", lambda *a: calls.append(1) or real(*a))
+        t_ro, u_ro = t.copy(), u.copy()
+        t_ro.flags.writeable = u_ro.flags.writeable = False
+        first = s.simulate(t_ro, u_ro, {})
+        np.testing.assert_array_equal(s.simulate(t_ro, u_ro, {}), first)
+        assert len(calls) == 1
+        # writeable arrays are checked at every call, so a NaN written in between is found
+        s.simulate(t, u, {})
+        u[2, 0] = np.nan
+        with pytest.raises(SimulationError, match=r"input 'u' is not finite at t=2"):
+            s.simulate(t, u, {})
+        # a read-only view of a writeable array can still change: not remembered either
+        base = np.ones((5, 1))
+        view = base.view()
+        view.flags.writeable = False
+        s.simulate(t_ro, view, {})
+        base[3, 0] = np.inf
+        with pytest.raises(SimulationError, match=r"input 'u' is not finite at t=3"):
+            s.simulate(t_ro, view, {})
+
+
 def test_tempdir_removed_on_close_and_on_error(fmus, grid, tmp_path):
     t, u = grid
     s = FMUSession(fmus["fmi2"], ["u"], ["y"], parameters=["tau", "t_fail"])

@@ -30,6 +30,7 @@ import ctypes
 import difflib
 import itertools
 import logging
+import math
 import os
 import re
 import shutil
@@ -246,6 +247,21 @@ def _cs_loop(major: int) -> Callable[..., tuple[int, int, int]]:
 # ---------------------------------------------------------------------------------------
 # Helpers
 # ---------------------------------------------------------------------------------------
+
+
+def _frozen(a: Any) -> bool:
+    """Return True for a read-only, C-contiguous float64 array (checked only once).
+
+    A read-only view of a writeable array can still change, so every array it is a
+    view of must be read-only too.
+    """
+    if not (isinstance(a, np.ndarray) and a.flags.c_contiguous and a.dtype == np.float64):
+        return False
+    while isinstance(a, np.ndarray):
+        if a.flags.writeable:
+            return False
+        a = a.base
+    return True
 
 
 def _suggest(name: str, candidates: Sequence[str]) -> str:
@@ -466,6 +482,7 @@ class FMUSession:
         self._fmu: Any = None
         self._component: Any = None
         self._needs_reset = False
+        self._checked: tuple[Any, Any, np.ndarray, np.ndarray] | None = None
         self._log = _LogCapture(logger)
         self._setters: dict[str, tuple[str, int]] = {}
         if interface not in ("auto", "cs", "me"):
@@ -797,6 +814,22 @@ class FMUSession:
     def _check_arrays(
         self, time: np.ndarray, inputs: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray]:
+        # A study simulates the same (read-only) time and input arrays hundreds of times:
+        # the checks below are done once for them. Only arrays that cannot be changed in
+        # place (not writeable, already float64 and C-contiguous) are remembered, by
+        # identity, holding a reference so that the identity cannot be reused.
+        last = self._checked
+        if last is not None and last[0] is time and last[1] is inputs:
+            return last[2], last[3]
+        t, u = self._validate_arrays(time, inputs)
+        if _frozen(time) and (inputs is None or _frozen(inputs)) and t is time:
+            if inputs is None or u is inputs or u.base is inputs:
+                self._checked = (time, inputs, t, u)
+        return t, u
+
+    def _validate_arrays(
+        self, time: np.ndarray, inputs: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
         t = np.ascontiguousarray(time, dtype=np.float64)
         name = self.path.name
         if t.ndim != 1 or t.size < 2:
@@ -829,6 +862,10 @@ class FMUSession:
         return t, u
 
     def _check_finite(self, t: np.ndarray, out: np.ndarray) -> None:
+        # NaN and inf always make the sum non-finite (one pass, no temporary array);
+        # only then (or for a sum that overflowed) are the elements looked at
+        if math.isfinite(float(out.sum())):
+            return
         bad = ~np.isfinite(out)
         if bad.any():
             row, col = np.argwhere(bad)[0]

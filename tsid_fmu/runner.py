@@ -91,16 +91,29 @@ def prepare_experiment(
         for r in range(replicates):
             rng = np.random.default_rng([seed, index, r])
             reps.append(inputs + rng.standard_normal(inputs.shape) * scale)
+    # read-only copies: the session checks these arrays once, not at every simulation
+    time = _frozen_copy(data.time)
+    frozen = _frozen_copy(inputs)
+    reps = [frozen if a is inputs else _frozen_copy(a) for a in reps]
+    inputs = frozen
     return PreparedExperiment(
         experiment=experiment,
         data=data,
-        time=data.time,
+        time=time,
         input_names=input_names,
         output_names=output_names,
         inputs=inputs,
         measured=measured,
         replicate_inputs=reps,
     )
+
+
+def _frozen_copy(a: np.ndarray | None) -> np.ndarray | None:
+    if a is None:
+        return None
+    out = np.array(a, dtype=np.float64, order="C", copy=True)
+    out.flags.writeable = False
+    return out
 
 
 @dataclass
