@@ -26,6 +26,7 @@ import numpy as np
 from tsid_fmu.analysis import AnovaTable, ResponseTable, anova, response_table
 from tsid_fmu.analysis import sn_smaller_the_better as sn_stb
 from tsid_fmu.arrays import select_array
+from tsid_fmu.canonical import CanonicalRecord, canonical_iteration
 from tsid_fmu.errors import StudyError
 from tsid_fmu.identifiability import standard_errors
 from tsid_fmu.leveling import (
@@ -250,6 +251,9 @@ class IdentificationResult(dict):
         Iterations run.
     iterations : list of IterationRecord
         The audit trail, one record per iteration.
+    canonical : list of CanonicalRecord
+        Iterations on canonical factors after the Taguchi iterations (study option
+        ``canonical``); ``x`` and ``fun`` include them.
     weak : dict
         Parameters the data constrain weakly, with the reason.
     contribution : dict
@@ -451,6 +455,39 @@ def run_iteration(
         nfev=nfev_before + ev.nfev + conf.nfev,
         extra={"selection": selection, "optimum": optimum},
     )
+
+
+def _canonical_stage(
+    study: Study,
+    evaluator: Any,
+    best: tuple[dict[str, float], float, str],
+    audit: Any,
+    callback: ProgressCallback | None,
+) -> tuple[dict[str, float], float, str, list[CanonicalRecord], str]:
+    """Run up to ``study.canonical`` iterations on canonical factors from ``best``."""
+    names = study.parameter_names
+    records: list[CanonicalRecord] = []
+    radius = math.inf
+    for i in range(1, study.canonical + 1):
+        if callback:
+            callback("canonical", {"iteration": i, "limit": study.canonical})
+        rec = canonical_iteration(
+            i, evaluator, names, best, study.bounds(), study.leveling.significance_db, radius
+        )
+        radius = rec.extra["radius"]
+        records.append(rec)
+        best = (rec.best_x, rec.best_cost, rec.best_source)
+        if audit is not None:
+            audit.write_canonical(rec)
+        if callback:
+            callback("canonical done", {"record": rec})
+        if rec.converged:
+            break
+    if records and records[-1].converged:
+        note = f"canonical factors converged after {len(records)} iteration(s)"
+    else:
+        note = f"{len(records)} iteration(s) on canonical factors"
+    return best[0], best[1], best[2], records, note
 
 
 def _levels_from_run(rec: IterationRecord, run: int, study: Study) -> dict[str, list[float]]:
@@ -797,7 +834,19 @@ def identify(
                     break
         if not records:
             raise StudyError("no iteration was run (max_iterations is 0?)")
-        best_x = records[-1].best_x
+        best_x, best_cost, best_source = (
+            records[-1].best_x,
+            records[-1].best_cost,
+            records[-1].best_source,
+        )
+        canon: list[CanonicalRecord] = []
+        if study.canonical and status != 2:
+            best_x, best_cost, best_source, canon, note = _canonical_stage(
+                study, evaluator, (best_x, best_cost, best_source), audit, callback
+            )
+            message = f"{message}; {note}"
+            if canon and canon[-1].converged:
+                status = 0
         sensitivity = local_sensitivity(evaluator, best_x)
         precision = standard_errors(evaluator, best_x)
         fit: dict[str, Any] = {}
@@ -827,17 +876,18 @@ def identify(
                 )
     result = IdentificationResult(
         x=dict(best_x),
-        fun=records[-1].best_cost,
+        fun=best_cost,
         success=status == 0,
         status=status,
         message=message,
         nfev=nfev,
-        nit=len(records),
+        nit=len(records) + len(canon),
         iterations=records,
+        canonical=canon,
         weak=weak,
         contribution=contribution,
         fit=fit,
-        best_source=records[-1].best_source,
+        best_source=best_source,
         sensitivity=sensitivity,
         identifiability=precision,
         study=study,

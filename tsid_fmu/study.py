@@ -288,6 +288,10 @@ class Study:
         Seed of the replicate noise, so a study is reproducible.
     max_iterations : int
         Upper bound on iterations, default 12.
+    canonical : int
+        After the Taguchi iterations, up to this many iterations on canonical factors
+        (the principal axes of the local cost surface, see :mod:`tsid_fmu.canonical`)
+        for parameters that act only in combination. Default 0 (off).
     selection : {"auto", "main_effects", "best_run"}
         How the next levels are centred. ``main_effects`` takes each parameter's best
         S/N level (SISO paper); ``best_run`` the levels of the best run seen (MISO paper,
@@ -327,6 +331,7 @@ class Study:
     phases: list[Phase] = field(default_factory=list)
     contribution: ContributionOptions = field(default_factory=ContributionOptions)
     max_reruns: int = 2
+    canonical: int = 0
 
     def __post_init__(self) -> None:
         where = f"{self.source}: " if self.source else ""
@@ -366,6 +371,10 @@ class Study:
         if int(self.max_iterations) != self.max_iterations or self.max_iterations < 1:
             raise StudyError(
                 f"{where}max_iterations must be a positive integer, got {self.max_iterations}"
+            )
+        if int(self.canonical) != self.canonical or self.canonical < 0:
+            raise StudyError(
+                f"{where}canonical must be a non-negative integer, got {self.canonical}"
             )
         if self.selection not in ("auto", "main_effects", "best_run"):
             raise StudyError(
@@ -435,7 +444,7 @@ _DATA = {
 }  # fmt: skip
 _METHOD = {
     "array", "cost", "replicates", "input_noise", "seed", "max_iterations", "selection",
-    "max_reruns",
+    "max_reruns", "canonical",
 }  # fmt: skip
 _PARAM = {"levels", "min", "max", "unit"}
 
@@ -607,6 +616,7 @@ def study_from_dict(
             phases=phases,
             contribution=contribution,
             max_reruns=_get(method, "max_reruns", int, where, "[method]", default=2),
+            canonical=_get(method, "canonical", int, where, "[method]", default=0),
         )
     except StudyError as exc:
         msg = str(exc)

@@ -210,6 +210,13 @@ class Trail:
             report.fit_plot(simulated, d / "fit.png", title=f"Iteration {rec.index}: best so far")
         atomic_write(d / "record.json", json.dumps(rec.to_dict(), indent=1) + "\n")
 
+    def write_canonical(self, rec: Any) -> None:
+        """Write a canonical-factor iteration: ``canonical_NN/runs.csv`` and ``record.json``."""
+        d = self.out / f"canonical_{rec.index:02d}"
+        d.mkdir(parents=True, exist_ok=True)
+        atomic_write(d / "runs.csv", rec.runs_frame().to_csv())
+        atomic_write(d / "record.json", json.dumps(rec.to_dict(), indent=1) + "\n")
+
     def write_result(self, result: IdentificationResult, simulated: Any | None) -> None:
         """Write the final result files, report and plots."""
         from tsid_fmu import report

@@ -1,0 +1,72 @@
+"""Taguchi iterations on canonical factors (tsid_fmu.canonical)."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from tsid_fmu.canonical import canonical_iteration
+from tsid_fmu.errors import StudyError
+from tsid_fmu.runner import Evaluation
+
+T = np.linspace(0.0, 6.0, 400)
+TRUTH = {"p": 3.0, "q": 0.5}
+
+
+def model(p, q):
+    # the output depends on p*q and p/q only: along the p and q axes the cost surface
+    # is a narrow valley at an angle, the case main effects over p and q handle badly
+    return np.column_stack([p * q * np.sin(T) + (p / q) * np.cos(2 * T)])
+
+
+class CurveEvaluator:
+    """Scores (p, q) against noisy 'measurements' of the model without an FMU."""
+
+    def __init__(self):
+        rng = np.random.default_rng(0)
+        self.measured = model(**TRUTH) + rng.normal(0, 0.01, (T.size, 1))
+        self.prep = SimpleNamespace(measured=self.measured)
+        self.nfev = 0
+
+    def cost(self, p, q):
+        return float(np.sum((model(p, q) - self.measured) ** 2))
+
+    def evaluate(self, sets, progress=None):
+        self.nfev += len(sets)
+        costs = np.array([[self.cost(**s)] for s in sets])
+        return Evaluation(costs=costs, errors=[None] * len(sets), nfev=len(sets))
+
+    def simulate_clean(self, params):
+        self.nfev += 1
+        return [(self.prep, model(**params), None)]
+
+
+def test_converges_along_a_coupled_valley_and_never_worsens():
+    ev = CurveEvaluator()
+    start = {"p": 2.0, "q": 0.8}  # 33 % and 60 % off, compensating in p*q
+    best = (start, ev.cost(**start), "start")
+    costs = [best[1]]
+    radius = float("inf")
+    for i in range(1, 13):
+        rec = canonical_iteration(i, ev, ["p", "q"], best, {}, 0.1, radius)
+        radius = rec.extra["radius"]
+        assert rec.best_cost <= best[1]  # the best set seen is kept
+        best = (rec.best_x, rec.best_cost, rec.best_source)
+        costs.append(rec.best_cost)
+        if rec.converged:
+            break
+    assert rec.converged
+    assert abs(best[0]["p"] / TRUTH["p"] - 1) < 1e-3
+    assert abs(best[0]["q"] / TRUTH["q"] - 1) < 1e-3
+    assert costs[-1] < 1e-3 * costs[0]
+    frame = rec.runs_frame()
+    assert list(frame.columns[:2]) == ["p", "q"] and len(frame) == 25 and "S/N" in frame
+
+
+def test_bounds_are_respected_and_non_positive_parameters_refused():
+    ev = CurveEvaluator()
+    best = ({"p": 2.0, "q": 0.8}, ev.cost(p=2.0, q=0.8), "start")
+    rec = canonical_iteration(1, ev, ["p", "q"], best, {"q": (0.7, 1.0)}, 0.1)
+    assert rec.values[:, 1].min() >= 0.7 and rec.values[:, 1].max() <= 1.0
+    with pytest.raises(StudyError, match="positive parameters; q is not"):
+        canonical_iteration(1, ev, ["p", "q"], ({"p": 1.0, "q": 0.0}, 1.0, "x"), {}, 0.1)
