@@ -25,7 +25,7 @@ class CurveEvaluator:
     def __init__(self):
         rng = np.random.default_rng(0)
         self.measured = model(**TRUTH) + rng.normal(0, 0.01, (T.size, 1))
-        self.prep = SimpleNamespace(measured=self.measured)
+        self.prep = SimpleNamespace(measured=self.measured, experiment=SimpleNamespace(name="c"))
         self.nfev = 0
 
     def cost(self, p, q):

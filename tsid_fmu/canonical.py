@@ -10,18 +10,17 @@ stalls short of the minimum (the example stopped at a cost 10 % above that of th
 true parameters).
 
 Response-surface practice answers this with *canonical analysis*: rotate to the
-principal axes of the local surface, where the factors act independently. Here the
-axes come from the output sensitivities ``J`` (central differences of the simulated
-outputs, each output scaled by its residual RMS as in
-:mod:`tsid_fmu.identifiability`). In the log-parameters ``z`` the canonical factors are
-``w = sqrt(L) V^T z`` with ``J^T J = V L V^T``: one unit of any ``w`` changes the
-weighted squared error by the same amount, and the factors do not interact to first
-order. Each iteration is an ordinary Taguchi iteration over the ``w``: a 5-level array
-spanning twice the Gauss-Newton step of each factor (at least one standard error),
-S/N ratios over the noise replicates, main effects, a confirmation run at the
-main-effects optimum and one at the Gauss-Newton point; the best set seen is kept, so
-the stage never makes the result worse. It stops when every canonical S/N is flat and
-every step is within its standard error.
+principal axes of the local surface, where the factors act independently. Here the axes
+come from the output sensitivities ``J`` (central differences of the simulated outputs,
+each output scaled by its residual RMS: :func:`tsid_fmu.identifiability.sensitivities`).
+In the log-parameters ``z`` the canonical factors are ``w = sqrt(L) V^T z`` with ``J^T J
+= V L V^T``: one unit of any ``w`` changes the weighted squared error by the same
+amount, and the factors do not interact to first order. Each iteration is an ordinary
+Taguchi iteration over the ``w``: a 5-level array spanning twice the Gauss-Newton step
+of each factor (at least one standard error), S/N ratios over the noise replicates, main
+effects, a confirmation run at the main-effects optimum and one at the Gauss-Newton
+point; the best set seen is kept, so the stage never makes the result worse. It stops
+when every canonical S/N is flat and every step is within its standard error.
 """
 
 from __future__ import annotations
@@ -37,6 +36,7 @@ from tsid_fmu.analysis import response_table
 from tsid_fmu.analysis import sn_smaller_the_better as sn_stb
 from tsid_fmu.arrays import select_array
 from tsid_fmu.errors import StudyError
+from tsid_fmu.identifiability import sensitivities
 
 __all__ = ["CanonicalRecord", "canonical_iteration"]
 
@@ -125,15 +125,6 @@ class CanonicalRecord:
         return frame
 
 
-def _residuals(evaluator: Any, x: Mapping[str, float]) -> list[np.ndarray] | None:
-    out = []
-    for prep, y, _ in evaluator.simulate_clean(dict(x)):
-        if y is None:
-            return None
-        out.append(np.asarray(y, dtype=float) - np.asarray(prep.measured, dtype=float))
-    return out
-
-
 def canonical_iteration(
     index: int,
     evaluator: Any,
@@ -184,31 +175,12 @@ def canonical_iteration(
         )
     k = len(names)
     nfev0 = evaluator.nfev
-    base = _residuals(evaluator, x0)
-    if base is None:
-        raise StudyError("canonical iterations: the simulation at the best set failed")
-    scale = [np.where(s > 0, s, 1.0) for s in (np.sqrt(np.mean(r**2, axis=0)) for r in base)]
-    r0 = np.concatenate([(r / s).ravel() for r, s in zip(base, scale, strict=True)])
+    sens = sensitivities(evaluator, x0, log=True, step=STEP)
+    if sens is None:
+        raise StudyError("canonical iterations: a simulation at or near the best set failed")
+    jac = sens.jacobian[:, [sens.names.index(n) for n in names]]
+    r0 = sens.residuals
     logx = np.log(np.array([x0[n] for n in names]))
-    columns = []
-    for j in range(k):
-        e = np.zeros(k)
-        e[j] = STEP
-        plus = _residuals(evaluator, dict(zip(names, np.exp(logx + e), strict=True)))
-        minus = _residuals(evaluator, dict(zip(names, np.exp(logx - e), strict=True)))
-        if plus is None or minus is None:
-            raise StudyError(
-                f"canonical iterations: a simulation near the best set failed ({names[j]})"
-            )
-        columns.append(
-            np.concatenate(
-                [
-                    ((p - m) / (2 * STEP) / s).ravel()
-                    for p, m, s in zip(plus, minus, scale, strict=True)
-                ]
-            )
-        )
-    jac = np.column_stack(columns)
     lam, vec = np.linalg.eigh(jac.T @ jac)
     lam = np.maximum(lam, max(float(lam.max()), 1e-300) * 1e-12)
     directions = vec / np.sqrt(lam)  # dz = directions @ w

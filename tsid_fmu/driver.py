@@ -249,6 +249,10 @@ def _cs_loop(major: int) -> Callable[..., tuple[int, int, int]]:
 # ---------------------------------------------------------------------------------------
 
 
+#: read-only (time, inputs) pairs a session remembers as checked
+_MAX_CHECKED = 32
+
+
 def _frozen(a: Any) -> bool:
     """Return True for a read-only, C-contiguous float64 array (checked only once).
 
@@ -482,7 +486,7 @@ class FMUSession:
         self._fmu: Any = None
         self._component: Any = None
         self._needs_reset = False
-        self._checked: tuple[Any, Any, np.ndarray, np.ndarray] | None = None
+        self._checked: dict[tuple[int, int], tuple[Any, Any, np.ndarray, np.ndarray]] = {}
         self._log = _LogCapture(logger)
         self._setters: dict[str, tuple[str, int]] = {}
         if interface not in ("auto", "cs", "me"):
@@ -818,13 +822,17 @@ class FMUSession:
         # the checks below are done once for them. Only arrays that cannot be changed in
         # place (not writeable, already float64 and C-contiguous) are remembered, by
         # identity, holding a reference so that the identity cannot be reused.
-        last = self._checked
-        if last is not None and last[0] is time and last[1] is inputs:
-            return last[2], last[3]
+        # A study alternates between its replicates' inputs, so several pairs are kept.
+        key = (id(time), id(inputs))
+        hit = self._checked.get(key)
+        if hit is not None and hit[0] is time and hit[1] is inputs:
+            return hit[2], hit[3]
         t, u = self._validate_arrays(time, inputs)
         if _frozen(time) and (inputs is None or _frozen(inputs)) and t is time:
             if inputs is None or u is inputs or u.base is inputs:
-                self._checked = (time, inputs, t, u)
+                if len(self._checked) >= _MAX_CHECKED:
+                    self._checked.pop(next(iter(self._checked)))
+                self._checked[key] = (time, inputs, t, u)
         return t, u
 
     def _validate_arrays(

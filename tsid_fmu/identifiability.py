@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Identifiability", "standard_errors"]
+__all__ = ["Identifiability", "Sensitivities", "sensitivities", "standard_errors"]
 
 STEP = 1e-3
 """Relative step of the central differences."""
@@ -67,6 +67,91 @@ class Identifiability:
         return pd.DataFrame(rows).set_index("parameter")
 
 
+@dataclass
+class Sensitivities:
+    """Output sensitivities at a parameter set, each output scaled by its residual RMS.
+
+    Attributes
+    ----------
+    names : list of str
+        The parameters, in the order of the columns of ``jacobian``.
+    residuals : numpy.ndarray
+        Scaled residuals ``(simulated - measured) / sigma`` of every experiment and
+        output, flattened.
+    jacobian : numpy.ndarray
+        ``(len(residuals), len(names))``: derivative of the scaled residuals with
+        respect to each parameter (or to its logarithm, see :func:`sensitivities`).
+    sigma : dict
+        Residual RMS of each output, by experiment name.
+    """
+
+    names: list[str]
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    sigma: dict[str, list[float]]
+
+
+def sensitivities(
+    evaluator: Any, x: Mapping[str, float], *, log: bool = False, step: float = STEP
+) -> Sensitivities | None:
+    """Compute the scaled output sensitivities at ``x`` by central differences.
+
+    Parameters
+    ----------
+    evaluator : Evaluator
+        The study's evaluator (its :meth:`simulate_clean` is used: measured inputs, no
+        added noise).
+    x : mapping of str to float
+        Parameter values.
+    log : bool
+        Differentiate with respect to ``log(x)`` (steps ``x * exp(+/-step)``; every
+        value must be positive) instead of ``x`` (steps ``+/-step * |x|``).
+    step : float
+        Relative step.
+
+    Returns
+    -------
+    Sensitivities or None
+        None if a simulation failed.
+    """
+    names = list(x)
+    base = evaluator.simulate_clean(dict(x))
+    if not base or any(y is None for _, y, _ in base):
+        return None
+    sigma = {}
+    scale = []
+    parts = []
+    for prep, y, _ in base:
+        resid = y - np.asarray(prep.measured)
+        s = np.sqrt(np.mean(resid**2, axis=0))
+        s = np.where(s > 0, s, 1.0)
+        sigma[prep.experiment.name] = [float(v) for v in s]
+        scale.append(s)
+        parts.append((resid / s).ravel())
+    columns = []
+    for n in names:
+        if log:
+            h = step
+            up, down = x[n] * np.exp(step), x[n] * np.exp(-step)
+        else:
+            h = step * abs(x[n]) if x[n] != 0 else step
+            up, down = x[n] + h, x[n] - h
+        plus = evaluator.simulate_clean({**x, n: up})
+        minus = evaluator.simulate_clean({**x, n: down})
+        col = []
+        for (_, yp, _), (_, ym, _), s in zip(plus, minus, scale, strict=True):
+            if yp is None or ym is None:
+                return None
+            col.append(((yp - ym) / (2 * h) / s).ravel())
+        columns.append(np.concatenate(col))
+    return Sensitivities(
+        names=names,
+        residuals=np.concatenate(parts),
+        jacobian=np.column_stack(columns),
+        sigma=sigma,
+    )
+
+
 def standard_errors(evaluator: Any, x: Mapping[str, float]) -> Identifiability | None:
     """Estimate the standard errors of the parameters ``x`` from the study's data.
 
@@ -84,29 +169,10 @@ def standard_errors(evaluator: Any, x: Mapping[str, float]) -> Identifiability |
         None if a simulation failed or the outputs do not depend on the parameters.
     """
     names = list(x)
-    base = evaluator.simulate_clean(dict(x))
-    if not base or any(y is None for _, y, _ in base):
+    sens = sensitivities(evaluator, x)
+    if sens is None:
         return None
-    sigma = {}
-    scale = []
-    for prep, y, _ in base:
-        resid = np.asarray(prep.measured) - y
-        s = np.sqrt(np.mean(resid**2, axis=0))
-        s = np.where(s > 0, s, 1.0)
-        sigma[prep.experiment.name] = [float(v) for v in s]
-        scale.append(s)
-    columns = []
-    for n in names:
-        h = STEP * abs(x[n]) if x[n] != 0 else STEP
-        plus = evaluator.simulate_clean({**x, n: x[n] + h})
-        minus = evaluator.simulate_clean({**x, n: x[n] - h})
-        parts = []
-        for (_, yp, _), (_, ym, _), s in zip(plus, minus, scale, strict=True):
-            if yp is None or ym is None:
-                return None
-            parts.append(((yp - ym) / (2 * h) / s).ravel())
-        columns.append(np.concatenate(parts))
-    jac = np.column_stack(columns)
+    jac = sens.jacobian
     fisher = jac.T @ jac
     try:
         cov = np.linalg.inv(fisher)
@@ -116,7 +182,7 @@ def standard_errors(evaluator: Any, x: Mapping[str, float]) -> Identifiability |
     if not np.all(np.isfinite(se)):
         return None
     corr = cov / np.outer(se, se)
-    out = Identifiability(values={n: float(x[n]) for n in names}, sigma=sigma)
+    out = Identifiability(values={n: float(x[n]) for n in names}, sigma=sens.sigma)
     out.condition = float(np.linalg.cond(fisher))
     for i, n in enumerate(names):
         out.std_error[n] = float(se[i])

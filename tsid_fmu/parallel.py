@@ -551,15 +551,6 @@ def _dask_warm(token: str, payload: Any) -> int:
     return os.getpid()
 
 
-def _dask_task(token: str, payload: Any, kind: str, params: Mapping[str, float], r: int) -> Any:
-    """Run one task on a Dask worker (the FMU arrives with ``payload``)."""
-    runner = _dask_acquire(token, payload)
-    try:
-        return _dask_one(runner, kind, params, r)
-    finally:
-        _dask_release_runner(token, runner)
-
-
 def _dask_one(runner: Any, kind: str, params: Mapping[str, float], r: int) -> Any:
     if kind == "check":
         return None
@@ -654,7 +645,9 @@ class _DaskPool:
         self.sims_per_task = len(indices)
         self.fmu_name = Path(study.fmu).name
         # build the runner on one worker now, so a bad FMU fails here as in serial
-        check = self.client.submit(_dask_task, self.token, self.payload, "check", {}, 0, pure=False)
+        check = self.client.submit(
+            _dask_batch, self.token, self.payload, [("check", {}, 0)], pure=False
+        )
         try:
             check.result()
         except TsidError:
@@ -663,11 +656,6 @@ class _DaskPool:
         except Exception as exc:
             self.close()
             raise FMUError(f"{self.fmu_name}: the Dask worker could not start: {exc}") from exc
-
-    @property
-    def n_slots(self) -> int:
-        info = self.client.scheduler_info()
-        return max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
 
     def run(self, tasks: list[tuple], on_result: Callable[[Any, tuple], None]) -> None:
         from distributed import as_completed
