@@ -20,20 +20,27 @@ def model(p, q):
 
 
 class CurveEvaluator:
-    """Scores (p, q) against noisy 'measurements' of the model without an FMU."""
+    """Scores (p, q) against noisy 'measurements' of the model without an FMU.
 
-    def __init__(self):
+    Like a study's noise replicates, each replicate perturbs the input (here it scales
+    ``p`` by ``1 + bias[r]``); with a biased draw their mean cost is lowest away from the
+    least-squares answer, which only the cost on the measured input (``clean=True``) has.
+    """
+
+    def __init__(self, bias=(0.0,)):
         rng = np.random.default_rng(0)
         self.measured = model(**TRUTH) + rng.normal(0, 0.01, (T.size, 1))
         self.prep = SimpleNamespace(measured=self.measured, experiment=SimpleNamespace(name="c"))
+        self.bias = bias
         self.nfev = 0
 
-    def cost(self, p, q):
-        return float(np.sum((model(p, q) - self.measured) ** 2))
+    def cost(self, p, q, bias=0.0):
+        return float(np.sum((model(p * (1 + bias), q) - self.measured) ** 2))
 
-    def evaluate(self, sets, progress=None):
-        self.nfev += len(sets)
-        costs = np.array([[self.cost(**s)] for s in sets])
+    def evaluate(self, sets, progress=None, *, clean=False):
+        biases = (0.0,) if clean else self.bias
+        self.nfev += len(sets) * len(biases)
+        costs = np.array([[self.cost(**s, bias=b) for b in biases] for s in sets])
         return Evaluation(costs=costs, errors=[None] * len(sets), nfev=len(sets))
 
     def simulate_clean(self, params):
@@ -41,8 +48,9 @@ class CurveEvaluator:
         return [(self.prep, model(**params), None)]
 
 
-def test_converges_along_a_coupled_valley_and_never_worsens():
-    ev = CurveEvaluator()
+@pytest.mark.parametrize("bias", [(0.0,), (0.02, 0.03)], ids=["no replicates", "biased replicates"])
+def test_converges_along_a_coupled_valley_and_never_worsens(bias):
+    ev = CurveEvaluator(bias)
     start = {"p": 2.0, "q": 0.8}  # 33 % and 60 % off, compensating in p*q
     best = (start, ev.cost(**start), "start")
     costs = [best[1]]
@@ -56,11 +64,14 @@ def test_converges_along_a_coupled_valley_and_never_worsens():
         if rec.converged:
             break
     assert rec.converged
+    # the replicates' mean cost is lowest near p = 3 / 1.025; the answer is the clean one
     assert abs(best[0]["p"] / TRUTH["p"] - 1) < 1e-3
     assert abs(best[0]["q"] / TRUTH["q"] - 1) < 1e-3
     assert costs[-1] < 1e-3 * costs[0]
+    assert best[1] == pytest.approx(ev.cost(**best[0]))  # the cost reported is the clean one
     frame = rec.runs_frame()
-    assert list(frame.columns[:2]) == ["p", "q"] and len(frame) == 25 and "S/N" in frame
+    assert list(frame.columns[:4]) == ["iteration", "run", "p", "q"] and len(frame) == 25
+    assert "S/N [dB]" in frame and "cost r1" in frame
 
 
 def test_bounds_are_respected_and_non_positive_parameters_refused():

@@ -203,3 +203,30 @@ def test_resume_right_after_a_rerun_decision_continues_the_same_way(tmp_path):
     assert [r.best_cost for r in resumed.iterations] == [r.best_cost for r in full.iterations]
     assert resumed.x == full.x
     assert "rerun" in resumed.iterations[first_rerun - 1].extra
+
+
+def test_canonical_stage_is_reported_shown_and_resumed(lag, tmp_path):
+    study = make_study(lag, max_iterations=2, canonical=3)
+    events = []
+    full = identify(study, tmp_path / "full", plots=False, progress=lambda e, i: events.append(e))
+    assert full.canonical and full.nit == 2 + len(full.canonical)
+    assert {"canonical", "canonical done"} <= set(events)
+    # after the canonical stage the cost is that on the measured input, and no worse
+    assert full.fun <= full.iterations[-1].best_cost
+    report = (tmp_path / "full" / "report.md").read_text()
+    assert "## Iterations on canonical factors" in report and "[C1](canonical_01/)" in report
+    runs = full.to_pandas()
+    assert set(runs["stage"]) == {"parameters", "canonical"}
+    assert (runs["stage"] == "canonical").sum() == 25 * len(full.canonical)
+    # interrupted after the first canonical iteration: the resume continues from it
+    out = tmp_path / "cut"
+    identify(study, out, plots=False)
+    assert len(full.canonical) > 1
+    for d in sorted(out.glob("canonical_*"))[1:]:
+        (d / "record.json").unlink()
+    first = out / "canonical_01" / "record.json"
+    kept = json.loads(first.read_text())
+    first.write_text(json.dumps({**kept, "best_source": "kept from the trail"}))
+    resumed = identify(study, out, resume=True, plots=False)
+    assert resumed.canonical[0].best_source == "kept from the trail"  # not run again
+    assert resumed.x == full.x and resumed.nit == full.nit and resumed.nfev == full.nfev

@@ -48,6 +48,7 @@ def test_siso_example_identifies_stiffness_and_mass(tmp_path):
     res = identify(study, tmp_path / "out", plots=False)
     err = rel_err(res.x, SISO_TRUTH)
     assert res.nit <= 12 and res.canonical  # 6 Taguchi + up to 6 canonical iterations
+    assert res.success and res.canonical[-1].converged, res.message
     for name in ("F_cm", "F_vm", "M_m", "K_s"):
         assert err[name] < 0.01, err
     assert err["B_s"] < 0.10, err

@@ -11,16 +11,23 @@ true parameters).
 
 Response-surface practice answers this with *canonical analysis*: rotate to the
 principal axes of the local surface, where the factors act independently. Here the axes
-come from the output sensitivities ``J`` (central differences of the simulated outputs,
-each output scaled by its residual RMS: :func:`tsid_fmu.identifiability.sensitivities`).
-In the log-parameters ``z`` the canonical factors are ``w = sqrt(L) V^T z`` with ``J^T J
-= V L V^T``: one unit of any ``w`` changes the weighted squared error by the same
-amount, and the factors do not interact to first order. Each iteration is an ordinary
-Taguchi iteration over the ``w``: a 5-level array spanning twice the Gauss-Newton step
-of each factor (at least one standard error), S/N ratios over the noise replicates, main
-effects, a confirmation run at the main-effects optimum and one at the Gauss-Newton
-point; the best set seen is kept, so the stage never makes the result worse. It stops
-when every canonical S/N is flat and every step is within its standard error.
+come from the output sensitivities ``J`` (central differences of the simulated outputs
+with respect to ``log x``, each output scaled by its residual RMS:
+:func:`tsid_fmu.identifiability.sensitivities`). In the relative changes ``z = dx / x``
+the canonical factors are ``w = sqrt(L) V^T z`` with ``J^T J = V L V^T``: one unit of any
+``w`` changes the weighted squared error by the same amount (one standard error), and
+the factors do not interact to first order. Each iteration is an ordinary Taguchi
+iteration over the ``w``: a 5-level array spanning twice the Gauss-Newton step of each
+factor (at least one standard error), S/N ratios over the noise replicates, main
+effects, then confirmation runs at the best runs, the main-effects optimum and along
+the Gauss-Newton step (half, whole, double).
+
+The confirmation runs are compared by their cost on the *measured* inputs, not by the
+replicates' mean: along a weakly determined valley a few replicates' input noise changes
+the cost more than the valley does, and choosing by it let the answer drift with the
+replicate seed. So after this stage the study's cost is the cost on the measured inputs.
+The best set seen is kept, so the stage never makes the result worse. It stops when
+every canonical S/N is flat and every Gauss-Newton step is within its standard error.
 """
 
 from __future__ import annotations
@@ -72,7 +79,7 @@ class CanonicalRecord:
     best_x : dict
         Best parameter set seen up to and including this iteration.
     best_cost : float
-        Its cost.
+        Its cost on the measured inputs (no added noise).
     best_source : str
         Where it came from.
     converged : bool
@@ -104,6 +111,10 @@ class CanonicalRecord:
             "names": self.names,
             "directions": self.directions.tolist(),
             "levels": self.levels.tolist(),
+            "values": self.values.tolist(),
+            "costs": [
+                [c if math.isfinite(c) else None for c in row] for row in self.costs.tolist()
+            ],
             "sn_means": self.sn_means.tolist(),
             "best_x": self.best_x,
             "best_cost": self.best_cost,
@@ -113,16 +124,54 @@ class CanonicalRecord:
             **self.extra,
         }
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> CanonicalRecord:
+        """Rebuild a record from :meth:`to_dict` (a resumed study's ``record.json``)."""
+        known = {"index", "array", "names", "directions", "levels", "values", "costs"}
+        known |= {"sn_means", "best_x", "best_cost", "best_source", "converged", "nfev"}
+        costs = [[math.inf if c is None else c for c in row] for row in data["costs"]]
+        return cls(
+            index=int(data["index"]),
+            array=str(data["array"]),
+            names=list(data["names"]),
+            directions=np.array(data["directions"], dtype=float),
+            levels=np.array(data["levels"], dtype=float),
+            values=np.array(data["values"], dtype=float),
+            costs=np.array(costs, dtype=float),
+            sn_means=np.array(data["sn_means"], dtype=float),
+            best_x={k: float(v) for k, v in data["best_x"].items()},
+            best_cost=float(data["best_cost"]),
+            best_source=str(data["best_source"]),
+            converged=bool(data["converged"]),
+            nfev=int(data["nfev"]),
+            extra={k: v for k, v in data.items() if k not in known},
+        )
+
     def runs_frame(self) -> Any:
-        """Return the runs (parameter values, costs) as a DataFrame."""
+        """Return the runs (parameter values, costs, S/N) as a DataFrame."""
         import pandas as pd
 
-        frame = pd.DataFrame(self.values, columns=self.names)
-        frame.index = pd.RangeIndex(1, len(frame) + 1, name="run")
+        data: dict[str, Any] = {"iteration": self.index, "run": np.arange(1, len(self.values) + 1)}
+        for j, n in enumerate(self.names):
+            data[n] = self.values[:, j]
         for r in range(self.costs.shape[1]):
-            frame[f"cost {r + 1}"] = self.costs[:, r]
-        frame["S/N"] = sn_stb(self.costs)
-        return frame
+            data[f"cost r{r + 1}"] = self.costs[:, r]
+        data["mean cost"] = self.costs.mean(axis=1)
+        data["S/N [dB]"] = sn_stb(self.costs)
+        return pd.DataFrame(data)
+
+
+def _scale(dz: np.ndarray) -> np.ndarray:
+    """Factor ``x / x0`` for a relative change ``dz``: ``1 + dz``, kept positive.
+
+    The sensitivities are relative (with respect to ``log x``), so both ``1 + dz`` and
+    ``exp(dz)`` agree to first order. Linear is better for large steps where parameters
+    compensate each other additively (the example's ``F_vm + B_s``); below ``dz = -0.5``
+    the factor continues as ``0.5 exp(2 (dz + 0.5))`` (same value and slope), so it never
+    reaches zero.
+    """
+    dz = np.asarray(dz, dtype=float)
+    return np.where(dz >= -0.5, 1.0 + dz, 0.5 * np.exp(2.0 * (np.minimum(dz, -0.5) + 0.5)))
 
 
 def canonical_iteration(
@@ -133,6 +182,7 @@ def canonical_iteration(
     bounds: Mapping[str, tuple[float, float]],
     significance_db: float,
     radius: float = math.inf,
+    progress: Any = None,
 ) -> CanonicalRecord:
     """Run one Taguchi iteration on the canonical factors about ``best``.
 
@@ -146,7 +196,8 @@ def canonical_iteration(
     names : list of str
         Parameters to identify; all must be positive (the factors act on logarithms).
     best : tuple
-        ``(x, cost, source)``: the best set so far, the centre of this iteration.
+        ``(x, cost, source)``: the best set so far, the centre of this iteration, with
+        its cost on the measured inputs (``evaluator.evaluate([x], clean=True)``).
     bounds : mapping
         Physical bounds ``(min, max)`` of each parameter; runs are clipped into them.
     significance_db : float
@@ -155,6 +206,8 @@ def canonical_iteration(
         Largest half-range of a factor, in standard errors (a trust region: the stage
         quarters it after an iteration that found nothing better, doubles it after
         one that did; the record's ``extra["radius"]`` is the value for the next).
+    progress : callable, optional
+        Called as ``progress(done, total)`` as the array's runs finish.
 
     Returns
     -------
@@ -180,7 +233,7 @@ def canonical_iteration(
         raise StudyError("canonical iterations: a simulation at or near the best set failed")
     jac = sens.jacobian[:, [sens.names.index(n) for n in names]]
     r0 = sens.residuals
-    logx = np.log(np.array([x0[n] for n in names]))
+    x_ref = np.array([x0[n] for n in names])
     lam, vec = np.linalg.eigh(jac.T @ jac)
     lam = np.maximum(lam, max(float(lam.max()), 1e-300) * 1e-12)
     directions = vec / np.sqrt(lam)  # dz = directions @ w
@@ -193,30 +246,38 @@ def canonical_iteration(
     level_index = np.asarray(array.table[:, cols], dtype=int)
 
     def to_x(w: np.ndarray) -> dict[str, float]:
-        z = logx + directions @ w
         out = {}
-        for n, v in zip(names, np.exp(z), strict=True):
+        for n, v in zip(names, x_ref * _scale(directions @ w), strict=True):
             lo, hi = bounds.get(n, (-math.inf, math.inf))
             out[n] = float(min(max(v, lo), hi))
         return out
 
     runs = [to_x(levels[np.arange(k), level_index[i]]) for i in range(array.n_runs)]
-    ev = evaluator.evaluate(runs)
+    ev = evaluator.evaluate(runs, progress=progress)
     sn = sn_stb(ev.costs)
     factors = [f"w{j + 1}" for j in range(k)]
     rt = response_table(level_index, sn, factors, n_levels=[LEVELS] * k)
     sn_means = np.array([rt.means[f] for f in factors], dtype=float)
     best_level = np.argmax(np.where(np.isfinite(sn_means), sn_means, -np.inf), axis=1)
     w_main = levels[np.arange(k), best_level]
-    trials = [to_x(w_main), to_x(step)]
-    conf = evaluator.evaluate(trials)
+    # The candidates are compared by their cost on the measured inputs: the S/N ratios
+    # need the noise replicates, but a few replicates' noise shifts the cost by more than
+    # a weakly determined valley changes it, and choosing by it lets the answer drift
+    # along the valley (in the SISO example B_s wandered by +26 % to +290 % with the seed).
+    i_best = int(np.argmin(ev.mean_costs))
+    i_sn = int(np.argmax(np.where(np.isfinite(sn), sn, -np.inf)))
+    trials = {
+        f"run {i_best + 1}": runs[i_best],
+        f"run {i_sn + 1}": runs[i_sn],
+        "main-effects optimum": to_x(w_main),
+        "Gauss-Newton point": to_x(step),
+        "half Gauss-Newton step": to_x(0.5 * step),
+        # far from the optimum the linearisation tends to under-shoot along a valley
+        "double Gauss-Newton step": to_x(2.0 * step),
+    }
+    conf = evaluator.evaluate(list(trials.values()), clean=True)
     candidates = [(x0, c0, src0)]
-    means = ev.mean_costs
-    i_best = int(np.argmin(means))
-    candidates.append((runs[i_best], float(means[i_best]), f"canonical {index}, run {i_best + 1}"))
-    for label, x, c in zip(
-        ("main-effects optimum", "Gauss-Newton point"), trials, conf.mean_costs, strict=True
-    ):
+    for (label, x), c in zip(trials.items(), conf.mean_costs, strict=True):
         candidates.append((x, float(c), f"canonical {index}, {label}"))
     best_x, best_cost, best_source = min(candidates, key=lambda c: c[1])
     widest = float(half.max())

@@ -238,9 +238,11 @@ class IdentificationResult(dict):
     x : dict
         Identified value of each parameter (the best parameter set seen).
     fun : float
-        Its mean cost over the replicates.
+        Its mean cost over the replicates; after iterations on canonical factors, its
+        cost on the measured inputs (no added noise), by which those compare sets.
     success : bool
-        True if the study converged (Case 3) before ``max_iterations``.
+        True if the study converged (Case 3, or the canonical factors converged) within
+        its iteration limits.
     status : int
         0 converged, 1 iteration limit reached, 2 paused by request.
     message : str
@@ -283,10 +285,15 @@ class IdentificationResult(dict):
         return "\n".join(lines)
 
     def to_pandas(self):
-        """Return every run of every iteration as one :class:`pandas.DataFrame`."""
+        """Return every run of every iteration as one :class:`pandas.DataFrame`.
+
+        The column ``stage`` tells the Taguchi iterations over the parameters
+        (``"parameters"``) from those on canonical factors (``"canonical"``).
+        """
         import pandas as pd
 
-        frames = [rec.runs_frame() for rec in self["iterations"]]
+        frames = [rec.runs_frame().assign(stage="parameters") for rec in self["iterations"]]
+        frames += [rec.runs_frame().assign(stage="canonical") for rec in self.get("canonical", [])]
         return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
     def parameters_frame(self):
@@ -463,17 +470,43 @@ def _canonical_stage(
     best: tuple[dict[str, float], float, str],
     audit: Any,
     callback: ProgressCallback | None,
+    prior: list[CanonicalRecord] | None = None,
 ) -> tuple[dict[str, float], float, str, list[CanonicalRecord], str]:
-    """Run up to ``study.canonical`` iterations on canonical factors from ``best``."""
+    """Run up to ``study.canonical`` iterations on canonical factors from ``best``.
+
+    ``prior`` holds the canonical iterations of an interrupted study (same Taguchi
+    result); the stage continues after them instead of starting again.
+    """
     names = study.parameter_names
-    records: list[CanonicalRecord] = []
-    radius = math.inf
-    for i in range(1, study.canonical + 1):
+    records: list[CanonicalRecord] = list(prior or [])
+    if records:
+        last = records[-1]
+        best = (last.best_x, last.best_cost, last.best_source)
+        radius = float(last.extra.get("radius", math.inf))
+        evaluator.nfev += sum(r.nfev for r in records)
+    else:
+        radius = math.inf
+        # from here on a set's cost is its cost on the measured inputs (see canonical.py)
+        nfev0 = evaluator.nfev
+        centre = evaluator.evaluate([best[0]], clean=True).mean_costs[0]
+        best = (best[0], float(centre), best[2])
+        centre_nfev = evaluator.nfev - nfev0
+    for i in range(len(records) + 1, study.canonical + 1):
+        if records and records[-1].converged:
+            break
         if callback:
             callback("canonical", {"iteration": i, "limit": study.canonical})
+        rows = None
+        if callback:
+
+            def rows(done: int, total: int) -> None:
+                callback("row", {"done": done, "total": total})
+
         rec = canonical_iteration(
-            i, evaluator, names, best, study.bounds(), study.leveling.significance_db, radius
+            i, evaluator, names, best, study.bounds(), study.leveling.significance_db, radius, rows
         )
+        if i == 1:
+            rec.nfev += centre_nfev  # the centre's cost on the measured inputs
         radius = rec.extra["radius"]
         records.append(rec)
         best = (rec.best_x, rec.best_cost, rec.best_source)
@@ -481,8 +514,6 @@ def _canonical_stage(
             audit.write_canonical(rec)
         if callback:
             callback("canonical done", {"record": rec})
-        if rec.converged:
-            break
     if records and records[-1].converged:
         note = f"canonical factors converged after {len(records)} iteration(s)"
     else:
@@ -775,10 +806,10 @@ def identify(
     try:
         evaluator.nfev = nfev
         converged_before = bool(records) and records[-1].decision.converged
+        ran = 0
         if converged_before and levels == records[-1].levels and pending_note is None:
             status, message = 0, records[-1].decision.message
         else:
-            ran = 0
             tried: set[tuple[int, int]] = {
                 tuple(r.extra["rerun_from"]) for r in records if "rerun_from" in r.extra
             }
@@ -840,9 +871,16 @@ def identify(
             records[-1].best_source,
         )
         canon: list[CanonicalRecord] = []
+        prior: list[CanonicalRecord] = []
+        if audit is not None:
+            # a resumed study whose Taguchi iterations are unchanged continues its
+            # canonical iterations; any others are stale
+            if resume and ran == 0 and study.canonical:
+                prior = audit.canonical_records()[: study.canonical]
+            audit.clear_canonical(keep=len(prior))
         if study.canonical and status != 2:
             best_x, best_cost, best_source, canon, note = _canonical_stage(
-                study, evaluator, (best_x, best_cost, best_source), audit, callback
+                study, evaluator, (best_x, best_cost, best_source), audit, callback, prior
             )
             message = f"{message}; {note}"
             if canon and canon[-1].converged:

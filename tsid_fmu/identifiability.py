@@ -20,8 +20,15 @@ import numpy as np
 
 __all__ = ["Identifiability", "Sensitivities", "sensitivities", "standard_errors"]
 
-STEP = 1e-3
-"""Relative step of the central differences."""
+STEP = 1e-2
+"""Relative step of the central differences.
+
+Large enough to average over the small discontinuities of models with dry friction
+or events (in the SISO example a step of 1e-3 gave F_vm's standard error as 0.027 %
+at one point and 0.32 % at another; 1e-2 gave 0.24 % at both), small enough that the
+central difference's truncation error, of order ``step**2``, does not matter for a
+standard error.
+"""
 
 
 @dataclass

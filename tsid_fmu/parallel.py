@@ -155,10 +155,13 @@ class _Runner:
         self.reps = [list(p.replicate_inputs) for p in self.evaluator.prepared]
 
     def replicate(self, params: Mapping[str, float], r: int) -> tuple[float, str | None, int, int]:
-        """Return ``(cost, error, experiment index of the error, nfev)`` of replicate r."""
+        """Return ``(cost, error, experiment index of the error, nfev)`` of replicate r.
+
+        ``r = -1`` scores the measured inputs themselves (no added noise).
+        """
         ev = self.evaluator
         for p, reps in zip(ev.prepared, self.reps, strict=True):
-            p.replicate_inputs = [reps[min(r, len(reps) - 1)]]
+            p.replicate_inputs = [p.inputs if r < 0 else reps[min(r, len(reps) - 1)]]
         before = ev.nfev
         result = ev.evaluate([params])
         nfev = ev.nfev - before
@@ -820,6 +823,8 @@ class ParallelEvaluator:
         self,
         parameter_sets: Sequence[Mapping[str, float]],
         progress: Progress | None = None,
+        *,
+        clean: bool = False,
     ) -> Evaluation:
         """Simulate and score each parameter set, in parallel.
 
@@ -829,6 +834,9 @@ class ParallelEvaluator:
             Parameter values by name, one mapping per set.
         progress : callable, optional
             Called as ``progress(done, total)`` each time a set is finished.
+        clean : bool
+            Score the measured inputs themselves (one column of costs, no added noise)
+            instead of the noise replicates.
 
         Returns
         -------
@@ -836,7 +844,7 @@ class ParallelEvaluator:
             Costs per set and replicate (bit-identical to the serial evaluator's), and
             failure reasons; a crashed or timed-out task gives ``inf`` and its reason.
         """
-        n_sets, n_rep = len(parameter_sets), self.n_replicates
+        n_sets, n_rep = len(parameter_sets), 1 if clean else self.n_replicates
         costs = np.zeros((n_sets, n_rep))
         failures: list[list[tuple[int, int, str]]] = [[] for _ in range(n_sets)]
         left = [n_rep] * n_sets
@@ -862,7 +870,7 @@ class ParallelEvaluator:
                     progress(state["finished"], n_sets)
 
         tasks = [
-            ("run", (i, r), dict(params), r)
+            ("run", (i, r), dict(params), -1 if clean else r)
             for i, params in enumerate(parameter_sets)
             for r in range(n_rep)
         ]

@@ -50,6 +50,20 @@ class ConsoleProgress:
                 f"best cost {rec.best_cost:.6g}; {rec.decision.message} "
                 f"[{rec.nfev} simulations, {now - self.t0:.1f} s]"
             )
+        elif event == "canonical":
+            self._print(
+                f"canonical iteration {info['iteration']}/{info['limit']}: running the array ..."
+            )
+        elif event == "canonical done":
+            rec = info["record"]
+            state = (
+                "converged" if rec.converged else f"spread {max(rec.extra['sn_spread_db']):.2g} dB"
+            )
+            self._print(
+                f"canonical iteration {rec.index} ({rec.array}): best cost {rec.best_cost:.6g} "
+                f"(measured input) from {rec.best_source}; {state} "
+                f"[{rec.nfev} simulations, {now - self.t0:.1f} s]"
+            )
         elif event == "phase":
             self._print(f"== {info['message']}")
         elif event == "rerun":

@@ -131,6 +131,14 @@ def convergence_plot(result: IdentificationResult, path: Path) -> None:
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6))
     ax1.semilogy(it, [r.best_cost for r in recs], "o-", label="best so far")
     ax1.semilogy(it, [np.min(r.mean_costs) for r in recs], "s--", alpha=0.6, label="best row")
+    canon = result.get("canonical")
+    if canon:
+        ax1.semilogy(
+            [len(recs) + r.index for r in canon],
+            [r.best_cost for r in canon],
+            "d-",
+            label="canonical factors (measured input)",
+        )
     ax1.set_xlabel("iteration")
     ax1.set_ylabel("cost")
     ax1.legend(fontsize=8)
@@ -215,14 +223,19 @@ def write_outputs(result: IdentificationResult, out: Path, simulated: Sequence[A
     if simulated is not None:
         convergence_plot(result, out / "convergence.png")
         fit_plot(simulated, out / "fit.png", title="Identified model vs measured data")
+    cost_kind = (
+        "on the measured inputs"
+        if result.get("canonical")
+        else f"mean over {study.replicates} noisy-input replicates"
+    )
     lines = [
         f"# Identification report: {study.name}",
         "",
         f"- FMU: `{study.fmu}`",
         f"- Result: **{result['message']}** ({result['nit']} iterations, "
         f"{result['nfev']} simulations)",
-        f"- Best cost ({study.cost}, mean over {study.replicates} noisy-input replicates): "
-        f"{result['fun']:.6g}, found at {result['best_source']}",
+        f"- Best cost ({study.cost}, {cost_kind}): {result['fun']:.6g}, "
+        f"found at {result['best_source']}",
         "",
         "## Identified parameters",
         "",
@@ -251,9 +264,35 @@ def write_outputs(result: IdentificationResult, out: Path, simulated: Sequence[A
             f"| [{rec.index}](iteration_{rec.index:02d}/) | {rec.array} | {rec.decision.case} | "
             f"{rec.best_cost:.6g} | {rec.nfev} |"
         )
+    lines += _canonical_lines(result.get("canonical", []))
     if simulated is not None:
         lines += ["", "![fit](fit.png)", "", "![convergence](convergence.png)"]
     atomic_write(out / "report.md", "\n".join(lines) + "\n")
+
+
+def _canonical_lines(records: Sequence[Any]) -> list[str]:
+    """Return the report's table of iterations on canonical factors (none: no lines)."""
+    if not records:
+        return []
+    lines = [
+        "",
+        "## Iterations on canonical factors",
+        "",
+        "Taguchi arrays over the principal axes of the local cost surface "
+        "(`tsid_fmu/canonical.py`); costs on the measured inputs, S/N over the replicates.",
+        "",
+        "| iteration | array | best cost | found at | largest S/N spread [dB] | converged "
+        "| simulations |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for rec in records:
+        spread = max(rec.extra.get("sn_spread_db", [math.nan]))
+        lines.append(
+            f"| [C{rec.index}](canonical_{rec.index:02d}/) | {rec.array} | {rec.best_cost:.6g} "
+            f"| {rec.best_source} | {spread:.3g} | {'yes' if rec.converged else 'no'} "
+            f"| {rec.nfev} |"
+        )
+    return lines
 
 
 def write_phased_outputs(result: IdentificationResult, out: Path) -> None:

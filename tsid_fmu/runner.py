@@ -201,6 +201,8 @@ class Evaluator:
         self,
         parameter_sets: Sequence[Mapping[str, float]],
         progress: Callable[[int, int], None] | None = None,
+        *,
+        clean: bool = False,
     ) -> Evaluation:
         """Simulate and score each parameter set.
 
@@ -210,13 +212,16 @@ class Evaluator:
             Parameter values by name, one mapping per set.
         progress : callable, optional
             Called as ``progress(done, total)`` after each set.
+        clean : bool
+            Score the measured inputs themselves (one column of costs, no added noise)
+            instead of the noise replicates.
 
         Returns
         -------
         Evaluation
             Costs per set and replicate, and failure reasons.
         """
-        n_rep = self.n_replicates
+        n_rep = 1 if clean else self.n_replicates
         costs = np.zeros((len(parameter_sets), n_rep))
         errors: list[str | None] = [None] * len(parameter_sets)
         nfev = 0
@@ -226,7 +231,11 @@ class Evaluator:
                     if errors[i] is not None:
                         costs[i, r] = math.inf
                         continue
-                    u = p.replicate_inputs[min(r, len(p.replicate_inputs) - 1)]
+                    u = (
+                        p.inputs
+                        if clean
+                        else p.replicate_inputs[min(r, len(p.replicate_inputs) - 1)]
+                    )
                     nfev += 1
                     try:
                         y = session.simulate(p.time, u, params)

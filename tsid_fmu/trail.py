@@ -210,6 +210,27 @@ class Trail:
             report.fit_plot(simulated, d / "fit.png", title=f"Iteration {rec.index}: best so far")
         atomic_write(d / "record.json", json.dumps(rec.to_dict(), indent=1) + "\n")
 
+    def canonical_records(self) -> list[Any]:
+        """Return the complete canonical-factor iterations in the folder (for a resume)."""
+        from tsid_fmu.canonical import CanonicalRecord
+
+        records = []
+        index = 1
+        while (path := self.out / f"canonical_{index:02d}" / "record.json").exists():
+            try:
+                records.append(CanonicalRecord.from_dict(json.loads(path.read_text())))
+            except (ValueError, KeyError, TypeError) as exc:
+                raise StudyError(f"{path}: damaged canonical iteration record ({exc})") from None
+            index += 1
+        return records
+
+    def clear_canonical(self, keep: int = 0) -> None:
+        """Delete the canonical-factor iterations after the first ``keep``."""
+        for d in sorted(self.out.glob("canonical_*")):
+            suffix = d.name.removeprefix("canonical_")
+            if d.is_dir() and suffix.isdigit() and int(suffix) > keep:
+                shutil.rmtree(d)
+
     def write_canonical(self, rec: Any) -> None:
         """Write a canonical-factor iteration: ``canonical_NN/runs.csv`` and ``record.json``."""
         d = self.out / f"canonical_{rec.index:02d}"
