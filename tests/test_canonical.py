@@ -74,10 +74,15 @@ def test_converges_along_a_coupled_valley_and_never_worsens(bias):
     assert "S/N [dB]" in frame and "cost r1" in frame
 
 
-def test_bounds_are_respected_and_non_positive_parameters_refused():
+def test_bounds_are_respected_and_parameters_at_zero_need_a_scale():
     ev = CurveEvaluator()
     best = ({"p": 2.0, "q": 0.8}, ev.cost(p=2.0, q=0.8), "start")
     rec = canonical_iteration(1, ev, ["p", "q"], best, {"q": (0.7, 1.0)}, 0.1)
     assert rec.values[:, 1].min() >= 0.7 and rec.values[:, 1].max() <= 1.0
-    with pytest.raises(StudyError, match="positive parameters; q is not"):
-        canonical_iteration(1, ev, ["p", "q"], ({"p": 1.0, "q": 0.0}, 1.0, "x"), {}, 0.1)
+    at_zero = ({"p": 0.0, "q": 0.5}, ev.cost(p=0.0, q=0.5), "x")
+    with pytest.raises(StudyError, match="p is 0 and no scale was given"):
+        canonical_iteration(1, ev, ["p", "q"], at_zero, {}, 0.1)
+    # with a scale, a parameter on its bound at 0 moves off it (one-sided differences)
+    rec = canonical_iteration(1, ev, ["p", "q"], at_zero, {"p": (0.0, 9.0)}, 0.1, scales={"p": 0.1})
+    assert rec.values[:, 0].min() >= 0.0 and rec.values[:, 0].max() > 0.0
+    assert rec.best_x["p"] > 0 and rec.best_cost < at_zero[1]

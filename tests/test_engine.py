@@ -1,5 +1,6 @@
 """The identification loop on a small real FMU: accuracy, failed rows, audit trail, resume."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -230,3 +231,35 @@ def test_canonical_stage_is_reported_shown_and_resumed(lag, tmp_path):
     resumed = identify(study, out, resume=True, plots=False)
     assert resumed.canonical[0].best_source == "kept from the trail"  # not run again
     assert resumed.x == full.x and resumed.nit == full.nit and resumed.nfev == full.nfev
+
+
+def test_noise_weighting_divides_each_output_by_its_noise(lag, tmp_path):
+    from tsid_fmu.runner import Evaluator
+    from tsid_fmu.scoring import noise_level
+
+    x = {"tau": TAU, "x0": X0}
+    plain = dataclasses.replace(make_study(lag), cost="sse", replicates=1, input_noise=0.0)
+    weighted = dataclasses.replace(plain, weighting="noise")
+    with Evaluator(plain) as a, Evaluator(weighted) as b:
+        sigma = noise_level(a.prepared[0].measured)[0]
+        sse = a.evaluate([x]).costs[0, 0]
+        chi2 = b.evaluate([x]).costs[0, 0]
+        n = a.prepared[0].time.size
+    assert chi2 == pytest.approx(sse / sigma**2)
+    # at the truth the noise-weighted SSE is about the number of samples
+    assert 0.8 * n < chi2 < 1.2 * n
+    with pytest.raises(StudyError, match='weighting must be "none" or "noise", got \'ml\''):
+        make_study(lag, weighting="ml")
+
+
+def test_noise_weighting_refuses_a_noise_free_output(lag, tmp_path):
+    from tsid_fmu.runner import Evaluator
+
+    _fmu, data = lag
+    frame = pd.read_csv(data)
+    frame["y_meas"] = 0.5 * frame["time"]  # simulated data written without noise
+    frame.to_csv(tmp_path / "clean.csv", index=False)
+    exp = Experiment(data=tmp_path / "clean.csv", inputs={"u": "u"}, outputs={"y": "y_meas"})
+    study = dataclasses.replace(make_study(lag), experiments=[exp], weighting="noise")
+    with pytest.raises(StudyError, match=r"experiment 'clean'.*but y shows no noise"):
+        Evaluator(study)

@@ -75,7 +75,7 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     total = res.validation["_total_cost"]
     assert np.isfinite(total) and res.validation["both inputs"]["cost_kind"] == "sse"
     err = rel_err(res.x, MISO_TRUTH)
-    assert err["m1"] < 0.15 and err["K_s"] < 0.15, err
+    assert err["m1"] < 0.01 and err["K_s"] < 0.01, err
     for name in ("C_d", "C_1", "m2", "C_2"):
         assert err[name] < 0.10 or name in res.weak, (name, err[name], res.weak)
     report = (tmp_path / "out" / "report.md").read_text()

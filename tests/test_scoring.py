@@ -37,3 +37,17 @@ def test_weights_and_non_finite():
 def test_unknown_cost_is_named():
     with pytest.raises(StudyError, match="unknown cost 'mae'"):
         Cost("mae")
+
+
+def test_noise_level_sees_white_noise_through_signal_and_steps():
+    from tsid_fmu.scoring import noise_level
+
+    t = np.arange(0, 10, 1e-3)
+    smooth = 100 * np.sin(2 * np.pi * t) + np.where(t % 2 < 1, 50.0, -50.0)  # with steps
+    rng = np.random.default_rng(3)
+    y = np.column_stack(
+        [smooth + rng.normal(0, 1.6, t.size), smooth / 4 + rng.normal(0, 0.4, t.size)]
+    )
+    sigma = noise_level(y)
+    assert sigma == pytest.approx([1.6, 0.4], rel=0.05)
+    assert noise_level(smooth)[0] < 0.01  # a clean signal shows (almost) none

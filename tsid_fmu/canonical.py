@@ -12,9 +12,9 @@ true parameters).
 Response-surface practice answers this with *canonical analysis*: rotate to the
 principal axes of the local surface, where the factors act independently. Here the axes
 come from the output sensitivities ``J`` (central differences of the simulated outputs
-with respect to ``log x``, each output scaled by its residual RMS:
-:func:`tsid_fmu.identifiability.sensitivities`). In the relative changes ``z = dx / x``
-the canonical factors are ``w = sqrt(L) V^T z`` with ``J^T J = V L V^T``: one unit of any
+with respect to the relative changes ``z = dx / s``, ``s = max(|x|, scale)``, each
+output scaled by its residual RMS: :func:`tsid_fmu.identifiability.sensitivities`). The
+canonical factors are ``w = sqrt(L) V^T z`` with ``J^T J = V L V^T``: one unit of any
 ``w`` changes the weighted squared error by the same amount (one standard error), and
 the factors do not interact to first order. Each iteration is an ordinary Taguchi
 iteration over the ``w``: a 5-level array spanning twice the Gauss-Newton step of each
@@ -161,19 +161,6 @@ class CanonicalRecord:
         return pd.DataFrame(data)
 
 
-def _scale(dz: np.ndarray) -> np.ndarray:
-    """Factor ``x / x0`` for a relative change ``dz``: ``1 + dz``, kept positive.
-
-    The sensitivities are relative (with respect to ``log x``), so both ``1 + dz`` and
-    ``exp(dz)`` agree to first order. Linear is better for large steps where parameters
-    compensate each other additively (the example's ``F_vm + B_s``); below ``dz = -0.5``
-    the factor continues as ``0.5 exp(2 (dz + 0.5))`` (same value and slope), so it never
-    reaches zero.
-    """
-    dz = np.asarray(dz, dtype=float)
-    return np.where(dz >= -0.5, 1.0 + dz, 0.5 * np.exp(2.0 * (np.minimum(dz, -0.5) + 0.5)))
-
-
 def canonical_iteration(
     index: int,
     evaluator: Any,
@@ -183,6 +170,7 @@ def canonical_iteration(
     significance_db: float,
     radius: float = math.inf,
     progress: Any = None,
+    scales: Mapping[str, float] | None = None,
 ) -> CanonicalRecord:
     """Run one Taguchi iteration on the canonical factors about ``best``.
 
@@ -194,7 +182,7 @@ def canonical_iteration(
         Scores parameter sets (``evaluate``) and simulates the measured inputs
         (``simulate_clean``).
     names : list of str
-        Parameters to identify; all must be positive (the factors act on logarithms).
+        Parameters to identify.
     best : tuple
         ``(x, cost, source)``: the best set so far, the centre of this iteration, with
         its cost on the measured inputs (``evaluator.evaluate([x], clean=True)``).
@@ -208,6 +196,9 @@ def canonical_iteration(
         one that did; the record's ``extra["radius"]`` is the value for the next).
     progress : callable, optional
         Called as ``progress(done, total)`` as the array's runs finish.
+    scales : mapping of str to float, optional
+        Smallest scale of each parameter: changes are relative to ``max(|x|, scale)``,
+        so a parameter at or near zero (a damping on its bound) can still move.
 
     Returns
     -------
@@ -217,37 +208,41 @@ def canonical_iteration(
     Raises
     ------
     StudyError
-        A parameter is not positive, or the simulations at the centre failed.
+        A parameter is zero and has no scale, or the simulations at the centre failed.
     """
     x0, c0, src0 = dict(best[0]), float(best[1]), best[2]
-    bad = [n for n in names if not x0[n] > 0]
+    size = {n: max(abs(x0[n]), (scales or {}).get(n, 0.0)) for n in names}
+    bad = [n for n in names if not size[n] > 0]
     if bad:
         raise StudyError(
-            f"canonical iterations need positive parameters; {', '.join(bad)} "
-            f"{'is' if len(bad) == 1 else 'are'} not"
+            f"canonical iterations: {', '.join(bad)} {'is' if len(bad) == 1 else 'are'} 0 "
+            "and no scale was given to step from"
         )
     k = len(names)
     nfev0 = evaluator.nfev
-    sens = sensitivities(evaluator, x0, log=True, step=STEP)
+    sens = sensitivities(evaluator, x0, step=STEP, scale=size, bounds=bounds)
     if sens is None:
         raise StudyError("canonical iterations: a simulation at or near the best set failed")
     jac = sens.jacobian[:, [sens.names.index(n) for n in names]]
     r0 = sens.residuals
     x_ref = np.array([x0[n] for n in names])
+    s_ref = np.array([size[n] for n in names])
     lam, vec = np.linalg.eigh(jac.T @ jac)
-    lam = np.maximum(lam, max(float(lam.max()), 1e-300) * 1e-12)
+    # directions the data do not see at all are not varied (their factor stays at 0)
+    seen = lam > max(float(lam.max()), 1e-300) * 1e-10
+    lam = np.where(seen, lam, 1.0)
     directions = vec / np.sqrt(lam)  # dz = directions @ w
-    step = -(vec.T @ (jac.T @ r0)) / np.sqrt(lam)  # Gauss-Newton step in w
+    step = np.where(seen, -(vec.T @ (jac.T @ r0)) / np.sqrt(lam), 0.0)  # Gauss-Newton step in w
     # one unit of w is one standard error (residuals scaled to unit RMS)
     step = np.clip(step, -radius, radius)
-    half = np.minimum(np.maximum(2.0 * np.abs(step), 1.0), max(radius, 1e-6))
+    half = np.where(seen, np.minimum(np.maximum(2.0 * np.abs(step), 1.0), max(radius, 1e-6)), 0.0)
     levels = np.linspace(-1.0, 1.0, LEVELS)[None, :] * half[:, None]
     array, cols = select_array([LEVELS] * k)
     level_index = np.asarray(array.table[:, cols], dtype=int)
 
     def to_x(w: np.ndarray) -> dict[str, float]:
         out = {}
-        for n, v in zip(names, x_ref * _scale(directions @ w), strict=True):
+        for n, v in zip(names, x_ref + s_ref * (directions @ w), strict=True):
             lo, hi = bounds.get(n, (-math.inf, math.inf))
             out[n] = float(min(max(v, lo), hi))
         return out

@@ -478,6 +478,8 @@ def _canonical_stage(
     result); the stage continues after them instead of starting again.
     """
     names = study.parameter_names
+    # a parameter at zero (on its bound) steps by 1 % of its largest first level
+    scales = {p.name: 0.01 * max(abs(v) for v in p.levels) for p in study.parameters}
     records: list[CanonicalRecord] = list(prior or [])
     if records:
         last = records[-1]
@@ -503,7 +505,15 @@ def _canonical_stage(
                 callback("row", {"done": done, "total": total})
 
         rec = canonical_iteration(
-            i, evaluator, names, best, study.bounds(), study.leveling.significance_db, radius, rows
+            i,
+            evaluator,
+            names,
+            best,
+            study.bounds(),
+            study.leveling.significance_db,
+            radius,
+            rows,
+            scales,
         )
         if i == 1:
             rec.nfev += centre_nfev  # the centre's cost on the measured inputs
@@ -902,6 +912,10 @@ def identify(
     weak, contribution = weak_parameters(records, study)
     if precision is not None:
         for n, rel in precision.relative.items():
+            if n in weak and rel <= WEAK_STD_ERROR:
+                # the Taguchi iterations' evidence is about their levels; say what the
+                # data determine at the answer too
+                weak[n] += f" (yet its standard error at the answer is +/-{rel:.2g} %)"
             if rel > WEAK_STD_ERROR:
                 spread = (
                     f"+/-{rel:.2g} %"

@@ -99,7 +99,13 @@ class Sensitivities:
 
 
 def sensitivities(
-    evaluator: Any, x: Mapping[str, float], *, log: bool = False, step: float = STEP
+    evaluator: Any,
+    x: Mapping[str, float],
+    *,
+    log: bool = False,
+    step: float = STEP,
+    scale: Mapping[str, float] | None = None,
+    bounds: Mapping[str, tuple[float, float]] | None = None,
 ) -> Sensitivities | None:
     """Compute the scaled output sensitivities at ``x`` by central differences.
 
@@ -115,6 +121,11 @@ def sensitivities(
         value must be positive) instead of ``x`` (steps ``+/-step * |x|``).
     step : float
         Relative step.
+    scale : mapping of str to float, optional
+        Differentiate with respect to ``x / scale`` instead (steps ``+/-step * scale``):
+        for values that may sit at or near zero. Overrides ``log``.
+    bounds : mapping of str to (float, float), optional
+        With ``scale``: a step that would leave these bounds is taken one-sided.
 
     Returns
     -------
@@ -126,18 +137,23 @@ def sensitivities(
     if not base or any(y is None for _, y, _ in base):
         return None
     sigma = {}
-    scale = []
+    rms = []
     parts = []
     for prep, y, _ in base:
         resid = y - np.asarray(prep.measured)
         s = np.sqrt(np.mean(resid**2, axis=0))
         s = np.where(s > 0, s, 1.0)
         sigma[prep.experiment.name] = [float(v) for v in s]
-        scale.append(s)
+        rms.append(s)
         parts.append((resid / s).ravel())
     columns = []
     for n in names:
-        if log:
+        if scale is not None:
+            h = step * scale[n]
+            lo, hi = (bounds or {}).get(n, (-np.inf, np.inf))
+            up, down = min(x[n] + h, max(hi, x[n])), max(x[n] - h, min(lo, x[n]))
+            h = (up - down) / 2 / scale[n]  # derivative per unit of x / scale
+        elif log:
             h = step
             up, down = x[n] * np.exp(step), x[n] * np.exp(-step)
         else:
@@ -146,7 +162,7 @@ def sensitivities(
         plus = evaluator.simulate_clean({**x, n: up})
         minus = evaluator.simulate_clean({**x, n: down})
         col = []
-        for (_, yp, _), (_, ym, _), s in zip(plus, minus, scale, strict=True):
+        for (_, yp, _), (_, ym, _), s in zip(plus, minus, rms, strict=True):
             if yp is None or ym is None:
                 return None
             col.append(((yp - ym) / (2 * h) / s).ravel())

@@ -88,6 +88,7 @@ def _sub_study(
         "name": study.name,
         "source": None,
         "max_reruns": study.max_reruns,
+        "weighting": study.weighting,
     }
     base.update(changes)
     return Study(**base)
@@ -341,7 +342,9 @@ def identify_phased(
             mid = min(max(current[p.name], p.min), p.max)
             lv = sorted({lo, mid, hi})
             if len(lv) < 3:  # a value at zero or on a bound: spread from the bound instead
-                width = max(abs(current[p.name]), 1e-9) * span
+                # (by the span of a tenth of the largest first level when the value is 0)
+                typical = 0.1 * max(abs(v) for v in p.levels)
+                width = max(abs(current[p.name]), typical, 1e-9) * span
                 lv = [mid, mid + width, mid + 2 * width] if mid == p.min else lv
                 lv = [mid - 2 * width, mid - width, mid] if mid == p.max else lv
             params.append(Parameter(p.name, lv, p.min, p.max, p.unit))
@@ -352,6 +355,7 @@ def identify_phased(
             current,
             max_iterations=max_iterations or study.max_iterations,
             name=f"{study.name} - {ph.name}",
+            canonical=study.canonical,
         )
         sub.parameters = params
         pdir = out_dir / f"phase_{len(phases) + 1:02d}" if out_dir is not None else None
@@ -444,7 +448,15 @@ def _compare_ungrouped(
     from tsid_fmu.engine import identify
 
     ident = [e.name for e in study.experiments if e.role == "identify"]
-    sub = _sub_study(study, study.parameter_names, ident, {}, name=f"{study.name} - ungrouped")
+    # like for like: the same end stage on canonical factors as the joint refinement
+    sub = _sub_study(
+        study,
+        study.parameter_names,
+        ident,
+        {},
+        name=f"{study.name} - ungrouped",
+        canonical=study.canonical,
+    )
     if progress:
         progress("phase", {"message": "comparison: all parameters in one array (no grouping)"})
     udir = out / "ungrouped" if out is not None else None

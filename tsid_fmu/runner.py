@@ -18,8 +18,8 @@ import numpy as np
 
 from tsid_fmu.data import MeasuredData, load_data
 from tsid_fmu.driver import FMUSession
-from tsid_fmu.errors import FMUError, SimulationError, TsidError
-from tsid_fmu.scoring import Cost
+from tsid_fmu.errors import FMUError, SimulationError, StudyError, TsidError
+from tsid_fmu.scoring import NOISE_POWER, Cost, noise_level
 from tsid_fmu.study import Experiment, Study
 
 __all__ = ["Evaluation", "Evaluator", "PreparedExperiment", "prepare_experiment"]
@@ -141,6 +141,34 @@ class Evaluation:
         return self.costs.mean(axis=1)
 
 
+def output_weights(study: Study, prepared: PreparedExperiment) -> np.ndarray:
+    """Weight of each output's cost in an experiment's total.
+
+    The experiment's ``weights`` (default 1); with ``study.weighting == "noise"`` each is
+    divided by the output's noise level estimated from the data, to the power the cost
+    kind needs (:data:`tsid_fmu.scoring.NOISE_POWER`).
+
+    Raises
+    ------
+    StudyError
+        Noise weighting was asked for but an output looks noise-free.
+    """
+    names = prepared.output_names
+    w = np.array([(prepared.experiment.weights or {}).get(n, 1.0) for n in names], dtype=float)
+    if study.weighting == "noise":
+        sigma = noise_level(prepared.measured)
+        span = np.ptp(prepared.measured, axis=0)
+        # below a millionth of the range even a 16-bit converter's quantisation: no noise
+        flat = [n for n, s, r in zip(names, sigma, span, strict=True) if not s > 1e-6 * r]
+        if flat:
+            raise StudyError(
+                f'experiment {prepared.experiment.name!r}: weighting = "noise" needs noisy '
+                f"outputs, but {', '.join(flat)} shows no noise; give weights instead"
+            )
+        w = w / sigma ** NOISE_POWER[Cost(study.cost).kind]
+    return w
+
+
 class Evaluator:
     """Score parameter sets of a study against its measured experiments.
 
@@ -187,10 +215,7 @@ class Evaluator:
         except BaseException:
             self.close()
             raise
-        self._weights = [
-            np.array([(p.experiment.weights or {}).get(n, 1.0) for n in p.output_names])
-            for p in self.prepared
-        ]
+        self._weights = [output_weights(study, p) for p in self.prepared]
 
     @property
     def n_replicates(self) -> int:

@@ -155,3 +155,31 @@ def metrics(
 def _as_2d(a: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=float)
     return a[:, None] if a.ndim == 1 else a
+
+
+#: power of the noise level by which ``weighting = "noise"`` divides each cost kind
+NOISE_POWER = {"iae": 1, "ise": 2, "sse": 2, "rmse": 1, "nrmse": 0}
+
+
+def noise_level(measured: np.ndarray) -> np.ndarray:
+    """Estimate the white-noise standard deviation of each measured column.
+
+    Uses the second differences ``y[k+1] - 2 y[k] + y[k-1]``: for a signal sampled much
+    faster than it changes they hold almost only the noise, with variance ``6 sigma^2``.
+    The median absolute deviation (times 1.4826) makes the estimate robust to the few
+    samples where the signal jumps (steps, impacts).
+
+    Parameters
+    ----------
+    measured : numpy.ndarray
+        Shape ``(n,)`` or ``(n, n_columns)``, ``n >= 3``.
+
+    Returns
+    -------
+    numpy.ndarray
+        One standard deviation per column (0 for a noise-free column).
+    """
+    y = _as_2d(np.asarray(measured, dtype=float))
+    d2 = y[2:] - 2.0 * y[1:-1] + y[:-2]
+    mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+    return 1.4826 * mad / np.sqrt(6.0)

@@ -291,7 +291,13 @@ class Study:
     canonical : int
         After the Taguchi iterations, up to this many iterations on canonical factors
         (the principal axes of the local cost surface, see :mod:`tsid_fmu.canonical`)
-        for parameters that act only in combination. Default 0 (off).
+        for parameters that act only in combination. Default 0 (off). In a phased
+        study they follow the joint refinement.
+    weighting : {"none", "noise"}
+        ``noise`` divides each output's cost by its noise level estimated from the
+        measured data (:func:`tsid_fmu.scoring.noise_level`), squared for ``sse`` and
+        ``ise``, so outputs and experiments with different noise count as they would in
+        a maximum-likelihood fit; ``none`` (default) uses the output weights as given.
     selection : {"auto", "main_effects", "best_run"}
         How the next levels are centred. ``main_effects`` takes each parameter's best
         S/N level (SISO paper); ``best_run`` the levels of the best run seen (MISO paper,
@@ -332,6 +338,7 @@ class Study:
     contribution: ContributionOptions = field(default_factory=ContributionOptions)
     max_reruns: int = 2
     canonical: int = 0
+    weighting: str = "none"
 
     def __post_init__(self) -> None:
         where = f"{self.source}: " if self.source else ""
@@ -376,6 +383,8 @@ class Study:
             raise StudyError(
                 f"{where}canonical must be a non-negative integer, got {self.canonical}"
             )
+        if self.weighting not in ("none", "noise"):
+            raise StudyError(f'{where}weighting must be "none" or "noise", got {self.weighting!r}')
         if self.selection not in ("auto", "main_effects", "best_run"):
             raise StudyError(
                 f"{where}selection must be 'auto', 'main_effects' or 'best_run', "
@@ -444,7 +453,7 @@ _DATA = {
 }  # fmt: skip
 _METHOD = {
     "array", "cost", "replicates", "input_noise", "seed", "max_iterations", "selection",
-    "max_reruns", "canonical",
+    "max_reruns", "canonical", "weighting",
 }  # fmt: skip
 _PARAM = {"levels", "min", "max", "unit"}
 
@@ -617,6 +626,7 @@ def study_from_dict(
             contribution=contribution,
             max_reruns=_get(method, "max_reruns", int, where, "[method]", default=2),
             canonical=_get(method, "canonical", int, where, "[method]", default=0),
+            weighting=_get(method, "weighting", str, where, "[method]", default="none"),
         )
     except StudyError as exc:
         msg = str(exc)
