@@ -481,6 +481,7 @@ def _canonical_stage(
     # a parameter at zero (on its bound) steps by 1 % of its largest first level
     scales = {p.name: 0.01 * max(abs(v) for v in p.levels) for p in study.parameters}
     records: list[CanonicalRecord] = list(prior or [])
+    centre_nfev = 0
     if records:
         last = records[-1]
         best = (last.best_x, last.best_cost, last.best_source)
