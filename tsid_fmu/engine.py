@@ -37,7 +37,7 @@ from tsid_fmu.leveling import (
     use_log_scale,
 )
 from tsid_fmu.runner import Evaluator
-from tsid_fmu.scoring import metrics
+from tsid_fmu.scoring import metrics, noise_level
 from tsid_fmu.study import Study, load_study
 from tsid_fmu.surrogate import quadratic_optimum
 
@@ -262,6 +262,10 @@ class IdentificationResult(dict):
         ANOVA percent contribution of each parameter per iteration.
     fit : dict
         Cost kinds and fit percentage per experiment and output at ``x``, noise-free.
+    noise : dict
+        Noise level of each experiment's measured outputs, estimated from the data
+        (:func:`tsid_fmu.scoring.noise_level`; the study's ``weighting = "noise"``
+        divides by it). A fit at the noise level has an RMSE close to it.
     out_dir : Path or None
         Where the audit trail and report were written.
     """
@@ -896,6 +900,12 @@ def identify(
             message = f"{message}; {note}"
             if canon and canon[-1].converged:
                 status = 0
+        noise = {
+            p.experiment.name: dict(
+                zip(p.output_names, (float(v) for v in noise_level(p.measured)), strict=True)
+            )
+            for p in evaluator.prepared
+        }
         sensitivity = local_sensitivity(evaluator, best_x)
         precision = standard_errors(evaluator, best_x)
         fit: dict[str, Any] = {}
@@ -940,6 +950,7 @@ def identify(
         weak=weak,
         contribution=contribution,
         fit=fit,
+        noise=noise,
         best_source=best_source,
         sensitivity=sensitivity,
         identifiability=precision,

@@ -218,6 +218,7 @@ def write_outputs(result: IdentificationResult, out: Path, simulated: Sequence[A
         "weak": result["weak"],
         "contribution": result["contribution"],
         "fit": result["fit"],
+        "noise": result.get("noise"),
     }
     atomic_write(out / "result.json", json.dumps(summary, indent=2) + "\n")
     if simulated is not None:
@@ -244,12 +245,15 @@ def write_outputs(result: IdentificationResult, out: Path, simulated: Sequence[A
         "## Fit at the identified parameters (measured input, no added noise)",
         "",
     ]
+    noise = result.get("noise") or {}
     for exp, per_output in result["fit"].items():
         for output, m in per_output.items():
             if isinstance(m, dict):
+                sigma = noise.get(exp, {}).get(output)
+                beside = f" (noise in the data: {sigma:.3g})" if sigma is not None else ""
                 lines.append(
                     f"- {exp} / {output}: fit {m['fit_percent']:.3f} %, IAE {m['iae']:.6g}, "
-                    f"RMSE {m['rmse']:.6g}"
+                    f"RMSE {m['rmse']:.6g}{beside}"
                 )
             else:
                 lines.append(f"- {exp}: {m}")
