@@ -86,3 +86,22 @@ def test_bounds_are_respected_and_parameters_at_zero_need_a_scale():
     rec = canonical_iteration(1, ev, ["p", "q"], at_zero, {"p": (0.0, 9.0)}, 0.1, scales={"p": 0.1})
     assert rec.values[:, 0].min() >= 0.0 and rec.values[:, 0].max() > 0.0
     assert rec.best_x["p"] > 0 and rec.best_cost < at_zero[1]
+
+
+def test_record_round_trips_through_strict_json_with_failed_runs():
+    import json
+
+    from tsid_fmu.canonical import CanonicalRecord
+
+    ev = CurveEvaluator()
+    best = ({"p": 2.0, "q": 0.8}, ev.cost(p=2.0, q=0.8), "start")
+    rec = canonical_iteration(1, ev, ["p", "q"], best, {}, 0.1)
+    rec.costs[3, 0] = np.inf  # a failed run
+    rec.sn_means[0, 0] = -np.inf
+    rec.extra["sn_spread_db"][0] = np.inf
+    text = json.dumps(rec.to_dict(), allow_nan=False)  # other tools read it too
+    back = CanonicalRecord.from_dict(json.loads(text))
+    assert np.isinf(back.costs[3, 0]) and np.isnan(back.sn_means[0, 0])
+    assert back.best_x == rec.best_x and back.extra["radius"] == rec.extra["radius"]
+    assert np.isnan(back.extra["sn_spread_db"][0])
+    np.testing.assert_array_equal(back.values, rec.values)

@@ -53,6 +53,22 @@ STEP = 1e-4
 LEVELS = 5
 
 
+def _json_safe(value: Any) -> Any:
+    """Replace non-finite floats (nested in lists) by None: strict JSON for other tools."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, list):
+        return [_json_safe(v) for v in value]
+    return value
+
+
+def _from_json(value: Any) -> Any:
+    """Undo :func:`_json_safe` in lists of numbers (None back to NaN)."""
+    if isinstance(value, list) and all(v is None or isinstance(v, int | float) for v in value):
+        return [math.nan if v is None else v for v in value]
+    return math.inf if value is None else value
+
+
 @dataclass
 class CanonicalRecord:
     """One iteration on canonical factors.
@@ -115,13 +131,15 @@ class CanonicalRecord:
             "costs": [
                 [c if math.isfinite(c) else None for c in row] for row in self.costs.tolist()
             ],
-            "sn_means": self.sn_means.tolist(),
+            "sn_means": [
+                [v if math.isfinite(v) else None for v in row] for row in self.sn_means.tolist()
+            ],
             "best_x": self.best_x,
             "best_cost": self.best_cost,
             "best_source": self.best_source,
             "converged": self.converged,
             "nfev": self.nfev,
-            **self.extra,
+            **{k: _json_safe(v) for k, v in self.extra.items()},
         }
 
     @classmethod
@@ -138,13 +156,16 @@ class CanonicalRecord:
             levels=np.array(data["levels"], dtype=float),
             values=np.array(data["values"], dtype=float),
             costs=np.array(costs, dtype=float),
-            sn_means=np.array(data["sn_means"], dtype=float),
+            sn_means=np.array(
+                [[math.nan if v is None else v for v in row] for row in data["sn_means"]],
+                dtype=float,
+            ),
             best_x={k: float(v) for k, v in data["best_x"].items()},
             best_cost=float(data["best_cost"]),
             best_source=str(data["best_source"]),
             converged=bool(data["converged"]),
             nfev=int(data["nfev"]),
-            extra={k: v for k, v in data.items() if k not in known},
+            extra={k: _from_json(v) for k, v in data.items() if k not in known},
         )
 
     def runs_frame(self) -> Any:

@@ -290,7 +290,8 @@ def _canonical_lines(records: Sequence[Any]) -> list[str]:
         "|---|---|---|---|---|---|---|",
     ]
     for rec in records:
-        spread = max(rec.extra.get("sn_spread_db", [math.nan]))
+        spreads = [v for v in rec.extra.get("sn_spread_db", []) if not math.isnan(v)]
+        spread = max(spreads) if spreads else math.nan
         lines.append(
             f"| [C{rec.index}](canonical_{rec.index:02d}/) | {rec.array} | {rec.best_cost:.6g} "
             f"| {rec.best_source} | {spread:.3g} | {'yes' if rec.converged else 'no'} "
