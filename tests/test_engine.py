@@ -98,6 +98,9 @@ def test_pause_edit_resume_matches_uninterrupted(lag, tmp_path):
     (out / "iteration_03" / "runs.csv").write_text("partial")
     resumed = identify(make_study(lag), out, resume=True, plots=False)
     assert resumed.x == full.x and resumed.nit == full.nit and resumed.nfev == full.nfev
+    # plots (one fit simulation per iteration) do not count as simulations used
+    drawn = identify(make_study(lag), tmp_path / "drawn", plots=True)
+    assert drawn.nfev == full.nfev
 
 
 def test_a_person_can_edit_the_next_levels(lag, tmp_path):

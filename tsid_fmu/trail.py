@@ -206,7 +206,11 @@ class Trail:
         atomic_write(d / "next_levels.toml", header + body)
         if evaluator is not None:
             report.main_effects_plot(rec, d / "main_effects.png")
+            # a plot is not part of the identification: its simulation is not counted,
+            # so a resumed study (which does not redraw old plots) counts the same
+            counted = evaluator.nfev
             simulated = evaluator.simulate_clean(rec.best_x)
+            evaluator.nfev = counted
             report.fit_plot(simulated, d / "fit.png", title=f"Iteration {rec.index}: best so far")
         atomic_write(d / "record.json", json.dumps(rec.to_dict(), indent=1) + "\n")
 
