@@ -37,7 +37,7 @@ from tsid_fmu.leveling import (
     use_log_scale,
 )
 from tsid_fmu.runner import Evaluator
-from tsid_fmu.scoring import metrics, noise_level
+from tsid_fmu.scoring import metrics
 from tsid_fmu.study import Study, load_study
 from tsid_fmu.surrogate import quadratic_optimum
 
@@ -901,9 +901,7 @@ def identify(
             if canon and canon[-1].converged:
                 status = 0
         noise = {
-            p.experiment.name: dict(
-                zip(p.output_names, (float(v) for v in noise_level(p.measured)), strict=True)
-            )
+            p.experiment.name: dict(zip(p.output_names, map(float, p.noise), strict=True))
             for p in evaluator.prepared
         }
         sensitivity = local_sensitivity(evaluator, best_x)

@@ -202,9 +202,9 @@ def _slug(text: str) -> str:
 def _identification_cost(study: Study, x: dict[str, float]) -> tuple[float, int]:
     """Noise-free cost of ``x`` summed over the identification experiments."""
     ident = [e.name for e in study.experiments if e.role == "identify"]
-    sub = _sub_study(study, study.parameter_names, ident, {}, replicates=1, input_noise=0.0)
+    sub = _sub_study(study, study.parameter_names, ident, {})
     with make_evaluator(sub, workers=1) as ev:
-        res = ev.evaluate([x])
+        res = ev.evaluate([x], clean=True)
     return float(res.mean_costs[0]), res.nfev
 
 
@@ -213,10 +213,10 @@ def _validate(study: Study, x: dict[str, float], out: Path | None, plots: bool) 
     names = [e.name for e in study.experiments if e.role == "validate"]
     if not names:
         return {}
-    sub = _sub_study(study, study.parameter_names, names, {}, replicates=1, input_noise=0.0)
+    sub = _sub_study(study, study.parameter_names, names, {})
     report: dict[str, Any] = {}
     with make_evaluator(sub, workers=1) as ev:
-        cost = ev.evaluate([x])
+        cost = ev.evaluate([x], clean=True)
         simulated = ev.simulate_clean(x)
     for prep, y, err in simulated:
         name = prep.experiment.name

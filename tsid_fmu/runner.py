@@ -22,7 +22,14 @@ from tsid_fmu.errors import FMUError, SimulationError, StudyError, TsidError
 from tsid_fmu.scoring import NOISE_POWER, Cost, noise_level
 from tsid_fmu.study import Experiment, Study
 
-__all__ = ["Evaluation", "Evaluator", "PreparedExperiment", "prepare_experiment"]
+__all__ = [
+    "Evaluation",
+    "Evaluator",
+    "PreparedExperiment",
+    "output_weights",
+    "prepare_experiment",
+    "prepare_experiments",
+]
 
 
 @dataclass
@@ -43,6 +50,9 @@ class PreparedExperiment:
         Measured outputs, shape ``(n, n_outputs)``, in the order of ``output_names``.
     replicate_inputs : list of numpy.ndarray
         Inputs of each replicate (with noise); one entry if the study has no noise.
+    noise : numpy.ndarray
+        Noise level of each measured output, estimated from the data
+        (:func:`tsid_fmu.scoring.noise_level`).
     """
 
     experiment: Experiment
@@ -53,6 +63,7 @@ class PreparedExperiment:
     inputs: np.ndarray | None
     measured: np.ndarray
     replicate_inputs: list[np.ndarray | None] = field(default_factory=list)
+    noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def prepare_experiment(
@@ -105,6 +116,7 @@ def prepare_experiment(
         inputs=inputs,
         measured=measured,
         replicate_inputs=reps,
+        noise=noise_level(measured),
     )
 
 
@@ -141,6 +153,17 @@ class Evaluation:
         return self.costs.mean(axis=1)
 
 
+def prepare_experiments(
+    study: Study, experiments: Sequence[int] | None = None
+) -> list[PreparedExperiment]:
+    """Prepare a study's experiments (all, or those with the given indices)."""
+    indices = range(len(study.experiments)) if experiments is None else experiments
+    return [
+        prepare_experiment(study.experiments[i], i, study.replicates, study.input_noise, study.seed)
+        for i in indices
+    ]
+
+
 def output_weights(study: Study, prepared: PreparedExperiment) -> np.ndarray:
     """Weight of each output's cost in an experiment's total.
 
@@ -156,7 +179,7 @@ def output_weights(study: Study, prepared: PreparedExperiment) -> np.ndarray:
     names = prepared.output_names
     w = np.array([(prepared.experiment.weights or {}).get(n, 1.0) for n in names], dtype=float)
     if study.weighting == "noise":
-        sigma = noise_level(prepared.measured)
+        sigma = prepared.noise
         span = np.ptp(prepared.measured, axis=0)
         # below a millionth of the range even a 16-bit converter's quantisation: no noise
         flat = [n for n, s, r in zip(names, sigma, span, strict=True) if not s > 1e-6 * r]
@@ -187,13 +210,7 @@ class Evaluator:
 
     def __init__(self, study: Study, experiments: Sequence[int] | None = None) -> None:
         self.study = study
-        indices = list(range(len(study.experiments))) if experiments is None else list(experiments)
-        self.prepared = [
-            prepare_experiment(
-                study.experiments[i], i, study.replicates, study.input_noise, study.seed
-            )
-            for i in indices
-        ]
+        self.prepared = prepare_experiments(study, experiments)
         self.cost = Cost(study.cost)
         self.nfev = 0
         self.sessions: list[FMUSession] = []
@@ -294,6 +311,12 @@ class Evaluator:
             except TsidError as exc:
                 out.append((p, None, str(exc)))
         return out
+
+    def simulate_clean_many(
+        self, parameter_sets: Sequence[Mapping[str, float]]
+    ) -> list[list[tuple[PreparedExperiment, np.ndarray | None, str | None]]]:
+        """:meth:`simulate_clean` for several parameter sets."""
+        return [self.simulate_clean(p) for p in parameter_sets]
 
     def close(self) -> None:
         """Free the FMU sessions."""
