@@ -47,6 +47,9 @@ class CurveEvaluator:
         self.nfev += 1
         return [(self.prep, model(**params), None)]
 
+    def simulate_clean_many(self, sets):
+        return [self.simulate_clean(p) for p in sets]
+
 
 @pytest.mark.parametrize("bias", [(0.0,), (0.02, 0.03)], ids=["no replicates", "biased replicates"])
 def test_converges_along_a_coupled_valley_and_never_worsens(bias):

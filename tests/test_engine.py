@@ -134,6 +134,9 @@ class FakeEvaluator:
     def simulate_clean(self, params):
         return []
 
+    def simulate_clean_many(self, sets):
+        return [[] for _ in sets]
+
     def close(self):
         pass
 

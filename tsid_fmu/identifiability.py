@@ -87,22 +87,24 @@ class Sensitivities:
         output, flattened.
     jacobian : numpy.ndarray
         ``(len(residuals), len(names))``: derivative of the scaled residuals with
-        respect to each parameter (or to its logarithm, see :func:`sensitivities`).
+        respect to each parameter divided by its ``scale``.
     sigma : dict
         Residual RMS of each output, by experiment name.
+    scale : numpy.ndarray
+        The scale of each parameter (see :func:`sensitivities`).
     """
 
     names: list[str]
     residuals: np.ndarray
     jacobian: np.ndarray
     sigma: dict[str, list[float]]
+    scale: np.ndarray
 
 
 def sensitivities(
     evaluator: Any,
     x: Mapping[str, float],
     *,
-    log: bool = False,
     step: float = STEP,
     scale: Mapping[str, float] | None = None,
     bounds: Mapping[str, tuple[float, float]] | None = None,
@@ -116,16 +118,13 @@ def sensitivities(
         added noise).
     x : mapping of str to float
         Parameter values.
-    log : bool
-        Differentiate with respect to ``log(x)`` (steps ``x * exp(+/-step)``; every
-        value must be positive) instead of ``x`` (steps ``+/-step * |x|``).
     step : float
-        Relative step.
+        Relative step: each parameter moves by ``+/-step * scale``.
     scale : mapping of str to float, optional
-        Differentiate with respect to ``x / scale`` instead (steps ``+/-step * scale``):
-        for values that may sit at or near zero. Overrides ``log``.
+        Differentiate with respect to ``x / scale``; default ``|x|`` (1 where ``x`` is
+        0), i.e. relative sensitivities. Give a scale for values at or near zero.
     bounds : mapping of str to (float, float), optional
-        With ``scale``: a step that would leave these bounds is taken one-sided.
+        A step that would leave these bounds is taken one-sided.
 
     Returns
     -------
@@ -133,8 +132,18 @@ def sensitivities(
         None if a simulation failed.
     """
     names = list(x)
-    base = evaluator.simulate_clean(dict(x))
-    if not base or any(y is None for _, y, _ in base):
+    if scale is None:
+        scale = {n: abs(x[n]) or 1.0 for n in names}
+    sets, halves = [dict(x)], []
+    for n in names:
+        h = step * scale[n]
+        lo, hi = (bounds or {}).get(n, (-np.inf, np.inf))
+        up, down = min(x[n] + h, max(hi, x[n])), max(x[n] - h, min(lo, x[n]))
+        halves.append((up - down) / 2 / scale[n])  # derivative per unit of x / scale
+        sets += [{**x, n: up}, {**x, n: down}]
+    # one batch: a parallel evaluator runs the 2 k + 1 simulations side by side
+    base, *moved = evaluator.simulate_clean_many(sets)
+    if not base or any(y is None for batch in (base, *moved) for _, y, _ in batch):
         return None
     sigma = {}
     rms = []
@@ -147,31 +156,19 @@ def sensitivities(
         rms.append(s)
         parts.append((resid / s).ravel())
     columns = []
-    for n in names:
-        if scale is not None:
-            h = step * scale[n]
-            lo, hi = (bounds or {}).get(n, (-np.inf, np.inf))
-            up, down = min(x[n] + h, max(hi, x[n])), max(x[n] - h, min(lo, x[n]))
-            h = (up - down) / 2 / scale[n]  # derivative per unit of x / scale
-        elif log:
-            h = step
-            up, down = x[n] * np.exp(step), x[n] * np.exp(-step)
-        else:
-            h = step * abs(x[n]) if x[n] != 0 else step
-            up, down = x[n] + h, x[n] - h
-        plus = evaluator.simulate_clean({**x, n: up})
-        minus = evaluator.simulate_clean({**x, n: down})
-        col = []
-        for (_, yp, _), (_, ym, _), s in zip(plus, minus, rms, strict=True):
-            if yp is None or ym is None:
-                return None
-            col.append(((yp - ym) / (2 * h) / s).ravel())
+    for j, half in enumerate(halves):
+        plus, minus = moved[2 * j], moved[2 * j + 1]
+        col = [
+            ((yp - ym) / (2 * half) / s).ravel()
+            for (_, yp, _), (_, ym, _), s in zip(plus, minus, rms, strict=True)
+        ]
         columns.append(np.concatenate(col))
     return Sensitivities(
         names=names,
         residuals=np.concatenate(parts),
         jacobian=np.column_stack(columns),
         sigma=sigma,
+        scale=np.array([scale[n] for n in names], dtype=float),
     )
 
 
@@ -195,7 +192,7 @@ def standard_errors(evaluator: Any, x: Mapping[str, float]) -> Identifiability |
     sens = sensitivities(evaluator, x)
     if sens is None:
         return None
-    jac = sens.jacobian
+    jac = sens.jacobian / sens.scale  # per unit of each parameter
     fisher = jac.T @ jac
     try:
         cov = np.linalg.inv(fisher)

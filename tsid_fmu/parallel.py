@@ -65,7 +65,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.errors import FMUError, StudyError, TsidError
-from tsid_fmu.runner import Evaluation, Evaluator, PreparedExperiment, prepare_experiment
+from tsid_fmu.runner import Evaluation, Evaluator, PreparedExperiment, prepare_experiments
 from tsid_fmu.study import Study
 
 __all__ = ["ParallelEvaluator", "available_cores", "make_evaluator"]
@@ -796,12 +796,7 @@ class ParallelEvaluator:
             raise StudyError(f"recycle_after must be at least 1, got {recycle_after}")
         self.study = study
         indices = list(range(len(study.experiments))) if experiments is None else list(experiments)
-        self.prepared = [
-            prepare_experiment(
-                study.experiments[i], i, study.replicates, study.input_noise, study.seed
-            )
-            for i in indices
-        ]
+        self.prepared = prepare_experiments(study, indices)
         self.nfev = 0
         self.workers = available_cores() if workers is None else int(workers)
         self.timeout = timeout
@@ -894,18 +889,30 @@ class ParallelEvaluator:
         list of tuple
             ``(prepared experiment, simulated outputs or None, error or None)``.
         """
-        box: dict[str, Any] = {}
+        return self.simulate_clean_many([params])[0]
+
+    def simulate_clean_many(
+        self, parameter_sets: Sequence[Mapping[str, float]]
+    ) -> list[list[tuple[PreparedExperiment, np.ndarray | None, str | None]]]:
+        """:meth:`simulate_clean` for several parameter sets, run in parallel."""
+        replies: dict[int, tuple] = {}
 
         def on_result(task: Any, reply: tuple) -> None:
-            box["reply"] = reply
+            replies[task] = reply
 
-        self._pool.run([("clean", "clean", dict(params))], on_result)
-        self.nfev += len(self.prepared)
-        reply = box.get("reply")
-        if reply is None or reply[0] != "clean":
-            reason = reply[2] if reply is not None else "no result"
-            return [(p, None, f"{p.experiment.name}: {reason}") for p in self.prepared]
-        return [(p, y, err) for p, (y, err) in zip(self.prepared, reply[2], strict=True)]
+        self._pool.run([("clean", i, dict(p)) for i, p in enumerate(parameter_sets)], on_result)
+        self.nfev += len(self.prepared) * len(parameter_sets)
+        out = []
+        for i in range(len(parameter_sets)):
+            reply = replies.get(i)
+            if reply is None or reply[0] != "clean":
+                reason = reply[2] if reply is not None else "no result"
+                out.append([(p, None, f"{p.experiment.name}: {reason}") for p in self.prepared])
+            else:
+                out.append(
+                    [(p, y, err) for p, (y, err) in zip(self.prepared, reply[2], strict=True)]
+                )
+        return out
 
     def close(self) -> None:
         """Stop the workers (they free their FMU instances and extracted folders)."""
