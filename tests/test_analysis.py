@@ -6,15 +6,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from tsid_fmu.analysis import (
+from tsid_fmu.doe import (
     SN_CAP,
     anova,
+    get_array,
     response_table,
     sn_larger_the_better,
     sn_nominal_the_best,
     sn_smaller_the_better,
 )
-from tsid_fmu.arrays import get_array
 from tsid_fmu.errors import StudyError
 
 # Hand-worked example: L9, factors A, B, C on columns 1, 2, 4 (1-based).

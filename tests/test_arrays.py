@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tsid_fmu.arrays import (
+from tsid_fmu.doe.arrays import (
     OrthogonalArray,
     available_arrays,
     check_orthogonal,

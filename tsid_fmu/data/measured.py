@@ -13,7 +13,6 @@ from __future__ import annotations
 import csv
 import difflib
 import os
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from tsid_fmu.data.expressions import evaluate
 from tsid_fmu.errors import DataError
 
 if TYPE_CHECKING:
@@ -30,31 +30,6 @@ __all__ = ["MeasuredData", "load_data"]
 
 #: allowed relative deviation of a sampling interval from the median interval
 JITTER_TOLERANCE = 0.01
-
-#: functions an expression in ``derived`` may call (numpy ufuncs only)
-_FUNCTIONS = {
-    "abs",
-    "sqrt",
-    "exp",
-    "expm1",
-    "log",
-    "log1p",
-    "log10",
-    "sin",
-    "cos",
-    "tan",
-    "arcsin",
-    "arccos",
-    "arctan",
-    "arctan2",
-    "sinh",
-    "cosh",
-    "tanh",
-    "arcsinh",
-    "arccosh",
-    "arctanh",
-}
-_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z_0-9]*")
 
 
 @dataclass
@@ -166,11 +141,11 @@ class MeasuredData:
             )
         frame = _to_numeric(frame, source)
         _check_finite(frame, source)
-        if derived:
-            frame = _derive(frame, derived, source)
-            _check_finite(frame[list(derived)], source)
         time = frame[time_column].to_numpy(dtype=np.float64)
         dt = _check_time(time, time_column, source)
+        if derived:
+            frame = _derive(frame, derived, source, dt)
+            _check_finite(frame[list(derived)], source)
         if sample_time is not None and not np.isclose(
             dt, sample_time, rtol=JITTER_TOLERANCE, atol=0.0
         ):
@@ -218,35 +193,15 @@ def _check_finite(frame: pd.DataFrame, source: str) -> None:
         raise DataError(f"{source}: column {frame.columns[col]!r} is {what} in row {row + 1}")
 
 
-def _derive(frame: pd.DataFrame, derived: Mapping[str, str], source: str) -> pd.DataFrame:
-    import pandas as pd
-
+def _derive(
+    frame: pd.DataFrame, derived: Mapping[str, str], source: str, sample_time: float
+) -> pd.DataFrame:
     frame = frame.copy()
     for name, expression in derived.items():
-        columns = list(frame.columns)
-        for token in _NAME_RE.findall(expression):
-            if token not in frame.columns and token not in _FUNCTIONS:
-                raise DataError(
-                    f"{source}: derived channel {name!r} = {expression!r} uses unknown name "
-                    f"{token!r}; columns are {', '.join(columns)} (functions: "
-                    f"{', '.join(sorted(_FUNCTIONS))})"
-                )
-        resolvers = ({c: frame[c] for c in columns},)
-        try:
-            value = pd.eval(
-                expression,
-                local_dict={},
-                global_dict={},
-                resolvers=resolvers,
-                engine="python",
-                parser="pandas",
-            )
-        except Exception as exc:  # pandas raises SyntaxError, ValueError, TypeError, ...
-            raise DataError(
-                f"{source}: cannot evaluate derived channel {name!r} = {expression!r}: {exc}"
-            ) from exc
-        array = np.broadcast_to(np.asarray(value, dtype=np.float64), (len(frame),))
-        frame[name] = array.copy()
+        columns = {str(c): frame[c].to_numpy(dtype=np.float64) for c in frame.columns}
+        frame[name] = evaluate(
+            expression, columns, sample_time=sample_time, channel=name, source=source
+        )
     return frame
 
 
