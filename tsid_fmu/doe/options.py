@@ -40,6 +40,14 @@ class LevelingOptions:
     log_ratio : float
         Ratio max/min from which ``auto`` uses logarithmic spacing. Default 10 (a range
         spanning a decade or more).
+    stall : int
+        Case 3 also holds when every S/N has been flat for this many iterations in a row
+        while the best cost fell by less than ``stall_rtol``: the levels then sit in a
+        valley the data hardly determine, and narrowing it further changes nothing the
+        data can tell. 0 turns the rule off. Default 2.
+    stall_rtol : float
+        Relative fall of the best cost below which an iteration counts as not improving.
+        Default 1e-4.
     expand : float
         Factor applied to the half-width when a range moves because its best is on the
         boundary (Case 1, shift): the new range is centred on that boundary level. 1
@@ -63,6 +71,8 @@ class LevelingOptions:
     log_ratio: float = 10.0
     min_contribution: float = 0.0
     expand: float = 1.0
+    stall: int = 2
+    stall_rtol: float = 1e-4
 
     def __post_init__(self) -> None:
         checks = [
@@ -91,6 +101,14 @@ class LevelingOptions:
             (
                 math.isfinite(self.expand) and self.expand > 0,
                 f"expand must be > 0, got {self.expand}",
+            ),
+            (
+                isinstance(self.stall, int) and not isinstance(self.stall, bool) and self.stall >= 0,
+                f"stall must be an integer >= 0, got {self.stall!r}",
+            ),
+            (
+                math.isfinite(self.stall_rtol) and self.stall_rtol >= 0,
+                f"stall_rtol must be a finite number >= 0, got {self.stall_rtol}",
             ),
             (
                 0 <= self.min_contribution < 100,

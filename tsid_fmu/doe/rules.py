@@ -212,7 +212,11 @@ def decide_factor(
     delta = float(sn_finite.max() - sn_finite.min()) if sn_finite.size else 0.0
     if centre is not None:
         optimum_u, source = float(centre[0]), centre[1]
-    interior = u[0] < optimum_u < u[-1] if centre is not None else 0 < best < len(u) - 1
+    # a run-based centre that is a boundary level up to rounding (it may have gone through
+    # the search coordinates and back) counts as on the boundary
+    eps = 1e-9 * float(u[-1] - u[0])
+    inside = u[0] + eps < optimum_u < u[-1] - eps
+    interior = inside if centre is not None else 0 < best < len(u) - 1
     if not interior:
         optimum_u = min(max(optimum_u, u[0]), u[-1]) if centre is None else optimum_u
     side = "" if interior else ("upper" if optimum_u >= u[-1] else "lower")

@@ -1,0 +1,169 @@
+"""The outcome of an identification, in the style of :class:`scipy.optimize.OptimizeResult`.
+
+The schema is the same for every kind of study (one Taguchi stage, phases, with or
+without refinement): ``x``, ``fun`` (always the study's cost on the measured inputs of
+its identification experiments), ``nfev``, ``success``, ``status``, ``message``, the
+``stages`` in order, and the ``intervals``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from tsid_fmu.search.record import IterationRecord, json_float
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.study.definition import Study
+from tsid_fmu.uncertainty.intervals import Uncertainty
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = ["STATUS", "IdentificationResult"]
+
+STATUS = {0: "converged", 1: "stopped at a limit", 2: "paused for review"}
+"""Meaning of :attr:`IdentificationResult.status`."""
+
+
+@dataclass
+class IdentificationResult:
+    """What an identification found, and the evidence for it.
+
+    Attributes
+    ----------
+    x : dict
+        Identified value of each parameter.
+    fun : float
+        The study's cost of ``x`` on the measured inputs of the identification
+        experiments (the one objective every stage minimised).
+    nfev : int
+        Simulations used by the stages (the side-by-side comparison and plots not
+        counted).
+    success : bool
+        True if the last stage converged.
+    status : int
+        0 converged, 1 stopped at a limit with a valid result, 2 paused for review.
+    message : str
+        Why the study stopped.
+    nit : int
+        Taguchi iterations (orthogonal arrays) run, over all stages.
+    stages : list of StageResult
+        The stages in order, each with its own answer, cost, simulations and message.
+    intervals : dict
+        95 % interval ``[low, high]`` per parameter (``None``: not determined).
+    uncertainty : Uncertainty or None
+        Standard errors, correlations, determined combinations.
+    fit : dict
+        Cost kinds and fit percentage per experiment and output at ``x``.
+    noise : dict
+        Noise level of each experiment's measured outputs, estimated from the data.
+    validation : dict
+        Cost and fit of the validation experiments at ``x`` (MISO superposition check).
+    contribution : dict
+        ANOVA percent contribution of each parameter per axis-aligned iteration.
+    weak : dict
+        Parameters the data determine poorly, with the reason.
+    warnings : list of str
+        Things a person should know (mismatch, limits, failed runs).
+    extra : dict
+        Stage-specific analyses (contribution tables, the ungrouped comparison).
+    study : Study or None
+        The study identified.
+    out_dir : Path or None
+        Where the trail and report were written.
+    """
+
+    x: dict[str, float]
+    fun: float
+    nfev: int
+    success: bool
+    status: int
+    message: str
+    nit: int = 0
+    stages: list[StageResult] = field(default_factory=list)
+    intervals: dict[str, list[float | None]] = field(default_factory=dict)
+    uncertainty: Uncertainty | None = None
+    fit: dict[str, Any] = field(default_factory=dict)
+    noise: dict[str, dict[str, float]] = field(default_factory=dict)
+    validation: dict[str, Any] = field(default_factory=dict)
+    contribution: dict[str, list[float]] = field(default_factory=dict)
+    weak: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    extra: dict[str, Any] = field(default_factory=dict)
+    study: Study | None = None
+    out_dir: Path | None = None
+
+    @property
+    def iterations(self) -> list[IterationRecord]:
+        """Every Taguchi iteration of every stage, in order."""
+        return [rec for st in self.stages for rec in st.records]
+
+    def __repr__(self) -> str:
+        keys = ["message", "success", "status", "fun", "x", "nfev", "nit", "intervals"]
+        width = max(map(len, keys))
+        return "\n".join(f"{k.rjust(width)}: {getattr(self, k)!r}" for k in keys)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the result as strict-JSON data (the content of ``result.json``)."""
+
+        def clean(v: Any) -> Any:
+            if isinstance(v, float):
+                return json_float(v)
+            if isinstance(v, dict):
+                return {str(k): clean(w) for k, w in v.items()}
+            if isinstance(v, list | tuple):
+                return [clean(w) for w in v]
+            return v
+
+        return clean(
+            {
+                "x": self.x, "fun": self.fun, "nfev": self.nfev, "success": self.success,
+                "status": self.status, "message": self.message, "nit": self.nit,
+                "stages": [s.to_dict() for s in self.stages], "intervals": self.intervals,
+                "uncertainty": self.uncertainty.to_dict() if self.uncertainty else None,
+                "fit": self.fit, "noise": self.noise, "validation": self.validation,
+                "weak": self.weak, "warnings": self.warnings,
+            }
+        )  # fmt: skip
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Return every run of every Taguchi iteration as one DataFrame."""
+        import pandas as pd
+
+        frames = [rec.runs_frame() for rec in self.iterations]
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+    def stages_frame(self) -> pd.DataFrame:
+        """Return one row per stage: kind, cost, simulations, what it contributed."""
+        import pandas as pd
+
+        rows, before = [], math.inf
+        for s in self.stages:
+            gain = (before - s.cost) / before if math.isfinite(before) and before else math.nan
+            rows.append({"stage": s.name, "kind": s.kind, "cost": s.cost, "simulations": s.nfev,
+                         "cost fall [%]": 100 * gain, "message": s.message})  # fmt: skip
+            before = s.cost if s.kind != "contribution" else before
+        return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
+
+    def parameters_frame(self) -> pd.DataFrame:
+        """Return the identified parameters with units, intervals, ranges and flags."""
+        import pandas as pd
+
+        rows = []
+        params = self.study.parameters if self.study else []
+        for p in params:
+            low, high = self.intervals.get(p.name, [None, None])
+            se = self.uncertainty.relative.get(p.name, math.nan) if self.uncertainty else math.nan
+            rows.append(
+                {
+                    "parameter": p.name, "value": self.x[p.name], "unit": p.unit,
+                    "95% low": math.nan if low is None else low,
+                    "95% high": math.nan if high is None else high,
+                    "std error [%]": se,
+                    "first levels": f"{min(p.levels):.6g} .. {max(p.levels):.6g}",
+                    "weakly determined": self.weak.get(p.name, ""),
+                }
+            )  # fmt: skip
+        return pd.DataFrame(rows).set_index("parameter") if rows else pd.DataFrame()

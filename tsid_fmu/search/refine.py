@@ -1,0 +1,146 @@
+"""The optional refinement stage: a local least-squares polish of the same cost.
+
+Not a Taguchi iteration, and named for what it is: SciPy's trust-region reflective
+least squares (:func:`scipy.optimize.least_squares`, ``method="trf"``) on the residual
+signals whose sum of squares *is* the study's ``sse`` cost, started from the Taguchi
+stage's answer, within the parameters' bounds, in the same search coordinates
+(:mod:`tsid_fmu.search.space`). Its Jacobians are forward differences whose ``p``
+simulations go to the evaluator as one batch, so they run in parallel. It stops at
+SciPy's tolerances or at ``refine_max_nfev`` simulations, and its answer is the best set
+it evaluated, so it never ends worse than it started.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.iteration import ProgressCallback
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.study.schema import Method
+
+__all__ = ["FD_STEP", "refine_stage"]
+
+FD_STEP = 1e-3
+"""Forward-difference step in search coordinates (0.1 % of a first range's width)."""
+
+_FAILED = 1e10
+"""Residual value given to every sample of a failed simulation (its cost is then huge)."""
+
+
+class _Budget(Exception):
+    """The refinement ran out of simulations."""
+
+
+class _Problem:
+    """Residuals and Jacobians of the cost in search coordinates, counting simulations."""
+
+    def __init__(self, space: Space, evaluator: Evaluator, limit: int, fixed: Mapping[str, float]):
+        self.space, self.evaluator, self.limit = space, evaluator, limit
+        self.fixed = dict(fixed)
+        self.start = evaluator.nfev
+        self.best: tuple[float, dict[str, float]] = (math.inf, {})
+        self.last: tuple[np.ndarray, np.ndarray] | None = None
+        self.calls = 0
+        self.size = 0
+
+    def _residuals(self, sets: list[dict[str, float]]) -> list[np.ndarray]:
+        if self.evaluator.nfev - self.start >= self.limit:
+            raise _Budget
+        ev = self.evaluator.evaluate(sets)
+        out = []
+        for x, cost, r in zip(sets, ev.costs[:, 0], ev.residuals or [None] * len(sets),
+                              strict=True):  # fmt: skip
+            if r is None or not np.isfinite(cost):
+                r = np.full(self.size or 1, _FAILED)
+            self.size = self.size or r.size
+            if cost < self.best[0]:
+                self.best = (float(cost), dict(x))
+            out.append(r)
+        return out
+
+    def fun(self, s: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        r = self._residuals([self.space.to_x(s)])[0]
+        self.last = (s.copy(), r)
+        return r
+
+    def jac(self, s: np.ndarray) -> np.ndarray:
+        if self.last is None or not np.array_equal(self.last[0], s):
+            self.fun(s)
+        assert self.last is not None
+        r0 = self.last[1]
+        steps = np.where(s + FD_STEP <= self.space.s_upper, FD_STEP, -FD_STEP)
+        trial = [s + steps[j] * np.eye(len(s))[j] for j in range(len(s))]
+        cols = self._residuals([self.space.to_x(t) for t in trial])
+        return np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
+
+
+def refine_stage(
+    name: str,
+    space: Space,
+    start: Mapping[str, float],
+    start_cost: float,
+    evaluator: Evaluator,
+    method: Method,
+    fixed: Mapping[str, float] | None = None,
+    progress: ProgressCallback | None = None,
+) -> StageResult:
+    """Polish ``start`` by trust-region least squares on the same cost (``sse``).
+
+    Parameters
+    ----------
+    name : str
+        Stage name.
+    space : Space
+        Search coordinates and bounds of the varied parameters.
+    start : mapping
+        Starting parameter set (the previous stage's answer, varied parameters).
+    start_cost : float
+        Its cost; the stage's answer is never worse.
+    evaluator : Evaluator
+        Scores parameter sets (its residuals are the least-squares residuals).
+    method : Method
+        ``refine_max_nfev`` bounds the simulations.
+    fixed : mapping, optional
+        Parameters not varied, merged into the answer.
+    progress : callable, optional
+        Receives ``("refinement", {...})`` when the stage starts and ends.
+
+    Returns
+    -------
+    StageResult
+    """
+    from scipy.optimize import least_squares
+
+    problem = _Problem(space, evaluator, method.refine_max_nfev, fixed or {})
+    problem.best = (float(start_cost), {n: float(start[n]) for n in space.names})
+    s0 = space.to_s(start)
+    width = space.s_upper - space.s_lower
+    s0 = np.clip(s0, space.s_lower + 1e-9 * np.minimum(width, 1.0),
+                 space.s_upper - 1e-9 * np.minimum(width, 1.0))  # fmt: skip
+    if progress:
+        progress("refinement", {"stage": name, "cost": start_cost})
+    extra: dict[str, Any] = {"method": "scipy.optimize.least_squares(method='trf')"}
+    try:
+        out = least_squares(problem.fun, s0, jac=problem.jac,
+                            bounds=(space.s_lower, space.s_upper), method="trf",
+                            ftol=1e-8, xtol=1e-8, gtol=1e-8, max_nfev=10_000)  # fmt: skip
+        status, message = 0, f"least squares: {out.message}"
+        extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
+    except _Budget:
+        status = 1
+        message = f"simulation limit ({method.refine_max_nfev}) of the refinement reached"
+    cost, x = problem.best
+    nfev = evaluator.nfev - problem.start
+    if progress:
+        progress("refinement done", {"stage": name, "cost": cost, "nfev": nfev})
+    return StageResult(
+        name=name, kind="refinement", x={**(fixed or {}), **x}, cost=cost, nfev=nfev,
+        message=message, status=status, extra=extra,
+    )  # fmt: skip

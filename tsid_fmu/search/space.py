@@ -1,0 +1,107 @@
+"""The coordinates the search works in.
+
+Each parameter is mapped to a dimensionless coordinate ``s``: its value ``u`` in the
+working domain (``log10`` of the value when its first levels are positive and span a
+decade or more, as :func:`tsid_fmu.doe.leveling.use_log_scale` decides; the value
+itself otherwise), minus the middle of its first levels' range, divided by that
+range's width. So every parameter's first levels span one unit of ``s``, and a step in
+``s`` means the same fraction of the user's rough range for every parameter, however
+different their units and magnitudes (the MISO paper's "quite different
+value-ranges"). Rotated factors (:mod:`tsid_fmu.search.frame`) are directions in ``s``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from tsid_fmu.doe.leveling import use_log_scale
+from tsid_fmu.doe.options import LevelingOptions
+
+__all__ = ["Space"]
+
+
+class Space:
+    """Map parameter values to search coordinates and back.
+
+    Parameters
+    ----------
+    levels : mapping of str to sequence of float
+        First levels of each parameter (their range sets the scale).
+    bounds : mapping of str to (float, float)
+        Physical bounds of each parameter.
+    options : LevelingOptions
+        Decides log or linear working domain per parameter.
+    """
+
+    def __init__(
+        self,
+        levels: Mapping[str, Sequence[float]],
+        bounds: Mapping[str, tuple[float, float]],
+        options: LevelingOptions,
+    ) -> None:
+        self.names = tuple(levels)
+        self.log = np.array([use_log_scale(levels[n], options) for n in self.names])
+        u = [np.log10(levels[n]) if lg else np.asarray(levels[n], float)
+             for n, lg in zip(self.names, self.log, strict=True)]  # fmt: skip
+        self.origin = np.array([0.5 * (v.max() + v.min()) for v in u])
+        self.width = np.array([max(v.max() - v.min(), 1e-300) for v in u])
+        self.bounds = {n: tuple(map(float, bounds[n])) for n in self.names}
+        lo, hi = [], []
+        for n, lg in zip(self.names, self.log, strict=True):
+            bmin, bmax = self.bounds[n]
+            if lg:
+                lo.append(math.log10(bmin) if bmin > 0 else -math.inf)
+                hi.append(math.log10(bmax) if bmax > 0 else -math.inf)
+            else:
+                lo.append(bmin)
+                hi.append(bmax)
+        self.s_lower = (np.array(lo) - self.origin) / self.width
+        self.s_upper = (np.array(hi) - self.origin) / self.width
+
+    @property
+    def dim(self) -> int:
+        """Number of parameters."""
+        return len(self.names)
+
+    def to_s(self, x: Mapping[str, float]) -> np.ndarray:
+        """Return the coordinates of a parameter set (values at or below 0 of a log
+        parameter map to the lower end of the bounds).
+        """
+        return np.array([self.coordinate(j, x[n]) for j, n in enumerate(self.names)])
+
+    def coordinate(self, j: int, value: float) -> float:
+        """Return parameter ``j``'s coordinate at ``value``."""
+        v = float(value)
+        if self.log[j]:
+            u = math.log10(v) if v > 0 else self.origin[j] + self.s_lower[j] * self.width[j]
+        else:
+            u = v
+        return float((u - self.origin[j]) / self.width[j])
+
+    def value(self, j: int, s: float) -> float:
+        """Return parameter ``j``'s value at coordinate ``s``, clipped to its bounds."""
+        u = self.origin[j] + s * self.width[j]
+        v = 10.0**u if self.log[j] else u
+        bmin, bmax = self.bounds[self.names[j]]
+        return float(min(max(v, bmin), bmax))
+
+    def to_x(self, s: np.ndarray) -> dict[str, float]:
+        """Return the parameter set at coordinates ``s`` (clipped to the bounds)."""
+        return {n: self.value(j, float(s[j])) for j, n in enumerate(self.names)}
+
+    def clip(self, s: np.ndarray) -> np.ndarray:
+        """Return ``s`` clipped to the bounds."""
+        return np.clip(s, self.s_lower, self.s_upper)
+
+    def u_direction(self, d: np.ndarray) -> np.ndarray:
+        """Return a direction in ``s`` as a unit vector of working-domain changes."""
+        v = np.asarray(d) * self.width
+        norm = np.linalg.norm(v)
+        return v / norm if norm > 0 else v
+
+    def label(self, j: int) -> str:
+        """Name of parameter ``j``'s working-domain coordinate (``lg K_s`` or ``M_m``)."""
+        return f"lg {self.names[j]}" if self.log[j] else self.names[j]

@@ -1,0 +1,89 @@
+"""A study is a sequence of named stages; each records its own answer."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from tsid_fmu.search.record import IterationRecord, json_float, unjson_float
+
+__all__ = ["KINDS", "StageResult"]
+
+KINDS = ("taguchi", "refinement", "phase", "contribution")
+"""Kinds of stage: the papers' Taguchi procedure; an optional local least-squares polish;
+a phase of a phased (MISO) study, itself a Taguchi procedure on a parameter group; the
+MISO paper's one-at-a-time contribution runs."""
+
+
+@dataclass
+class StageResult:
+    """What one stage did.
+
+    Attributes
+    ----------
+    name : str
+        ``"taguchi"``, ``"refinement"``, ``"phase 1: m1, K_s"``, ...
+    kind : str
+        One of :data:`KINDS`.
+    x : dict
+        The stage's answer (the best parameter set it saw, including the parameters it
+        did not vary).
+    cost : float
+        The study's cost of ``x`` on the measured inputs of the stage's experiments.
+    nfev : int
+        Simulations the stage ran.
+    message : str
+        Why it stopped.
+    status : int
+        0 converged, 1 stopped at a limit, 2 paused for review.
+    records : list of IterationRecord
+        Its Taguchi iterations (empty for a refinement).
+    experiments : list of str
+        The experiments the stage fitted.
+    extra : dict
+        Stage-specific details (the refinement's iterations, a phase's parameters).
+    """
+
+    name: str
+    kind: str
+    x: dict[str, float]
+    cost: float
+    nfev: int
+    message: str
+    status: int = 0
+    records: list[IterationRecord] = field(default_factory=list)
+    experiments: list[str] = field(default_factory=list)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def converged(self) -> bool:
+        """True if the stage stopped because it converged."""
+        return self.status == 0
+
+    def to_dict(self) -> dict[str, Any]:
+        """The summary written into ``result.json`` (``records`` are kept apart)."""
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "x": dict(self.x),
+            "cost": json_float(self.cost),
+            "nfev": self.nfev,
+            "message": self.message,
+            "status": self.status,
+            "iterations": len(self.records),
+            "experiments": list(self.experiments),
+            "extra": self.extra,
+        }
+
+    @classmethod
+    def from_dict(
+        cls, d: Mapping[str, Any], records: list[IterationRecord] | None = None
+    ) -> StageResult:
+        """Re-create a stage written by :meth:`to_dict`, with its records."""
+        return cls(
+            name=str(d["name"]), kind=str(d["kind"]), x={k: float(v) for k, v in d["x"].items()},
+            cost=unjson_float(d["cost"]), nfev=int(d["nfev"]), message=str(d["message"]),
+            status=int(d.get("status", 0)), records=list(records or []),
+            experiments=list(d.get("experiments", [])), extra=dict(d.get("extra", {})),
+        )  # fmt: skip

@@ -1,0 +1,217 @@
+"""The Taguchi stage: iterations until the levels converge (Case 3) or a limit is reached.
+
+Each iteration is :func:`tsid_fmu.search.iteration.run_iteration`. Between iterations
+the stage applies the MISO paper's lesson: when continuing from the best choice has not
+lowered the cost for ``RERUN_AFTER`` iterations, the search is re-conducted from the
+next-best run of the iteration that made that choice (the paper continued from its run
+7, then went back to run 4). The answer is the best parameter set seen, so it is never
+worse than any run evaluated.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.frame import Frame
+from tsid_fmu.search.iteration import Best, ProgressCallback, run_iteration
+from tsid_fmu.search.nextlevels import next_frame
+from tsid_fmu.search.record import IterationRecord
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.study.schema import Method
+
+__all__ = ["RERUN_AFTER", "Recorder", "TaguchiRun", "taguchi_stage"]
+
+RERUN_AFTER = 2
+"""Iterations without a lower cost after which the next-best run is re-conducted."""
+
+
+class Recorder(Protocol):
+    """Receives each finished iteration (the audit trail writes it to disk)."""
+
+    def iteration(self, record: IterationRecord) -> None: ...
+
+
+@dataclass
+class TaguchiRun:
+    """How to run (or continue) one Taguchi stage."""
+
+    name: str
+    space: Space
+    first: Frame
+    method: Method
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    prior: list[IterationRecord] = field(default_factory=list)
+    override: Frame | None = None
+    override_note: str | None = None
+    nfev_before: int = 0
+    max_iterations: int | None = None
+    pause_after: int | None = None
+    experiments: list[str] = field(default_factory=list)
+
+
+def _next_best(
+    records: list[IterationRecord], run: TaguchiRun
+) -> tuple[IterationRecord, int] | None:
+    """The run to re-conduct from when the last iterations did not lower the cost."""
+    if len(records) < RERUN_AFTER + 1:
+        return None
+    last, src = records[-1], records[-1 - RERUN_AFTER]
+    if last.best_cost < src.best_cost or last.decision.converged:
+        return None
+    if any("rerun" in r.extra for r in records[-RERUN_AFTER:]):
+        return None  # give a re-run its own iterations before judging it
+    wide = 10 * run.method.leveling.tolerance
+    if all(v <= wide for v in last.next_frame.spans(run.space).values()):
+        return None  # near convergence a flat iteration is expected, not a wrong turn
+    tried = {tuple(r.extra["rerun_from"]) for r in records if "rerun_from" in r.extra}
+    costs = src.measured_costs
+    for i in [int(i) for i in np.argsort(costs, kind="stable")][1:]:
+        if np.isfinite(costs[i]) and (src.index, i) not in tried:
+            return src, i
+    return None
+
+
+def frame_from_run(record: IterationRecord, run: int, space: Space, method: Method) -> Frame:
+    """The next frame of ``record`` centred on its run ``run`` (0-based) instead."""
+    x = {n: float(v) for n, v in zip(record.parameters, record.sets[run], strict=True)}
+    label = f"iteration {record.index}, run {run + 1}"
+    _, frame = next_frame(record.frame, space, record.sn_means(), (x, label), method.leveling,
+                          record.anova.contribution, None)  # fmt: skip
+    return frame
+
+
+def _decide_rerun(
+    records: list[IterationRecord], run: TaguchiRun, reruns: int, progress: ProgressCallback | None
+) -> tuple[Frame, str, list[int]] | None:
+    if records[-1].decision.converged or reruns >= run.method.max_reruns:
+        return None
+    alt = _next_best(records, run)
+    if alt is None:
+        return None
+    src, i = alt
+    frame = frame_from_run(src, i, run.space, run.method)
+    note = (
+        f"iteration {records[-1].index} did not lower the cost ({records[-1].best_cost:.6g}); "
+        f"re-conducted from iteration {src.index}, run {i + 1} (next best)"
+    )
+    if progress:
+        progress("rerun", {"message": note})
+    return frame, note, [src.index, i]
+
+
+def _stalled(records: list[IterationRecord], method: Method) -> str | None:
+    """Case 3 by stalling: every S/N flat for ``stall`` iterations without a better cost."""
+    n = method.leveling.stall
+    if n == 0 or len(records) < n + 1:
+        return None
+    recent = records[-n:]
+    if not all(all(d.delta_db < method.leveling.significance_db for d in r.decision.parameters)
+               for r in recent):  # fmt: skip
+        return None
+    before = records[-n - 1].best_cost
+    if before - recent[-1].best_cost > method.leveling.stall_rtol * abs(before):
+        return None
+    return (
+        f"Case 3: every S/N flat for {n} iterations and the best cost fell by less than "
+        f"{method.leveling.stall_rtol:g} of itself: the remaining ranges are what the data "
+        "hardly determine"
+    )
+
+
+def _limits(run: TaguchiRun, index: int, nfev: int, ran: int) -> tuple[int, str] | None:
+    """Whether the stage must stop before iteration ``index`` (status, message)."""
+    limit = run.max_iterations or run.method.max_iterations
+    if index > limit:
+        return 1, f"iteration limit ({limit}) reached before the levels converged"
+    budget = run.method.max_simulations
+    if budget is not None and nfev - run.nfev_before >= budget:
+        return 1, f"simulation limit ({budget}) reached before the levels converged"
+    if run.pause_after is not None and ran >= run.pause_after:
+        return 2, f"paused after iteration {index - 1}: review the proposed levels and resume"
+    return None
+
+
+def taguchi_stage(
+    run: TaguchiRun,
+    evaluator: Evaluator,
+    recorder: Recorder | None = None,
+    progress: ProgressCallback | None = None,
+) -> StageResult:
+    """Run (or continue) a Taguchi stage; see the module docstring."""
+    records = list(run.prior)
+    frame, pending = run.first, None
+    if records:
+        last = records[-1]
+        frame = run.override or last.next_frame
+        if run.override is not None:
+            pending = (run.override_note or "levels edited by a person", None)
+        elif "next" in last.extra:
+            frame = Frame.from_dict(last.extra["next"]["frame"])
+            pending = (last.extra["next"]["note"], last.extra["next"]["from"])
+    best = (
+        Best(records[-1].best_x, records[-1].best_cost, records[-1].best_source)
+        if records
+        else None
+    )
+    nfev = records[-1].nfev_total if records else run.nfev_before
+    reruns = sum("rerun_from" in r.extra for r in records)
+    status, message, ran = 1, "", 0
+    if records and records[-1].decision.converged and pending is None:
+        return _result(run, records, best, nfev, 0, records[-1].decision.message)
+    while True:
+        stop = _limits(run, len(records) + 1, nfev, ran)
+        if stop:
+            status, message = stop
+            break
+        index = len(records) + 1
+        if progress:
+            progress("iteration", {"stage": run.name, "iteration": index, "frame": frame})
+        rec = run_iteration(index, run.name, frame, run.space, evaluator, run.method, best, nfev,
+                            progress)  # fmt: skip
+        if pending is not None:
+            rec.extra["rerun"] = pending[0]
+            if pending[1] is not None:
+                rec.extra["rerun_from"] = list(pending[1])
+            pending = None
+        records.append(rec)
+        best, nfev, ran = Best(rec.best_x, rec.best_cost, rec.best_source), rec.nfev_total, ran + 1
+        frame = rec.next_frame
+        stalled = None if rec.decision.converged else _stalled(records, run.method)
+        if stalled:
+            rec.decision.converged, rec.decision.message = True, stalled
+        alt = _decide_rerun(records, run, reruns, progress)
+        if alt is not None:
+            frame, note, origin = alt
+            reruns += 1
+            rec.extra["next"] = {"frame": frame.to_dict(), "note": note, "from": origin}
+            pending = (note, origin)
+        if recorder is not None:
+            recorder.iteration(rec)
+        if progress:
+            progress("iteration done", {"record": rec})
+        if rec.decision.converged:
+            status, message = 0, rec.decision.message
+            break
+    return _result(run, records, best, nfev, status, message)
+
+
+def _result(
+    run: TaguchiRun,
+    records: list[IterationRecord],
+    best: Best | None,
+    nfev: int,
+    status: int,
+    message: str,
+) -> StageResult:
+    x = {**run.fixed, **(best.x if best else {})}
+    return StageResult(
+        name=run.name, kind="taguchi", x=x, cost=best.cost if best else float("inf"),
+        nfev=nfev - run.nfev_before, message=message, status=status, records=records,
+        experiments=list(run.experiments),
+    )  # fmt: skip

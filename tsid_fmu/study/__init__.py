@@ -1,0 +1,30 @@
+"""Studies: what to identify, from which data, with which method; and their preparation.
+
+* :class:`Study` with its parts :class:`Parameter`, :class:`Experiment`,
+  :class:`Method`, :class:`Phase` and :class:`ContributionOptions`;
+* :meth:`Study.from_toml` / :meth:`Study.to_toml` (:mod:`tsid_fmu.study.toml`);
+* :func:`prepare`: the loaded, weighted experiments an evaluator needs.
+"""
+
+from tsid_fmu.study.definition import Study
+from tsid_fmu.study.prepare import load_experiment, prepare
+from tsid_fmu.study.schema import (
+    MAX_REPLICATES,
+    ContributionOptions,
+    Experiment,
+    Method,
+    Parameter,
+    Phase,
+)
+
+__all__ = [
+    "MAX_REPLICATES",
+    "ContributionOptions",
+    "Experiment",
+    "Method",
+    "Parameter",
+    "Phase",
+    "Study",
+    "load_experiment",
+    "prepare",
+]

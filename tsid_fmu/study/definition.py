@@ -1,0 +1,185 @@
+"""What a study is: the FMU, the parameters, the experiments and the method.
+
+Scripts and notebooks build a :class:`Study` directly; :meth:`Study.from_toml` reads
+one from a TOML file such as::
+
+    [study]
+    name = "LSEA SISO"
+    fmu = "../../fmus/LSEA_SISO.fmu"          # relative to the study file
+    start_values = { V_z = 0.001 }             # fixed FMU parameters
+
+    [data]                                     # or several [[experiments]]
+    file = "measured.csv"
+    derived = { F_o = "F_of - F_or" }          # channels computed from columns
+    inputs = { F_m = "F_m" }                   # FMU input = data column
+    outputs = { F_o = "F_o", x_m = "x_m" }     # FMU variable = data column
+
+    [method]
+    array = "L25"
+    cost = "sse"
+
+    [parameters]
+    F_cm = { levels = [10, 50, 80, 100, 110], min = 0, unit = "N" }
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.doe.arrays import select_array
+from tsid_fmu.errors import ArrayError, StudyError
+from tsid_fmu.study.schema import (
+    ContributionOptions,
+    Experiment,
+    Method,
+    Parameter,
+    Phase,
+    check_choice,
+    check_number,
+)
+from tsid_fmu.study.toml import read_study_file, write_study_file
+
+__all__ = ["Study", "fields_of"]
+
+
+def fields_of(study: Study) -> dict[str, Any]:
+    """Return the study's fields as keyword arguments of :class:`Study`."""
+    return {f.name: getattr(study, f.name) for f in dataclasses.fields(study)}
+
+
+@dataclass
+class Study:
+    """Everything an identification needs.
+
+    Parameters
+    ----------
+    fmu : str or Path
+        The FMU file.
+    parameters : list of Parameter
+        Parameters to identify.
+    experiments : list of Experiment
+        Measured experiments (one for a SISO study).
+    method : Method
+        Cost, arrays, replicates, stages and limits.
+    start_values : mapping of str to float
+        FMU values fixed for every run (not identified).
+    interface : {"auto", "cs", "me"}
+        FMI interface to simulate with.
+    step_size : float, optional
+        Communication step; default the data's sample time.
+    name : str
+        Label for reports.
+    source : Path, optional
+        The study file this came from (errors and reports name it).
+    phases : list of Phase
+        Explicit phases (parameter groups identified in turn; MISO paper).
+    contribution : ContributionOptions
+        Plan the phases from the MISO paper's contribution analyses.
+    """
+
+    fmu: Path
+    parameters: list[Parameter]
+    experiments: list[Experiment]
+    method: Method = field(default_factory=Method)
+    start_values: dict[str, float] = field(default_factory=dict)
+    interface: str = "auto"
+    step_size: float | None = None
+    name: str = "study"
+    source: Path | None = None
+    phases: list[Phase] = field(default_factory=list)
+    contribution: ContributionOptions = field(default_factory=ContributionOptions)
+
+    def __post_init__(self) -> None:
+        where = f"{self.source}: " if self.source else ""
+        try:
+            self._check()
+        except ArrayError as exc:
+            raise ArrayError(f"{where}[method] array: {exc}") from None
+        except StudyError as exc:
+            msg = str(exc)
+            raise StudyError(msg if msg.startswith(where) else f"{where}{msg}") from None
+
+    def _check(self) -> None:
+        self.fmu = Path(self.fmu)
+        if not self.parameters:
+            raise StudyError("no parameters to identify")
+        names = self.parameter_names
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise StudyError(f"parameter(s) listed twice: {', '.join(dupes)}")
+        if not self.experiments:
+            raise StudyError("no experiment (data) given")
+        exp_names = [e.name for e in self.experiments]
+        dupes = sorted({n for n in exp_names if exp_names.count(n) > 1})
+        if dupes:
+            raise StudyError(f"experiment name(s) used twice: {', '.join(dupes)}")
+        if not any(e.role == "identify" for e in self.experiments):
+            raise StudyError("no experiment has role 'identify'")
+        if not isinstance(self.method, Method):
+            raise StudyError(f"method must be a Method, got {type(self.method).__name__}")
+        self.start_values = {
+            k: check_number(v, f"[study] start value {k}") for k, v in self.start_values.items()
+        }
+        self.interface = check_choice(self.interface, "interface", ("auto", "cs", "me"))
+        if self.step_size is not None:
+            self.step_size = check_number(self.step_size, "[study] step_size")
+            if self.step_size < 1e-9:
+                raise StudyError(f"[study] step_size must be at least 1e-9 s, got {self.step_size}")
+        clash = sorted(set(names) & set(self.start_values))
+        if clash:
+            raise StudyError(f"{', '.join(clash)} both identified and fixed in start_values")
+        self._check_phases(names, exp_names)
+        select_array([len(p.levels) for p in self.parameters], name=self.method.array)
+
+    def _check_phases(self, names: list[str], exp_names: list[str]) -> None:
+        for i, ph in enumerate(self.phases):
+            ph.name = ph.name or f"phase {i + 1}"
+            unknown = sorted(set(ph.parameters) - set(names))
+            if unknown or not ph.parameters:
+                raise StudyError(
+                    f"{ph.name}: parameters {unknown or '[]'} are not study parameters"
+                )
+            bad = sorted(set(ph.experiments) - set(exp_names))
+            if bad:
+                raise StudyError(f"{ph.name}: unknown experiments {bad}; have {exp_names}")
+        unknown_values = sorted(set(self.contribution.values) - set(names))
+        if unknown_values:
+            raise StudyError(f"[contribution] values for unknown {unknown_values}")
+
+    @property
+    def parameter_names(self) -> list[str]:
+        """Names of the identified parameters, in study order."""
+        return [p.name for p in self.parameters]
+
+    def first_levels(self) -> dict[str, list[float]]:
+        """Levels of the first iteration by parameter name."""
+        return {p.name: list(p.levels) for p in self.parameters}
+
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        """Physical bounds by parameter name."""
+        return {p.name: p.bounds for p in self.parameters}
+
+    def identify_experiments(self) -> list[Experiment]:
+        """The experiments that are fitted (role ``identify``)."""
+        return [e for e in self.experiments if e.role == "identify"]
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Study:
+        """Read a study from a TOML file.
+
+        Relative paths inside the file are relative to its folder. Every key is
+        checked: a misspelt key, a wrong type, a value out of range is a
+        :class:`~tsid_fmu.errors.StudyError` naming the file and the key.
+        """
+        path = Path(path)
+        return cls(**read_study_file(path), source=path)
+
+    def to_toml(self, path: str | Path) -> Path:
+        """Write the study as TOML that :meth:`from_toml` reads back to an equal study.
+
+        Data given as DataFrames are written as CSV files beside the TOML file.
+        """
+        return write_study_file(path, fields_of(self))

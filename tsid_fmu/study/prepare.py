@@ -1,0 +1,144 @@
+"""From a study to what the evaluators need: loaded data, weights, replicate inputs."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from tsid_fmu.data.measured import MeasuredData, load_data
+from tsid_fmu.errors import StudyError
+from tsid_fmu.evaluate.cost import NOISE_POWER, noise_level
+from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
+from tsid_fmu.study.definition import Study
+from tsid_fmu.study.schema import Experiment
+
+__all__ = ["NOISE_FLOOR", "load_experiment", "prepare", "prepare_experiment"]
+
+NOISE_FLOOR = 1e-3
+"""With ``weighting = "auto"``, an output that shows no noise is weighed as if its noise
+were this fraction of its RMS value."""
+
+
+def load_experiment(experiment: Experiment) -> MeasuredData:
+    """Load (and check) an experiment's data with its derived channels."""
+    data = experiment.data
+    if isinstance(data, MeasuredData):
+        return data
+    derived = experiment.derived or None
+    if hasattr(data, "columns") and hasattr(data, "iloc"):
+        return MeasuredData.from_frame(
+            data, time_column=experiment.time_column, source=experiment.name, derived=derived,
+            sample_time=experiment.sample_time,
+        )  # fmt: skip
+    return load_data(
+        data, time_column=experiment.time_column, derived=derived,
+        sample_time=experiment.sample_time,
+    )  # fmt: skip
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    out = np.array(a, dtype=np.float64, order="C", copy=True)
+    out.flags.writeable = False
+    return out
+
+
+def _weights_and_scale(
+    study: Study, experiment: Experiment, measured: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each output's cost weight and residual scale, from the noise seen in the data."""
+    names = list(experiment.outputs)
+    user = np.array([(experiment.weights or {}).get(n, 1.0) for n in names], dtype=float)
+    sigma = noise_level(measured)
+    rms = np.sqrt(np.mean(measured**2, axis=0))
+    quiet = ~(sigma > 1e-6 * np.maximum(np.ptp(measured, axis=0), 1e-300))
+    if study.method.weighting == "noise" and quiet.any():
+        flat = [n for n, q in zip(names, quiet, strict=True) if q]
+        raise StudyError(
+            f'experiment {experiment.name!r}: weighting = "noise" needs noisy outputs, but '
+            f"{', '.join(flat)} shows no noise; give weights instead"
+        )
+    scale = np.where(quiet, np.maximum(NOISE_FLOOR * rms, 1e-300), sigma)
+    if study.method.weighting == "none":
+        return user, scale
+    return user / scale ** NOISE_POWER[study.method.cost], scale
+
+
+def _noisy_inputs(study: Study, index: int, inputs: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    method = study.method
+    if inputs is None or method.input_noise == 0 or method.replicates == 1:
+        return ()
+    scale = method.input_noise * np.std(inputs, axis=0)
+    out = []
+    for r in range(1, method.replicates):
+        rng = np.random.default_rng([method.seed, index, r])
+        out.append(_frozen(inputs + rng.standard_normal(inputs.shape) * scale))
+    return tuple(out)
+
+
+def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
+    """Load experiment ``index`` of a study and arrange it for simulation.
+
+    Replicate ``r`` (``r >= 2``) of experiment ``index`` adds Gaussian noise drawn from
+    ``numpy.random.default_rng([seed, index, r - 1])`` with a standard deviation of
+    ``input_noise`` times each input's own standard deviation; replicate 1 is the
+    measured input itself.
+    """
+    experiment = study.experiments[index]
+    data = load_experiment(experiment)
+    inputs = data.columns(list(experiment.inputs.values())) if experiment.inputs else None
+    measured = data.columns(list(experiment.outputs.values()))
+    weights, scale = _weights_and_scale(study, experiment, measured)
+    return PreparedExperiment(
+        name=experiment.name,
+        time=_frozen(data.time),
+        input_names=tuple(experiment.inputs),
+        output_names=tuple(experiment.outputs),
+        inputs=None if inputs is None else _frozen(inputs),
+        measured=_frozen(measured),
+        weights=weights,
+        scale=scale,
+        noisy_inputs=_noisy_inputs(study, index, inputs),
+        start_values=dict(experiment.start_values),
+        hold=dict(experiment.hold),
+    )
+
+
+def prepare(
+    study: Study,
+    experiments: Sequence[str] | None = None,
+    parameters: Sequence[str] | None = None,
+    *,
+    role: str = "identify",
+) -> EvaluationSpec:
+    """Build the evaluation spec of a study.
+
+    Parameters
+    ----------
+    study : Study
+        The study.
+    experiments : sequence of str, optional
+        Names of the experiments to use; default every experiment with ``role``.
+    parameters : sequence of str, optional
+        Parameters varied (default all of the study's); the others are not set.
+    role : {"identify", "validate"}
+        Which experiments are used when ``experiments`` is not given.
+
+    Returns
+    -------
+    EvaluationSpec
+    """
+    if experiments is None:
+        indices = [i for i, e in enumerate(study.experiments) if e.role == role]
+    else:
+        by_name = {e.name: i for i, e in enumerate(study.experiments)}
+        indices = [by_name[n] for n in experiments]
+    return EvaluationSpec(
+        fmu=study.fmu,
+        parameter_names=tuple(parameters or study.parameter_names),
+        experiments=tuple(prepare_experiment(study, i) for i in indices),
+        cost=study.method.cost,
+        start_values=dict(study.start_values),
+        interface=study.interface,
+        step_size=study.step_size,
+    )

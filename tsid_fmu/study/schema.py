@@ -1,0 +1,387 @@
+"""The parts of a study: parameters, experiments, method, phases, contribution options.
+
+Scripts and notebooks build these objects directly; :mod:`tsid_fmu.study.toml` reads
+and writes them as TOML. Every value is checked when the object is made, so a wrong
+study fails at once with a :class:`~tsid_fmu.errors.StudyError` naming the key.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.errors import StudyError
+from tsid_fmu.evaluate.cost import COSTS
+
+__all__ = [
+    "MAX_REPLICATES",
+    "ContributionOptions",
+    "Experiment",
+    "Method",
+    "Parameter",
+    "Phase",
+    "check_choice",
+    "check_number",
+    "check_whole",
+]
+
+MAX_REPLICATES = 1000
+"""Upper bound on replicates per row."""
+
+
+def check_number(value: Any, what: str) -> float:
+    """Return ``value`` as a float, refusing booleans, strings and non-finite values.
+
+    Raises
+    ------
+    StudyError
+        Naming ``what``.
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise StudyError(f"{what} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise StudyError(f"{what} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def check_bound(value: Any, what: str, default: float) -> float:
+    """Return a bound: a number, ``None`` (the default) or an infinity, never NaN."""
+    if value is None:
+        return default
+    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
+        raise StudyError(f"{what} must be a number, got {value!r}")
+    return float(value)
+
+
+def check_whole(value: Any, what: str, low: int, high: int | None = None) -> int:
+    """Return an integer in ``[low, high]``, refusing booleans and floats."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise StudyError(f"{what} must be an integer >= {low}, got {value!r}")
+    if high is not None and value > high:
+        raise StudyError(f"{what} must be an integer from {low} to {high}, got {value!r}")
+    return int(value)
+
+
+def check_choice(value: Any, what: str, allowed: tuple[str, ...]) -> str:
+    """Return ``value`` if it is one of ``allowed``."""
+    if value not in allowed:
+        raise StudyError(f"{what} must be one of {', '.join(map(repr, allowed))}, got {value!r}")
+    return str(value)
+
+
+@dataclass
+class Parameter:
+    """An FMU parameter to identify, with its first-iteration levels and bounds.
+
+    Parameters
+    ----------
+    name : str
+        Name of the FMU variable (causality ``parameter``).
+    levels : sequence of float
+        Levels of the first iteration; any explicit, distinct values (the SISO paper's
+        Table I uses uneven ones such as 10, 50, 80, 100, 110).
+    min, max : float
+        Physical bounds that later levels never cross.
+    unit : str
+        Unit shown in reports.
+    """
+
+    name: str
+    levels: list[float]
+    min: float = -math.inf
+    max: float = math.inf
+    unit: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.isprintable() or not self.name:
+            raise StudyError(f"parameter name must be a non-empty printable string: {self.name!r}")
+        if isinstance(self.levels, str | bytes) or not hasattr(self.levels, "__iter__"):
+            raise StudyError(f"parameter {self.name!r}: levels must be a list of numbers")
+        self.levels = sorted(
+            check_number(v, f"parameter {self.name!r}: level") for v in self.levels
+        )
+        if len(self.levels) < 2:
+            raise StudyError(f"parameter {self.name!r}: needs at least 2 levels")
+        if len(set(self.levels)) != len(self.levels):
+            raise StudyError(f"parameter {self.name!r}: levels must be distinct, got {self.levels}")
+        if not math.isfinite(self.levels[-1] - self.levels[0]):
+            raise StudyError(
+                f"parameter {self.name!r}: levels {self.levels} span beyond float range"
+            )
+        self.min = check_bound(self.min, f"parameter {self.name!r}: min", -math.inf)
+        self.max = check_bound(self.max, f"parameter {self.name!r}: max", math.inf)
+        if self.min >= self.max:
+            raise StudyError(f"parameter {self.name!r}: min {self.min} is not below max {self.max}")
+        outside = [v for v in self.levels if v < self.min or v > self.max]
+        if outside:
+            raise StudyError(
+                f"parameter {self.name!r}: levels {outside} lie outside the bounds "
+                f"[{self.min}, {self.max}]"
+            )
+        if not isinstance(self.unit, str):
+            raise StudyError(f"parameter {self.name!r}: unit must be a string")
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """Physical bounds ``(min, max)``."""
+        return (self.min, self.max)
+
+
+@dataclass
+class Experiment:
+    """One measured experiment: data and how its columns map to the FMU.
+
+    Parameters
+    ----------
+    data : str or Path or pandas.DataFrame
+        The measured data (file path, or a frame for scripts and notebooks).
+    inputs : mapping of str to str
+        FMU input variable -> data column (or derived channel) that drives it.
+    outputs : mapping of str to str
+        FMU variable -> data column (or derived channel) it is compared with.
+    name : str
+        Label used in reports; default the data file's stem.
+    time_column : str
+        Name of the time column.
+    derived : mapping of str to str
+        New channel -> expression over columns (see :mod:`tsid_fmu.data.expressions`),
+        e.g. ``{"F_o": "F_of - F_or", "v_o": "der(x_o)"}``.
+    weights : mapping of str to float, optional
+        Weight of each output's cost (default 1), on top of the study's weighting.
+    start_values : mapping of str to float
+        FMU values fixed for this experiment only.
+    sample_time : float, optional
+        Expected sample time; a file with another one is refused.
+    role : {"identify", "validate"}
+        ``validate`` experiments are not fitted; after identification the model is
+        simulated against them and their cost reported (the MISO paper's check with
+        both inputs together).
+    hold : mapping of str to str
+        How each input's samples are held between communication points: ``"previous"``
+        (a controller's output, the default) or ``"linear"`` (a measured continuous
+        signal, interpolated).
+    """
+
+    data: Any
+    inputs: dict[str, str] = field(default_factory=dict)
+    outputs: dict[str, str] = field(default_factory=dict)
+    name: str = ""
+    time_column: str = "time"
+    derived: dict[str, str] = field(default_factory=dict)
+    weights: dict[str, float] | None = None
+    start_values: dict[str, float] = field(default_factory=dict)
+    sample_time: float | None = None
+    role: str = "identify"
+    hold: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            is_path = isinstance(self.data, str | Path)
+            self.name = Path(self.data).stem if is_path else "experiment"
+        where = f"experiment {self.name!r}"
+        if not self.outputs:
+            raise StudyError(f"{where}: no outputs to compare with the data")
+        if self.weights is not None:
+            self.weights = {
+                k: check_number(v, f"{where}: weight of {k}") for k, v in self.weights.items()
+            }
+            if any(v < 0 for v in self.weights.values()):
+                raise StudyError(f"{where}: weights must be >= 0, got {self.weights}")
+            unknown = set(self.weights) - set(self.outputs)
+            if unknown:
+                raise StudyError(
+                    f"{where}: weights given for {sorted(unknown)}, which are not outputs "
+                    f"({sorted(self.outputs)})"
+                )
+            if all(self.weights.get(k, 1.0) == 0 for k in self.outputs):
+                raise StudyError(f"{where}: every output has weight 0, so every cost would be 0")
+        if self.sample_time is not None:
+            self.sample_time = check_number(self.sample_time, f"{where}: sample_time")
+            if self.sample_time <= 0:
+                raise StudyError(f"{where}: sample_time must be > 0, got {self.sample_time}")
+        self.role = check_choice(self.role, f"{where}: role", ("identify", "validate"))
+        self.start_values = {
+            k: check_number(v, f"{where}: start value {k}") for k, v in self.start_values.items()
+        }
+        for name, how in self.hold.items():
+            if name not in self.inputs:
+                raise StudyError(f"{where}: hold given for {name!r}, which is not an input")
+            check_choice(how, f"{where}: hold of {name}", ("previous", "linear"))
+
+
+@dataclass
+class Phase:
+    """One phase of a phased identification: a group of parameters, some experiments.
+
+    Parameters
+    ----------
+    parameters : list of str
+        Parameters identified in this phase; the others stay at their current values.
+    experiments : list of str
+        Names of the experiments fitted in this phase (default: every ``identify`` one).
+    name : str
+        Label (default ``phase N``).
+    array : str, optional
+        Orthogonal array of this phase (default: the smallest that fits).
+    max_iterations : int, optional
+        Iteration limit of this phase (default: the study's).
+    """
+
+    parameters: list[str]
+    experiments: list[str] = field(default_factory=list)
+    name: str = ""
+    array: str | None = None
+    max_iterations: int | None = None
+
+
+@dataclass
+class ContributionOptions:
+    """Contribution analyses of the MISO paper that plan the phases automatically.
+
+    Parameters
+    ----------
+    enabled : bool
+        Run the input and parameter contribution analyses and identify in phases.
+    group_ratio : float
+        Gap between the contributions of consecutive parameters that starts a new group
+        (see :func:`tsid_fmu.search.contribution.group_parameters`). Default 1.75.
+    min_percent : float
+        A parameter contributing less than this (% of error variation) to an
+        experiment is left for the next experiment's phases. Default 1.
+    values : mapping of str to list of float
+        Three values per parameter for the one-at-a-time runs (default: lowest,
+        middle and highest first-iteration level).
+    compare_ungrouped : bool
+        Also identify all parameters in one array on all experiments and report the
+        difference in cost and simulations (why grouping exists, or where it does not
+        pay).
+    refine_jointly : bool
+        After the phases, one more phase identifies all parameters together on all
+        identification experiments, from ranges within ``refine_span`` of the phase
+        results. Default true.
+    refine_span : float
+        Relative half-width of the joint phase's first levels. Default 0.2.
+    """
+
+    enabled: bool = False
+    group_ratio: float = 1.75
+    min_percent: float = 1.0
+    values: dict[str, list[float]] = field(default_factory=dict)
+    compare_ungrouped: bool = False
+    refine_jointly: bool = True
+    refine_span: float = 0.2
+
+    def __post_init__(self) -> None:
+        if not 0 < check_number(self.refine_span, "refine_span") < 1:
+            raise StudyError(f"refine_span must be between 0 and 1, got {self.refine_span}")
+        if not check_number(self.group_ratio, "group_ratio") > 1:
+            raise StudyError(f"group_ratio must be > 1, got {self.group_ratio}")
+        if not check_number(self.min_percent, "min_percent") >= 0:
+            raise StudyError(f"min_percent must be >= 0, got {self.min_percent}")
+        for name, vals in self.values.items():
+            nums = [check_number(v, f"contribution value of {name!r}") for v in vals]
+            if len(nums) != 3 or len(set(nums)) != 3:
+                raise StudyError(f"contribution values of {name!r} must be 3 distinct numbers")
+
+
+@dataclass
+class Method:
+    """How to identify: the cost, the arrays, replicates, stages and limits.
+
+    Parameters
+    ----------
+    array : str, optional
+        Orthogonal array (e.g. ``"L25"``); default the smallest that fits the levels.
+    cost : str
+        The study's one objective (:data:`tsid_fmu.evaluate.cost.COSTS`): ``"sse"``
+        (default; with noise weighting the Gaussian maximum-likelihood cost, as in the
+        MISO paper), ``"iae"`` (the SISO paper's), ``"ise"``, ``"rmse"``, ``"nrmse"``.
+        Every stage minimises it and compares parameter sets by it on the measured
+        inputs.
+    weighting : {"auto", "noise", "none"}
+        ``noise`` divides each output's cost by its noise level estimated from the data
+        (squared for ``sse``/``ise``), as a maximum-likelihood fit does, and refuses
+        outputs that show no noise; ``auto`` (default) does the same but weighs a
+        noise-free output as if its noise were 0.1 % of its RMS; ``none`` uses the
+        output weights as given.
+    replicates : int
+        Runs per array row: the measured inputs, plus ``replicates - 1`` copies with
+        white noise added to the inputs (the SISO paper's robustness step; its S/N is
+        over all of them). Default 1.
+    input_noise : float
+        Standard deviation of the replicates' input noise, relative to each input's
+        standard deviation. Default 0.01.
+    seed : int
+        Seed of the replicate noise.
+    max_iterations : int
+        Most Taguchi iterations (arrays) per stage or phase. Default 20.
+    max_simulations : int, optional
+        Most simulations of the Taguchi stage (checked between iterations).
+    selection : {"auto", "main_effects", "best_run"}
+        Where the next levels are centred: ``main_effects`` on the predicted optimum of
+        the S/N main effects (SISO paper), ``best_run`` on the best run (MISO paper),
+        ``auto`` (default) on whichever of the two, and the current centre, has the
+        lowest cost.
+    rotate : bool
+        From the second iteration on, let the factors be the principal axes of the cost
+        surface estimated from the array runs (parameters that act in combination become
+        one factor). Default true.
+    max_reruns : int
+        Re-runs from the next-best run when continuing from the best did not lower the
+        cost (MISO paper). Default 2.
+    refine : {"none", "least_squares"}
+        Optional refinement stage after the Taguchi stage: a trust-region least-squares
+        polish of the same cost (``"sse"`` only). Default ``"none"``.
+    refine_max_nfev : int
+        Most simulations of the refinement stage. Default 200.
+    leveling : LevelingOptions
+        Re-leveling thresholds and rules.
+    """
+
+    array: str | None = None
+    cost: str = "sse"
+    weighting: str = "auto"
+    replicates: int = 1
+    input_noise: float = 0.01
+    seed: int = 0
+    max_iterations: int = 20
+    max_simulations: int | None = None
+    selection: str = "auto"
+    rotate: bool = True
+    max_reruns: int = 2
+    refine: str = "none"
+    refine_max_nfev: int = 200
+    leveling: LevelingOptions = field(default_factory=LevelingOptions)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.cost, str) or self.cost.lower() not in COSTS:
+            raise StudyError(
+                f"unknown cost {self.cost!r}; choose one of {', '.join(sorted(COSTS))}"
+            )
+        self.cost = self.cost.lower()
+        self.weighting = check_choice(self.weighting, "weighting", ("auto", "noise", "none"))
+        self.replicates = check_whole(self.replicates, "replicates", 1, MAX_REPLICATES)
+        self.input_noise = check_number(self.input_noise, "input_noise")
+        if self.input_noise < 0:
+            raise StudyError(f"input_noise must be >= 0, got {self.input_noise}")
+        self.seed = check_whole(self.seed, "seed", 0)
+        self.max_iterations = check_whole(self.max_iterations, "max_iterations", 1)
+        if self.max_simulations is not None:
+            self.max_simulations = check_whole(self.max_simulations, "max_simulations", 1)
+        self.selection = check_choice(
+            self.selection, "selection", ("auto", "main_effects", "best_run")
+        )
+        if not isinstance(self.rotate, bool):
+            raise StudyError(f"rotate must be true or false, got {self.rotate!r}")
+        self.max_reruns = check_whole(self.max_reruns, "max_reruns", 0)
+        self.refine = check_choice(self.refine, "refine", ("none", "least_squares"))
+        if self.refine == "least_squares" and self.cost != "sse":
+            raise StudyError(
+                f'refine = "least_squares" minimises the sse cost; the study uses {self.cost!r}'
+            )
+        self.refine_max_nfev = check_whole(self.refine_max_nfev, "refine_max_nfev", 1)
+        if not isinstance(self.leveling, LevelingOptions):
+            raise StudyError("leveling must be a LevelingOptions")

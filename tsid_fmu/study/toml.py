@@ -1,0 +1,374 @@
+"""Study files: read and write the TOML form of a study.
+
+:func:`read_study_file` turns a study file into the keyword arguments of
+:class:`~tsid_fmu.study.definition.Study` (its parts already built and checked);
+:func:`write_study_file` writes them back. Every key is checked on reading: a misspelt
+key, a wrong type, a value out of range is a :class:`~tsid_fmu.errors.StudyError` that
+names the file and the key. Booleans and strings are never taken as numbers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import os
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.errors import StudyError
+from tsid_fmu.study.schema import ContributionOptions, Experiment, Method, Parameter, Phase
+
+__all__ = ["read_study_file", "study_from_document", "write_study_file"]
+
+MAX_FILE_BYTES = 16 * 1024**2
+"""Largest study file read."""
+
+_TOP = {"study", "data", "experiments", "method", "leveling", "parameters", "phases",
+        "contribution"}  # fmt: skip
+_STUDY = {"name", "fmu", "start_values", "interface", "step_size"}
+_DATA = {"file", "name", "time", "derived", "inputs", "outputs", "weights", "start_values",
+         "sample_time", "role", "hold"}  # fmt: skip
+_PARAM = {"levels", "min", "max", "unit"}
+_PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
+_METHOD_TYPES: dict[str, type] = {
+    "array": str, "cost": str, "weighting": str, "replicates": int, "input_noise": float,
+    "seed": int, "max_iterations": int, "max_simulations": int, "selection": str,
+    "rotate": bool, "max_reruns": int, "refine": str, "refine_max_nfev": int,
+}  # fmt: skip
+_LEVELING_TYPES: dict[str, type] = {
+    "significance_db": float, "tolerance": float, "shrink": float, "n_levels": int,
+    "refine": bool, "selective": bool, "scale": str, "log_ratio": float,
+    "min_contribution": float, "expand": float, "stall": int, "stall_rtol": float,
+}  # fmt: skip
+_CONTRIB_TYPES: dict[str, type] = {
+    "enabled": bool, "group_ratio": float, "min_percent": float, "values": dict,
+    "compare_ungrouped": bool, "refine_jointly": bool, "refine_span": float,
+}  # fmt: skip
+_TYPE_NAMES = {float: "a number", int: "an integer", str: "a string", bool: "true or false",
+               list: "a list", dict: "a table"}  # fmt: skip
+
+
+class _Where:
+    """The file being read, for messages."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def error(self, label: str, message: str) -> StudyError:
+        return StudyError(f"{self.source}: {label}{' ' if label else ''}{message}")
+
+
+def _check_keys(table: Mapping[str, Any], allowed: set[str], where: _Where, label: str) -> None:
+    for key in table:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise where.error(
+                "", f"unknown key {key!r} in {label}{hint} (allowed: {', '.join(sorted(allowed))})"
+            )
+
+
+def _table(doc: Mapping[str, Any], key: str, where: _Where, required: bool = False) -> dict:
+    value = doc.get(key)
+    if value is None:
+        if required:
+            raise where.error("", f"missing table [{key}]")
+        return {}
+    if not isinstance(value, dict):
+        raise where.error("", f"[{key}] must be a table, got {type(value).__name__}")
+    return value
+
+
+def _ok(value: Any, kind: type) -> bool:
+    if kind is float:
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    if kind is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, kind)
+
+
+def _get(
+    table: Mapping[str, Any], key: str, kind: type, where: _Where, label: str, default: Any = None
+) -> Any:
+    if key not in table:
+        return default
+    value = table[key]
+    if not _ok(value, kind):
+        raise where.error(
+            label, f"{key} must be {_TYPE_NAMES.get(kind, kind.__name__)}, got {value!r}"
+        )
+    return float(value) if kind is float else value
+
+
+def _typed(table: Mapping[str, Any], types: dict[str, type], where: _Where, label: str) -> dict:
+    _check_keys(table, set(types), where, label)
+    return {k: _get(table, k, types[k], where, label) for k in table}
+
+
+def _map(table: Mapping[str, Any], key: str, kind: type, where: _Where, label: str) -> dict:
+    value = table.get(key, {})
+    if not isinstance(value, dict) or not all(_ok(v, kind) for v in value.values()):
+        what = "strings" if kind is str else "numbers"
+        raise where.error(label, f"{key} must be a table of {what}, got {value!r}")
+    return {k: (float(v) if kind is float else v) for k, v in value.items()}
+
+
+def _build(where: _Where, label: str, make: Any, *args: Any, **kwargs: Any) -> Any:
+    """Call a part's constructor; its StudyError gains the file and the table."""
+    try:
+        return make(*args, **kwargs)
+    except StudyError as exc:
+        raise where.error(label, str(exc)) from None
+
+
+def _experiment(e: Mapping[str, Any], base: Path, where: _Where, label: str, i: int) -> Experiment:
+    _check_keys(e, _DATA, where, label)
+    file = _get(e, "file", str, where, label)
+    if file is None:
+        raise where.error(label, "is missing the key 'file'")
+    path = Path(file) if Path(file).is_absolute() else (base / file)
+    outputs = _map(e, "outputs", str, where, label)
+    if not outputs:
+        raise where.error(label, 'needs outputs = { FMU_VARIABLE = "column" }')
+    return _build(
+        where, label, Experiment, data=path, inputs=_map(e, "inputs", str, where, label),
+        outputs=outputs, name=_get(e, "name", str, where, label, path.stem or f"exp{i + 1}"),
+        time_column=_get(e, "time", str, where, label, "time"),
+        derived=_map(e, "derived", str, where, label),
+        weights=_map(e, "weights", float, where, label) if "weights" in e else None,
+        start_values=_map(e, "start_values", float, where, label),
+        sample_time=_get(e, "sample_time", float, where, label),
+        role=_get(e, "role", str, where, label, "identify"),
+        hold=_map(e, "hold", str, where, label),
+    )  # fmt: skip
+
+
+def _experiments(doc: Mapping[str, Any], base: Path, where: _Where) -> list[Experiment]:
+    if "data" in doc and "experiments" in doc:
+        raise where.error("", "give either [data] or [[experiments]], not both")
+    if "data" in doc:
+        return [_experiment(_table(doc, "data", where, True), base, where, "[data]", 0)]
+    raw = doc.get("experiments")
+    if not isinstance(raw, list) or not raw or not all(isinstance(e, dict) for e in raw):
+        raise where.error("", "needs a [data] table or one or more [[experiments]]")
+    return [_experiment(e, base, where, f"[[experiments]] #{i + 1}", i) for i, e in enumerate(raw)]
+
+
+def _parameters(doc: Mapping[str, Any], where: _Where) -> list[Parameter]:
+    out = []
+    for name, spec in _table(doc, "parameters", where, True).items():
+        label = f"[parameters] {name}"
+        if not isinstance(spec, dict):
+            raise where.error(
+                label, f"must be a table such as {{ levels = [1, 2, 3] }}, got {spec!r}"
+            )
+        _check_keys(spec, _PARAM, where, label)
+        levels = _get(spec, "levels", list, where, label)
+        if levels is None:
+            raise where.error(label, "is missing the key 'levels'")
+        out.append(
+            _build(
+                where,
+                "",
+                Parameter,
+                name=name,
+                levels=levels,
+                min=_get(spec, "min", float, where, label, -math.inf),
+                max=_get(spec, "max", float, where, label, math.inf),
+                unit=_get(spec, "unit", str, where, label, ""),
+            )  # fmt: skip
+        )
+    return out
+
+
+def _phases(doc: Mapping[str, Any], where: _Where) -> list[Phase]:
+    raw = doc.get("phases", [])
+    if not isinstance(raw, list) or not all(isinstance(p, dict) for p in raw):
+        raise where.error("", "phases must be given as [[phases]] tables")
+    phases = []
+    for i, ph in enumerate(raw):
+        label = f"[[phases]] #{i + 1}"
+        _check_keys(ph, _PHASE, where, label)
+        plist = _get(ph, "parameters", list, where, label, None)
+        if plist is None:
+            raise where.error(label, "is missing the key 'parameters'")
+        elist = _get(ph, "experiments", list, where, label, [])
+        if not all(isinstance(x, str) for x in plist + elist):
+            raise where.error(label, "parameters and experiments must be names")
+        phases.append(
+            Phase(
+                parameters=plist,
+                experiments=elist,
+                name=_get(ph, "name", str, where, label, ""),
+                array=_get(ph, "array", str, where, label),
+                max_iterations=_get(ph, "max_iterations", int, where, label),
+            )  # fmt: skip
+        )
+    return phases
+
+
+def _method(doc: Mapping[str, Any], where: _Where) -> Method:
+    args = _typed(_table(doc, "method", where), _METHOD_TYPES, where, "[method]")
+    lev = _typed(_table(doc, "leveling", where), _LEVELING_TYPES, where, "[leveling]")
+    leveling = _build(where, "[leveling]", LevelingOptions, **lev)
+    return _build(where, "[method]", Method, **args, leveling=leveling)
+
+
+def _contribution(doc: Mapping[str, Any], where: _Where) -> ContributionOptions:
+    table = _table(doc, "contribution", where)
+    args = _typed(table, _CONTRIB_TYPES, where, "[contribution]")
+    values = args.get("values", {})
+    if not all(isinstance(v, list) and all(_ok(x, float) for x in v) for v in values.values()):
+        raise where.error("[contribution]", "values must map names to lists of numbers")
+    args["values"] = {k: [float(x) for x in v] for k, v in values.items()}
+    args.setdefault("enabled", bool(table))
+    return _build(where, "[contribution]", ContributionOptions, **args)
+
+
+def study_from_document(doc: Mapping[str, Any], base: Path, source: str) -> dict[str, Any]:
+    """Return the keyword arguments of a Study from a parsed TOML document.
+
+    Parameters
+    ----------
+    doc : mapping
+        The parsed document.
+    base : Path
+        Folder that relative paths in the document are relative to.
+    source : str
+        The file name, for messages.
+    """
+    where = _Where(source)
+    _check_keys(doc, _TOP, where, "the top level")
+    st = _table(doc, "study", where, required=True)
+    _check_keys(st, _STUDY, where, "[study]")
+    fmu_name = _get(st, "fmu", str, where, "[study]")
+    if fmu_name is None:
+        raise where.error("[study]", "is missing the key 'fmu'")
+    fmu = Path(fmu_name) if Path(fmu_name).is_absolute() else (base / fmu_name).resolve()
+    if not fmu.is_file():
+        raise where.error("[study]", f"fmu: no such file {fmu}")
+    return {
+        "fmu": fmu,
+        "parameters": _parameters(doc, where),
+        "experiments": _experiments(doc, base, where),
+        "method": _method(doc, where),
+        "start_values": _map(st, "start_values", float, where, "[study]"),
+        "interface": _get(st, "interface", str, where, "[study]", "auto"),
+        "step_size": _get(st, "step_size", float, where, "[study]"),
+        "name": _get(st, "name", str, where, "[study]", fmu.stem),
+        "phases": _phases(doc, where),
+        "contribution": _contribution(doc, where),
+    }
+
+
+def read_study_file(path: Path) -> dict[str, Any]:
+    """Read a study file and return the keyword arguments of a Study (see module doc)."""
+    try:
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise StudyError(f"{path}: the study file is larger than {MAX_FILE_BYTES} bytes")
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise StudyError(f"{path}: study file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise StudyError(f"{path}: cannot read the study file ({type(exc).__name__})") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise StudyError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise StudyError(f"{path}: not valid TOML: nested too deeply") from None
+    return study_from_document(doc, path.parent, str(path))
+
+
+# ------------------------------------------------------------------------- writing
+
+
+def _relative(path: Path, base: Path) -> str:
+    path = Path(path).resolve()
+    try:
+        return os.path.relpath(path, base).replace(os.sep, "/")
+    except ValueError:  # another drive on Windows
+        return str(path)
+
+
+def _non_default(obj: Any) -> dict[str, Any]:
+    """Fields of a dataclass that differ from their defaults (None values dropped)."""
+    out = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        default = (
+            f.default
+            if f.default is not dataclasses.MISSING
+            else (
+                f.default_factory() if f.default_factory is not dataclasses.MISSING else None  # type: ignore[misc]
+            )
+        )
+        if value is not None and value != default:
+            out[f.name] = value
+    return out
+
+
+def _experiment_table(e: Experiment, base: Path, stem: str) -> dict[str, Any]:
+    if isinstance(e.data, str | os.PathLike):
+        file = _relative(Path(e.data), base)
+    else:  # a DataFrame: written beside the study file
+        name = f"{stem}_{''.join(c if c.isalnum() else '_' for c in e.name)}.csv"
+        e.data.to_csv(base / name, index=False)
+        file = name
+    table: dict[str, Any] = {"file": file, "name": e.name}
+    fields = _non_default(e)
+    for key, out in (("time_column", "time"), ("inputs", "inputs"), ("outputs", "outputs"),
+                     ("derived", "derived"), ("weights", "weights"), ("hold", "hold"),
+                     ("start_values", "start_values"), ("sample_time", "sample_time"),
+                     ("role", "role")):  # fmt: skip
+        if key in fields:
+            table[out] = fields[key]
+    return table
+
+
+def _document(fields: Mapping[str, Any], base: Path, stem: str) -> dict[str, Any]:
+    study: dict[str, Any] = {"name": fields["name"], "fmu": _relative(fields["fmu"], base)}
+    for key in ("start_values", "interface", "step_size"):
+        if fields[key] not in (None, {}, "auto"):
+            study[key] = fields[key]
+    method = _non_default(fields["method"])
+    leveling = _non_default(method.pop("leveling", LevelingOptions()))
+    params = {}
+    for p in fields["parameters"]:
+        spec: dict[str, Any] = {"levels": list(p.levels)}
+        spec.update({k: v for k, v in (("min", p.min), ("max", p.max)) if math.isfinite(v)})
+        if p.unit:
+            spec["unit"] = p.unit
+        params[p.name] = spec
+    doc: dict[str, Any] = {"study": study, "method": method}
+    if leveling:
+        doc["leveling"] = leveling
+    doc["experiments"] = [_experiment_table(e, base, stem) for e in fields["experiments"]]
+    doc["parameters"] = params
+    if fields["phases"]:
+        doc["phases"] = [
+            _non_default(ph) | {"parameters": ph.parameters} for ph in fields["phases"]
+        ]
+    contribution = _non_default(fields["contribution"])
+    if contribution:
+        doc["contribution"] = contribution | {"enabled": fields["contribution"].enabled}
+    return doc
+
+
+def write_study_file(path: str | Path, fields: Mapping[str, Any]) -> Path:
+    """Write a study's fields as a TOML file; return its path.
+
+    Paths are written relative to the file's folder; data given as DataFrames are
+    written as ``<stem>_<experiment>.csv`` beside it.
+    """
+    import tomli_w
+
+    path = Path(path)
+    base = path.parent.resolve()
+    doc = _document(fields, base, path.stem)
+    path.write_text(tomli_w.dumps(doc), encoding="utf-8")
+    return path

@@ -1,0 +1,61 @@
+"""Writing files so that an interruption leaves the old file or the new one, never half."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.errors import StudyError
+
+__all__ = ["atomic_write", "read_json", "write_json"]
+
+
+def atomic_write(path: Path, write: Callable[[Path], None] | str | bytes) -> None:
+    """Write a file atomically: to a temporary file in the same folder, then rename.
+
+    The file gets the default permissions of a new file (the umask applies).
+
+    Parameters
+    ----------
+    path : Path
+        Destination.
+    write : str, bytes or callable
+        Content, or a function that writes the file at the path it is given.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_path, 0o666 & ~umask)
+        if isinstance(write, str):
+            tmp_path.write_text(write, encoding="utf-8")
+        elif isinstance(write, bytes):
+            tmp_path.write_bytes(write)
+        else:
+            write(tmp_path)
+        with open(tmp_path, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_json(path: Path, data: Any) -> None:
+    """Write strict JSON (no NaN or infinity) atomically."""
+    atomic_write(path, json.dumps(data, indent=1, allow_nan=False) + "\n")
+
+
+def read_json(path: Path, what: str) -> Any:
+    """Read a JSON file of the trail; a damaged one is a StudyError naming it."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise StudyError(f"{path}: damaged {what} ({type(exc).__name__})") from None
