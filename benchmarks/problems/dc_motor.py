@@ -31,7 +31,6 @@ from scipy.linalg import expm
 
 if __package__:
     from .base import (
-        CACHE,
         Problem,
         ProblemExperiment,
         cached_path,
@@ -43,7 +42,6 @@ if __package__:
 else:  # run as a script, or loaded from a file path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from problems.base import (
-        CACHE,
         Problem,
         ProblemExperiment,
         cached_path,
@@ -151,8 +149,7 @@ def build_fmu() -> Path:
     fmu = cached_path("DCMotor", SLAVE)
     if fmu.exists():
         return fmu
-    CACHE.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=CACHE) as tmp:
+    with tempfile.TemporaryDirectory(dir=fmu.parent) as tmp:
         script = Path(tmp) / "dcmotor.py"
         script.write_text(textwrap.dedent(SLAVE).lstrip())
         proc = subprocess.run(

@@ -45,11 +45,15 @@ Data: independent piecewise-exact solution (examples/lsea_siso/make_data.py), F_
 per sample. F_o = F_of - F_or is the sum of two independent load-cell noises, so its
 sigma is sqrt(2) times a cell's. x_m is an encoder reading (quantised to 1 um, no
 other noise): its sigma is the quantisation's, 1 um/sqrt(12) = 0.29 um, which makes it
-a very precise channel. The FMU (internal RK4 step fixedStepSize = 1e-4 s) misses some
-passages through the stick band V_z that last less than one internal step; this moves
-x_m by a few um (about 13 quantisation sigmas RMS) but F_o by only ~0.01 sigma. With
-start value fixedStepSize = 1e-5 the FMU agrees to 0.2 sigma on x_m as well (and runs
-about ten times slower). V_z = 0.001 m/s is a fixed model constant (start_values)."""
+a very precise channel. The FMU (internal RK4 step fixedStepSize = 1e-4 s, event
+location on its indicators only at the end of internal steps) misses passages through
+the stick band |v_m| <= V_z that last less than one internal step (e.g. a velocity
+reversal under a large spring force takes ~80 us); this moves x_m by ~3.7 um RMS (about
+13 quantisation sigmas) but F_o by only ~0.006 sigma. The FMU converges to the
+independent solution as its step shrinks: x_m RMS 0.31 sigma at fixedStepSize 2e-5,
+0.25 at 1e-5, 0.02 at 1e-6 (0.01 s per run at 1e-4, 0.7 s at 1e-6). A benchmark that
+weighs x_m by its true sigma at the default step will see that model error.
+V_z = 0.001 m/s is a fixed model constant (start_values)."""
 
 
 def _generator():
