@@ -1,0 +1,1 @@
+"""Benchmark identification problems with independent data (see ``base.py``)."""
