@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tsid_fmu.driver import FMUSession
+from tsid_fmu.fmu import FMUSession
 
 HERE = Path(__file__).resolve().parent
 FMU = HERE.parents[1] / "fmus" / "LSEA_SISO.fmu"
