@@ -87,9 +87,10 @@ int main(int argc, char **argv) {
         if (n_in) CHECK(fmi2SetReal(c, vr_in, n_in, u), "fmi2SetReal", 0);
         CHECK(fmi2ExitInitializationMode(c), "fmi2ExitInitializationMode", 0);
         CHECK(fmi2GetReal(c, vr_out, n_out, out), "fmi2GetReal", 0);
+        /* the session's order: step t[k] -> t[k+1], set the inputs of t[k+1], get */
         for (long k = 0; k < n - 1; k++) {
-            if (n_in) CHECK(fmi2SetReal(c, vr_in, n_in, u + k * n_in), "fmi2SetReal", k);
             CHECK(fmi2DoStep(c, t[k], t[k + 1] - t[k], 1), "fmi2DoStep", k);
+            if (n_in) CHECK(fmi2SetReal(c, vr_in, n_in, u + (k + 1) * n_in), "fmi2SetReal", k + 1);
             CHECK(fmi2GetReal(c, vr_out, n_out, out + (k + 1) * n_out), "fmi2GetReal", k + 1);
         }
         CHECK(fmi2Terminate(c), "fmi2Terminate", n - 1);

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 from _common import REPO, build_master, run_master, timeit
 
-from tsid_fmu import fastloop
-from tsid_fmu.driver import FMUSession
+from tsid_fmu.fmu import FMUSession
+from tsid_fmu.fmu import compiled as fastloop
 
 
 def bench(name, fmu, t, u, inputs, outputs, work, exe, repeats, fmpy_repeats):

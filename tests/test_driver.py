@@ -14,8 +14,8 @@ from fmu_factory import (
     pythonfmu_available,
 )
 
-from tsid_fmu.driver import FMUSession, fmu_info
 from tsid_fmu.errors import FMUError, SimulationError
+from tsid_fmu.fmu import FMUSession, fmu_info
 
 REPO = Path(__file__).resolve().parents[1]
 

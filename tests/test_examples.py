@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tsid_fmu.driver import FMUSession
 from tsid_fmu.engine import identify
+from tsid_fmu.fmu import FMUSession
 from tsid_fmu.study import load_study
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

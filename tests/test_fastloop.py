@@ -13,9 +13,9 @@ import pytest
 from crash_factory import build_crash_fmu
 from fmu_factory import build_c_fmu, lag_response
 
-from tsid_fmu import fastloop
-from tsid_fmu.driver import FMUSession
 from tsid_fmu.errors import SimulationError
+from tsid_fmu.fmu import FMUSession
+from tsid_fmu.fmu import compiled as fastloop
 from tsid_fmu.scoring import Cost
 
 REPO = Path(__file__).resolve().parents[1]
@@ -59,7 +59,7 @@ def test_backend_is_numba_and_loops_are_compiled():
 
 
 def test_env_variable_forces_python_loop(python_loop):
-    from tsid_fmu.driver import _cs_loop_fmi2, _cs_loop_fmi3
+    from tsid_fmu.fmu.steploop import _cs_loop_fmi2, _cs_loop_fmi3
 
     assert fastloop.backend() == "python"
     assert fastloop.cs_loop(2) is _cs_loop_fmi2
@@ -119,8 +119,8 @@ def test_fallback_without_numba_gives_identical_output(fmus, grid, tmp_path):
         import sys
         sys.modules["numba"] = None  # import numba -> ImportError
         import numpy as np
-        from tsid_fmu import fastloop
-        from tsid_fmu.driver import FMUSession
+        from tsid_fmu.fmu import compiled as fastloop
+        from tsid_fmu.fmu import FMUSession
         assert not fastloop.numba_available()
         assert fastloop.backend() == "python", fastloop.backend()
         assert fastloop.warm_up() == "python"
@@ -148,6 +148,15 @@ def test_fast_loop_matches_fmpy_simulate_fmu_costs(fmus, grid):
             ours = s.simulate(t, u, params)[:, 0]
         signal = np.zeros(t.size, dtype=[("time", np.float64), ("u", np.float64)])
         signal["time"], signal["u"] = t, u
+        if path == fmus["feed"]:
+            # FMPy's master reads the outputs of t[k+1] before it sets the inputs of
+            # t[k+1]: one step of lag on a direct feed-through, which the session does
+            # not have (it sets the inputs of t[k+1] first, as FMI co-simulation
+            # implies). So FMPy gets each input one sample early, with an event at t[0]
+            # (and a sample before it) so that its initialization still sets u[0].
+            signal = np.zeros(t.size + 2, dtype=signal.dtype)
+            signal["time"] = np.concatenate([t[:1] - 1, t[:1], t])
+            signal["u"] = np.concatenate([u[:1], u[:1], u[1:], u[-1:]])
         ref = fmpy.simulate_fmu(
             str(path),
             start_values=params,

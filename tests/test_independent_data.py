@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tsid_fmu.driver import FMUSession
+from tsid_fmu.fmu import FMUSession
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))

@@ -20,11 +20,10 @@ import numpy as np
 import pytest
 from fmu_factory import build_c_fmu, build_stub_library, copy_without
 
-from tsid_fmu import safety
 from tsid_fmu.cli import main
-from tsid_fmu.driver import FMUSession
 from tsid_fmu.errors import FMUError
-from tsid_fmu.safety import safe_extract
+from tsid_fmu.fmu import FMUSession, safe_extract
+from tsid_fmu.fmu import archive as safety
 
 MIB = 1 << 20
 

@@ -2,7 +2,7 @@
 
 A Taguchi study runs the same FMU hundreds to thousands of times (FMPy users report
 crashes after ~1000 instantiations and slow parameter loops).  These tests run 5,000
-short simulations through one :class:`~tsid_fmu.driver.FMUSession`, with a failing run
+short simulations through one :class:`~tsid_fmu.fmu.FMUSession`, with a failing run
 now and then, and many sessions opened and closed one after another, and check that
 resident memory, open file descriptors and the time per simulation do not grow.
 """
@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from fmu_factory import build_c_fmu, lag_response
 
-from tsid_fmu.driver import FMUSession
 from tsid_fmu.errors import SimulationError
+from tsid_fmu.fmu import FMUSession
 
 N_SIM = 5_000
 N_STEPS = 100

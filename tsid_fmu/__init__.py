@@ -11,6 +11,7 @@ from tsid_fmu.errors import (
     StudyError,
     TsidError,
 )
+from tsid_fmu.fmu import simulate
 
 __version__ = "0.1.0"
 
@@ -23,4 +24,5 @@ __all__ = [
     "StudyError",
     "TsidError",
     "__version__",
+    "simulate",
 ]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import tsid_fmu.parallel
 import tsid_fmu.runner  # noqa: F401
-from tsid_fmu.fastloop import warm_up
+from tsid_fmu.fmu.compiled import warm_up
 
 warm_up()
 

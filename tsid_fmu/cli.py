@@ -112,7 +112,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from tsid_fmu.driver import fmu_info
+    from tsid_fmu.fmu import fmu_info
 
     print(fmu_info(args.fmu))
     return 0

@@ -148,7 +148,7 @@ class _Runner:
     """A worker's evaluator: runs one replicate of one parameter set per task."""
 
     def __init__(self, study: Study, indices: Sequence[int]) -> None:
-        from tsid_fmu.fastloop import warm_up
+        from tsid_fmu.fmu.compiled import warm_up
 
         self.evaluator = Evaluator(study, list(indices))
         warm_up()  # load the compiled loop now, not in the first (timed) task

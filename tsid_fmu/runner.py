@@ -1,7 +1,7 @@
 """Evaluate parameter sets: simulate each experiment and replicate, score against the data.
 
 This is the step of the Taguchi loop that costs time: one simulation per array row,
-replicate and experiment. :class:`Evaluator` owns one :class:`~tsid_fmu.driver.FMUSession`
+replicate and experiment. :class:`Evaluator` owns one :class:`~tsid_fmu.fmu.FMUSession`
 per experiment (extracted and instantiated once, reset between runs) and the replicate
 inputs (measured input plus seeded white Gaussian noise, the SISO paper's robustness
 step). A row whose simulation fails is scored ``inf`` and its reason kept; it never stops
@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tsid_fmu.data import MeasuredData, load_data
-from tsid_fmu.driver import FMUSession
 from tsid_fmu.errors import FMUError, SimulationError, StudyError, TsidError
+from tsid_fmu.fmu import FMUSession
 from tsid_fmu.scoring import NOISE_POWER, Cost, noise_level
 from tsid_fmu.study import Experiment, Study
 

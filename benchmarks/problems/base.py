@@ -148,7 +148,7 @@ def simulate_fmu(
     start_values: dict[str, float] | None = None,
 ) -> np.ndarray:
     """Run ``fmu`` once with inputs given per sample (held over each step)."""
-    from tsid_fmu.driver import FMUSession
+    from tsid_fmu.fmu import FMUSession
 
     with FMUSession(
         fmu,

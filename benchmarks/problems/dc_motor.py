@@ -271,7 +271,7 @@ def cramer_rao(t: np.ndarray, v: np.ndarray, rel_step: float = 1e-6) -> dict[str
 
 def self_check() -> None:
     """Print the problem, the FMU against the independent solution, and the CRB."""
-    from tsid_fmu.driver import FMUSession
+    from tsid_fmu.fmu import FMUSession
 
     t0 = time.perf_counter()
     fmu = build_fmu()

@@ -194,7 +194,7 @@ def fit(fmu_session, t: np.ndarray, data: pd.DataFrame, start: dict[str, float])
 
 def self_check() -> None:
     """Print the problem, the FMU against the independent solution, and the fits."""
-    from tsid_fmu.driver import FMUSession
+    from tsid_fmu.fmu import FMUSession
 
     t0 = time.perf_counter()
     fmu = build_fmu()

@@ -118,7 +118,7 @@ def _savgol(x: np.ndarray, dt: float, window: int) -> tuple[np.ndarray, np.ndarr
 
 def self_check() -> None:
     """Print the problem and the mismatch of the FMU (held inputs) against the data."""
-    from tsid_fmu.driver import FMUSession
+    from tsid_fmu.fmu import FMUSession
 
     gen = _generator()
     t0 = time.perf_counter()

@@ -109,7 +109,7 @@ def siso(encoder: bool, seed: int = 1) -> Problem:
 
 def self_check() -> None:
     """Print the problem and how the independent simulation compares with the FMU."""
-    from tsid_fmu.driver import FMUSession
+    from tsid_fmu.fmu import FMUSession
 
     gen = _generator()
     t0 = time.perf_counter()

@@ -7,7 +7,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from tsid_fmu.driver import FMUSession
+from tsid_fmu.fmu import FMUSession
 from tsid_fmu.errors import FMUError, SimulationError, TsidError
 from tsid_fmu.evaluate.cost import Cost
 from tsid_fmu.evaluate.protocol import Evaluation, Simulated

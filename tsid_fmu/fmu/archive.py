@@ -95,6 +95,112 @@ def _too_big(fmu: Path, what: str, size: int, limit: int) -> FMUError:
     )
 
 
+def _open(fmu: Path) -> zipfile.ZipFile:
+    if not fmu.is_file():
+        raise FMUError(f"FMU file not found: {fmu}")
+    if not zipfile.is_zipfile(fmu):
+        raise FMUError(f"{fmu}: not an FMU (an FMU is a ZIP archive)")
+    try:
+        return zipfile.ZipFile(fmu)
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+        raise FMUError(f"{fmu}: cannot read the ZIP archive: {exc}") from exc
+
+
+def _plan(
+    fmu: Path, archive: zipfile.ZipFile, limit: int, member_limit: int
+) -> tuple[list[tuple[zipfile.ZipInfo, PurePosixPath]], int]:
+    """Check every member before anything is written; return them and their total size."""
+    members = archive.infolist()
+    if len(members) > member_limit:
+        raise FMUError(
+            f"{fmu}: the archive has {len(members):,} members, more than the limit of "
+            f"{member_limit:,}; refusing the FMU"
+        )
+    plan: list[tuple[zipfile.ZipInfo, PurePosixPath]] = []
+    total = 0
+    for info in members:
+        rel = _member_path(fmu, info)
+        _check_type(fmu, info)
+        if rel is None:
+            continue
+        if info.file_size > limit:
+            raise _too_big(fmu, f"member {info.filename!r}", info.file_size, limit)
+        total += info.file_size
+        plan.append((info, rel))
+    if total > limit:
+        largest = max(plan, key=lambda p: p[0].file_size)[0]
+        raise _too_big(fmu, f"the archive (largest member {largest.filename!r})", total, limit)
+    if not any(rel == PurePosixPath("modelDescription.xml") for _, rel in plan):
+        nested = [str(rel) for _, rel in plan if rel.name == "modelDescription.xml"]
+        hint = (
+            f"; the archive holds {nested[0]!r}: zip the contents of the FMU folder, "
+            "not the folder itself"
+            if nested
+            else ""
+        )
+        raise FMUError(
+            f"{fmu}: not a valid FMU, modelDescription.xml is missing (no such member "
+            f"at the root of the archive){hint}"
+        )
+    return plan, total
+
+
+def _copy(
+    fmu: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, target: Path, room: int
+) -> int:
+    """Write one member to ``target`` counting the bytes; return how many were written.
+
+    ``room`` is what is left of the total limit.
+    """
+    size = 0
+    with archive.open(info) as src, open(target, "wb") as out:
+        while chunk := src.read(_CHUNK):
+            size += len(chunk)
+            if size > info.file_size:
+                raise FMUError(
+                    f"{fmu}: member {info.filename!r} expands beyond its declared "
+                    f"size of {info.file_size:,} bytes (a forged header); refusing the FMU"
+                )
+            if size > room:
+                return size
+            out.write(chunk)
+    return size
+
+
+def _extract_member(
+    fmu: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, target: Path, room: int
+) -> int:
+    """Create one member's folder or file; return the bytes written (FMUError on failure)."""
+    try:
+        if info.is_dir() or info.filename.endswith("\\"):
+            target.mkdir(parents=True, exist_ok=True)
+            return 0
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if target.is_symlink() or target.is_dir():
+            raise FMUError(
+                f"{fmu}: member {info.filename!r} clashes with another member of "
+                "the same path; refusing the FMU"
+            )
+        return _copy(fmu, archive, info, target, room)
+    except FMUError:
+        raise
+    except NotImplementedError as exc:  # before RuntimeError, its base
+        raise FMUError(
+            f"{fmu}: member {info.filename!r} uses ZIP compression method "
+            f"{info.compress_type}, which cannot be read (FMUs use deflate or none)"
+        ) from exc
+    except RuntimeError as exc:  # zipfile: "... is encrypted, password required"
+        raise FMUError(
+            f"{fmu}: member {info.filename!r} is encrypted; an FMU must not be password-protected"
+        ) from exc
+    except (zipfile.BadZipFile, zlib.error, EOFError, ValueError) as exc:
+        raise FMUError(f"{fmu}: member {info.filename!r} is damaged: {exc}") from exc
+    except OSError as exc:
+        raise FMUError(
+            f"{fmu}: cannot extract member {info.filename!r} to {target}: {exc}"
+        ) from exc
+
+
 def safe_extract(
     fmu_path: str | os.PathLike[str],
     dest: str | os.PathLike[str],
@@ -134,48 +240,9 @@ def safe_extract(
     fmu = Path(fmu_path)
     limit = MAX_BYTES if max_bytes is None else int(max_bytes)
     member_limit = MAX_MEMBERS if max_members is None else int(max_members)
-    if not fmu.is_file():
-        raise FMUError(f"FMU file not found: {fmu}")
-    if not zipfile.is_zipfile(fmu):
-        raise FMUError(f"{fmu}: not an FMU (an FMU is a ZIP archive)")
-    try:
-        archive = zipfile.ZipFile(fmu)
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
-        raise FMUError(f"{fmu}: cannot read the ZIP archive: {exc}") from exc
-    with archive:
-        members = archive.infolist()
-        if len(members) > member_limit:
-            raise FMUError(
-                f"{fmu}: the archive has {len(members):,} members, more than the limit of "
-                f"{member_limit:,}; refusing the FMU"
-            )
+    with _open(fmu) as archive:
         # 1. check everything before writing anything
-        plan: list[tuple[zipfile.ZipInfo, PurePosixPath]] = []
-        total = 0
-        for info in members:
-            rel = _member_path(fmu, info)
-            _check_type(fmu, info)
-            if rel is None:
-                continue
-            if info.file_size > limit:
-                raise _too_big(fmu, f"member {info.filename!r}", info.file_size, limit)
-            total += info.file_size
-            plan.append((info, rel))
-        if total > limit:
-            largest = max(plan, key=lambda p: p[0].file_size)[0]
-            raise _too_big(fmu, f"the archive (largest member {largest.filename!r})", total, limit)
-        if not any(rel == PurePosixPath("modelDescription.xml") for _, rel in plan):
-            nested = [str(rel) for _, rel in plan if rel.name == "modelDescription.xml"]
-            hint = (
-                f"; the archive holds {nested[0]!r}: zip the contents of the FMU folder, "
-                "not the folder itself"
-                if nested
-                else ""
-            )
-            raise FMUError(
-                f"{fmu}: not a valid FMU, modelDescription.xml is missing (no such member "
-                f"at the root of the archive){hint}"
-            )
+        plan, total = _plan(fmu, archive, limit, member_limit)
         root = Path(dest)
         root.mkdir(parents=True, exist_ok=True)
         root = root.resolve()
@@ -194,46 +261,7 @@ def safe_extract(
                     f"{fmu}: member {info.filename!r} would be written outside the "
                     "extraction folder; refusing the FMU"
                 )
-            try:
-                if info.is_dir() or info.filename.endswith("\\"):
-                    target.mkdir(parents=True, exist_ok=True)
-                    continue
-                target.parent.mkdir(parents=True, exist_ok=True)
-                if target.is_symlink() or target.is_dir():
-                    raise FMUError(
-                        f"{fmu}: member {info.filename!r} clashes with another member of "
-                        "the same path; refusing the FMU"
-                    )
-                size = 0
-                with archive.open(info) as src, open(target, "wb") as out:
-                    while chunk := src.read(_CHUNK):
-                        size += len(chunk)
-                        written += len(chunk)
-                        if size > info.file_size:
-                            raise FMUError(
-                                f"{fmu}: member {info.filename!r} expands beyond its declared "
-                                f"size of {info.file_size:,} bytes (a forged header); "
-                                "refusing the FMU"
-                            )
-                        if written > limit:
-                            raise _too_big(fmu, f"member {info.filename!r}", written, limit)
-                        out.write(chunk)
-            except FMUError:
-                raise
-            except NotImplementedError as exc:  # before RuntimeError, its base
-                raise FMUError(
-                    f"{fmu}: member {info.filename!r} uses ZIP compression method "
-                    f"{info.compress_type}, which cannot be read (FMUs use deflate or none)"
-                ) from exc
-            except RuntimeError as exc:  # zipfile: "... is encrypted, password required"
-                raise FMUError(
-                    f"{fmu}: member {info.filename!r} is encrypted; an FMU must not be "
-                    "password-protected"
-                ) from exc
-            except (zipfile.BadZipFile, zlib.error, EOFError, ValueError) as exc:
-                raise FMUError(f"{fmu}: member {info.filename!r} is damaged: {exc}") from exc
-            except OSError as exc:
-                raise FMUError(
-                    f"{fmu}: cannot extract member {info.filename!r} to {target}: {exc}"
-                ) from exc
+            written += _extract_member(fmu, archive, info, target, limit - written)
+            if written > limit:
+                raise _too_big(fmu, f"member {info.filename!r}", written, limit)
     return root

@@ -1,21 +1,16 @@
-"""Native-speed Co-Simulation step loops (Numba), with the Python loops as fallback.
+"""Choose how the step loops run: compiled by Numba, or interpreted.
 
-The hot path of a study is the per-step *set inputs / do step / get outputs* loop of
-:class:`~tsid_fmu.driver.FMUSession`.  In Python each step costs three ctypes calls
-through the interpreter (a few microseconds); here the same loop is compiled by Numba
-to machine code that calls the FMU's C functions directly through their raw function
-pointers, so a step costs what the FMU itself costs.
+The loops of :mod:`tsid_fmu.fmu.steploop` are one Python source per FMI version.  With
+Numba installed (``pip install tsid-fmu[fast]``) :func:`cs_loop` returns them compiled
+to machine code that calls the FMU's C functions directly; without it, when the
+environment variable ``TSID_FMU_LOOP=python`` is set, or if compiling fails, it returns
+the same functions to be interpreted.  Same arguments, same ``(status, step, call)``
+return, every FMI status checked, so the session reports a failure naming the FMI call,
+the step and the time whichever mode ran.
 
-The compiled loops keep the contract of :func:`tsid_fmu.driver._cs_loop_fmi2` and
-:func:`tsid_fmu.driver._cs_loop_fmi3` exactly -- same arguments, same ``(status, step,
-call)`` return, every FMI status checked -- so the session reports a failure naming the
-FMI call, the step and the time whichever loop ran.
-
-Numba is optional (``pip install tsid-fmu[fast]``).  Without it, or when the environment
-variable ``TSID_FMU_LOOP=python`` is set, or if compiling fails, :func:`cs_loop` returns
-the Python loops of :mod:`tsid_fmu.driver`.  Compiled code is cached on disk (Numba's
-``cache=True``), so only the first process on a machine pays the compile time (about a
-second); worker processes load it from the cache.
+Compiled code is cached on disk (Numba's ``cache=True``), so only the first process on
+a machine pays the compile time (about a second); worker processes load it from the
+cache, ideally in :func:`warm_up` while they start.
 
 Model Exchange FMUs are integrated by FMPy and never use these loops.
 """
@@ -31,17 +26,20 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.fmu import steploop
+
 __all__ = ["LOOP_ENV", "backend", "cs_loop", "numba_available", "warm_up"]
 
 LOOP_ENV = "TSID_FMU_LOOP"
-"""Environment variable: ``python`` forces the Python loops, ``numba`` (default) the compiled."""
+"""Environment variable: ``python`` forces the interpreted loops (default: compiled)."""
+
+Loop = Callable[..., tuple[int, int, int]]
 
 _log = logging.getLogger(__name__)
 _lock = threading.Lock()
-_compiled: dict[int, Callable[..., tuple[int, int, int]]] | None = None
+_PYTHON: dict[int, Loop] = {2: steploop._cs_loop_fmi2, 3: steploop._cs_loop_fmi3}
+_compiled: dict[int, Loop] | None = None
 _failed: str | None = None  # why the compiled loops are unavailable, once known
-
-Loop = Callable[..., tuple[int, int, int]]
 
 
 def numba_available() -> bool:
@@ -55,50 +53,36 @@ def numba_available() -> bool:
 
 def _build() -> dict[int, Loop]:
     """Import (compile on first call, or load from Numba's cache) the compiled loops."""
-    from tsid_fmu import _fastloop_numba as nb
+    from tsid_fmu.fmu import _numba  # imports Numba: only when it is wanted
 
-    return {2: nb.loop2, 3: nb.loop3}
+    return {2: _numba.loop2, 3: _numba.loop3}
 
 
-def _wrap(compiled: Loop, fallback: Loop, major: int) -> Loop:
-    """Call the compiled loop; on a Numba typing/compile error use ``fallback`` for good."""
+def _wrap(compiled: Loop, major: int) -> Loop:
+    """Call the compiled loop; on a Numba typing/compile error use the Python one for good."""
+    fallback = _PYTHON[major]
 
-    def loop(
-        funcs: tuple[Any, Any, Any],
-        component: Any,
-        vr_in: np.ndarray,
-        vr_out: np.ndarray,
-        time: np.ndarray,
-        inputs: np.ndarray,
-        out: np.ndarray,
-    ) -> tuple[int, int, int]:
+    def loop(*args: Any) -> tuple[int, int, int]:
         global _failed
         if _failed is None:
-            address = int(getattr(component, "value", component) or 0)
             try:
-                status, k, call = compiled(funcs, address, vr_in, vr_out, time, inputs, out)
+                status, k, call = compiled(*args)
             except Exception as exc:  # numba.core.errors.NumbaError: compile/typing failed
                 if "numba" not in type(exc).__module__:
                     raise
                 _failed = f"compiling the FMI {major} loop failed: {exc}"
                 warnings.warn(
-                    f"tsid_fmu.fastloop: {_failed}; using the slower Python loop",
+                    f"tsid_fmu.fmu.compiled: {_failed}; using the slower Python loop",
                     RuntimeWarning,
                     stacklevel=2,
                 )
             else:
                 return int(status), int(k), int(call)
-        return fallback(funcs, component, vr_in, vr_out, time, inputs, out)
+        return fallback(*args)
 
     loop.__name__ = f"cs_loop_fmi{major}_numba"
-    loop.__doc__ = f"Numba-compiled FMI {major} step loop (see tsid_fmu.driver)."
+    loop.__doc__ = f"Numba-compiled FMI {major} step loop (see tsid_fmu.fmu.steploop)."
     return loop
-
-
-def _python_loops() -> dict[int, Loop]:
-    from tsid_fmu.driver import _cs_loop_fmi2, _cs_loop_fmi3
-
-    return {2: _cs_loop_fmi2, 3: _cs_loop_fmi3}
 
 
 def _loops() -> dict[int, Loop] | None:
@@ -112,16 +96,15 @@ def _loops() -> dict[int, Loop] | None:
         if _compiled is None and _failed is None:
             if not numba_available():
                 _failed = "Numba is not installed (pip install tsid-fmu[fast])"
-                _log.info("tsid_fmu.fastloop: %s; using the Python loop", _failed)
+                _log.info("tsid_fmu.fmu.compiled: %s; using the Python loop", _failed)
                 return None
             try:
                 built = _build()
             except Exception as exc:  # a Numba/llvmlite that cannot build the loops
                 _failed = f"Numba cannot build the loops: {exc}"
-                _log.warning("tsid_fmu.fastloop: %s; using the Python loop", _failed)
+                _log.warning("tsid_fmu.fmu.compiled: %s; using the Python loop", _failed)
                 return None
-            python = _python_loops()
-            _compiled = {m: _wrap(built[m], python[m], m) for m in (2, 3)}
+            _compiled = {m: _wrap(built[m], m) for m in (2, 3)}
     return _compiled
 
 
@@ -136,13 +119,13 @@ def cs_loop(major: int) -> Loop:
     Returns
     -------
     callable
-        ``loop(funcs, component, vr_in, vr_out, time, inputs, out) -> (status, step,
-        call)`` with the contract of :func:`tsid_fmu.driver._cs_loop_fmi2`: the
-        Numba-compiled loop when available, else the Python loop.
+        The loop of :mod:`tsid_fmu.fmu.steploop` for that version
+        (``_cs_loop_fmi2`` or ``_cs_loop_fmi3``): compiled by Numba when available,
+        else the Python function itself.
     """
     loops = _loops()
     if loops is None or _failed is not None:
-        return _python_loops()[major]
+        return _PYTHON[major]
     return loops[major]
 
 
@@ -150,7 +133,7 @@ def backend() -> str:
     """Return ``"numba"`` if :func:`cs_loop` gives compiled loops, else ``"python"``.
 
     The answer triggers compilation on first use; the reason for ``"python"`` is
-    logged (``logging.getLogger("tsid_fmu.fastloop")``).
+    logged (``logging.getLogger("tsid_fmu.fmu.compiled")``).
     """
     return "numba" if _loops() is not None and _failed is None else "python"
 
@@ -162,13 +145,18 @@ def _reset_for_tests() -> None:
     _failed = None
 
 
+def _fail(*args: Any) -> int:
+    return 3  # fmi2Error / fmi3Error
+
+
 def warm_up() -> str:
     """Load (or compile) the compiled loops now, without touching any FMU.
 
     Worker processes call this while they start, so that the first simulation of a
     worker does not pay Numba's import and cache loading (which would count against
     a per-simulation time limit).  The loops are called once with stand-in function
-    pointers of the FMI prototypes that return ``fmi2Error`` at once.
+    pointers of the FMI prototypes that return an error at once, with arguments of the
+    types the session passes.
 
     Returns
     -------
@@ -177,17 +165,23 @@ def warm_up() -> str:
     """
     if backend() != "numba":
         return "python"
-    from tsid_fmu import driver
-
-    def fail(*args: Any) -> int:
-        return 3
-
-    dummies = {
-        2: (driver._FMI2_SETGET(fail), driver._FMI2_DOSTEP(fail), driver._FMI2_SETGET(fail)),
-        3: (driver._FMI3_SETGET(fail), driver._FMI3_DOSTEP(fail), driver._FMI3_SETGET(fail)),
-    }
+    sl = steploop
+    fmi2 = (sl.FMI2_SETGET(_fail), sl.FMI2_DOSTEP(_fail), sl.FMI2_SETGET(_fail))
+    fmi3 = (sl.FMI3_SETGET(_fail), sl.FMI3_DOSTEP(_fail), sl.FMI3_SETGET(_fail))
     vr = np.zeros(1, dtype=np.uint32)
     time = np.array([0.0, 1.0])
-    for major, funcs in dummies.items():
-        cs_loop(major)(funcs, 0, vr, vr, time, np.zeros((2, 1)), np.zeros((2, 1)))
+    u, out = np.zeros((2, 1)), np.zeros((2, 1))
+    cs_loop(2)(
+        (*fmi2, sl.FMI2_SETDER(_fail)),
+        0,
+        vr,
+        vr,
+        time,
+        u,
+        out,
+        vr,
+        np.ones(1, dtype=np.int32),
+        np.zeros((1, 1)),
+    )
+    cs_loop(3)(fmi3, 0, vr, vr, time, u, out, np.zeros(16, dtype=np.uint8))
     return backend()

@@ -1,0 +1,211 @@
+"""Communication grid and input values of one Co-Simulation run.
+
+Measured inputs are samples; between two samples each input is held (``"previous"``,
+a zero-order hold, the default) or linearly interpolated (``"linear"``).  A linear
+input reaches the FMU in one of two ways:
+
+- the FMU interpolates itself (FMI 2.0 ``canInterpolateInputs``): it gets the slope
+  ``(u[k+1] - u[k]) / h`` through ``fmi2SetRealInputDerivatives`` before each step;
+- otherwise every sample interval is split into ``substeps`` communication steps and
+  the input is set, linearly interpolated, at each of them.
+
+A ``step_size`` splits long sample intervals the same way (inputs held or
+interpolated).  :func:`refine` returns the grid the step loop runs on and the rows of it
+that are the original samples.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from tsid_fmu.errors import FMUError, SimulationError
+
+__all__ = [
+    "HOLDS",
+    "MAX_SUBSTEPS",
+    "Grid",
+    "check_step_size",
+    "check_substeps",
+    "frozen",
+    "refine",
+    "validate",
+]
+
+HOLDS = ("previous", "linear")
+"""Input holds: zero-order hold, linear interpolation between samples."""
+
+MAX_SUBSTEPS = 1_000_000
+"""Largest number of communication steps one sample interval may be split into."""
+
+
+class Grid(NamedTuple):
+    """What the step loop runs on (every array C-contiguous, float64, writeable).
+
+    Attributes
+    ----------
+    time : numpy.ndarray
+        Communication points, shape ``(m,)``.
+    inputs : numpy.ndarray
+        Input values at the communication points, shape ``(m, n_inputs)``.
+    slopes : numpy.ndarray
+        Derivatives of the inputs the FMU interpolates, per step, shape
+        ``(m - 1, n_interpolated)`` (``n_interpolated`` is 0 without such inputs).
+    keep : numpy.ndarray or None
+        Rows of the communication points that are the original samples; None when
+        the grid is the samples themselves.
+    """
+
+    time: np.ndarray
+    inputs: np.ndarray
+    slopes: np.ndarray
+    keep: np.ndarray | None
+
+
+def frozen(a: Any) -> bool:
+    """Return True for a read-only, C-contiguous float64 array (checked only once).
+
+    A read-only view of a writeable array can still change, so every array it is a
+    view of must be read-only too.
+    """
+    if not (isinstance(a, np.ndarray) and a.flags.c_contiguous and a.dtype == np.float64):
+        return False
+    while isinstance(a, np.ndarray):
+        if a.flags.writeable:
+            return False
+        a = a.base
+    return True
+
+
+def validate(
+    fmu: str, input_names: tuple[str, ...], time: Any, inputs: Any
+) -> tuple[np.ndarray, np.ndarray]:
+    """Check the sample times and inputs of one run; return them as float64 arrays.
+
+    Raises
+    ------
+    SimulationError
+        Fewer than 2 samples, time not finite and strictly increasing, inputs of the
+        wrong shape, missing, or not finite (the message names the input and time).
+    """
+    t = np.ascontiguousarray(time, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2:
+        raise SimulationError(
+            f"{fmu}: time must be a 1-D array of at least 2 samples, got shape {t.shape}"
+        )
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise SimulationError(f"{fmu}: time must be finite and strictly increasing")
+    n_in = len(input_names)
+    if inputs is None:
+        if n_in:
+            raise SimulationError(f"{fmu}: inputs missing for {', '.join(input_names)}")
+        return t, np.zeros((t.size, 0))
+    u = np.asarray(inputs, dtype=np.float64)
+    if u.ndim == 1 and n_in == 1:
+        u = u[:, None]
+    if u.shape != (t.size, n_in):
+        raise SimulationError(
+            f"{fmu}: inputs must have shape ({t.size}, {n_in}) "
+            f"for {list(input_names)}, got {u.shape}"
+        )
+    if not np.all(np.isfinite(u)):
+        row, col = np.argwhere(~np.isfinite(u))[0]
+        raise SimulationError(
+            f"{fmu}: input {input_names[col]!r} is not finite at t={t[row]:g} (row {row})"
+        )
+    return t, np.ascontiguousarray(u)
+
+
+def _splits(fmu: str, h: np.ndarray, step_size: float | None, substeps: int) -> np.ndarray | None:
+    """Return the number of communication steps per sample interval (None: all 1)."""
+    n_sub = np.ones(h.size, dtype=np.int64)
+    if step_size is not None:
+        ratio = h / step_size
+        if not np.all(ratio <= MAX_SUBSTEPS):
+            raise SimulationError(
+                f"{fmu}: step_size {step_size:g} s would split a sample "
+                f"interval into more than {MAX_SUBSTEPS} steps"
+            )
+        n_sub = np.maximum(np.ceil(ratio - 1e-9), 1).astype(np.int64)
+    n_sub = np.maximum(n_sub, substeps)
+    return n_sub if n_sub.max() > 1 else None
+
+
+def _writeable(a: np.ndarray) -> np.ndarray:
+    # the compiled loop is specialised for writeable arrays: one signature, one compile
+    return a if a.flags.writeable else a.copy()
+
+
+def refine(
+    fmu: str,
+    t: np.ndarray,
+    u: np.ndarray,
+    linear: np.ndarray,
+    *,
+    native: bool,
+    step_size: float | None = None,
+    substeps: int = 1,
+) -> Grid:
+    """Return the communication grid and input values for samples ``t``, ``u``.
+
+    Parameters
+    ----------
+    fmu : str
+        The FMU's name, for messages.
+    t, u : numpy.ndarray
+        Checked samples (see :func:`validate`).
+    linear : numpy.ndarray of bool
+        Per input: interpolate linearly (else hold).
+    native : bool
+        The FMU interpolates inputs itself given their derivatives.
+    step_size : float, optional
+        Largest communication step.
+    substeps : int
+        Communication steps per sample interval when some input is linear and the FMU
+        does not interpolate.
+    """
+    h = np.diff(t)
+    interpolate = bool(linear.any())
+    if native and interpolate:
+        slopes = np.diff(u[:, linear], axis=0) / h[:, None]
+    else:
+        slopes = np.zeros((t.size - 1, 0))
+    n_sub = _splits(fmu, h, step_size, substeps if interpolate and not native else 1)
+    keep = None
+    if n_sub is not None:
+        keep = np.concatenate([[0], np.cumsum(n_sub)])
+        # t[k] + j * (h[k] / n[k]), the same floating-point operations as
+        # np.linspace(t[k], t[k + 1], n[k], endpoint=False)
+        j = np.arange(keep[-1]) - np.repeat(keep[:-1], n_sub)
+        fine = np.repeat(t[:-1], n_sub) + j * np.repeat(h / n_sub, n_sub)
+        t_fine = np.concatenate([fine, t[-1:]])
+        u_fine = np.concatenate([np.repeat(u[:-1], n_sub, axis=0), u[-1:]])
+        for c in np.flatnonzero(linear):
+            u_fine[:, c] = np.interp(t_fine, t, u[:, c])
+        t, u = t_fine, u_fine
+        slopes = np.repeat(slopes, n_sub, axis=0)
+    return Grid(_writeable(t), _writeable(u), np.ascontiguousarray(slopes), keep)
+
+
+def check_substeps(fmu: str, substeps: Any) -> int:
+    """Return ``substeps`` as an int in ``1 .. MAX_SUBSTEPS``; FMUError otherwise."""
+    if isinstance(substeps, bool) or not isinstance(substeps, int | np.integer):
+        raise FMUError(f"{fmu}: substeps must be an integer, got {substeps!r}")
+    if not 1 <= substeps <= MAX_SUBSTEPS:
+        raise FMUError(f"{fmu}: substeps must be 1 to {MAX_SUBSTEPS}, got {substeps}")
+    return int(substeps)
+
+
+def check_step_size(fmu: str, step_size: Any) -> float | None:
+    """Return ``step_size`` as a positive finite float (or None); FMUError otherwise."""
+    if step_size is None:
+        return None
+    try:
+        value = float(step_size)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise FMUError(f"{fmu}: step_size must be a positive time in seconds, got {step_size!r}")
+    return value

@@ -1,0 +1,118 @@
+"""A human-readable summary of an FMU, for ``tsid info FMU``."""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.errors import FMUError
+from tsid_fmu.fmu.variables import variable_info
+
+__all__ = ["fmu_info", "read_fmu_description"]
+
+MAX_DESCRIPTION_BYTES = 256 * 1024**2
+"""Largest modelDescription.xml that :func:`fmu_info` reads into memory."""
+
+
+def read_fmu_description(path: Path) -> Any:
+    """Return FMPy's model description of the FMU file ``path``, read from the archive.
+
+    Raises
+    ------
+    FMUError
+        The file is missing, not a ZIP archive, has no readable ``modelDescription.xml``
+        or one larger than :data:`MAX_DESCRIPTION_BYTES`.
+    """
+    from fmpy.model_description import read_model_description
+
+    if not path.is_file():
+        raise FMUError(f"FMU file not found: {path}")
+    if not zipfile.is_zipfile(path):
+        raise FMUError(f"{path}: not an FMU (an FMU is a ZIP archive)")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            size = archive.getinfo("modelDescription.xml").file_size
+    except KeyError:
+        raise FMUError(f"{path}: not a valid FMU, modelDescription.xml is missing") from None
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise FMUError(f"{path}: cannot read the FMU: {exc}") from None
+    if size > MAX_DESCRIPTION_BYTES:
+        raise FMUError(
+            f"{path}: modelDescription.xml expands to {size} bytes, more than the limit of "
+            f"{MAX_DESCRIPTION_BYTES}; refusing the FMU"
+        )
+    try:
+        return read_model_description(str(path), validate=False)
+    except Exception as exc:  # FMPy raises bare Exception, KeyError for a missing member
+        raise FMUError(f"{path}: cannot read modelDescription.xml: {exc}") from exc
+
+
+def _variable_table(md: Any) -> list[str]:
+    groups = (
+        ("Inputs", lambda v: v.causality == "input"),
+        ("Outputs", lambda v: v.causality == "output"),
+        ("Parameters", lambda v: v.causality == "parameter" and v.variability != "constant"),
+    )
+    lines = []
+    for title, keep in groups:
+        chosen = [variable_info(v) for v in md.modelVariables if keep(v)]
+        lines.append("")
+        lines.append(f"{title} ({len(chosen)})")
+        if chosen:
+            width = max(len(v.name) for v in chosen)
+            for v in chosen:
+                lines.append(
+                    f"  {v.name:<{width}}  {v.type:<8} {v.unit or '':<8} "
+                    f"start={v.start if v.start is not None else '-':<10} "
+                    f"{v.description or ''}".rstrip()
+                )
+    return lines
+
+
+def fmu_info(path: str | os.PathLike[str]) -> str:
+    """Return a human-readable summary of an FMU (for ``tsid info FMU``).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The ``.fmu`` file.
+
+    Returns
+    -------
+    str
+        FMI version, model name, generation tool, interfaces, platforms, and the
+        inputs, outputs and parameters with type, unit, start value and description.
+
+    Raises
+    ------
+    FMUError
+        The file is missing or not a readable FMU.
+    """
+    from fmpy import supported_platforms
+
+    path = Path(path)
+    md = read_fmu_description(path)
+    platforms = supported_platforms(str(path))
+    interfaces = [
+        name
+        for name, d in (("Co-Simulation", md.coSimulation), ("Model Exchange", md.modelExchange))
+        if d
+    ]
+    lines = [
+        f"FMU              {path}",
+        f"FMI version      {md.fmiVersion}",
+        f"Model name       {md.modelName}",
+        f"Description      {md.description or ''}",
+        f"Generation tool  {md.generationTool or ''}",
+        f"Interfaces       {', '.join(interfaces) or 'none'}",
+        f"Platforms        {', '.join(platforms) or 'none'}",
+    ]
+    exp = md.defaultExperiment
+    if exp is not None:
+        lines.append(
+            f"Experiment       start={exp.startTime} stop={exp.stopTime} "
+            f"step={exp.stepSize} tolerance={exp.tolerance}"
+        )
+    return "\n".join(lines + _variable_table(md))

@@ -1,0 +1,184 @@
+"""The life of one FMU instance: instantiate, set values, initialize, reset, free.
+
+Everything here goes through FMPy's checked wrappers (``FMU2Slave``, ``FMU3Model``,
+...), whose failures raise ``FMICallException``; :meth:`Instance.error` turns such a
+failure into a :class:`~tsid_fmu.errors.SimulationError` naming the FMI function, the
+step, the time and the FMU's last log messages.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.errors import FMUError, SimulationError
+from tsid_fmu.fmu.logs import STATUS_NAMES, LogCapture, fmi2_callbacks
+from tsid_fmu.fmu.variables import VariableInfo
+
+__all__ = ["Instance", "Values"]
+
+_FMI_DISCARD = 2
+_FMI_FATAL = 4
+
+#: ``(name, kind, value_reference, value)`` of the values set before initialization
+Values = list[tuple[str, str, int, float]]
+
+
+class Instance:
+    """An FMPy FMU object (its library loaded) and the instance made from it.
+
+    Parameters
+    ----------
+    fmu : fmpy.fmi2.FMU2Slave or FMU2Model or fmpy.fmi3.FMU3Slave or FMU3Model
+        The loaded FMU, not yet instantiated.
+    major : {2, 3}
+        FMI major version.
+    log : LogCapture
+        Receives the instance's log messages.
+    name : str
+        The FMU's file name, for messages.
+
+    Attributes
+    ----------
+    component : int or None
+        The instance as FMPy holds it (None once freed).
+    address : int
+        The instance's address, for the step loops.
+    """
+
+    def __init__(self, fmu: Any, major: int, log: LogCapture, name: str) -> None:
+        self.fmu = fmu
+        self.major = major
+        self.log = log
+        self.name = name
+        self.component: Any = None
+        self.address = 0
+        self._callbacks: Any = None
+
+    def instantiate(self) -> None:
+        """Make a new instance; FMUError if the FMU refuses."""
+        fmu = self.fmu
+        try:
+            if self.major == 2:
+                self._callbacks = fmi2_callbacks(self.log)  # alive as long as the instance
+                fmu.instantiate(callbacks=self._callbacks)
+            else:
+                fmu.instantiate(logMessage=self.log.fmi3)
+        except Exception as exc:  # FMPy raises bare Exception on a NULL instance
+            raise FMUError(f"{self.name}: instantiation failed: {exc}.{self.log.text()}") from exc
+        if not fmu.component:
+            raise FMUError(f"{self.name}: instantiation failed.{self.log.text()}")
+        self.component = fmu.component
+        self.address = int(getattr(fmu.component, "value", fmu.component) or 0)
+
+    def free(self) -> None:
+        """Free the instance (if any)."""
+        if self.component is not None:
+            if self.major == 2:
+                self.fmu.fmi2FreeInstance(self.component)
+            else:
+                self.fmu.fmi3FreeInstance(self.component)
+        self.component = None
+        self.address = 0
+
+    def reset(self) -> None:
+        """Bring the instance back to the instantiated state (re-instantiate if needed)."""
+        if self.component is not None:
+            try:
+                status = self.fmu.reset()
+                if status is None or status < _FMI_DISCARD:
+                    return
+            except Exception:
+                pass
+        self.free()
+        self.instantiate()
+
+    def unload(self) -> None:
+        """Free the instance and unload the library."""
+        try:
+            self.free()
+        finally:
+            self.fmu.freeLibrary()
+
+    def error(
+        self, exc: Exception, what: str, step: int | str, t: float, status: int | None = None
+    ) -> SimulationError:
+        """Return the SimulationError for a failed FMI call (and free a Fatal instance)."""
+        function = getattr(exc, "function", None) or what
+        status = getattr(exc, "status", status)
+        label = (
+            f" returned {STATUS_NAMES[status]}"
+            if status is not None and 0 <= status < len(STATUS_NAMES)
+            else " failed"
+        )
+        if status is not None and status >= _FMI_FATAL:
+            self.free()
+        return SimulationError(
+            f"{self.name}: {function}{label} at step {step}, t={t:g} ({what}).{self.log.text()}"
+        )
+
+    def _set(self, name: str, kind: str, vr: int, value: float, vtype: str) -> None:
+        fmu = self.fmu
+        if kind == "real":
+            (fmu.setReal if self.major == 2 else fmu.setFloat64)([vr], [float(value)])
+        elif kind == "int":
+            if float(value) != round(float(value)):
+                raise SimulationError(
+                    f"{self.name}: {name!r} is an Integer variable, got non-integer {value!r}"
+                )
+            setter = (
+                fmu.setInteger
+                if self.major == 2
+                else getattr(fmu, "set" + ("Int64" if vtype == "Enumeration" else vtype))
+            )
+            setter([vr], [round(float(value))])
+        else:
+            fmu.setBoolean([vr], [bool(value)])
+
+    def apply(self, values: Values, variables: Mapping[str, VariableInfo], t0: float) -> None:
+        """Set start values and parameters (before initialization)."""
+        for name, kind, vr, value in values:
+            try:
+                self._set(name, kind, vr, value, variables[name].type)
+            except SimulationError:
+                raise
+            except Exception as exc:  # FMICallException
+                raise self.error(exc, f"setting {name!r} = {value!r}", 0, t0) from exc
+
+    def initialize(
+        self,
+        t0: float,
+        t_end: float,
+        values: Values,
+        variables: Mapping[str, VariableInfo],
+        vr_in: np.ndarray,
+        u0: np.ndarray,
+    ) -> None:
+        """Apply ``values``, set the inputs of ``t0`` and initialize."""
+        fmu = self.fmu
+        try:
+            if self.major == 2:
+                fmu.setupExperiment(startTime=t0, stopTime=t_end)
+                self.apply(values, variables, t0)
+                fmu.enterInitializationMode()
+                if u0.size:
+                    fmu.setReal(list(vr_in), list(u0))
+            else:
+                self.apply(values, variables, t0)
+                fmu.enterInitializationMode(startTime=t0, stopTime=t_end)
+                if u0.size:
+                    fmu.setFloat64(list(vr_in), list(u0))
+            fmu.exitInitializationMode()
+        except SimulationError:
+            raise
+        except Exception as exc:  # FMICallException from FMPy's checked wrappers
+            raise self.error(exc, "initialization", 0, t0) from exc
+
+    def terminate(self, step: int, t: float) -> None:
+        """End the run (``fmi2Terminate`` / ``fmi3Terminate``)."""
+        try:
+            self.fmu.terminate()
+        except Exception as exc:  # FMICallException
+            raise self.error(exc, "terminate", step, t) from exc

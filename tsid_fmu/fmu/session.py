@@ -1,0 +1,490 @@
+"""Run an FMU for one parameter set against measured inputs, many times over.
+
+A Taguchi study simulates the same FMU hundreds of times with different parameter
+values.  :class:`FMUSession` therefore does all the expensive work once -- extract the
+archive, read ``modelDescription.xml``, check the variable names, load the shared
+library and instantiate -- and only *resets* the instance between runs.
+
+Co-Simulation FMUs (FMI 2.0 and 3.0) are stepped by the loops of
+:mod:`tsid_fmu.fmu.steploop` (compiled by Numba when available); inputs are held or
+interpolated between samples as :mod:`tsid_fmu.fmu.grid` describes.  Model Exchange
+FMUs are integrated with FMPy's own solver (:mod:`tsid_fmu.fmu.exchange`), reusing the
+session's instance and extracted folder.
+
+Setup (instantiate, initialization, reset, terminate) goes through FMPy's
+``FMU2Slave``/``FMU2Model``/``FMU3Slave``/``FMU3Model`` wrappers, whose FMI status
+checks raise ``FMICallException``; the session turns them into
+:class:`~tsid_fmu.errors.SimulationError` naming the FMI function, the time and the
+FMU's last log messages.
+
+Examples
+--------
+>>> with FMUSession("plant.fmu", inputs=["u"], outputs=["y"],
+...                 parameters=["tau"]) as session:          # doctest: +SKIP
+...     y = session.simulate(t, u[:, None], {"tau": 0.2})
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+import zipfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from tsid_fmu.errors import FMUError, SimulationError
+from tsid_fmu.fmu import exchange, grid, steploop
+from tsid_fmu.fmu.archive import safe_extract
+from tsid_fmu.fmu.compiled import cs_loop
+from tsid_fmu.fmu.instance import Instance, Values
+from tsid_fmu.fmu.library import load_fmu, loop_functions
+from tsid_fmu.fmu.logs import LogCapture, Logger
+from tsid_fmu.fmu.variables import (
+    VariableInfo,
+    choose_interface,
+    parse_start,
+    read_description,
+    real_reference,
+    setter_kind,
+    suggest,
+    variable_info,
+)
+
+__all__ = ["FMUSession"]
+
+#: read-only (time, inputs) pairs a session remembers as checked
+_MAX_CHECKED = 32
+
+
+class _StatusError(Exception):
+    """Carries a failing status out of the step loop (internal)."""
+
+    def __init__(self, function: str, status: int) -> None:
+        super().__init__(function)
+        self.function = function
+        self.status = status
+
+
+class FMUSession:
+    """An FMU opened once and simulated many times (context manager).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The ``.fmu`` file (FMI 2.0 or 3.0), or a folder it was extracted to.
+    inputs : sequence of str
+        Real input variables (causality ``input``), in the column order of the
+        ``inputs`` array given to :meth:`simulate`.
+    outputs : sequence of str
+        Real variables to record, in the column order of the result.
+    parameters : sequence of str, optional
+        Parameters that will be set per run (causality ``parameter``, variability
+        ``fixed`` or ``tunable``); checked here so that a study fails before its first run.
+    interface : {"auto", "cs", "me"}, optional
+        Co-Simulation or Model Exchange; ``"auto"`` prefers Co-Simulation.
+    step_size : float, optional
+        Co-Simulation: largest communication step; longer sample intervals are split
+        into equal sub-steps.  Model Exchange: the solver's step size hint.
+    start_values : mapping of str to float, optional
+        Values applied on every run before the parameters (e.g. initial states).
+    logger : logging.Logger or callable, optional
+        Receives the FMU's log messages (the session always keeps the last few and puts
+        them into error messages).
+    hold : mapping of str to {"previous", "linear"}, optional
+        How each input behaves between samples: ``"previous"`` (zero-order hold, the
+        default for every input) or ``"linear"`` (linear interpolation; through
+        ``fmi2SetRealInputDerivatives`` if the FMI 2.0 FMU declares
+        ``canInterpolateInputs``, else by ``substeps`` communication steps per sample
+        interval with interpolated values).
+    substeps : int, optional
+        Communication steps per sample interval for linear inputs the FMU does not
+        interpolate itself (default 10).
+
+    Attributes
+    ----------
+    model_description : fmpy.model_description.ModelDescription
+        FMPy's model description, read once.
+    variables : dict of str to VariableInfo
+        Every model variable by name.
+    hold : dict of str to str
+        The hold of every input.
+    nfev : int
+        Number of simulations run (including failed ones).
+
+    Raises
+    ------
+    FMUError
+        The file is missing, not an FMU, lacks a binary for this platform, cannot be
+        loaded, or does not have the named variables with the right causality and type;
+        a hold or ``substeps`` is invalid.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        inputs: Sequence[str],
+        outputs: Sequence[str],
+        *,
+        parameters: Sequence[str] = (),
+        interface: Literal["auto", "cs", "me"] = "auto",
+        step_size: float | None = None,
+        start_values: Mapping[str, float] | None = None,
+        logger: Logger | None = None,
+        hold: Mapping[str, str] | None = None,
+        substeps: int = 10,
+    ) -> None:
+        self.path = Path(path)
+        self.input_names = tuple(inputs)
+        self.output_names = tuple(outputs)
+        self.parameter_names = tuple(parameters)
+        self.nfev = 0
+        self._tempdir: Path | None = None
+        self._inst: Instance | None = None
+        self._needs_reset = False
+        self._checked: dict[tuple[int, int], tuple[Any, Any, grid.Grid]] = {}
+        self._log = LogCapture(logger)
+        self._setters: dict[str, tuple[str, int]] = {}
+        try:
+            self.step_size = grid.check_step_size(self.path.name, step_size)
+            self.substeps = grid.check_substeps(self.path.name, substeps)
+            if interface not in ("auto", "cs", "me"):
+                raise FMUError(
+                    f"{self.path.name}: interface must be 'auto', 'cs' or 'me', not {interface!r}"
+                )
+            self._open(interface, dict(start_values or {}), dict(hold or {}))
+        except BaseException:
+            self.close()
+            raise
+
+    # -- opening --------------------------------------------------------------------------
+
+    def _open(self, interface: str, start_values: dict[str, float], hold: dict[str, str]) -> None:
+        unzipdir = self._extract()
+        md = read_description(unzipdir / "modelDescription.xml", self.path)
+        self.model_description = md
+        self.fmi_version = md.fmiVersion
+        self._major = 2 if md.fmiVersion == "2.0" else 3
+        self.variables: dict[str, VariableInfo] = {
+            v.name: variable_info(v) for v in md.modelVariables
+        }
+        self.interface = choose_interface(md, interface, self.path)
+        name = self.path.name
+        self._vr_in = np.array(
+            [real_reference(self.variables, name, n, "input", "input") for n in self.input_names],
+            dtype=np.uint32,
+        )
+        self._vr_out = np.array(
+            [real_reference(self.variables, name, n, "output") for n in self.output_names],
+            dtype=np.uint32,
+        )
+        if not self.output_names:
+            raise FMUError(f"{self.path}: at least one output is needed")
+        for pname in self.parameter_names:
+            self._setter(pname, role="parameter")
+        self._start_values: dict[str, float] = {}
+        for sname, value in start_values.items():
+            self._setter(sname, role="start value")
+            self._start_values[sname] = value
+        self._set_hold(hold)
+        fmu = load_fmu(name, unzipdir, md, self.interface, self._major)
+        self._inst = Instance(fmu, self._major, self._log, name)
+        if self.interface == "cs":
+            self._loop_funcs = loop_functions(fmu.dll, self._major)
+        self._inst.instantiate()
+
+    def _set_hold(self, hold: dict[str, str]) -> None:
+        """Check the holds; decide how linear inputs reach the FMU."""
+        for name, kind in hold.items():
+            if name not in self.input_names:
+                raise FMUError(
+                    f"{self.path.name}: hold given for {name!r}, which is not one of the "
+                    f"inputs {list(self.input_names)}.{suggest(name, self.input_names)}"
+                )
+            if kind not in grid.HOLDS:
+                raise FMUError(
+                    f"{self.path.name}: hold of input {name!r} must be 'previous' or "
+                    f"'linear', not {kind!r}"
+                )
+        self.hold = {name: hold.get(name, "previous") for name in self.input_names}
+        self._linear = np.array([self.hold[n] == "linear" for n in self.input_names], dtype=bool)
+        cs = self.model_description.coSimulation
+        #: the FMU interpolates linear inputs from their derivatives (FMI 2.0 only)
+        self._native = bool(
+            self._major == 2
+            and self.interface == "cs"
+            and cs is not None
+            and getattr(cs, "canInterpolateInputs", False)
+        )
+        interpolated = self._linear if self._native else np.zeros_like(self._linear)
+        self._vr_der = np.ascontiguousarray(self._vr_in[interpolated])
+        self._order = np.ones(max(self._vr_der.size, 1), dtype=np.int32)
+        self._flags = np.zeros(16, dtype=np.uint8)
+
+    def _extract(self) -> Path:
+        if self.path.is_dir():
+            return self.path
+        if not self.path.is_file():
+            raise FMUError(f"FMU file not found: {self.path}")
+        if not zipfile.is_zipfile(self.path):
+            raise FMUError(f"{self.path}: not an FMU (an FMU is a ZIP archive)")
+        self._tempdir = Path(tempfile.mkdtemp(prefix="tsid-fmu-"))
+        # checks member names, types and sizes; FMUError names the member at fault
+        safe_extract(self.path, self._tempdir)
+        return self._tempdir
+
+    def _setter(self, name: str, role: str) -> tuple[str, int]:
+        """Check that ``name`` can be set before initialization; cache how to set it."""
+        if name not in self._setters:
+            self._setters[name] = setter_kind(self.variables, self.path.name, name, role)
+        return self._setters[name]
+
+    @property
+    def _fmu(self) -> Any:
+        """FMPy's FMU object (None once closed)."""
+        return None if self._inst is None else self._inst.fmu
+
+    @property
+    def _component(self) -> Any:
+        """The FMU instance (None once freed)."""
+        return None if self._inst is None else self._inst.component
+
+    # -- public API ------------------------------------------------------------------------
+
+    def default_parameters(self) -> dict[str, float]:
+        """Return the model description's start values of the session's parameters.
+
+        Returns
+        -------
+        dict of str to float
+            ``name -> start`` (NaN where the model gives no start value).
+        """
+        out = {}
+        for name in self.parameter_names:
+            start = parse_start(self.variables[name])
+            out[name] = float("nan") if start is None else start
+        return out
+
+    def set_start_values(self, values: Mapping[str, float]) -> None:
+        """Replace the start values applied on every run (checked like the constructor's).
+
+        Raises
+        ------
+        FMUError
+            A name is unknown or cannot be set.
+        """
+        checked = {}
+        for name, value in values.items():
+            self._setter(name, role="start value")
+            checked[name] = value
+        self._start_values = checked
+
+    def simulate(
+        self,
+        time: np.ndarray,
+        inputs: np.ndarray | None,
+        parameters: Mapping[str, float],
+    ) -> np.ndarray:
+        """Simulate once with ``parameters`` and return the outputs at ``time``.
+
+        Parameters
+        ----------
+        time : numpy.ndarray
+            Strictly increasing sample times, shape ``(n,)``, ``n >= 2``.
+        inputs : numpy.ndarray or None
+            Shape ``(n, len(inputs))`` (or ``(n,)`` with one input); row ``k`` is the
+            inputs at ``time[k]``, held or interpolated up to ``time[k+1]`` as the
+            session's ``hold`` says.  ``None`` when the session has no inputs.
+        parameters : mapping of str to float
+            Values for this run, set after instantiation/reset and before the end of
+            initialization (after the construction's ``start_values``).
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape ``(n, len(outputs))``; row ``k`` is the outputs at ``time[k]``, after
+            the inputs of ``time[k]`` are set (no lag for direct feed-through).
+
+        Raises
+        ------
+        SimulationError
+            An FMI call failed (the message names the call, step and time and quotes
+            the FMU's log) or an output is not finite.  The session stays usable.
+        FMUError
+            A parameter name is unknown or cannot be set.
+        """
+        inst = self._inst
+        if inst is None:
+            raise SimulationError(f"{self.path.name}: the session is closed")
+        g = self._check_arrays(time, inputs)
+        values = [
+            (name, *self._setter(name, "parameter"), value)
+            for name, value in {**self._start_values, **parameters}.items()
+        ]
+        if self._needs_reset:
+            inst.reset()
+        self._log.messages.clear()
+        self.nfev += 1
+        self._needs_reset = True
+        if self.interface == "cs":
+            out = self._simulate_cs(inst, g, values)
+            t = g.time if g.keep is None else g.time[g.keep]
+        else:
+            t = g.time
+            out = self._simulate_me(inst, g, values)
+        self._check_finite(t, out)
+        return out
+
+    def _check_arrays(self, time: np.ndarray, inputs: np.ndarray | None) -> grid.Grid:
+        # A study simulates the same (read-only) time and input arrays hundreds of times:
+        # the checks and the grid are done once for them. Only arrays that cannot be
+        # changed in place (not writeable, already float64 and C-contiguous) are
+        # remembered, by identity, holding a reference so that the identity cannot be
+        # reused. A study alternates between its replicates' inputs, so several pairs
+        # are kept.
+        key = (id(time), id(inputs))
+        hit = self._checked.get(key)
+        if hit is not None and hit[0] is time and hit[1] is inputs:
+            return hit[2]
+        t, u = self._validate_arrays(time, inputs)
+        if self.interface == "cs":
+            g = grid.refine(
+                self.path.name,
+                t,
+                u,
+                self._linear,
+                native=self._native,
+                step_size=self.step_size,
+                substeps=self.substeps,
+            )
+        else:
+            g = grid.Grid(t, u, np.zeros((t.size - 1, 0)), None)
+        if grid.frozen(time) and (inputs is None or grid.frozen(inputs)):
+            if len(self._checked) >= _MAX_CHECKED:
+                self._checked.pop(next(iter(self._checked)))
+            self._checked[key] = (time, inputs, g)
+        return g
+
+    def _validate_arrays(
+        self, time: np.ndarray, inputs: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        return grid.validate(self.path.name, self.input_names, time, inputs)
+
+    def _check_finite(self, t: np.ndarray, out: np.ndarray) -> None:
+        # NaN and inf always make the sum non-finite (one pass, no temporary array);
+        # only then (or for a sum that overflowed) are the elements looked at
+        if math.isfinite(float(out.sum())):
+            return
+        bad = ~np.isfinite(out)
+        if bad.any():
+            row, col = np.argwhere(bad)[0]
+            raise SimulationError(
+                f"{self.path.name}: output {self.output_names[col]!r} is {out[row, col]} at "
+                f"t={t[row]:g} (step {row}); check the parameters of this run"
+            )
+
+    # -- one run -----------------------------------------------------------------------------
+
+    def _simulate_cs(self, inst: Instance, g: grid.Grid, values: Values) -> np.ndarray:
+        t, u = g.time, g.inputs
+        inst.initialize(t[0], t[-1], values, self.variables, self._vr_in, u[0])
+        out = np.empty((t.size, self._vr_out.size))
+        args: tuple[Any, ...] = (
+            self._loop_funcs,
+            inst.address,
+            self._vr_in,
+            self._vr_out,
+            t,
+            u,
+            out,
+        )
+        if self._major == 2:
+            args += (self._vr_der, self._order, g.slopes)
+        else:
+            args += (self._flags,)
+        status, k, call = cs_loop(self._major)(*args)
+        if status:
+            raise self._loop_error(inst, status, k, call, t)
+        inst.terminate(t.size - 1, t[-1])
+        return out if g.keep is None else out[g.keep]
+
+    def _loop_error(
+        self, inst: Instance, status: int, k: int, call: int, t: np.ndarray
+    ) -> SimulationError:
+        if status == steploop.STATUS_TERMINATE:
+            return SimulationError(
+                f"{self.path.name}: the FMU requested termination in fmi3DoStep at step "
+                f"{k}, t={t[k]:g}.{self._log.text()}"
+            )
+        what = (
+            f"step from t={t[k]:g} to t={t[k + 1]:g}"
+            if call in (steploop.CALL_STEP, steploop.CALL_DER)
+            else "communication point"
+        )
+        err = _StatusError(steploop.CALL_NAMES[self._major][call], status)
+        return inst.error(err, what, k, t[k])
+
+    def _simulate_me(self, inst: Instance, g: grid.Grid, values: Values) -> np.ndarray:
+        start_values = {
+            name: (bool(v) if kind == "bool" else round(v) if kind == "int" else float(v))
+            for name, kind, _vr, v in values
+        }
+        return exchange.simulate_me(
+            inst.fmu,
+            self.model_description,
+            g.time,
+            exchange.input_signal(g.time, g.inputs, self.input_names, self._linear),
+            self.output_names,
+            start_values,
+            self.step_size,
+            lambda exc, t: inst.error(exc, f"Model Exchange simulation: {exc}", "?", t),
+        )
+
+    # -- closing ---------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Terminate and free the instance, unload the library, delete the temp folder."""
+        try:
+            if self._inst is not None:
+                inst, self._inst = self._inst, None
+                inst.unload()
+        finally:
+            self._log.release()
+            if self._tempdir is not None:
+                shutil.rmtree(self._tempdir, ignore_errors=True)
+                self._tempdir = None
+
+    @property
+    def closed(self) -> bool:
+        """True after :meth:`close`."""
+        return self._inst is None
+
+    @property
+    def tempdir(self) -> Path | None:
+        """The folder the FMU was extracted to (removed on close), if the session owns one."""
+        return self._tempdir
+
+    def __enter__(self) -> FMUSession:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        if getattr(self, "_tempdir", None) is not None or getattr(self, "_inst", None):
+            try:
+                self.close()
+            except Exception:
+                pass
+
+    def __repr__(self) -> str:
+        state = "closed" if self.closed else f"FMI {self.fmi_version} {self.interface}"
+        return (
+            f"FMUSession({str(self.path)!r}, inputs={list(self.input_names)}, "
+            f"outputs={list(self.output_names)}, parameters={list(self.parameter_names)}, "
+            f"{state}, nfev={self.nfev})"
+        )

@@ -1,0 +1,224 @@
+"""What an FMU's model description says about its variables, and checks of names.
+
+The checks raise :class:`~tsid_fmu.errors.FMUError` naming the FMU, the role the name
+was given in (input, output, parameter, start value) and, for an unknown name, the
+closest names the model has.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.errors import FMUError
+
+__all__ = [
+    "BOOL_TYPES",
+    "INT_TYPES",
+    "REAL_TYPES",
+    "VariableInfo",
+    "choose_interface",
+    "find_variable",
+    "parse_start",
+    "read_description",
+    "real_reference",
+    "setter_kind",
+    "suggest",
+    "variable_info",
+]
+
+REAL_TYPES = frozenset({"Real", "Float64"})
+INT_TYPES = frozenset(
+    {"Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32"}
+    | {"Int64", "UInt64"}
+)
+BOOL_TYPES = frozenset({"Boolean"})
+
+
+@dataclass(frozen=True)
+class VariableInfo:
+    """What the session knows about one model variable.
+
+    Attributes
+    ----------
+    name, value_reference, type, causality, variability, initial, unit, description
+        As in ``modelDescription.xml`` (``type`` is FMPy's: ``"Real"``, ``"Float64"``,
+        ``"Integer"``, ``"Boolean"``, ...).
+    start : str or None
+        The start value as written in the model description.
+    """
+
+    name: str
+    value_reference: int
+    type: str
+    causality: str | None
+    variability: str | None
+    initial: str | None
+    start: str | None
+    unit: str | None
+    description: str | None
+
+
+def _declared_unit(variable: Any) -> str | None:
+    unit = getattr(variable, "unit", None)
+    if unit is None and getattr(variable, "declaredType", None) is not None:
+        unit = getattr(variable.declaredType, "unit", None)
+    return unit
+
+
+def variable_info(variable: Any) -> VariableInfo:
+    """Return the :class:`VariableInfo` of one of FMPy's ``ScalarVariable`` objects."""
+    return VariableInfo(
+        name=variable.name,
+        value_reference=int(variable.valueReference),
+        type=variable.type,
+        causality=variable.causality,
+        variability=variable.variability,
+        initial=variable.initial,
+        start=None if variable.start is None else str(variable.start),
+        unit=_declared_unit(variable),
+        description=variable.description,
+    )
+
+
+def parse_start(info: VariableInfo) -> float | None:
+    """Return the start value as a float (Booleans as 0/1), or None if there is none."""
+    if info.start is None:
+        return None
+    text = info.start.strip()
+    if info.type in BOOL_TYPES:
+        return 1.0 if text.lower() in ("true", "1") else 0.0
+    try:
+        return float(text.split()[0])
+    except (ValueError, IndexError):
+        return None
+
+
+def suggest(name: str, candidates: Sequence[str]) -> str:
+    """Return ``" Did you mean 'a', 'b'?"`` for the closest candidates, or ``""``."""
+    close = difflib.get_close_matches(name, candidates, n=3, cutoff=0.6)
+    return f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+
+
+def read_description(md_file: Path, fmu: Path) -> Any:
+    """Read ``modelDescription.xml`` with FMPy (no schema validation).
+
+    Raises
+    ------
+    FMUError
+        The file is missing or unreadable, or the FMI version is not 2.0 or 3.x.
+    """
+    from fmpy.model_description import read_model_description
+
+    if not md_file.is_file():
+        raise FMUError(f"{fmu}: not a valid FMU, modelDescription.xml is missing")
+    try:
+        md = read_model_description(str(md_file), validate=False)
+    except Exception as exc:  # FMPy raises bare Exception / lxml errors
+        raise FMUError(f"{fmu}: cannot read modelDescription.xml: {exc}") from exc
+    if not (md.fmiVersion == "2.0" or md.fmiVersion.startswith("3.")):
+        raise FMUError(f"{fmu}: FMI version {md.fmiVersion} is not supported (FMI 2.0 and 3.0 are)")
+    return md
+
+
+def find_variable(
+    variables: Mapping[str, VariableInfo], fmu: str, name: str, role: str
+) -> VariableInfo:
+    """Return the variable ``name``; FMUError with suggestions if there is none."""
+    info = variables.get(name)
+    if info is None:
+        raise FMUError(
+            f"{fmu}: unknown {role} {name!r}: the model has no "
+            f"variable of that name.{suggest(name, list(variables))}"
+        )
+    return info
+
+
+def real_reference(
+    variables: Mapping[str, VariableInfo],
+    fmu: str,
+    name: str,
+    role: str,
+    causality: str | None = None,
+) -> int:
+    """Return the value reference of a Real variable, checking its causality if given."""
+    info = find_variable(variables, fmu, name, role)
+    if causality is not None and info.causality != causality:
+        raise FMUError(
+            f"{fmu}: {role} {name!r} has causality {info.causality!r}, not {causality!r}"
+        )
+    if info.type not in REAL_TYPES:
+        raise FMUError(
+            f"{fmu}: {role} {name!r} is of type {info.type}, "
+            "but a Real (Float64) variable is needed"
+        )
+    return info.value_reference
+
+
+def setter_kind(
+    variables: Mapping[str, VariableInfo], fmu: str, name: str, role: str
+) -> tuple[str, int]:
+    """Check that ``name`` can be set before initialization.
+
+    Returns
+    -------
+    kind : {"real", "int", "bool"}
+        Which setter to use.
+    value_reference : int
+    """
+    info = find_variable(variables, fmu, name, role)
+    if info.variability == "constant":
+        raise FMUError(f"{fmu}: {role} {name!r} is a constant and cannot be set")
+    if role == "parameter" and info.causality != "parameter":
+        hint = (
+            " (a calculated parameter is computed by the FMU)"
+            if info.causality == "calculatedParameter"
+            else ""
+        )
+        raise FMUError(
+            f"{fmu}: parameter {name!r} has causality {info.causality!r}, not 'parameter'; "
+            f"it cannot be identified{hint}"
+        )
+    if info.causality == "independent" or (
+        info.causality != "input" and info.initial == "calculated"
+    ):
+        raise FMUError(
+            f"{fmu}: {role} {name!r} (causality {info.causality!r}, initial "
+            f"{info.initial!r}) cannot be set"
+        )
+    if info.type in REAL_TYPES:
+        return "real", info.value_reference
+    if info.type in INT_TYPES:
+        return "int", info.value_reference
+    if info.type in BOOL_TYPES:
+        return "bool", info.value_reference
+    raise FMUError(
+        f"{fmu}: {role} {name!r} is of type {info.type}; only "
+        "Real, Integer and Boolean variables can be set"
+    )
+
+
+def choose_interface(md: Any, interface: str, fmu: Path) -> str:
+    """Return ``"cs"`` or ``"me"``: the one asked for, or for ``"auto"`` Co-Simulation first.
+
+    Raises
+    ------
+    FMUError
+        The FMU declares no interface, or not the one asked for.
+    """
+    available = [k for k, d in (("cs", md.coSimulation), ("me", md.modelExchange)) if d]
+    if interface == "auto":
+        if not available:
+            raise FMUError(f"{fmu}: the FMU declares neither Co-Simulation nor Model Exchange")
+        return available[0]
+    if interface not in available:
+        names = {"cs": "Co-Simulation", "me": "Model Exchange"}
+        raise FMUError(
+            f"{fmu}: interface {interface!r} requested but the FMU only supports "
+            + (", ".join(names[a] for a in available) or "no interface")
+            + f" (use interface={available[0]!r})" * bool(available)
+        )
+    return interface
