@@ -72,9 +72,11 @@ def test_find_models():
     assert list(find_models(MODELS)) == ["LSEA_MISO", "LSEA_SISO"]
 
 
+@pytest.mark.parametrize("version", [2, 3])
 @pytest.mark.parametrize("name", ["LSEA_SISO", "LSEA_MISO"])
-def test_rebuilt_fmus_simulate_identically_to_committed(rebuilt, name):
-    new, old = rebuilt / f"{name}.fmu", FMUS / f"{name}.fmu"
+def test_rebuilt_fmus_simulate_identically_to_committed(rebuilt, name, version):
+    sub = "" if version == 2 else "fmi3/"
+    new, old = rebuilt / f"{sub}{name}.fmu", FMUS / f"{sub}{name}.fmu"
     assert validate_fmu(str(new)) == []
     md = read_model_description(str(new))
     inputs = [v.name for v in md.modelVariables if v.causality == "input"]
@@ -86,6 +88,18 @@ def test_rebuilt_fmus_simulate_identically_to_committed(rebuilt, name):
     a = simulate_fmu(str(new), **kw)
     b = simulate_fmu(str(old), **kw)
     np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-12, atol=1e-9)
+    me = {"fmi_type": "ModelExchange", "record_events": False}
+    a = simulate_fmu(str(new), **kw, **me)
+    b = simulate_fmu(str(old), **kw, **me)
+    np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-12, atol=1e-9)
+
+
+def test_build_is_byte_reproducible_and_selects_versions(rebuilt, tmp_path):
+    args = ["--models-dir", str(MODELS), "--out", str(tmp_path), "--fmi-version", "3"]
+    assert main([*args, "LSEA_SISO"]) == 0
+    assert not (tmp_path / "LSEA_SISO.fmu").exists()
+    again = tmp_path / "fmi3" / "LSEA_SISO.fmu"
+    assert again.read_bytes() == (rebuilt / "fmi3" / "LSEA_SISO.fmu").read_bytes()
 
 
 def test_model_description_from_declarations(rebuilt):
@@ -106,6 +120,29 @@ def test_model_description_from_declarations(rebuilt):
     miso = read_model_description(str(rebuilt / "LSEA_MISO.fmu"))
     deps = sorted(d.name for d in miso.outputs[0].dependencies)
     assert deps == ["a_o", "v", "v_o", "x", "x_o"]
+
+
+def test_fmi3_model_description(rebuilt):
+    import zipfile
+
+    path = rebuilt / "fmi3" / "LSEA_SISO.fmu"
+    md = read_model_description(str(path))
+    assert md.fmiVersion == "3.0"
+    v = {x.name: x for x in md.modelVariables}
+    assert v["time"].causality == "independent"
+    assert v["K_s"].causality == "parameter" and float(v["K_s"].start) == 8600.0
+    assert v["F_m"].causality == "input"
+    indicators = [x for x in md.modelVariables if x.name.startswith("_eventIndicator_")]
+    assert len(indicators) == md.numberOfEventIndicators == 2
+    assert "abs(v_m) <= V_z" in indicators[0].description
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+    # FMI 3.0 platform tuple, e.g. binaries/x86_64-linux/
+    assert any(n.startswith("binaries/") and "-" in n.split("/")[1] for n in names)
+    assert "sources/buildDescription.xml" in names and "sources/fmi3Functions.c" in names
+    assert md.outputs[0].variable.name == "F_o"
+    # FMI 3.0 counts parameters among the knowns of an output
+    assert sorted(d.name for d in md.outputs[0].dependencies) == ["B_s", "K_s", "v_m", "x_m"]
 
 
 def test_extra_model_built_from_test_source(tmp_path):
@@ -203,12 +240,14 @@ def test_compiler_error_names_command(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("cmake") is None, reason="fmpy compile needs cmake")
-def test_fmu_sources_recompile_with_fmpy(tmp_path):
+@pytest.mark.parametrize("sub", ["", "fmi3"], ids=["fmi2", "fmi3"])
+def test_fmu_sources_recompile_with_fmpy(tmp_path, sub):
     import subprocess
     import sys
 
+    committed = FMUS / sub / "LSEA_SISO.fmu"
     fmu = tmp_path / "LSEA_SISO.fmu"
-    shutil.copy2(FMUS / "LSEA_SISO.fmu", fmu)
+    shutil.copy2(committed, fmu)
     proc = subprocess.run(
         [sys.executable, "-m", "fmpy", "compile", str(fmu)], capture_output=True, text=True
     )
@@ -217,5 +256,5 @@ def test_fmu_sources_recompile_with_fmpy(tmp_path):
     sig = _inputs(["F_m"], t, [np.where(t < 1.0, 300.0, -300.0)])
     kw = {"stop_time": 2.0, "step_size": DT, "output_interval": DT, "input": sig}
     a = simulate_fmu(str(fmu), **kw)
-    b = simulate_fmu(str(FMUS / "LSEA_SISO.fmu"), **kw)
+    b = simulate_fmu(str(committed), **kw)
     np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-9, atol=1e-6)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import itertools
 import time
+import xml.etree.ElementTree as ET
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +21,10 @@ ROOT = Path(__file__).resolve().parents[1]
 FMUS = ROOT / "fmus"
 SISO = FMUS / "LSEA_SISO.fmu"
 MISO = FMUS / "LSEA_MISO.fmu"
+SISO3 = FMUS / "fmi3" / "LSEA_SISO.fmu"
+MISO3 = FMUS / "fmi3" / "LSEA_MISO.fmu"
+ALL_FMUS = [SISO, MISO, SISO3, MISO3]
+ALL_IDS = ["SISO", "MISO", "SISO-fmi3", "MISO-fmi3"]
 DT = 1e-3
 N = 10_000  # 10 s at 1 kHz
 
@@ -185,19 +191,37 @@ def stage_motion(amp: float = 2e-3, f: float = 1.5) -> dict[str, np.ndarray]:
 # --------------------------------------------------------------------------- tests
 
 
-@pytest.mark.parametrize("path", [SISO, MISO], ids=["SISO", "MISO"])
+@pytest.mark.parametrize("path", ALL_FMUS, ids=ALL_IDS)
 def test_validate_fmu_reports_no_problem(path):
     assert validate_fmu(str(path)) == []
 
 
-@pytest.mark.parametrize("path", [SISO, MISO], ids=["SISO", "MISO"])
+@pytest.mark.parametrize("path", ALL_FMUS, ids=ALL_IDS)
+def test_capabilities_events_and_interpolation(path):
+    md = read_model_description(str(path))
+    # one event indicator per relation of the friction law: |v_m| <= V_z, |F_mt| <= F_cm
+    assert md.numberOfEventIndicators == (2 if "SISO" in path.name else 0)
+    assert md.modelExchange is not None and md.coSimulation is not None
+    if md.fmiVersion == "2.0":
+        assert md.coSimulation.canInterpolateInputs
+    else:
+        assert md.fmiVersion == "3.0"
+        assert md.coSimulation.providesIntermediateUpdate
+        # FMPy does not read the attribute: every input may be set in Intermediate Update
+        with zipfile.ZipFile(path) as zf:
+            root = ET.fromstring(zf.read("modelDescription.xml"))
+        inputs = [e for e in root.iter("Float64") if e.get("causality") == "input"]
+        assert inputs and all(e.get("intermediateUpdate") == "true" for e in inputs)
+
+
+@pytest.mark.parametrize("path", ALL_FMUS, ids=ALL_IDS)
 @pytest.mark.parametrize("fmi_type", ["CoSimulation", "ModelExchange"])
 def test_simulates_with_fmpy_in_cs_and_me(path, fmi_type):
     t = np.arange(0, 2.0 + DT / 2, DT)
     sig = np.zeros(len(t), dtype=[("time", float), ("F_m", float)])
     sig["time"] = t
     sig["F_m"] = np.where(t < 1.0, 200.0, -200.0)
-    kw = {"input": sig} if path == SISO else {"input": _with_zero_motion(sig)}
+    kw = {"input": sig} if path in (SISO, SISO3) else {"input": _with_zero_motion(sig)}
     res = simulate_fmu(
         str(path),
         fmi_type=fmi_type,

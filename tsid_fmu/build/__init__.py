@@ -1,65 +1,61 @@
-"""Build FMI 2.0 FMUs (Co-Simulation and Model Exchange) from Modelica sources.
+"""Build FMI 2.0 and FMI 3.0 FMUs (Co-Simulation and Model Exchange) from Modelica.
 
 Modelica is the single source of a plant model. The build
 
-1. parses and flattens the model with pymoca (:mod:`.modelica`),
-2. sorts and solves the equations for the derivatives and outputs and generates C code
-   for them with CasADi (:mod:`.codegen`),
-3. writes ``modelDescription.xml`` from the declarations (:mod:`.model_description`),
-4. compiles the generated model part together with the hand-written, generic FMI 2.0
-   wrapper in ``tsid_fmu/build/c/`` and packs the FMU, sources included
-   (:mod:`.packaging`).
+1. parses and flattens the model with pymoca (:mod:`.modelica`, :mod:`.expressions`),
+2. sorts and solves the equations for the derivatives and outputs (:mod:`.causalize`),
+   once with the relations evaluated live (Co-Simulation) and once with every relation
+   a discrete state (Model Exchange: event indicators, events), and generates C code
+   for both with CasADi (:mod:`.codegen`),
+3. writes ``modelDescription.xml`` from the declarations (:mod:`.model_description`,
+   :mod:`.model_description3`),
+4. compiles the generated model part together with the hand-written, generic wrapper
+   in ``tsid_fmu/build/c/`` (a shared core ``tsid_core.c`` under ``fmi2Functions.c`` or
+   ``fmi3Functions.c``) and packs the FMU, sources included (:mod:`.packaging`,
+   :mod:`.assemble`).
 
 Building needs a C compiler and the ``build`` extra (``pip install tsid-fmu[build]``);
 using a built FMU needs neither.
 
 Public API
 ----------
-``build_fmu(model_file, model_name, out_path=None, *, package_dir=None, step_size=None)``
+``build_fmu(model_file, model_name, out_path=None, *, package_dir=None, step_size=None,
+fmi_version=2)``
     Build one FMU and return its path.
-``build_all(models_dir=None, out_dir=None, names=None)``
-    Build every model (or the named ones) of a Modelica package directory.
+``build_all(models_dir=None, out_dir=None, names=None, fmi_versions=(2, 3))``
+    Build every model (or the named ones) of a Modelica package directory: FMI 2.0 into
+    ``<out>/<Model>.fmu``, FMI 3.0 into ``<out>/fmi3/<Model>.fmu``.
 ``main(argv=None)``
-    Command line: ``python -m tsid_fmu.build [--all | MODEL ...] [--out DIR]``.
+    Command line: ``python -m tsid_fmu.build [--all | MODEL ...] [--out DIR]
+    [--fmi-version {2,3,all}]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import re
-import shutil
 import sys
-import tempfile
-import uuid
 from pathlib import Path
 
 from tsid_fmu.errors import BuildError
 
+from .assemble import DEFAULT_STEP_SIZE
+
 __all__ = [
     "DEFAULT_STEP_SIZE",
+    "FMI_VERSIONS",
     "build_all",
     "build_fmu",
     "default_models_dir",
     "find_models",
     "main",
+    "output_path",
 ]
 
-#: Default of the Co-Simulation parameter ``fixedStepSize`` [s] when the model does not
-#: give one with the vendor annotation ``annotation(__tsid_fmu(fixedStepSize = ...))``.
-DEFAULT_STEP_SIZE = 1e-4
+#: The FMI versions the build writes.
+FMI_VERSIONS = (2, 3)
 
-_STEP_RE = re.compile(r"__tsid_fmu\s*\(\s*fixedStepSize\s*=\s*([-+0-9.eE]+)\s*\)")
 _MODEL_RE = re.compile(r"^\s*(?:partial\s+)?model\s+(\w+)", re.M)
-
-
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("tsid-fmu")
-    except Exception:  # pragma: no cover - not installed
-        return "0"
 
 
 def default_models_dir() -> Path:
@@ -99,6 +95,27 @@ def find_models(models_dir: str | Path) -> dict[str, Path]:
     return dict(sorted(found.items()))
 
 
+def output_path(out_dir: str | Path, model: str, fmi_version: int) -> Path:
+    """Where :func:`build_all` writes a model's FMU of an FMI version.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The output directory (``fmus/``).
+    model : str
+        Short model name.
+    fmi_version : int
+        2 (``<out_dir>/<model>.fmu``) or 3 (``<out_dir>/fmi3/<model>.fmu``).
+
+    Returns
+    -------
+    Path
+        The FMU path.
+    """
+    out_dir = Path(out_dir)
+    return out_dir / f"{model}.fmu" if fmi_version == 2 else out_dir / "fmi3" / f"{model}.fmu"
+
+
 def build_fmu(
     model_file: str | Path,
     model_name: str,
@@ -106,8 +123,9 @@ def build_fmu(
     *,
     package_dir: str | Path | None = None,
     step_size: float | None = None,
+    fmi_version: int = 2,
 ) -> Path:
-    """Build an FMI 2.0 FMU (Co-Simulation and Model Exchange) from a Modelica model.
+    """Build an FMU (Co-Simulation and Model Exchange) from a Modelica model.
 
     Parameters
     ----------
@@ -118,7 +136,8 @@ def build_fmu(
         last component is the FMI model identifier and must be a C identifier.
     out_path : str or Path, optional
         The ``.fmu`` file to write, or an existing directory to write
-        ``<Model>.fmu`` into. Default: ``fmus/<Model>.fmu`` in the working directory.
+        ``<Model>.fmu`` into. Default: ``fmus/<Model>.fmu`` (FMI 2.0) or
+        ``fmus/fmi3/<Model>.fmu`` (FMI 3.0) in the working directory.
     package_dir : str or Path, optional
         Directory whose other ``.mo`` files are parsed too (models that use other classes
         of their package).
@@ -126,6 +145,8 @@ def build_fmu(
         Default of the parameter ``fixedStepSize`` (internal RK4 step of Co-Simulation,
         in s). Default: the model's ``annotation(__tsid_fmu(fixedStepSize = ...))``, else
         :data:`DEFAULT_STEP_SIZE`.
+    fmi_version : int, optional
+        2 (default) or 3.
 
     Returns
     -------
@@ -138,88 +159,24 @@ def build_fmu(
         If parsing, flattening, code generation or compilation fails, or pymoca/casadi
         are missing. The message names the file, model, equation or compiler command.
     """
-    from .codegen import causalize, generate_c
-    from .model_description import FIXED_STEP_NAME, model_description_xml
-    from .modelica import flatten_model
-    from .packaging import C_DIR, WRAPPER_FILES, compile_binary, fmi_platform, zip_fmu
+    from .assemble import prepare, write_fmu
 
-    model_file = Path(model_file)
-    model = flatten_model(model_file, model_name, package_dir)
-    ident = model.short_name
-    if not re.fullmatch(r"[A-Za-z_]\w*", ident):
-        raise BuildError(f"{model_file}: model name {ident!r} is not a valid C identifier")
-    names = {
-        v.name
-        for v in model.states + model.inputs + model.outputs + model.parameters + model.locals
-    }
-    if FIXED_STEP_NAME in names:
-        raise BuildError(
-            f"{model_file}: model {model.name} declares '{FIXED_STEP_NAME}', "
-            "a name reserved for the FMU's internal step parameter"
-        )
-    text = model_file.read_text(encoding="utf-8")
-    if step_size is None:
-        m = _STEP_RE.search(text)
-        step_size = float(m.group(1)) if m else DEFAULT_STEP_SIZE
-    if not step_size > 0:
-        raise BuildError(f"{model_file}: fixedStepSize must be > 0, got {step_size}")
-
+    prep = prepare(model_file, model_name, package_dir, step_size)
+    ident = prep.model.short_name
     if out_path is None:
-        out = Path.cwd() / "fmus" / f"{ident}.fmu"
+        out = output_path(Path.cwd() / "fmus", ident, fmi_version)
     else:
         out = Path(out_path)
         if out.is_dir():
             out = out / f"{ident}.fmu"
-
-    causal = causalize(model)
-    wrapper = "".join((C_DIR / f).read_text() for f in WRAPPER_FILES)
-    digest = hashlib.sha256(
-        "\0".join([model.name, text, repr(step_size), _version(), wrapper]).encode()
-    ).hexdigest()
-    guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "tsid-fmu:" + digest)) + "}"
-
-    plat, _ = fmi_platform()
-    with tempfile.TemporaryDirectory(prefix=f"tsid_build_{ident}_") as tmp:
-        root = Path(tmp) / "fmu"
-        src = root / "sources"
-        src.mkdir(parents=True)
-        for f in WRAPPER_FILES:
-            shutil.copy2(C_DIR / f, src / f)
-        generated = generate_c(model, causal, src, guid=guid, step_size=step_size)
-        source_files = ["fmi2Functions.c", *generated]
-        xml = model_description_xml(
-            model,
-            causal,
-            guid=guid,
-            step_size=step_size,
-            source_files=source_files,
-            generation_tool=f"tsid-fmu {_version()}",
-        )
-        (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
-        doc = root / "documentation"
-        doc.mkdir()
-        (doc / "index.html").write_text(
-            f"<html><head><title>{model.name}</title></head><body>\n<h1>{model.name}</h1>\n"
-            f"<p>{model.description}</p>\n{_strip_html(model.info_html)}\n</body></html>\n",
-            encoding="utf-8",
-        )
-        res = root / "resources"
-        res.mkdir()
-        shutil.copy2(model_file, res / model_file.name)
-        compile_binary(src, ident, root / "binaries" / plat, generated)
-        zip_fmu(root, out)
-    return out
-
-
-def _strip_html(info: str) -> str:
-    """Return the body of a Modelica ``info`` string (without ``<html>`` tags)."""
-    return re.sub(r"</?html>", "", info).strip()
+    return write_fmu(prep, out, fmi_version)
 
 
 def build_all(
     models_dir: str | Path | None = None,
     out_dir: str | Path | None = None,
     names: list[str] | None = None,
+    fmi_versions: tuple[int, ...] = FMI_VERSIONS,
 ) -> list[Path]:
     """Build every model of a Modelica directory (or the named ones) into ``out_dir``.
 
@@ -228,9 +185,12 @@ def build_all(
     models_dir : str or Path, optional
         Directory with the Modelica package(s); default :func:`default_models_dir`.
     out_dir : str or Path, optional
-        Output directory; default ``fmus/`` next to ``models_dir``.
+        Output directory; default ``fmus/`` next to ``models_dir``. See
+        :func:`output_path` for the file of each version.
     names : list of str, optional
         Short model names to build; default all models found.
+    fmi_versions : tuple of int, optional
+        FMI versions to write (default both, 2 and 3).
 
     Returns
     -------
@@ -242,6 +202,8 @@ def build_all(
     BuildError
         If a named model does not exist or a build fails.
     """
+    from .assemble import prepare, write_fmu
+
     mdir = Path(models_dir) if models_dir is not None else default_models_dir()
     odir = Path(out_dir) if out_dir is not None else mdir.resolve().parent / "fmus"
     odir.mkdir(parents=True, exist_ok=True)
@@ -249,14 +211,16 @@ def build_all(
     if not models:
         raise BuildError(f"no Modelica models found in {mdir}")
     wanted = names or list(models)
-    out = []
     for name in wanted:
         short = name.rsplit(".", 1)[-1]
         if short not in models:
             raise BuildError(f"model {name!r} not found in {mdir} (available: {', '.join(models)})")
-        out.append(
-            build_fmu(models[short], name, odir / f"{short}.fmu", package_dir=models[short].parent)
-        )
+    out = []
+    for name in wanted:
+        short = name.rsplit(".", 1)[-1]
+        prep = prepare(models[short], name, models[short].parent)
+        for version in fmi_versions:
+            out.append(write_fmu(prep, output_path(odir, short, version), version))
     return out
 
 
@@ -275,7 +239,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     parser = argparse.ArgumentParser(
         prog="python -m tsid_fmu.build",
-        description="Build FMI 2.0 FMUs (CS + ME) from the Modelica models in models/.",
+        description="Build FMI 2.0 and 3.0 FMUs (CS + ME) from the Modelica models in models/.",
     )
     parser.add_argument(
         "models", nargs="*", metavar="MODEL", help="model names to build (default: all)"
@@ -287,11 +251,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--out", type=Path, default=None, help="output directory (default: fmus/ next to models/)"
     )
+    parser.add_argument(
+        "--fmi-version",
+        choices=["2", "3", "all"],
+        default="all",
+        help="FMI version(s) to write: 2 -> OUT/<Model>.fmu, 3 -> OUT/fmi3/<Model>.fmu "
+        "(default: all)",
+    )
     args = parser.parse_args(argv)
     if args.all and args.models:
         parser.error("give either --all or model names, not both")
+    versions = FMI_VERSIONS if args.fmi_version == "all" else (int(args.fmi_version),)
     try:
-        paths = build_all(args.models_dir, args.out, args.models or None)
+        paths = build_all(args.models_dir, args.out, args.models or None, versions)
     except BuildError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -6,10 +6,18 @@ import re
 import xml.etree.ElementTree as ET
 from typing import Any
 
-from .codegen import Causalized
+from .causalize import Causalized, Layout
 from .modelica import FlatModel, import_build_deps
 
-__all__ = ["FIXED_STEP_NAME", "model_description_xml", "unit_base"]
+__all__ = [
+    "FIXED_STEP_NAME",
+    "add_unit_definitions",
+    "dependency_vrs",
+    "der_unit",
+    "fmt",
+    "model_description_xml",
+    "unit_base",
+]
 
 FIXED_STEP_NAME = "fixedStepSize"
 
@@ -86,8 +94,169 @@ def der_unit(unit: str) -> str | None:
     return du if unit_base(du) is not None else None
 
 
-def _fmt(v: float) -> str:
+def fmt(v: float) -> str:
+    """Return the shortest exact decimal text of a float (for XML attributes).
+
+    Parameters
+    ----------
+    v : float
+        The value.
+
+    Returns
+    -------
+    str
+        ``repr(float(v))``.
+    """
     return repr(float(v))
+
+
+def add_unit_definitions(root: ET.Element, lay: Layout) -> None:
+    """Add ``<UnitDefinitions>`` for every unit used (the same in FMI 2.0 and 3.0).
+
+    Parameters
+    ----------
+    root : xml.etree.ElementTree.Element
+        The ``fmiModelDescription`` element.
+    lay : Layout
+        The variables.
+    """
+    groups = [lay.states, lay.inputs, lay.outputs, lay.locals, lay.parameters]
+    der_units = {der_unit(v.unit) for v in lay.states if v.unit and der_unit(v.unit)}
+    units = sorted({v.unit for vs in groups for v in vs if v.unit} | {"s"} | der_units)
+    ud = ET.SubElement(root, "UnitDefinitions")
+    for u in units:
+        ue = ET.SubElement(ud, "Unit", {"name": u})
+        base = unit_base(u)
+        if base is not None:
+            exps, factor = base
+            attrs = {b: str(e) for b, e in exps.items()}
+            if factor != 1.0:
+                attrs["factor"] = fmt(factor)
+            ET.SubElement(ue, "BaseUnit", attrs)
+
+
+def dependency_vrs(
+    causal: Causalized, *, with_parameters: bool = False
+) -> tuple[list[list[int]], list[list[int]]]:
+    """Value references each derivative and each algebraic variable depends on.
+
+    From the Jacobian sparsity of the live ``eval`` function (a relation counts as a
+    dependency of every variable whose branch it selects).
+
+    Parameters
+    ----------
+    causal : Causalized
+        The live form of the model.
+    with_parameters : bool, optional
+        Also list parameters and time (FMI 3.0 counts them among the knowns; FMI 2.0
+        lists only states and inputs). Time is given as value reference ``n_real``.
+
+    Returns
+    -------
+    tuple of list
+        ``(dx, w)``: per derivative and per algebraic variable (outputs, then locals), the
+        sorted value references of the knowns it depends on.
+    """
+    ca, *_ = import_build_deps()
+    lay = causal.layout
+    ev = causal.eval
+    args = ev.sx_in() if ev.is_a("SXFunction") else ev.mx_in()
+    dx, w = ev.call(args)
+    t, x, u, p = args[:4]
+    known = [x, u] + ([p, t] if with_parameters else [])
+    vrs = [lay.x_off + k for k in range(lay.nx)] + [lay.u_off + k for k in range(u.numel())]
+    if with_parameters:
+        vrs += [lay.p_off + k for k in range(p.numel())] + [lay.n_real]
+    xu = ca.vertcat(*known)
+
+    def deps(expr: Any) -> list[list[int]]:
+        if expr.numel() == 0:
+            return []
+        sp = ca.jacobian(expr, xu).sparsity()
+        return [
+            sorted(vrs[j] for j in range(len(vrs)) if sp.has_nz(i, j)) for i in range(expr.numel())
+        ]
+
+    return deps(dx), deps(w)
+
+
+def default_experiment(root: ET.Element, model: FlatModel) -> None:
+    """Add ``<DefaultExperiment>`` from the model's ``experiment`` annotation.
+
+    Parameters
+    ----------
+    root : xml.etree.ElementTree.Element
+        The ``fmiModelDescription`` element.
+    model : FlatModel
+        The model.
+    """
+    exp = model.experiment
+    de = {"startTime": fmt(exp.get("StartTime", 0.0)), "stopTime": fmt(exp.get("StopTime", 1.0))}
+    if "Interval" in exp:
+        de["stepSize"] = fmt(exp["Interval"])
+    ET.SubElement(root, "DefaultExperiment", de)
+
+
+#: Description of the parameter ``fixedStepSize``.
+FIXED_STEP_DESCRIPTION = (
+    "Internal step of the fixed-step RK4 integrator in Co-Simulation "
+    "(communication steps are split into steps of this size)"
+)
+
+
+def variable_rows(lay: Layout, step_size: float) -> list[tuple[str, dict[str, str], str, dict]]:
+    """Return the real variables in value-reference order, with their FMI attributes.
+
+    Parameters
+    ----------
+    lay : Layout
+        The variables.
+    step_size : float
+        Default of ``fixedStepSize``.
+
+    Returns
+    -------
+    list of tuple
+        ``(name, attributes, description, type attributes)`` per value reference; the
+        type attributes hold ``unit``, ``start`` and, for derivatives, ``derivative`` as
+        the value reference of the state.
+    """
+
+    def unit_of(v: Any, der: bool = False) -> dict[str, str]:
+        du = der_unit(v.unit) if v.unit and der else v.unit
+        return {"unit": du} if du else {}
+
+    def kind(causality: str, initial: str | None = None, variability: str = "continuous"):
+        attrs = {"causality": causality, "variability": variability}
+        return {**attrs, "initial": initial} if initial else attrs
+
+    rows: list[tuple[str, dict[str, str], str, dict]] = []
+    for v in lay.states:
+        rows.append(
+            (v.name, kind("local", "exact"), v.description, {**unit_of(v), "start": fmt(v.start)})
+        )
+    for k, v in enumerate(lay.states):
+        rows.append(
+            (
+                f"der({v.name})",
+                kind("local", "calculated"),
+                f"Time derivative of {v.name}",
+                {**unit_of(v, der=True), "derivative": str(lay.x_off + k)},
+            )
+        )
+    for v in lay.inputs:
+        rows.append((v.name, kind("input"), v.description, {**unit_of(v), "start": fmt(v.start)}))
+    for v in lay.outputs:
+        rows.append((v.name, kind("output", "calculated"), v.description, unit_of(v)))
+    for v in lay.locals:
+        rows.append((v.name, kind("local", "calculated"), v.description, unit_of(v)))
+    fixed = kind("parameter", "exact", "fixed")
+    for v in lay.parameters:
+        rows.append((v.name, fixed, v.description, {**unit_of(v), "start": fmt(v.start)}))
+    rows.append(
+        (FIXED_STEP_NAME, fixed, FIXED_STEP_DESCRIPTION, {"unit": "s", "start": fmt(step_size)})
+    )
+    return rows
 
 
 def model_description_xml(
@@ -98,8 +267,9 @@ def model_description_xml(
     step_size: float,
     source_files: list[str],
     generation_tool: str,
+    n_event_indicators: int = 0,
 ) -> str:
-    """Return the text of ``modelDescription.xml``.
+    """Return the text of the FMI 2.0 ``modelDescription.xml``.
 
     Parameters
     ----------
@@ -115,16 +285,16 @@ def model_description_xml(
         C files in ``sources/`` to compile (``SourceFiles``).
     generation_tool : str
         Value of the ``generationTool`` attribute.
+    n_event_indicators : int, optional
+        Number of event indicators of Model Exchange (one per relation).
 
     Returns
     -------
     str
         The XML document.
     """
-    ca, *_ = import_build_deps()
     lay = causal.layout
     ident = model.short_name
-    exp = model.experiment
     root = ET.Element(
         "fmiModelDescription",
         {
@@ -134,9 +304,7 @@ def model_description_xml(
             "description": model.description,
             "generationTool": generation_tool,
             "variableNamingConvention": "structured",
-            # The event indicators are used inside Co-Simulation only: exposed to an ME
-            # solver, the stick band of dry friction makes it chatter at the band edge.
-            "numberOfEventIndicators": "0",
+            "numberOfEventIndicators": str(n_event_indicators),
         },
     )
     caps = {
@@ -145,160 +313,55 @@ def model_description_xml(
         "canNotUseMemoryManagementFunctions": "true",
     }
     me = ET.SubElement(root, "ModelExchange", caps)
-    cs = ET.SubElement(
-        root, "CoSimulation", {**caps, "canHandleVariableCommunicationStepSize": "true"}
-    )
+    cs_caps = {
+        **caps,
+        "canHandleVariableCommunicationStepSize": "true",
+        "canInterpolateInputs": "true",
+    }
+    cs = ET.SubElement(root, "CoSimulation", cs_caps)
     for parent in (me, cs):
         sf = ET.SubElement(parent, "SourceFiles")
         for f in source_files:
             ET.SubElement(sf, "File", {"name": f})
-
-    groups: list[tuple[str, list[Any]]] = [
-        ("state", lay.states),
-        ("der", lay.states),
-        ("input", lay.inputs),
-        ("output", lay.outputs),
-        ("local", lay.locals),
-        ("parameter", lay.parameters),
-    ]
-    der_units = {der_unit(v.unit) for v in lay.states if v.unit and der_unit(v.unit)}
-    units = sorted({v.unit for _, vs in groups for v in vs if v.unit} | {"s"} | der_units)
-    ud = ET.SubElement(root, "UnitDefinitions")
-    for u in units:
-        ue = ET.SubElement(ud, "Unit", {"name": u})
-        base = unit_base(u)
-        if base is not None:
-            exps, factor = base
-            attrs = {b: str(e) for b, e in exps.items()}
-            if factor != 1.0:
-                attrs["factor"] = _fmt(factor)
-            ET.SubElement(ue, "BaseUnit", attrs)
-
-    start_time = exp.get("StartTime", 0.0)
-    de = {"startTime": _fmt(start_time), "stopTime": _fmt(exp.get("StopTime", 1.0))}
-    if "Interval" in exp:
-        de["stepSize"] = _fmt(exp["Interval"])
-    ET.SubElement(root, "DefaultExperiment", de)
+    add_unit_definitions(root, lay)
+    default_experiment(root, model)
 
     mv = ET.SubElement(root, "ModelVariables")
-    index: dict[int, int] = {}  # value reference -> 1-based index
-    vr = 0
-
-    def add(name: str, attrs: dict[str, str], desc: str, real: dict[str, str]) -> None:
-        nonlocal vr
+    for vr, (name, attrs, desc, real) in enumerate(variable_rows(lay, step_size)):
         a = {"name": name, "valueReference": str(vr)}
         if desc:
             a["description"] = desc
         a.update(attrs)
+        if "derivative" in real:  # FMI 2.0 refers to the state by its 1-based index
+            real = {**real, "derivative": str(int(real["derivative"]) + 1)}
         sv = ET.SubElement(mv, "ScalarVariable", a)
         ET.SubElement(sv, "Real", real)
-        index[vr] = len(index) + 1
-        vr += 1
+    _model_structure(root, causal)
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
-    def unit_of(v: Any, der: bool = False) -> dict[str, str]:
-        if not v.unit:
-            return {}
-        if not der:
-            return {"unit": v.unit}
-        du = der_unit(v.unit)
-        return {"unit": du} if du else {}
 
-    for v in lay.states:
-        add(
-            v.name,
-            {"causality": "local", "variability": "continuous", "initial": "exact"},
-            v.description,
-            {**unit_of(v), "start": _fmt(v.start or 0.0)},
-        )
-    for k, v in enumerate(lay.states):
-        add(
-            f"der({v.name})",
-            {"causality": "local", "variability": "continuous", "initial": "calculated"},
-            f"Time derivative of {v.name}",
-            {**unit_of(v, der=True), "derivative": str(index[lay.x_off + k])},
-        )
-    for v in lay.inputs:
-        add(
-            v.name,
-            {"causality": "input", "variability": "continuous"},
-            v.description,
-            {**unit_of(v), "start": _fmt(v.start or 0.0)},
-        )
-    for v in lay.outputs:
-        add(
-            v.name,
-            {"causality": "output", "variability": "continuous", "initial": "calculated"},
-            v.description,
-            unit_of(v),
-        )
-    for v in lay.locals:
-        add(
-            v.name,
-            {"causality": "local", "variability": "continuous", "initial": "calculated"},
-            v.description,
-            unit_of(v),
-        )
-    for v in lay.parameters:
-        add(
-            v.name,
-            {"causality": "parameter", "variability": "fixed", "initial": "exact"},
-            v.description,
-            {**unit_of(v), "start": _fmt(v.start)},
-        )
-    add(
-        FIXED_STEP_NAME,
-        {"causality": "parameter", "variability": "fixed", "initial": "exact"},
-        "Internal step of the fixed-step RK4 integrator in Co-Simulation "
-        "(communication steps are split into steps of this size)",
-        {"unit": "s", "start": _fmt(step_size)},
-    )
+def _model_structure(root: ET.Element, causal: Causalized) -> None:
+    """FMI 2.0 ``<ModelStructure>``: variables by 1-based index (= value reference + 1)."""
+    lay = causal.layout
+    dep_dx, dep_w = dependency_vrs(causal)
 
-    # Dependencies from the Jacobian sparsity of (der(x), w) w.r.t. (x, u).
-    ev = causal.eval
-    nx, nu = lay.nx, len(lay.inputs)
-    x_in = ev.sx_in(1) if ev.is_a("SXFunction") else ev.mx_in(1)
-    u_in = ev.sx_in(2) if ev.is_a("SXFunction") else ev.mx_in(2)
-    args = ev.sx_in() if ev.is_a("SXFunction") else ev.mx_in()
-    args[1], args[2] = x_in, u_in
-    dx, w = ev.call(args)
-    xu = ca.vertcat(x_in, u_in)
+    def idx(vrs: list[int]) -> str:
+        return " ".join(str(v + 1) for v in vrs)
 
-    def deps(expr: Any) -> list[list[int]]:
-        if expr.numel() == 0:
-            return []
-        sp = ca.jacobian(expr, xu).sparsity()
-        out = []
-        for i in range(expr.numel()):
-            cols = [j for j in range(nx + nu) if sp.has_nz(i, j)]
-            out.append(
-                [index[lay.x_off + j] if j < nx else index[lay.u_off + j - nx] for j in cols]
-            )
-        return out
-
-    dep_dx = deps(dx)
-    dep_w = deps(w)
     ms = ET.SubElement(root, "ModelStructure")
     outs = ET.SubElement(ms, "Outputs")
     for k in range(len(lay.outputs)):
         ET.SubElement(
-            outs,
-            "Unknown",
-            {"index": str(index[lay.y_off + k]), "dependencies": " ".join(map(str, dep_w[k]))},
+            outs, "Unknown", {"index": str(lay.y_off + k + 1), "dependencies": idx(dep_w[k])}
         )
     ders = ET.SubElement(ms, "Derivatives")
-    for k in range(nx):
+    for k in range(lay.nx):
         ET.SubElement(
-            ders,
-            "Unknown",
-            {"index": str(index[lay.dx_off + k]), "dependencies": " ".join(map(str, dep_dx[k]))},
+            ders, "Unknown", {"index": str(lay.dx_off + k + 1), "dependencies": idx(dep_dx[k])}
         )
     init = ET.SubElement(ms, "InitialUnknowns")
-    for k in range(len(lay.outputs)):
-        ET.SubElement(init, "Unknown", {"index": str(index[lay.y_off + k])})
-    for k in range(nx):
-        ET.SubElement(init, "Unknown", {"index": str(index[lay.dx_off + k])})
-    # InitialUnknowns must be sorted by index.
-    init[:] = sorted(init, key=lambda e: int(e.get("index", "0")))
-
-    ET.indent(root, space="  ")
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    unknowns = [lay.y_off + k for k in range(len(lay.outputs))]
+    unknowns += [lay.dx_off + k for k in range(lay.nx)]
+    for vr in sorted(unknowns):  # InitialUnknowns must be sorted by index
+        ET.SubElement(init, "Unknown", {"index": str(vr + 1)})

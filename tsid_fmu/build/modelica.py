@@ -22,6 +22,8 @@ from typing import Any
 
 from tsid_fmu.errors import BuildError
 
+from .expressions import Converter, Relation, expr_text
+
 __all__ = ["FlatModel", "Variable", "flatten_model", "import_build_deps"]
 
 
@@ -99,7 +101,12 @@ class FlatModel:
     time : Any
         CasADi symbol of ``time``.
     residuals : list
-        One CasADi ``SX`` residual ``lhs - rhs`` per equation.
+        One CasADi ``SX`` residual ``lhs - rhs`` per equation (relations evaluated live).
+    residuals_frozen : list
+        The same residuals with every relation outside ``noEvent`` replaced by the
+        symbol of its :class:`~.expressions.Relation` (the Model Exchange form).
+    relations : list of Relation
+        The relations that generate state events, in order of appearance.
     equation_text : list of str
         A readable form of each equation, for error messages.
     experiment : dict
@@ -120,6 +127,8 @@ class FlatModel:
     der_syms: list[Any] = field(default_factory=list)
     time: Any = None
     residuals: list[Any] = field(default_factory=list)
+    residuals_frozen: list[Any] = field(default_factory=list)
+    relations: list[Relation] = field(default_factory=list)
     equation_text: list[str] = field(default_factory=list)
     experiment: dict[str, float] = field(default_factory=dict)
     info_html: str = ""
@@ -128,167 +137,6 @@ class FlatModel:
     def short_name(self) -> str:
         """Last component of the qualified name (used as FMI model identifier)."""
         return self.name.rsplit(".", 1)[-1]
-
-
-_UNARY = {
-    "abs": "fabs",
-    "sign": "sign",
-    "sqrt": "sqrt",
-    "sin": "sin",
-    "cos": "cos",
-    "tan": "tan",
-    "asin": "arcsin",
-    "acos": "arccos",
-    "atan": "arctan",
-    "sinh": "sinh",
-    "cosh": "cosh",
-    "tanh": "tanh",
-    "exp": "exp",
-    "log": "log",
-    "log10": "log10",
-    "floor": "floor",
-    "ceil": "ceil",
-}
-
-
-class _Converter:
-    """Convert pymoca expression trees into CasADi SX expressions."""
-
-    def __init__(self, ca: Any, ast: Any, symbols: dict[str, Any], where: str) -> None:
-        self.ca = ca
-        self.ast = ast
-        self.symbols = symbols
-        self.where = where
-        self.der: dict[str, Any] = {}
-
-    def fail(self, msg: str) -> BuildError:
-        return BuildError(f"{self.where}: {msg}")
-
-    def ref_name(self, ref: Any) -> str:
-        name = ref.name
-        for idx in getattr(ref, "indices", []) or []:
-            for i in idx:
-                if i is not None and getattr(i, "value", None) is not None:
-                    raise self.fail(f"array access {name}[...] is not supported (scalars only)")
-        child = ref.child
-        while child:
-            c = child[0]
-            name += "." + c.name
-            child = c.child
-        return name
-
-    def __call__(self, node: Any) -> Any:
-        ca, ast = self.ca, self.ast
-        if isinstance(node, ast.Primary):
-            v = node.value
-            if isinstance(v, bool):
-                return ca.SX(1.0 if v else 0.0)
-            if isinstance(v, int | float):
-                return ca.SX(float(v))
-            raise self.fail(f"unsupported literal {v!r}")
-        if isinstance(node, ast.ComponentRef):
-            name = self.ref_name(node)
-            if name == "time":
-                return self.symbols["time"]
-            if name in ("true", "false"):
-                return ca.SX(1.0 if name == "true" else 0.0)
-            if name not in self.symbols:
-                raise self.fail(f"unknown variable '{name}'")
-            return self.symbols[name]
-        if isinstance(node, ast.IfExpression):
-            result = self(node.expressions[-1])
-            for cond, expr in zip(
-                reversed(node.conditions), reversed(node.expressions[:-1]), strict=True
-            ):
-                result = ca.if_else(self(cond), self(expr), result)
-            return result
-        if isinstance(node, ast.Expression):
-            return self.expression(node)
-        if isinstance(node, int | float):
-            return ca.SX(float(node))
-        raise self.fail(f"unsupported expression node {type(node).__name__}")
-
-    def expression(self, node: Any) -> Any:
-        ca, ast = self.ca, self.ast
-        op = node.operator
-        if isinstance(op, ast.ComponentRef):
-            op = self.ref_name(op)
-        ops = node.operands
-        if op == "der":
-            arg = ops[0]
-            if not isinstance(arg, ast.ComponentRef):
-                raise self.fail("der() of an expression is not supported, only der(variable)")
-            name = self.ref_name(arg)
-            if name not in self.symbols:
-                raise self.fail(f"der() of unknown variable '{name}'")
-            if name not in self.der:
-                self.der[name] = ca.SX.sym(f"der({name})")
-            return self.der[name]
-        if op in ("noEvent", "smooth", "homotopy"):
-            return self(ops[-1] if op == "smooth" else ops[0])
-        args = [self(o) for o in ops]
-        n = len(args)
-        if op == "-" and n == 1:
-            return -args[0]
-        if op == "+" and n == 1:
-            return args[0]
-        if op == "not" and n == 1:
-            return ca.logic_not(args[0])
-        if n == 2:
-            a, b = args
-            binary = {
-                "+": lambda: a + b,
-                "-": lambda: a - b,
-                "*": lambda: a * b,
-                ".*": lambda: a * b,
-                "/": lambda: a / b,
-                "./": lambda: a / b,
-                "^": lambda: a**b,
-                ".^": lambda: a**b,
-                "<": lambda: a < b,
-                "<=": lambda: a <= b,
-                ">": lambda: a > b,
-                ">=": lambda: a >= b,
-                "==": lambda: a == b,
-                "<>": lambda: a != b,
-                "and": lambda: ca.logic_and(a, b),
-                "or": lambda: ca.logic_or(a, b),
-                "min": lambda: ca.fmin(a, b),
-                "max": lambda: ca.fmax(a, b),
-                "atan2": lambda: ca.atan2(a, b),
-                "mod": lambda: a - ca.floor(a / b) * b,
-                "rem": lambda: ca.fmod(a, b),
-                "div": lambda: ca.if_else(a / b >= 0, ca.floor(a / b), ca.ceil(a / b)),
-            }
-            if op in binary:
-                return binary[op]()
-        if n == 1 and op in _UNARY:
-            return getattr(ca, _UNARY[op])(args[0])
-        raise self.fail(f"unsupported operator or function '{op}' with {n} argument(s)")
-
-
-def _expr_text(node: Any, ast: Any) -> str:
-    """Readable (approximate) Modelica text of an expression, for messages."""
-    if isinstance(node, ast.Primary):
-        return repr(node.value)
-    if isinstance(node, ast.ComponentRef):
-        return str(node)
-    if isinstance(node, ast.IfExpression):
-        parts = [
-            f"if {_expr_text(c, ast)} then {_expr_text(e, ast)}"
-            for c, e in zip(node.conditions, node.expressions[:-1], strict=False)
-        ]
-        return " else".join(parts) + f" else {_expr_text(node.expressions[-1], ast)}"
-    if isinstance(node, ast.Expression):
-        op = node.operator
-        op = str(op) if isinstance(op, ast.ComponentRef) else op
-        args = [_expr_text(o, ast) for o in node.operands]
-        if len(args) == 2 and not op.isidentifier():
-            return f"({args[0]} {op} {args[1]})"
-        if len(args) == 1 and op in ("-", "+", "not"):
-            return f"{op}{args[0]}"
-        return f"{op}({', '.join(args)})"
-    return str(node)
 
 
 def _literal(value: Any, ast: Any) -> Any:
@@ -360,39 +208,18 @@ def _annotations(text: str) -> tuple[dict[str, float], str]:
     return experiment, info
 
 
-def flatten_model(
-    model_file: str | Path, model_name: str, package_dir: str | Path | None = None
-) -> FlatModel:
-    """Parse, flatten and convert one Modelica model.
+def _parse_flat(
+    model_file: Path, model_name: str, package_dir: str | Path | None
+) -> tuple[str, Any, str, str]:
+    """Parse the source (and its package) and flatten the model.
 
-    Parameters
-    ----------
-    model_file : str or Path
-        The ``.mo`` file holding the model.
-    model_name : str
-        Qualified (``"TSID.LSEA_SISO"``) or short (``"LSEA_SISO"``) model name.
-    package_dir : str or Path, optional
-        A package directory whose other ``.mo`` files are parsed as well (for models that
-        refer to other classes of their package). By default only ``model_file`` is read.
-
-    Returns
-    -------
-    FlatModel
-        Variables by role with their attributes and one residual per equation.
-
-    Raises
-    ------
-    BuildError
-        If the file cannot be read or parsed, the model is not found or uses a
-        construct outside the supported subset.
+    Returns the source text, the flat class, its qualified name and the message prefix.
     """
-    ca, parser, tree, ast = import_build_deps()
-    model_file = Path(model_file)
+    _ca, parser, tree, ast = import_build_deps()
     try:
         text = model_file.read_text(encoding="utf-8")
     except OSError as exc:
         raise BuildError(f"cannot read Modelica file {model_file}: {exc}") from exc
-    where = f"{model_file}: model {model_name}"
     try:
         root = parser.parse(text, bypass_cache=True)
     except Exception as exc:
@@ -427,19 +254,13 @@ def flatten_model(
     ):
         if getattr(flat, attr, None):
             raise BuildError(f"{where}: {what} are not supported")
+    return text, flat, qname, where
 
-    experiment, info = _annotations(text)
-    fm = FlatModel(
-        name=qname,
-        description=flat.comment or "",
-        source=model_file,
-        experiment=experiment,
-        info_html=info,
-    )
-    fm.time = ca.SX.sym("time")
 
-    # -- declarations -------------------------------------------------------------
-    symbols: dict[str, Any] = {"time": fm.time}
+def _declarations(flat: Any, time: Any, where: str) -> tuple[list[Variable], dict[str, Any]]:
+    """Variables (with symbols) and the symbol table of the flat class's declarations."""
+    ca, _parser, _tree, ast = import_build_deps()
+    symbols: dict[str, Any] = {"time": time}
     decls: list[tuple[str, Any]] = list(flat.symbols.items())
     constants: dict[str, Any] = {}
     variables: list[Variable] = []
@@ -466,7 +287,7 @@ def flatten_model(
             raw = s.value if value is not None else s.start
             if raw is None or (isinstance(raw, ast.Primary) and raw.value is None):
                 raise BuildError(f"{where}: parameter '{name}' has no value")
-            conv = _Converter(ca, ast, {**constants, "time": fm.time}, f"{where}: '{name}'")
+            conv = Converter(ca, ast, {**constants, "time": time}, f"{where}: '{name}'")
             expr = conv(raw)
             if not expr.is_constant():
                 raise BuildError(
@@ -485,7 +306,7 @@ def flatten_model(
                 try:
                     st = float(start)
                 except (TypeError, ValueError):
-                    conv = _Converter(ca, ast, {**constants, "time": fm.time}, where)
+                    conv = Converter(ca, ast, {**constants, "time": time}, where)
                     e = conv(s.start)
                     if not e.is_constant():
                         raise BuildError(
@@ -496,24 +317,36 @@ def flatten_model(
             var = Variable(name, kind, unit, desc, st, ca.SX.sym(name))
         variables.append(var)
         symbols[name] = var.sym
+    return variables, symbols
 
-    # -- equations ----------------------------------------------------------------
-    conv = _Converter(ca, ast, symbols, where)
+
+def _equations(flat: Any, fm: FlatModel, symbols: dict[str, Any], where: str) -> dict[str, Any]:
+    """Fill the residuals (live and frozen) of ``fm``; return the ``der()`` symbols."""
+    ca, _parser, _tree, ast = import_build_deps()
+    conv = Converter(ca, ast, symbols, where)
+    frozen = Converter(ca, ast, symbols, where, relations=fm.relations, der=conv.der)
     for i, eq in enumerate(flat.equations, start=1):
         if not isinstance(eq, ast.Equation):
             raise BuildError(
                 f"{where}: equation {i} is a {type(eq).__name__}; only simple equations "
                 "'lhs = rhs' are supported"
             )
-        txt = f"{_expr_text(eq.left, ast)} = {_expr_text(eq.right, ast)}"
+        txt = f"{expr_text(eq.left, ast)} = {expr_text(eq.right, ast)}"
         conv.where = f"{where}: equation {i} '{txt}'"
         res = conv(eq.left) - conv(eq.right)
         fm.residuals.append(res)
+        frozen.where = conv.where
+        fm.residuals_frozen.append(frozen(eq.left) - frozen(eq.right))
         fm.equation_text.append(txt)
+    return conv.der
 
-    # -- roles --------------------------------------------------------------------
+
+def _assign_roles(
+    fm: FlatModel, variables: list[Variable], der: dict[str, Any], where: str
+) -> None:
+    """Sort the variables of ``fm`` by role; differentiated locals become states."""
     for var in variables:
-        if var.kind in ("local", "output") and var.name in conv.der:
+        if var.kind in ("local", "output") and var.name in der:
             if var.kind == "output":
                 raise BuildError(
                     f"{where}: output '{var.name}' is differentiated; declare a separate "
@@ -523,7 +356,7 @@ def flatten_model(
             if var.start is None:
                 var.start = 0.0
         if var.kind == "input":
-            if var.name in conv.der:
+            if var.name in der:
                 raise BuildError(f"{where}: der() of input '{var.name}' is not supported")
             if var.start is None:
                 var.start = 0.0
@@ -535,8 +368,52 @@ def flatten_model(
             "parameter": fm.parameters,
             "local": fm.locals,
         }[var.kind].append(var)
-    fm.der_syms = [conv.der[v.name] for v in fm.states]
+    fm.der_syms = [der[v.name] for v in fm.states]
     for v in fm.parameters + fm.states + fm.inputs:
         if v.start is not None and not math.isfinite(v.start):
             raise BuildError(f"{where}: start value of '{v.name}' is not finite")
+
+
+def flatten_model(
+    model_file: str | Path, model_name: str, package_dir: str | Path | None = None
+) -> FlatModel:
+    """Parse, flatten and convert one Modelica model.
+
+    Parameters
+    ----------
+    model_file : str or Path
+        The ``.mo`` file holding the model.
+    model_name : str
+        Qualified (``"TSID.LSEA_SISO"``) or short (``"LSEA_SISO"``) model name.
+    package_dir : str or Path, optional
+        A package directory whose other ``.mo`` files are parsed as well (for models that
+        refer to other classes of their package). By default only ``model_file`` is read.
+
+    Returns
+    -------
+    FlatModel
+        Variables by role with their attributes and one residual per equation (live and
+        with the relations frozen, see :mod:`.expressions`).
+
+    Raises
+    ------
+    BuildError
+        If the file cannot be read or parsed, the model is not found or uses a
+        construct outside the supported subset.
+    """
+    ca, *_ = import_build_deps()
+    model_file = Path(model_file)
+    text, flat, qname, where = _parse_flat(model_file, model_name, package_dir)
+    experiment, info = _annotations(text)
+    fm = FlatModel(
+        name=qname,
+        description=flat.comment or "",
+        source=model_file,
+        experiment=experiment,
+        info_html=info,
+    )
+    fm.time = ca.SX.sym("time")
+    variables, symbols = _declarations(flat, fm.time, where)
+    der = _equations(flat, fm, symbols, where)
+    _assign_roles(fm, variables, der, where)
     return fm

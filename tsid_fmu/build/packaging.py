@@ -13,18 +13,56 @@ from pathlib import Path
 
 from tsid_fmu.errors import BuildError
 
-__all__ = ["C_DIR", "WRAPPER_FILES", "compile_binary", "fmi_platform", "zip_fmu"]
+__all__ = [
+    "C_DIR",
+    "WRAPPER_FILES",
+    "WRAPPER_FILES3",
+    "compile_binary",
+    "fmi_platform",
+    "wrapper_files",
+    "zip_fmu",
+]
 
-#: Directory of the hand-written, generic C wrapper and the FMI 2.0 headers.
+#: Directory of the hand-written, generic C wrappers and the FMI 2.0 and 3.0 headers.
 C_DIR = Path(__file__).resolve().parent / "c"
 
-#: Files copied from :data:`C_DIR` into every FMU's ``sources/``.
+#: The model-independent core shared by both wrappers.
+_CORE_FILES = ["tsid_core.c", "tsid_core.h"]
+
+#: Files copied from :data:`C_DIR` into every FMI 2.0 FMU's ``sources/``.
 WRAPPER_FILES = [
     "fmi2Functions.c",
+    *_CORE_FILES,
     "fmi2Functions.h",
     "fmi2FunctionTypes.h",
     "fmi2TypesPlatform.h",
 ]
+
+#: Files copied from :data:`C_DIR` into every FMI 3.0 FMU's ``sources/``.
+WRAPPER_FILES3 = [
+    "fmi3Functions.c",
+    *_CORE_FILES,
+    "fmi3Functions.h",
+    "fmi3FunctionTypes.h",
+    "fmi3PlatformTypes.h",
+]
+
+
+def wrapper_files(fmi_version: int) -> list[str]:
+    """Return the wrapper files of an FMI version (C files first).
+
+    Parameters
+    ----------
+    fmi_version : int
+        2 or 3.
+
+    Returns
+    -------
+    list of str
+        File names in :data:`C_DIR`.
+    """
+    return WRAPPER_FILES3 if fmi_version == 3 else WRAPPER_FILES
+
 
 # Own, hand-written code must compile without any warning.
 _STRICT = ["-Wall", "-Wextra", "-Wpedantic", "-Werror"]
@@ -39,8 +77,13 @@ _TOLERANT = [
 ]
 
 
-def fmi_platform() -> tuple[str, str]:
-    """Return the FMI 2.0 platform folder name and the shared-library suffix.
+def fmi_platform(fmi_version: int = 2) -> tuple[str, str]:
+    """Return the platform folder name of ``binaries/`` and the shared-library suffix.
+
+    Parameters
+    ----------
+    fmi_version : int, optional
+        2 (``linux64``) or 3 (platform tuple ``x86_64-linux``).
 
     Returns
     -------
@@ -53,10 +96,14 @@ def fmi_platform() -> tuple[str, str]:
         On a platform the build does not support.
     """
     bits = "64" if sys.maxsize > 2**32 else "32"
+    machine = platform.machine().lower()
+    arch = {"amd64": "x86_64", "arm64": "aarch64", "i686": "x86", "i386": "x86"}.get(
+        machine, machine
+    )
     if sys.platform.startswith("linux"):
-        return f"linux{bits}", ".so"
+        return (f"{arch}-linux" if fmi_version == 3 else f"linux{bits}"), ".so"
     if sys.platform == "darwin":
-        return f"darwin{bits}", ".dylib"
+        return (f"{arch}-darwin" if fmi_version == 3 else f"darwin{bits}"), ".dylib"
     raise BuildError(
         f"building FMU binaries on {sys.platform}/{platform.machine()} is not supported; "
         "build on Linux or macOS, or compile the FMU's sources/ with 'fmpy compile'"
@@ -91,7 +138,12 @@ def _run(cmd: list[str], cwd: Path) -> None:
 
 
 def compile_binary(
-    sources_dir: Path, model_identifier: str, out_dir: Path, generated: list[str]
+    sources_dir: Path,
+    model_identifier: str,
+    out_dir: Path,
+    generated: list[str],
+    *,
+    fmi_version: int = 2,
 ) -> Path:
     """Compile the wrapper and the generated model part into a shared library.
 
@@ -105,6 +157,8 @@ def compile_binary(
         Directory that receives the library.
     generated : list of str
         Generated ``.c`` files in ``sources_dir``.
+    fmi_version : int, optional
+        2 or 3: which wrapper to compile.
 
     Returns
     -------
@@ -116,13 +170,14 @@ def compile_binary(
     BuildError
         Naming the compiler command that failed and its output.
     """
-    _, suffix = fmi_platform()
+    _, suffix = fmi_platform(fmi_version)
     cc = _compiler()
     out_dir.mkdir(parents=True, exist_ok=True)
     common = ["-O2", "-fPIC", "-std=c99", "-fvisibility=hidden", "-I", "."]
     objs = []
-    for src in ["fmi2Functions.c", *generated]:
-        flags = _STRICT if src in ("fmi2Functions.c", "model.c") else _TOLERANT
+    own = [f for f in wrapper_files(fmi_version) if f.endswith(".c")]
+    for src in [*own, *generated]:
+        flags = _STRICT if src in [*own, "model.c"] else _TOLERANT
         obj = src[:-2] + ".o"
         _run([*cc, *common, *flags, "-c", src, "-o", obj], sources_dir)
         objs.append(obj)

@@ -1,42 +1,39 @@
 /*
  * Generic FMI 2.0 wrapper of tsid-fmu (Model Exchange and Co-Simulation).
  *
- * Hand-written, model independent. The model part is generated per model
- * (model.h, model.c, model_casadi.c) and provides:
- *   - the layout of the real array (model.h: NX, NU, NW, NP, *_OFF, N_REAL),
- *   - start values and names (model_start[], model_names[]),
- *   - model_ode(t, x, u, p, dx) and model_eval(t, x, u, p, dx, w).
+ * Hand-written, model independent: the FMI 2.0 API on top of the shared core
+ * (tsid_core.c, also used by the FMI 3.0 wrapper), which holds the instance data,
+ * evaluates the generated equations (model.c, model_casadi.c) and integrates.
  *
- * All variables are reals; a value reference is the index into the instance's
- * real array r[]: states, derivatives, inputs, outputs+locals, parameters,
- * fixedStepSize.
+ * All variables are reals; a value reference is the index into the instance's real
+ * array r[]: states, derivatives, inputs, outputs+locals, parameters, fixedStepSize.
  *
- * Co-Simulation integrates with the classical fourth-order Runge-Kutta method at
- * the fixed internal step fixedStepSize, inputs held constant over a communication
- * step. Time is taken from a step counter (t = t0 + n*h), not accumulated. The
- * event indicators of the model (one per relation in its if-conditions) are
- * checked after every internal step; when one changes sign, the step is cut at the
- * crossing (bisection on the step length) and continued from there, so that e.g.
- * the stick/slip switching of dry friction happens at the right state, not one
- * step late. A step that produces a non-finite state or output returns fmi2Error
- * with a log message.
+ * Co-Simulation integrates with the classical fourth-order Runge-Kutta method at the
+ * fixed internal step fixedStepSize. Time is taken from a step counter (t = t0 + n*h),
+ * not accumulated. The sign changes of the relations in the model's if-conditions are
+ * located inside a step by bisection, so that e.g. the stick/slip switching of dry
+ * friction happens at the right state, not one step late. Inputs are held over a
+ * communication step unless fmi2SetRealInputDerivatives gave their first derivatives
+ * (canInterpolateInputs): then u(t) = u + du*(t - tc) in every internal stage, and at
+ * the end of the step the inputs hold their interpolated values at the new time (the
+ * derivatives apply to that one step; set them again for the next). A step that
+ * produces a non-finite state or output returns fmi2Error with a log message.
  *
- * Model Exchange provides states and derivatives. It exposes no event indicators
- * (numberOfEventIndicators = 0): with the stick band of dry friction, an ME
- * solver's root finding chatters at the band edge, so discontinuities are left
- * to the solver's step-size control. There are no discrete states.
+ * Model Exchange: every relation of the model (outside noEvent) is a discrete state
+ * that changes only in Event Mode (fmi2NewDiscreteStates, with event iteration); its
+ * event indicator, with a small hysteresis, is exposed (numberOfEventIndicators), so
+ * the right-hand side is smooth between events and a variable-step solver locates
+ * every switch of an if-expression (see tsid_core.h).
  *
  * SPDX-License-Identifier: BSD-3-Clause
  */
 
 #include <math.h>
-#include <stdarg.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi2Functions.h"
-#include "model.h"
+#include "tsid_core.h"
 
 typedef enum {
     StateInstantiated = 1 << 0,
@@ -49,182 +46,41 @@ typedef enum {
 } ModelState;
 
 #define ANY_STATE 0x7f
+#define INIT_PHASE (StateInstantiated | StateInitializationMode)
 
 typedef struct {
-    double r[N_REAL];   /* all real variables, index = value reference */
-    double time;        /* current time */
-    double startTime;   /* time base of the step counter */
-    long long nSteps;   /* internal steps since startTime (Co-Simulation) */
-    int dirty;          /* derived variables (derivatives, outputs) must be recomputed */
-    double z[NZ + 1];   /* event indicators at the current state (Co-Simulation) */
-} InstanceData;
-
-/* Event location: bisection until the bracket is this short [s], at most this many
- * located events per internal step (the rest of the step is then taken as is). */
-#define EVENT_TIME_TOL 1e-10
-#define MAX_EVENTS_PER_STEP 8
-
-typedef struct {
-    InstanceData d;
+    Core core; /* first member: a Core * is an Instance * */
     fmi2Type type;
     ModelState state;
     char *instanceName;
     fmi2CallbackFunctions cb;
-    fmi2Boolean loggingOn;
 } Instance;
 
 /* --------------------------------------------------------------------- logging */
 
-static void logMessage(Instance *comp, fmi2Status status, const char *category,
-                       const char *fmt, ...) {
-    char buf[1024];
-    va_list args;
-    if (!comp || !comp->cb.logger) return;
-    if (status == fmi2OK && !comp->loggingOn) return;
-    va_start(args, fmt);
-    vsnprintf(buf, sizeof(buf), fmt, args);
-    va_end(args);
-    comp->cb.logger(comp->cb.componentEnvironment, comp->instanceName, status, category,
-                    "%s", buf);
+static void logToFmi2(Core *core, CoreStatus status, const char *category, const char *msg) {
+    Instance *comp = (Instance *)core;
+    if (!comp->cb.logger) return;
+    comp->cb.logger(comp->cb.componentEnvironment, comp->instanceName, (fmi2Status)status,
+                    category, "%s", msg);
 }
 
 static fmi2Status fail(Instance *comp, const char *fmt, const char *arg) {
-    logMessage(comp, fmi2Error, "logStatusError", fmt, arg);
+    if (comp) coreLog(&comp->core, CoreError, "logStatusError", fmt, arg);
     return fmi2Error;
 }
 
 static int allowed(Instance *comp, const char *f, int mask) {
     if (!comp) return 0;
     if (comp->state & mask) return 1;
-    logMessage(comp, fmi2Error, "logStatusError", "%s: illegal call sequence", f);
+    coreLog(&comp->core, CoreError, "logStatusError", "%s: illegal call sequence", f);
     return 0;
 }
 
-#define CHECK(f, mask)                               \
-    do {                                             \
+#define CHECK(f, mask)                                 \
+    do {                                               \
         if (!allowed(comp, f, mask)) return fmi2Error; \
     } while (0)
-
-/* ------------------------------------------------------------------ evaluation */
-
-#define X(d) ((d)->r + X_OFF)
-#define DX(d) ((d)->r + DX_OFF)
-#define U(d) ((d)->r + U_OFF)
-#define W(d) ((d)->r + W_OFF)
-#define P(d) ((d)->r + P_OFF)
-
-static int allFinite(const double *v, int n, int *bad) {
-    int i;
-    for (i = 0; i < n; i++) {
-        if (!isfinite(v[i])) {
-            *bad = i;
-            return 0;
-        }
-    }
-    return 1;
-}
-
-/* Recompute derivatives and algebraic variables from states, inputs, parameters. */
-static fmi2Status evaluate(Instance *comp, const char *caller) {
-    InstanceData *d = &comp->d;
-    int bad = 0;
-    if (!d->dirty) return fmi2OK;
-    if (model_eval(d->time, X(d), U(d), P(d), DX(d), W(d)) != 0) {
-        logMessage(comp, fmi2Error, "logStatusError",
-                   "%s: evaluation of the model equations failed at t = %g", caller, d->time);
-        return fmi2Error;
-    }
-    d->dirty = 0;
-    if (!allFinite(DX(d), NX, &bad)) {
-        logMessage(comp, fmi2Error, "logStatusError",
-                   "%s: non-finite value of %s at t = %g", caller, model_names[DX_OFF + bad],
-                   d->time);
-        return fmi2Error;
-    }
-    if (!allFinite(W(d), NW, &bad)) {
-        logMessage(comp, fmi2Error, "logStatusError",
-                   "%s: non-finite value of %s at t = %g", caller, model_names[W_OFF + bad],
-                   d->time);
-        return fmi2Error;
-    }
-    return fmi2OK;
-}
-
-static void resetData(InstanceData *d) {
-    memcpy(d->r, model_start, sizeof(d->r));
-    d->time = 0.0;
-    d->startTime = 0.0;
-    d->nSteps = 0;
-    d->dirty = 1;
-}
-
-/* One classical Runge-Kutta step of size h from time t (inputs held constant). */
-static int rk4Step(InstanceData *d, double t, double h) {
-    double k1[NX + 1], k2[NX + 1], k3[NX + 1], k4[NX + 1], xt[NX + 1];
-    double *x = X(d);
-    const double *u = U(d), *p = P(d);
-    int i;
-    if (model_ode(t, x, u, p, k1)) return 1;
-    for (i = 0; i < NX; i++) xt[i] = x[i] + 0.5 * h * k1[i];
-    if (model_ode(t + 0.5 * h, xt, u, p, k2)) return 1;
-    for (i = 0; i < NX; i++) xt[i] = x[i] + 0.5 * h * k2[i];
-    if (model_ode(t + 0.5 * h, xt, u, p, k3)) return 1;
-    for (i = 0; i < NX; i++) xt[i] = x[i] + h * k3[i];
-    if (model_ode(t + h, xt, u, p, k4)) return 1;
-    for (i = 0; i < NX; i++) x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-    return 0;
-}
-
-#if NZ > 0
-/* Index of the first indicator whose sign class (z >= 0) differs, or -1. */
-static int crossed(const double *z0, const double *z1) {
-    int i;
-    for (i = 0; i < NZ; i++) {
-        if ((z0[i] >= 0.0) != (z1[i] >= 0.0)) return i;
-    }
-    return -1;
-}
-#endif
-
-/* One internal step of size h from t with event location. d->z must hold the event
- * indicators at (t, x); on return it holds them at the new state. */
-static int stepWithEvents(InstanceData *d, double t, double h) {
-#if NZ > 0
-    double x0[NX + 1], z1[NZ + 1];
-    const double *u = U(d), *p = P(d);
-    double tau = 0.0; /* part of the step already taken */
-    int events = 0;
-    while (h - tau > 0.0) {
-        double rest = h - tau;
-        memcpy(x0, X(d), sizeof(double) * (NX + 1));
-        if (rk4Step(d, t + tau, rest)) return 1;
-        if (model_zc(t + h, X(d), u, p, z1)) return 1;
-        if (events < MAX_EVENTS_PER_STEP && crossed(d->z, z1) >= 0) {
-            double lo = 0.0, hi = rest;
-            while (hi - lo > EVENT_TIME_TOL) {
-                double mid = 0.5 * (lo + hi);
-                memcpy(X(d), x0, sizeof(double) * (NX + 1));
-                if (rk4Step(d, t + tau, mid)) return 1;
-                if (model_zc(t + tau + mid, X(d), u, p, z1)) return 1;
-                if (crossed(d->z, z1) >= 0) hi = mid; else lo = mid;
-            }
-            /* advance to just past the first crossing and continue from there */
-            memcpy(X(d), x0, sizeof(double) * (NX + 1));
-            if (rk4Step(d, t + tau, hi)) return 1;
-            if (model_zc(t + tau + hi, X(d), u, p, z1)) return 1;
-            memcpy(d->z, z1, sizeof(double) * NZ);
-            tau += hi;
-            events++;
-            continue;
-        }
-        memcpy(d->z, z1, sizeof(double) * NZ);
-        break;
-    }
-    return 0;
-#else
-    return rk4Step(d, t, h);
-#endif
-}
 
 /* ------------------------------------------------------------- common functions */
 
@@ -238,7 +94,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     (void)nCategories;
     (void)categories;
     if (!comp) return fmi2Error;
-    comp->loggingOn = loggingOn;
+    comp->core.loggingOn = loggingOn;
     return fmi2OK;
 }
 
@@ -273,9 +129,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     memcpy(comp->instanceName, instanceName, n);
     comp->cb = *functions;
     comp->type = fmuType;
-    comp->loggingOn = loggingOn;
     comp->state = StateInstantiated;
-    resetData(&comp->d);
+    coreInit(&comp->core, fmuType == fmi2ModelExchange);
+    comp->core.loggingOn = loggingOn;
+    comp->core.log = logToFmi2;
     return comp;
 }
 
@@ -295,10 +152,10 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
     (void)stopTimeDefined;
     (void)stopTime;
     CHECK("fmi2SetupExperiment", StateInstantiated);
-    comp->d.time = startTime;
-    comp->d.startTime = startTime;
-    comp->d.nSteps = 0;
-    comp->d.dirty = 1;
+    comp->core.d.time = startTime;
+    comp->core.d.startTime = startTime;
+    comp->core.d.nSteps = 0;
+    coreInvalidate(&comp->core, 1);
     return fmi2OK;
 }
 
@@ -306,27 +163,27 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     Instance *comp = (Instance *)c;
     CHECK("fmi2EnterInitializationMode", StateInstantiated);
     comp->state = StateInitializationMode;
-    comp->d.dirty = 1;
+    coreInvalidate(&comp->core, 1);
     return fmi2OK;
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     Instance *comp = (Instance *)c;
-    fmi2Status s;
+    const char *f = "fmi2ExitInitializationMode";
     double h;
-    CHECK("fmi2ExitInitializationMode", StateInitializationMode);
-    h = comp->d.r[VR_FIXED_STEP];
+    CHECK(f, StateInitializationMode);
+    h = comp->core.d.r[VR_FIXED_STEP];
     if (!(h > 0.0) || !isfinite(h)) {
-        logMessage(comp, fmi2Error, "logStatusError",
-                   "fmi2ExitInitializationMode: fixedStepSize = %g must be > 0", h);
+        coreLog(&comp->core, CoreError, "logStatusError", "%s: fixedStepSize = %g must be > 0",
+                f, h);
         comp->state = StateError;
         return fmi2Error;
     }
-    comp->d.dirty = 1;
-    s = evaluate(comp, "fmi2ExitInitializationMode");
-    if (s != fmi2OK) {
+    coreInvalidate(&comp->core, 1);
+    if ((comp->core.isModelExchange && coreInitModes(&comp->core, f) != CoreOK) ||
+        coreEvaluate(&comp->core, f) != CoreOK) {
         comp->state = StateError;
-        return s;
+        return fmi2Error;
     }
     comp->state = comp->type == fmi2ModelExchange ? StateEventMode : StateStepComplete;
     return fmi2OK;
@@ -342,7 +199,7 @@ fmi2Status fmi2Terminate(fmi2Component c) {
 fmi2Status fmi2Reset(fmi2Component c) {
     Instance *comp = (Instance *)c;
     if (!comp) return fmi2Error;
-    resetData(&comp->d);
+    coreResetData(&comp->core);
     comp->state = StateInstantiated;
     return fmi2OK;
 }
@@ -359,11 +216,12 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     for (i = 0; i < nvr; i++) {
         if (vr[i] >= N_REAL) return fail(comp, "fmi2GetReal: %s", "unknown value reference");
     }
-    if (comp->d.dirty && !(comp->state & (StateInstantiated | StateError))) {
-        s = evaluate(comp, "fmi2GetReal");
-        if (s != fmi2OK) comp->d.dirty = 0; /* report once; values are returned as they are */
+    if (comp->core.d.dirty && !(comp->state & (StateInstantiated | StateError))) {
+        s = (fmi2Status)coreEvaluate(&comp->core, "fmi2GetReal");
+        /* report once; values are returned as they are */
+        if (s != fmi2OK) comp->core.d.dirty = 0;
     }
-    for (i = 0; i < nvr; i++) value[i] = comp->d.r[vr[i]];
+    for (i = 0; i < nvr; i++) value[i] = comp->core.d.r[vr[i]];
     return s;
 }
 
@@ -371,91 +229,47 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
                        const fmi2Real value[]) {
     Instance *comp = (Instance *)c;
     size_t i;
+    int initPhase;
     CHECK("fmi2SetReal", StateInstantiated | StateInitializationMode | StateEventMode |
                              StateContinuousTimeMode | StateStepComplete);
     if (nvr > 0 && (!vr || !value)) return fail(comp, "fmi2SetReal: %s", "NULL argument");
+    initPhase = (comp->state & INIT_PHASE) != 0;
     for (i = 0; i < nvr; i++) {
-        fmi2ValueReference v = vr[i];
-        int isInput = v >= U_OFF && v < U_OFF + NU;
-        int isState = v < X_OFF + NX;
-        int isParam = v >= P_OFF && v <= VR_FIXED_STEP;
-        if (v >= N_REAL) return fail(comp, "fmi2SetReal: %s", "unknown value reference");
-        if (isParam && !(comp->state & (StateInstantiated | StateInitializationMode))) {
-            return fail(comp, "fmi2SetReal: parameter %s is fixed after initialization",
-                        model_names[v]);
-        }
-        if (isState && !(comp->state & (StateInstantiated | StateInitializationMode))) {
-            return fail(comp, "fmi2SetReal: %s can only be set before or during initialization",
-                        model_names[v]);
-        }
-        if (!isInput && !isParam && !isState) {
-            return fail(comp, "fmi2SetReal: %s is not an input, state or parameter",
-                        model_names[v]);
+        if (coreCheckSet(&comp->core, vr[i], initPhase, "fmi2SetReal") != CoreOK) {
+            return fmi2Error;
         }
     }
-    for (i = 0; i < nvr; i++) comp->d.r[vr[i]] = value[i];
-    comp->d.dirty = 1;
+    for (i = 0; i < nvr; i++) comp->core.d.r[vr[i]] = value[i];
+    coreInvalidate(&comp->core, initPhase);
     return fmi2OK;
 }
 
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Integer value[]) {
-    (void)vr;
-    (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, "fmi2GetInteger: %s", "the model has no Integer variables");
-}
+#define NO_VARIABLES(F, T, CONST, KIND)                                                 \
+    fmi2Status F(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,          \
+                 CONST T value[]) {                                                    \
+        (void)vr;                                                                      \
+        (void)value;                                                                   \
+        if (nvr == 0) return fmi2OK;                                                   \
+        return fail((Instance *)c, #F ": %s", "the model has no " KIND " variables"); \
+    }
 
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Boolean value[]) {
-    (void)vr;
-    (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, "fmi2GetBoolean: %s", "the model has no Boolean variables");
-}
-
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         fmi2String value[]) {
-    (void)vr;
-    (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, "fmi2GetString: %s", "the model has no String variables");
-}
-
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          const fmi2Integer value[]) {
-    (void)vr;
-    (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, "fmi2SetInteger: %s", "the model has no Integer variables");
-}
-
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          const fmi2Boolean value[]) {
-    (void)vr;
-    (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, "fmi2SetBoolean: %s", "the model has no Boolean variables");
-}
-
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         const fmi2String value[]) {
-    (void)vr;
-    (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, "fmi2SetString: %s", "the model has no String variables");
-}
+NO_VARIABLES(fmi2GetInteger, fmi2Integer, , "Integer")
+NO_VARIABLES(fmi2GetBoolean, fmi2Boolean, , "Boolean")
+NO_VARIABLES(fmi2GetString, fmi2String, , "String")
+NO_VARIABLES(fmi2SetInteger, fmi2Integer, const, "Integer")
+NO_VARIABLES(fmi2SetBoolean, fmi2Boolean, const, "Boolean")
+NO_VARIABLES(fmi2SetString, fmi2String, const, "String")
 
 /* ------------------------------------------------------------------- FMU state */
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     Instance *comp = (Instance *)c;
-    InstanceData *copy;
+    CoreData *copy;
     CHECK("fmi2GetFMUstate", ANY_STATE);
     if (!FMUstate) return fail(comp, "fmi2GetFMUstate: %s", "NULL argument");
-    copy = *FMUstate ? (InstanceData *)*FMUstate : (InstanceData *)malloc(sizeof(InstanceData));
+    copy = *FMUstate ? (CoreData *)*FMUstate : (CoreData *)malloc(sizeof(CoreData));
     if (!copy) return fail(comp, "fmi2GetFMUstate: %s", "out of memory");
-    *copy = comp->d;
+    *copy = comp->core.d;
     *FMUstate = copy;
     return fmi2OK;
 }
@@ -464,8 +278,8 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
     Instance *comp = (Instance *)c;
     CHECK("fmi2SetFMUstate", ANY_STATE);
     if (!FMUstate) return fail(comp, "fmi2SetFMUstate: %s", "NULL state");
-    comp->d = *(InstanceData *)FMUstate;
-    comp->d.dirty = 1;
+    comp->core.d = *(CoreData *)FMUstate;
+    comp->core.d.dirty = 1;
     return fmi2OK;
 }
 
@@ -519,18 +333,26 @@ fmi2Status fmi2EnterEventMode(fmi2Component c) {
     Instance *comp = (Instance *)c;
     CHECK("fmi2EnterEventMode", StateEventMode | StateContinuousTimeMode);
     comp->state = StateEventMode;
+    comp->core.eventIterations = 0;
     return fmi2OK;
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
     Instance *comp = (Instance *)c;
+    int changed = 0;
     CHECK("fmi2NewDiscreteStates", StateEventMode);
+    if (!info) return fail(comp, "fmi2NewDiscreteStates: %s", "NULL argument");
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
     info->nominalsOfContinuousStatesChanged = fmi2False;
     info->valuesOfContinuousStatesChanged = fmi2False;
     info->nextEventTimeDefined = fmi2False;
     info->nextEventTime = 0.0;
+    if (coreUpdateModes(&comp->core, &changed, "fmi2NewDiscreteStates") != CoreOK) {
+        comp->state = StateError;
+        return fmi2Error;
+    }
+    info->newDiscreteStatesNeeded = changed ? fmi2True : fmi2False;
     return fmi2OK;
 }
 
@@ -545,9 +367,17 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
                                        fmi2Boolean *enterEventMode,
                                        fmi2Boolean *terminateSimulation) {
     Instance *comp = (Instance *)c;
+    int pending = 0;
     (void)noSetFMUStatePriorToCurrentPoint;
     CHECK("fmi2CompletedIntegratorStep", StateContinuousTimeMode);
-    *enterEventMode = fmi2False;
+    if (!enterEventMode || !terminateSimulation) {
+        return fail(comp, "fmi2CompletedIntegratorStep: %s", "NULL argument");
+    }
+    /* a relation whose indicator changed sign without the solver stopping there */
+    if (coreModeChangePending(&comp->core, &pending, "fmi2CompletedIntegratorStep") != CoreOK) {
+        return fmi2Error;
+    }
+    *enterEventMode = pending ? fmi2True : fmi2False;
     *terminateSimulation = fmi2False;
     return fmi2OK;
 }
@@ -556,8 +386,8 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) {
     Instance *comp = (Instance *)c;
     CHECK("fmi2SetTime", StateInstantiated | StateInitializationMode | StateEventMode |
                              StateContinuousTimeMode);
-    comp->d.time = time;
-    comp->d.dirty = 1;
+    comp->core.d.time = time;
+    coreInvalidate(&comp->core, (comp->state & INIT_PHASE) != 0);
     return fmi2OK;
 }
 
@@ -566,14 +396,15 @@ fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t n
     size_t i;
     CHECK("fmi2SetContinuousStates", StateEventMode | StateContinuousTimeMode);
     if (nx != NX) return fail(comp, "fmi2SetContinuousStates: %s", "wrong number of states");
+    if (nx > 0 && !x) return fail(comp, "fmi2SetContinuousStates: %s", "NULL argument");
     for (i = 0; i < nx; i++) {
         if (!isfinite(x[i])) {
             return fail(comp, "fmi2SetContinuousStates: non-finite value of state %s",
                         model_names[X_OFF + i]);
         }
-        comp->d.r[X_OFF + i] = x[i];
+        comp->core.d.r[X_OFF + i] = x[i];
     }
-    comp->d.dirty = 1;
+    coreInvalidate(&comp->core, 0);
     return fmi2OK;
 }
 
@@ -584,16 +415,27 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx
     CHECK("fmi2GetDerivatives", StateInitializationMode | StateEventMode |
                                     StateContinuousTimeMode | StateTerminated | StateError);
     if (nx != NX) return fail(comp, "fmi2GetDerivatives: %s", "wrong number of states");
-    s = evaluate(comp, "fmi2GetDerivatives");
-    for (i = 0; i < nx; i++) derivatives[i] = comp->d.r[DX_OFF + i];
+    if (nx > 0 && !derivatives) return fail(comp, "fmi2GetDerivatives: %s", "NULL argument");
+    s = (fmi2Status)coreEvaluate(&comp->core, "fmi2GetDerivatives");
+    for (i = 0; i < nx; i++) derivatives[i] = comp->core.d.r[DX_OFF + i];
     return s;
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
     Instance *comp = (Instance *)c;
-    (void)eventIndicators;
-    CHECK("fmi2GetEventIndicators", ANY_STATE);
-    if (ni != 0) return fail(comp, "fmi2GetEventIndicators: %s", "the FMU exposes none");
+    double e[NREL + 1];
+    size_t i;
+    CHECK("fmi2GetEventIndicators", StateInitializationMode | StateEventMode |
+                                        StateContinuousTimeMode | StateTerminated | StateError);
+    if (ni != NREL) {
+        return fail(comp, "fmi2GetEventIndicators: %s", "wrong number of event indicators");
+    }
+    if (ni == 0) return fmi2OK;
+    if (!eventIndicators) return fail(comp, "fmi2GetEventIndicators: %s", "NULL argument");
+    if (coreEventIndicators(&comp->core, e, "fmi2GetEventIndicators") != CoreOK) {
+        return fmi2Error;
+    }
+    for (i = 0; i < ni; i++) eventIndicators[i] = e[i];
     return fmi2OK;
 }
 
@@ -602,7 +444,8 @@ fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
     size_t i;
     CHECK("fmi2GetContinuousStates", ANY_STATE);
     if (nx != NX) return fail(comp, "fmi2GetContinuousStates: %s", "wrong number of states");
-    for (i = 0; i < nx; i++) x[i] = comp->d.r[X_OFF + i];
+    if (nx > 0 && !x) return fail(comp, "fmi2GetContinuousStates: %s", "NULL argument");
+    for (i = 0; i < nx; i++) x[i] = comp->core.d.r[X_OFF + i];
     return fmi2OK;
 }
 
@@ -613,6 +456,9 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal
     if (nx != NX) {
         return fail(comp, "fmi2GetNominalsOfContinuousStates: %s", "wrong number of states");
     }
+    if (nx > 0 && !x_nominal) {
+        return fail(comp, "fmi2GetNominalsOfContinuousStates: %s", "NULL argument");
+    }
     for (i = 0; i < nx; i++) x_nominal[i] = 1.0;
     return fmi2OK;
 }
@@ -622,11 +468,19 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
                                        size_t nvr, const fmi2Integer order[],
                                        const fmi2Real value[]) {
-    (void)vr;
-    (void)nvr;
-    (void)order;
-    (void)value;
-    return fail((Instance *)c, "fmi2SetRealInputDerivatives: %s", "not supported");
+    Instance *comp = (Instance *)c;
+    const char *f = "fmi2SetRealInputDerivatives";
+    CoreStatus s = CoreOK;
+    size_t i;
+    CHECK(f, StateInstantiated | StateInitializationMode | StateStepComplete);
+    if (comp->type != fmi2CoSimulation) return fail(comp, "%s: only in Co-Simulation", f);
+    if (nvr > 0 && (!vr || !order || !value)) return fail(comp, "%s: NULL argument", f);
+    for (i = 0; i < nvr; i++) {
+        CoreStatus si = coreSetInputDerivative(&comp->core, vr[i], order[i], value[i], f);
+        if (si == CoreError) return fmi2Error;
+        if (si > s) s = si;
+    }
+    return (fmi2Status)s;
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
@@ -636,81 +490,24 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     (void)nvr;
     (void)order;
     (void)value;
-    return fail((Instance *)c, "fmi2GetRealOutputDerivatives: %s", "not supported");
+    return fail((Instance *)c, "fmi2GetRealOutputDerivatives: %s",
+                "not supported (maxOutputDerivativeOrder = 0)");
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentCommunicationPoint) {
     Instance *comp = (Instance *)c;
-    InstanceData *d;
-    double h, tEnd, nReal, hSub;
-    long long n, k;
-    int bad = 0;
-    fmi2Status s;
+    CoreStatus s;
     (void)noSetFMUStatePriorToCurrentCommunicationPoint;
     CHECK("fmi2DoStep", StateStepComplete);
-    d = &comp->d;
-    h = d->r[VR_FIXED_STEP];
-    if (communicationStepSize <= 0.0) {
-        logMessage(comp, fmi2Error, "logStatusError",
-                   "fmi2DoStep: communicationStepSize = %g must be > 0", communicationStepSize);
-        return fmi2Error;
+    if (coreCheckStep(&comp->core, currentCommunicationPoint, communicationStepSize,
+                      "fmi2DoStep") != CoreOK) {
+        return fmi2Error; /* bad arguments: the instance stays usable */
     }
-    if (fabs(currentCommunicationPoint - d->time) > 1e-9 * (1.0 + fabs(d->time))) {
-        logMessage(comp, fmi2Error, "logStatusError",
-                   "fmi2DoStep: currentCommunicationPoint = %.17g does not match the FMU time "
-                   "%.17g",
-                   currentCommunicationPoint, d->time);
-        return fmi2Error;
-    }
-    tEnd = currentCommunicationPoint + communicationStepSize;
-    /* inputs may have changed since the last step: indicators at the current point */
-    if (NZ > 0 && model_zc(d->time, X(d), U(d), P(d), d->z)) goto evalfail;
-    nReal = communicationStepSize / h;
-    n = (long long)floor(nReal + 0.5);
-    if (n >= 1 && fabs(nReal - (double)n) <= 1e-9 * nReal) {
-        /* communication step is a multiple of the internal step: t = t0 + k*h */
-        for (k = 0; k < n; k++) {
-            double t = d->startTime + (double)d->nSteps * h;
-            if (stepWithEvents(d, t, h)) goto evalfail;
-            d->nSteps++;
-            if (!allFinite(X(d), NX, &bad)) goto nonfinite;
-        }
-        d->time = d->startTime + (double)d->nSteps * h;
-    } else {
-        /* otherwise split the communication step into equal sub-steps <= h */
-        n = (long long)ceil(nReal - 1e-9);
-        if (n < 1) n = 1;
-        hSub = communicationStepSize / (double)n;
-        for (k = 0; k < n; k++) {
-            if (stepWithEvents(d, currentCommunicationPoint + (double)k * hSub, hSub)) {
-                goto evalfail;
-            }
-            if (!allFinite(X(d), NX, &bad)) goto nonfinite;
-        }
-        d->time = tEnd;
-        d->startTime = tEnd; /* restart the step counter at the new time base */
-        d->nSteps = 0;
-    }
-    d->dirty = 1;
-    s = evaluate(comp, "fmi2DoStep");
-    if (s != fmi2OK) comp->state = StateError;
-    return s;
-
-nonfinite:
-    logMessage(comp, fmi2Error, "logStatusError",
-               "fmi2DoStep: the state %s became non-finite (%g) between t = %g and t = %g; "
-               "the integration diverged (parameters too stiff for fixedStepSize = %g?)",
-               model_names[X_OFF + bad], d->r[X_OFF + bad], currentCommunicationPoint, tEnd, h);
-    comp->state = StateError;
-    return fmi2Error;
-evalfail:
-    logMessage(comp, fmi2Error, "logStatusError",
-               "fmi2DoStep: evaluation of the model equations failed in [%g, %g]",
-               currentCommunicationPoint, tEnd);
-    comp->state = StateError;
-    return fmi2Error;
+    s = coreDoStep(&comp->core, currentCommunicationPoint, communicationStepSize, "fmi2DoStep");
+    if (s != CoreOK) comp->state = StateError;
+    return (fmi2Status)s;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c) {
@@ -726,7 +523,7 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
     Instance *comp = (Instance *)c;
     if (s == fmi2LastSuccessfulTime && comp && value) {
-        *value = comp->d.time;
+        *value = comp->core.d.time;
         return fmi2OK;
     }
     return fail(comp, "fmi2GetRealStatus: %s", "not supported");

@@ -1,0 +1,821 @@
+/*
+ * Generic FMI 3.0 wrapper of tsid-fmu (Model Exchange and Co-Simulation).
+ *
+ * Hand-written, model independent: the FMI 3.0 API on top of the shared core
+ * (tsid_core.c, also used by the FMI 2.0 wrapper), so both versions of an FMU compute
+ * the same equations with the same integrator and the same event handling.
+ *
+ * All variables are Float64. Value references: the index into the instance's real
+ * array r[] (states, derivatives, inputs, outputs+locals, parameters, fixedStepSize),
+ * then time (VR_TIME) and the event indicators (VR_EVENT_INDICATOR_OFF + k), which
+ * FMI 3.0 requires to be variables.
+ *
+ * Co-Simulation (no Event Mode: hasEventMode = false): classical RK4 at the fixed
+ * internal step fixedStepSize with event location, as in FMI 2.0. Input interpolation
+ * follows FMI 3.0 (which has no fmi3SetInputDerivatives): if the importer gives an
+ * intermediateUpdate callback and lists inputs in requiredIntermediateVariables,
+ * fmi3DoStep calls the callback (intermediateVariableSetRequested = true) at every
+ * time inside the step at which the integrator evaluates the inputs, and the importer
+ * sets their values for that time with fmi3SetFloat64. Otherwise the inputs are held.
+ *
+ * Model Exchange: every relation of the model is a discrete state that changes only in
+ * fmi3UpdateDiscreteStates (event iteration), with one event indicator per relation
+ * (with hysteresis, see tsid_core.h); fmi3CompletedIntegratorStep asks for an event if
+ * an indicator changed sign without the solver stopping there.
+ *
+ * SPDX-License-Identifier: BSD-3-Clause
+ */
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi3Functions.h"
+#include "tsid_core.h"
+
+typedef enum {
+    StateInstantiated = 1 << 0,
+    StateInitializationMode = 1 << 1,
+    StateEventMode = 1 << 2,
+    StateContinuousTimeMode = 1 << 3,
+    StateStepMode = 1 << 4,
+    StateIntermediateUpdateMode = 1 << 5,
+    StateTerminated = 1 << 6,
+    StateError = 1 << 7
+} ModelState;
+
+#define ANY_STATE 0xff
+#define INIT_PHASE (StateInstantiated | StateInitializationMode)
+#define RUNNING (StateEventMode | StateContinuousTimeMode | StateStepMode)
+
+typedef struct {
+    Core core; /* first member: a Core * is an Instance * */
+    int isModelExchange;
+    ModelState state;
+    char *instanceName;
+    fmi3InstanceEnvironment env;
+    fmi3LogMessageCallback logMessage;
+    fmi3IntermediateUpdateCallback intermediateUpdate;
+} Instance;
+
+/* --------------------------------------------------------------------- logging */
+
+static void logToFmi3(Core *core, CoreStatus status, const char *category, const char *msg) {
+    Instance *comp = (Instance *)core;
+    if (!comp->logMessage) return;
+    comp->logMessage(comp->env, (fmi3Status)status, category, msg);
+}
+
+static fmi3Status fail(Instance *comp, const char *fmt, const char *arg) {
+    if (comp) coreLog(&comp->core, CoreError, "logStatusError", fmt, arg);
+    return fmi3Error;
+}
+
+static int allowed(Instance *comp, const char *f, int mask) {
+    if (!comp) return 0;
+    if (comp->state & mask) return 1;
+    coreLog(&comp->core, CoreError, "logStatusError", "%s: illegal call sequence", f);
+    return 0;
+}
+
+#define CHECK(f, mask)                                 \
+    do {                                               \
+        if (!allowed(comp, f, mask)) return fmi3Error; \
+    } while (0)
+
+/* ---------------------------------------------------------------- instantiation */
+
+static Instance *newInstance(fmi3String instanceName, fmi3String token, int isModelExchange,
+                             fmi3Boolean loggingOn, fmi3InstanceEnvironment env,
+                             fmi3LogMessageCallback logMessage) {
+    Instance *comp;
+    size_t n;
+    if (!instanceName || !instanceName[0]) {
+        if (logMessage) logMessage(env, fmi3Error, "logStatusError", "missing instance name");
+        return NULL;
+    }
+    if (!token || strcmp(token, INSTANTIATION_TOKEN) != 0) {
+        if (logMessage) {
+            logMessage(env, fmi3Error, "logStatusError",
+                       "wrong instantiationToken, expected " INSTANTIATION_TOKEN);
+        }
+        return NULL;
+    }
+    comp = (Instance *)calloc(1, sizeof(Instance));
+    if (!comp) return NULL;
+    n = strlen(instanceName) + 1;
+    comp->instanceName = (char *)malloc(n);
+    if (!comp->instanceName) {
+        free(comp);
+        return NULL;
+    }
+    memcpy(comp->instanceName, instanceName, n);
+    comp->isModelExchange = isModelExchange;
+    comp->state = StateInstantiated;
+    comp->env = env;
+    comp->logMessage = logMessage;
+    coreInit(&comp->core, isModelExchange);
+    comp->core.loggingOn = loggingOn;
+    comp->core.log = logToFmi3;
+    return comp;
+}
+
+/* The FMI 3.0 intermediate update: the importer sets the inputs for time t. */
+static int requestInputs(Core *core, double t) {
+    Instance *comp = (Instance *)core;
+    fmi3Boolean earlyReturnRequested = fmi3False;
+    fmi3Float64 earlyReturnTime = t;
+    comp->state = StateIntermediateUpdateMode;
+    comp->intermediateUpdate(comp->env, t, fmi3True, fmi3False, fmi3False, fmi3False,
+                             &earlyReturnRequested, &earlyReturnTime);
+    comp->state = StateStepMode;
+    return 0;
+}
+
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn,
+                               size_t nCategories, const fmi3String categories[]) {
+    Instance *comp = (Instance *)instance;
+    (void)nCategories;
+    (void)categories;
+    if (!comp) return fmi3Error;
+    comp->core.loggingOn = loggingOn;
+    return fmi3OK;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName,
+                                          fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible,
+                                          fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage) {
+    (void)resourcePath;
+    (void)visible;
+    return newInstance(instanceName, instantiationToken, 1, loggingOn, instanceEnvironment,
+                       logMessage);
+}
+
+fmi3Instance fmi3InstantiateCoSimulation(
+    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
+    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
+    fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
+    size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
+    fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate) {
+    Instance *comp;
+    size_t i;
+    (void)resourcePath;
+    (void)visible;
+    (void)earlyReturnAllowed;
+    if (eventModeUsed) {
+        if (logMessage) {
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                       "fmi3InstantiateCoSimulation: eventModeUsed = true, but the FMU has no "
+                       "Event Mode in Co-Simulation (hasEventMode = false)");
+        }
+        return NULL;
+    }
+    for (i = 0; i < nRequiredIntermediateVariables; i++) {
+        if (!requiredIntermediateVariables ||
+            !coreIsInput((unsigned int)requiredIntermediateVariables[i])) {
+            if (logMessage) {
+                logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                           "fmi3InstantiateCoSimulation: only inputs can be intermediate "
+                           "variables");
+            }
+            return NULL;
+        }
+    }
+    comp = newInstance(instanceName, instantiationToken, 0, loggingOn, instanceEnvironment,
+                       logMessage);
+    if (comp && intermediateUpdate && nRequiredIntermediateVariables > 0) {
+        comp->intermediateUpdate = intermediateUpdate;
+        comp->core.requestInputs = requestInputs;
+    }
+    return comp;
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(
+    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
+    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
+    fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+    fmi3LockPreemptionCallback lockPreemption, fmi3UnlockPreemptionCallback unlockPreemption) {
+    (void)instanceName;
+    (void)instantiationToken;
+    (void)resourcePath;
+    (void)visible;
+    (void)loggingOn;
+    (void)clockUpdate;
+    (void)lockPreemption;
+    (void)unlockPreemption;
+    if (logMessage) {
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                   "Scheduled Execution is not supported");
+    }
+    return NULL;
+}
+
+void fmi3FreeInstance(fmi3Instance instance) {
+    Instance *comp = (Instance *)instance;
+    if (!comp) return;
+    free(comp->instanceName);
+    free(comp);
+}
+
+fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined,
+                                       fmi3Float64 tolerance, fmi3Float64 startTime,
+                                       fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
+    Instance *comp = (Instance *)instance;
+    (void)toleranceDefined;
+    (void)tolerance;
+    (void)stopTimeDefined;
+    (void)stopTime;
+    CHECK("fmi3EnterInitializationMode", StateInstantiated);
+    comp->core.d.time = startTime;
+    comp->core.d.startTime = startTime;
+    comp->core.d.nSteps = 0;
+    comp->state = StateInitializationMode;
+    coreInvalidate(&comp->core, 1);
+    return fmi3OK;
+}
+
+fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3ExitInitializationMode";
+    double h;
+    CHECK(f, StateInitializationMode);
+    h = comp->core.d.r[VR_FIXED_STEP];
+    if (!(h > 0.0) || !isfinite(h)) {
+        coreLog(&comp->core, CoreError, "logStatusError", "%s: fixedStepSize = %g must be > 0",
+                f, h);
+        comp->state = StateError;
+        return fmi3Error;
+    }
+    coreInvalidate(&comp->core, 1);
+    if ((comp->isModelExchange && coreInitModes(&comp->core, f) != CoreOK) ||
+        coreEvaluate(&comp->core, f) != CoreOK) {
+        comp->state = StateError;
+        return fmi3Error;
+    }
+    comp->state = comp->isModelExchange ? StateEventMode : StateStepMode;
+    return fmi3OK;
+}
+
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
+    Instance *comp = (Instance *)instance;
+    CHECK("fmi3EnterEventMode", StateContinuousTimeMode);
+    comp->state = StateEventMode;
+    comp->core.eventIterations = 0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3Terminate(fmi3Instance instance) {
+    Instance *comp = (Instance *)instance;
+    CHECK("fmi3Terminate", RUNNING);
+    comp->state = StateTerminated;
+    return fmi3OK;
+}
+
+fmi3Status fmi3Reset(fmi3Instance instance) {
+    Instance *comp = (Instance *)instance;
+    if (!comp) return fmi3Error;
+    coreResetData(&comp->core);
+    comp->state = StateInstantiated;
+    return fmi3OK;
+}
+
+/* ----------------------------------------------------------------- get and set */
+
+fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                          size_t nValueReferences, fmi3Float64 values[], size_t nValues) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3GetFloat64";
+    double e[NREL + 1] = {0.0};
+    size_t i;
+    int needE = 0;
+    fmi3Status s = fmi3OK;
+    CHECK(f, ANY_STATE);
+    if (nValueReferences == 0) return fmi3OK;
+    if (!valueReferences || !values) return fail(comp, "%s: NULL argument", f);
+    if (nValues != nValueReferences) return fail(comp, "%s: expected one value per reference", f);
+    for (i = 0; i < nValueReferences; i++) {
+        fmi3ValueReference vr = valueReferences[i];
+        if (vr >= VR_EVENT_INDICATOR_OFF + NREL) return fail(comp, "%s: unknown value reference", f);
+        if (vr >= VR_EVENT_INDICATOR_OFF) needE = 1;
+    }
+    if (comp->core.d.dirty && !(comp->state & (StateInstantiated | StateError))) {
+        s = (fmi3Status)coreEvaluate(&comp->core, f);
+        if (s != fmi3OK) comp->core.d.dirty = 0; /* report once; values returned as they are */
+    }
+    if (needE && coreEventIndicators(&comp->core, e, f) != CoreOK) return fmi3Error;
+    for (i = 0; i < nValueReferences; i++) {
+        fmi3ValueReference vr = valueReferences[i];
+        if (vr < N_REAL) values[i] = comp->core.d.r[vr];
+        else if (vr == VR_TIME) values[i] = comp->core.d.time;
+        else values[i] = e[vr - VR_EVENT_INDICATOR_OFF];
+    }
+    return s;
+}
+
+fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                          size_t nValueReferences, const fmi3Float64 values[], size_t nValues) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3SetFloat64";
+    size_t i;
+    int initPhase;
+    CHECK(f, INIT_PHASE | RUNNING | StateIntermediateUpdateMode | StateTerminated);
+    if (nValueReferences == 0) return fmi3OK;
+    if (!valueReferences || !values) return fail(comp, "%s: NULL argument", f);
+    if (nValues != nValueReferences) return fail(comp, "%s: expected one value per reference", f);
+    initPhase = (comp->state & INIT_PHASE) != 0;
+    for (i = 0; i < nValueReferences; i++) {
+        unsigned int vr = (unsigned int)valueReferences[i];
+        if (comp->state == StateIntermediateUpdateMode && !coreIsInput(vr)) {
+            return fail(comp, "%s: only inputs can be set in Intermediate Update Mode", f);
+        }
+        if (coreCheckSet(&comp->core, vr, initPhase, f) != CoreOK) return fmi3Error;
+    }
+    for (i = 0; i < nValueReferences; i++) comp->core.d.r[valueReferences[i]] = values[i];
+    coreInvalidate(&comp->core, initPhase);
+    return fmi3OK;
+}
+
+#define NO_VARIABLES(F, T, CONST, KIND)                                                \
+    fmi3Status F(fmi3Instance instance, const fmi3ValueReference valueReferences[],  \
+                 size_t nValueReferences, CONST T values[], size_t nValues) {         \
+        (void)valueReferences;                                                        \
+        (void)values;                                                                 \
+        (void)nValues;                                                                \
+        if (nValueReferences == 0) return fmi3OK;                                     \
+        return fail((Instance *)instance, #F ": %s", "the model has no " KIND " variables"); \
+    }
+
+NO_VARIABLES(fmi3GetFloat32, fmi3Float32, , "Float32")
+NO_VARIABLES(fmi3GetInt8, fmi3Int8, , "Int8")
+NO_VARIABLES(fmi3GetUInt8, fmi3UInt8, , "UInt8")
+NO_VARIABLES(fmi3GetInt16, fmi3Int16, , "Int16")
+NO_VARIABLES(fmi3GetUInt16, fmi3UInt16, , "UInt16")
+NO_VARIABLES(fmi3GetInt32, fmi3Int32, , "Int32")
+NO_VARIABLES(fmi3GetUInt32, fmi3UInt32, , "UInt32")
+NO_VARIABLES(fmi3GetInt64, fmi3Int64, , "Int64")
+NO_VARIABLES(fmi3GetUInt64, fmi3UInt64, , "UInt64")
+NO_VARIABLES(fmi3GetBoolean, fmi3Boolean, , "Boolean")
+NO_VARIABLES(fmi3GetString, fmi3String, , "String")
+NO_VARIABLES(fmi3SetFloat32, fmi3Float32, const, "Float32")
+NO_VARIABLES(fmi3SetInt8, fmi3Int8, const, "Int8")
+NO_VARIABLES(fmi3SetUInt8, fmi3UInt8, const, "UInt8")
+NO_VARIABLES(fmi3SetInt16, fmi3Int16, const, "Int16")
+NO_VARIABLES(fmi3SetUInt16, fmi3UInt16, const, "UInt16")
+NO_VARIABLES(fmi3SetInt32, fmi3Int32, const, "Int32")
+NO_VARIABLES(fmi3SetUInt32, fmi3UInt32, const, "UInt32")
+NO_VARIABLES(fmi3SetInt64, fmi3Int64, const, "Int64")
+NO_VARIABLES(fmi3SetUInt64, fmi3UInt64, const, "UInt64")
+NO_VARIABLES(fmi3SetBoolean, fmi3Boolean, const, "Boolean")
+NO_VARIABLES(fmi3SetString, fmi3String, const, "String")
+
+fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                         size_t nValueReferences, size_t valueSizes[], fmi3Binary values[],
+                         size_t nValues) {
+    (void)valueReferences;
+    (void)valueSizes;
+    (void)values;
+    (void)nValues;
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3GetBinary: %s", "the model has no Binary variables");
+}
+
+fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                         size_t nValueReferences, const size_t valueSizes[],
+                         const fmi3Binary values[], size_t nValues) {
+    (void)valueReferences;
+    (void)valueSizes;
+    (void)values;
+    (void)nValues;
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3SetBinary: %s", "the model has no Binary variables");
+}
+
+fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, fmi3Clock values[]) {
+    (void)valueReferences;
+    (void)values;
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3GetClock: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, const fmi3Clock values[]) {
+    (void)valueReferences;
+    (void)values;
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3SetClock: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance,
+                                               fmi3ValueReference valueReference,
+                                               size_t *nDependencies) {
+    (void)valueReference;
+    (void)nDependencies;
+    return fail((Instance *)instance, "fmi3GetNumberOfVariableDependencies: %s",
+                "not supported (see ModelStructure)");
+}
+
+fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference dependent,
+                                       size_t elementIndicesOfDependent[],
+                                       fmi3ValueReference independents[],
+                                       size_t elementIndicesOfIndependents[],
+                                       fmi3DependencyKind dependencyKinds[],
+                                       size_t nDependencies) {
+    (void)dependent;
+    (void)elementIndicesOfDependent;
+    (void)independents;
+    (void)elementIndicesOfIndependents;
+    (void)dependencyKinds;
+    (void)nDependencies;
+    return fail((Instance *)instance, "fmi3GetVariableDependencies: %s",
+                "not supported (see ModelStructure)");
+}
+
+/* ------------------------------------------------------------------- FMU state */
+
+fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
+    Instance *comp = (Instance *)instance;
+    CoreData *copy;
+    CHECK("fmi3GetFMUState", ANY_STATE);
+    if (!FMUState) return fail(comp, "fmi3GetFMUState: %s", "NULL argument");
+    copy = *FMUState ? (CoreData *)*FMUState : (CoreData *)malloc(sizeof(CoreData));
+    if (!copy) return fail(comp, "fmi3GetFMUState: %s", "out of memory");
+    *copy = comp->core.d;
+    *FMUState = copy;
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
+    Instance *comp = (Instance *)instance;
+    CHECK("fmi3SetFMUState", ANY_STATE);
+    if (!FMUState) return fail(comp, "fmi3SetFMUState: %s", "NULL state");
+    comp->core.d = *(CoreData *)FMUState;
+    comp->core.d.dirty = 1;
+    return fmi3OK;
+}
+
+fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
+    (void)instance;
+    if (FMUState && *FMUState) {
+        free(*FMUState);
+        *FMUState = NULL;
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState,
+                                      size_t *size) {
+    (void)FMUState;
+    (void)size;
+    return fail((Instance *)instance, "fmi3SerializedFMUStateSize: %s", "not supported");
+}
+
+fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
+                                 fmi3Byte serializedState[], size_t size) {
+    (void)FMUState;
+    (void)serializedState;
+    (void)size;
+    return fail((Instance *)instance, "fmi3SerializeFMUState: %s", "not supported");
+}
+
+fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
+                                   size_t size, fmi3FMUState *FMUState) {
+    (void)serializedState;
+    (void)size;
+    (void)FMUState;
+    return fail((Instance *)instance, "fmi3DeserializeFMUState: %s", "not supported");
+}
+
+#define NO_DERIVATIVES(F)                                                                   \
+    fmi3Status F(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns, \
+                 const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[], \
+                 size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {              \
+        (void)unknowns;                                                                     \
+        (void)nUnknowns;                                                                    \
+        (void)knowns;                                                                       \
+        (void)nKnowns;                                                                      \
+        (void)seed;                                                                         \
+        (void)nSeed;                                                                        \
+        (void)sensitivity;                                                                  \
+        (void)nSensitivity;                                                                 \
+        return fail((Instance *)instance, #F ": %s", "not supported");                      \
+    }
+
+NO_DERIVATIVES(fmi3GetDirectionalDerivative)
+NO_DERIVATIVES(fmi3GetAdjointDerivative)
+
+fmi3Status fmi3EnterConfigurationMode(fmi3Instance instance) {
+    return fail((Instance *)instance, "fmi3EnterConfigurationMode: %s",
+                "the model has no structural parameters");
+}
+
+fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
+    return fail((Instance *)instance, "fmi3ExitConfigurationMode: %s",
+                "the model has no structural parameters");
+}
+
+/* ------------------------------------------------------------------- Clocks */
+
+static void unused(const void *p) { (void)p; }
+
+fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
+                                  const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, fmi3Float64 intervals[],
+                                  fmi3IntervalQualifier qualifiers[]) {
+    unused(valueReferences);
+    unused(intervals);
+    unused(qualifiers);
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3GetIntervalDecimal: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3GetIntervalFraction(fmi3Instance instance,
+                                   const fmi3ValueReference valueReferences[],
+                                   size_t nValueReferences, fmi3UInt64 counters[],
+                                   fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[]) {
+    unused(valueReferences);
+    unused(counters);
+    unused(resolutions);
+    unused(qualifiers);
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3GetIntervalFraction: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                               size_t nValueReferences, fmi3Float64 shifts[]) {
+    unused(valueReferences);
+    unused(shifts);
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3GetShiftDecimal: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, fmi3UInt64 counters[],
+                                fmi3UInt64 resolutions[]) {
+    unused(valueReferences);
+    unused(counters);
+    unused(resolutions);
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3GetShiftFraction: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance,
+                                  const fmi3ValueReference valueReferences[],
+                                  size_t nValueReferences, const fmi3Float64 intervals[]) {
+    unused(valueReferences);
+    unused(intervals);
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3SetIntervalDecimal: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
+                                   const fmi3ValueReference valueReferences[],
+                                   size_t nValueReferences, const fmi3UInt64 counters[],
+                                   const fmi3UInt64 resolutions[]) {
+    unused(valueReferences);
+    unused(counters);
+    unused(resolutions);
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3SetIntervalFraction: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                               size_t nValueReferences, const fmi3Float64 shifts[]) {
+    unused(valueReferences);
+    unused(shifts);
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3SetShiftDecimal: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                                size_t nValueReferences, const fmi3UInt64 counters[],
+                                const fmi3UInt64 resolutions[]) {
+    unused(valueReferences);
+    unused(counters);
+    unused(resolutions);
+    if (nValueReferences == 0) return fmi3OK;
+    return fail((Instance *)instance, "fmi3SetShiftFraction: %s", "the model has no Clocks");
+}
+
+fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
+    return fail((Instance *)instance, "fmi3EvaluateDiscreteStates: %s",
+                "not supported (providesEvaluateDiscreteStates = false)");
+}
+
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
+                                    fmi3Boolean *terminateSimulation,
+                                    fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                    fmi3Boolean *valuesOfContinuousStatesChanged,
+                                    fmi3Boolean *nextEventTimeDefined,
+                                    fmi3Float64 *nextEventTime) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3UpdateDiscreteStates";
+    int changed = 0;
+    CHECK(f, StateEventMode);
+    if (!discreteStatesNeedUpdate || !terminateSimulation ||
+        !nominalsOfContinuousStatesChanged || !valuesOfContinuousStatesChanged ||
+        !nextEventTimeDefined || !nextEventTime) {
+        return fail(comp, "%s: NULL argument", f);
+    }
+    *terminateSimulation = fmi3False;
+    *nominalsOfContinuousStatesChanged = fmi3False;
+    *valuesOfContinuousStatesChanged = fmi3False;
+    *nextEventTimeDefined = fmi3False;
+    *nextEventTime = 0.0;
+    if (coreUpdateModes(&comp->core, &changed, f) != CoreOK) {
+        comp->state = StateError;
+        return fmi3Error;
+    }
+    *discreteStatesNeedUpdate = changed ? fmi3True : fmi3False;
+    return fmi3OK;
+}
+
+/* ---------------------------------------------------------------- Model Exchange */
+
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
+    Instance *comp = (Instance *)instance;
+    CHECK("fmi3EnterContinuousTimeMode", StateEventMode);
+    comp->state = StateContinuousTimeMode;
+    return fmi3OK;
+}
+
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
+                                       fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean *enterEventMode,
+                                       fmi3Boolean *terminateSimulation) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3CompletedIntegratorStep";
+    int pending = 0;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    CHECK(f, StateContinuousTimeMode);
+    if (!enterEventMode || !terminateSimulation) return fail(comp, "%s: NULL argument", f);
+    if (coreModeChangePending(&comp->core, &pending, f) != CoreOK) return fmi3Error;
+    *enterEventMode = pending ? fmi3True : fmi3False;
+    *terminateSimulation = fmi3False;
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
+    Instance *comp = (Instance *)instance;
+    CHECK("fmi3SetTime", StateEventMode | StateContinuousTimeMode);
+    comp->core.d.time = time;
+    coreInvalidate(&comp->core, 0);
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
+                                   size_t nContinuousStates) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3SetContinuousStates";
+    size_t i;
+    CHECK(f, StateEventMode | StateContinuousTimeMode);
+    if (nContinuousStates != NX) return fail(comp, "%s: wrong number of states", f);
+    if (NX > 0 && !continuousStates) return fail(comp, "%s: NULL argument", f);
+    for (i = 0; i < nContinuousStates; i++) {
+        if (!isfinite(continuousStates[i])) {
+            return fail(comp, "fmi3SetContinuousStates: non-finite value of state %s",
+                        model_names[X_OFF + i]);
+        }
+        comp->core.d.r[X_OFF + i] = continuousStates[i];
+    }
+    coreInvalidate(&comp->core, 0);
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
+                                             size_t nContinuousStates) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3GetContinuousStateDerivatives";
+    size_t i;
+    fmi3Status s;
+    CHECK(f, StateInitializationMode | StateEventMode | StateContinuousTimeMode |
+                 StateTerminated);
+    if (nContinuousStates != NX) return fail(comp, "%s: wrong number of states", f);
+    if (NX > 0 && !derivatives) return fail(comp, "%s: NULL argument", f);
+    s = (fmi3Status)coreEvaluate(&comp->core, f);
+    for (i = 0; i < nContinuousStates; i++) derivatives[i] = comp->core.d.r[DX_OFF + i];
+    return s;
+}
+
+fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
+                                  size_t nEventIndicators) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3GetEventIndicators";
+    double e[NREL + 1];
+    size_t i;
+    CHECK(f, StateInitializationMode | StateEventMode | StateContinuousTimeMode |
+                 StateTerminated);
+    if (nEventIndicators != NREL) return fail(comp, "%s: wrong number of event indicators", f);
+    if (nEventIndicators == 0) return fmi3OK;
+    if (!eventIndicators) return fail(comp, "%s: NULL argument", f);
+    if (coreEventIndicators(&comp->core, e, f) != CoreOK) return fmi3Error;
+    for (i = 0; i < nEventIndicators; i++) eventIndicators[i] = e[i];
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
+                                   size_t nContinuousStates) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3GetContinuousStates";
+    size_t i;
+    CHECK(f, ANY_STATE);
+    if (nContinuousStates != NX) return fail(comp, "%s: wrong number of states", f);
+    if (NX > 0 && !continuousStates) return fail(comp, "%s: NULL argument", f);
+    for (i = 0; i < nContinuousStates; i++) continuousStates[i] = comp->core.d.r[X_OFF + i];
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
+                                             size_t nContinuousStates) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3GetNominalsOfContinuousStates";
+    size_t i;
+    CHECK(f, ANY_STATE);
+    if (nContinuousStates != NX) return fail(comp, "%s: wrong number of states", f);
+    if (NX > 0 && !nominals) return fail(comp, "%s: NULL argument", f);
+    for (i = 0; i < nContinuousStates; i++) nominals[i] = 1.0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
+    Instance *comp = (Instance *)instance;
+    CHECK("fmi3GetNumberOfEventIndicators", ANY_STATE);
+    if (!nEventIndicators) return fail(comp, "%s: NULL argument", "fmi3GetNumberOfEventIndicators");
+    *nEventIndicators = NREL;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
+    Instance *comp = (Instance *)instance;
+    CHECK("fmi3GetNumberOfContinuousStates", ANY_STATE);
+    if (!nContinuousStates) {
+        return fail(comp, "%s: NULL argument", "fmi3GetNumberOfContinuousStates");
+    }
+    *nContinuousStates = NX;
+    return fmi3OK;
+}
+
+/* ------------------------------------------------------------------ Co-Simulation */
+
+fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
+    return fail((Instance *)instance, "fmi3EnterStepMode: %s",
+                "the FMU has no Event Mode in Co-Simulation (hasEventMode = false)");
+}
+
+fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance,
+                                    const fmi3ValueReference valueReferences[],
+                                    size_t nValueReferences, const fmi3Int32 orders[],
+                                    fmi3Float64 values[], size_t nValues) {
+    (void)valueReferences;
+    (void)nValueReferences;
+    (void)orders;
+    (void)values;
+    (void)nValues;
+    return fail((Instance *)instance, "fmi3GetOutputDerivatives: %s",
+                "not supported (maxOutputDerivativeOrder = 0)");
+}
+
+fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
+                      fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                      fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation,
+                      fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
+    Instance *comp = (Instance *)instance;
+    const char *f = "fmi3DoStep";
+    CoreStatus s;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    CHECK(f, StateStepMode);
+    if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime) {
+        return fail(comp, "%s: NULL argument", f);
+    }
+    *eventHandlingNeeded = fmi3False;
+    *terminateSimulation = fmi3False;
+    *earlyReturn = fmi3False;
+    *lastSuccessfulTime = comp->core.d.time;
+    if (coreCheckStep(&comp->core, currentCommunicationPoint, communicationStepSize, f) !=
+        CoreOK) {
+        return fmi3Error; /* bad arguments: the instance stays usable */
+    }
+    s = coreDoStep(&comp->core, currentCommunicationPoint, communicationStepSize, f);
+    if (s != CoreOK) {
+        comp->state = StateError;
+        return (fmi3Status)s;
+    }
+    *lastSuccessfulTime = comp->core.d.time;
+    return fmi3OK;
+}
+
+/* ------------------------------------------------------------ Scheduled Execution */
+
+fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
+                                      fmi3Float64 activationTime) {
+    (void)clockReference;
+    (void)activationTime;
+    return fail((Instance *)instance, "fmi3ActivateModelPartition: %s",
+                "Scheduled Execution is not supported");
+}
