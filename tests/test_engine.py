@@ -8,9 +8,8 @@ import pandas as pd
 import pytest
 from fmu_factory import build_c_fmu, lag_response
 
-from tsid_fmu.engine import identify
+from tsid_fmu import Experiment, Parameter, Study, identify
 from tsid_fmu.errors import StudyError
-from tsid_fmu.study import Experiment, Parameter, Study
 
 TAU, X0 = 0.37, 0.8
 
@@ -120,21 +119,19 @@ class FakeEvaluator:
     """Scores parameter sets with a Python function instead of an FMU."""
 
     n_replicates = 1
+    spec = None
 
     def __init__(self, f):
         self.f, self.nfev, self.prepared = f, 0, []
 
     def evaluate(self, sets, progress=None):
-        from tsid_fmu.runner import Evaluation
+        from tsid_fmu.evaluate import Evaluation
 
         costs = np.array([[self.f(**s)] for s in sets])
         self.nfev += len(sets)
         return Evaluation(costs=costs, errors=[None] * len(sets), nfev=len(sets))
 
-    def simulate_clean(self, params):
-        return []
-
-    def simulate_clean_many(self, sets):
+    def simulate(self, sets, count=True):
         return [[] for _ in sets]
 
     def close(self):
@@ -217,36 +214,18 @@ def test_resume_right_after_a_rerun_decision_continues_the_same_way(tmp_path):
     assert "rerun" in resumed.iterations[first_rerun - 1].extra
 
 
-def test_canonical_stage_is_reported_shown_and_resumed(lag, tmp_path):
-    study = make_study(lag, max_iterations=2, canonical=3)
-    events = []
-    full = identify(study, tmp_path / "full", plots=False, progress=lambda e, i: events.append(e))
-    assert full.canonical and full.nit == 2 + len(full.canonical)
-    assert {"canonical", "canonical done"} <= set(events)
-    # after the canonical stage the cost is that on the measured input, and no worse
-    assert full.fun <= full.iterations[-1].best_cost
-    report = (tmp_path / "full" / "report.md").read_text()
-    assert "## Iterations on canonical factors" in report and "[C1](canonical_01/)" in report
-    runs = full.to_pandas()
-    assert set(runs["stage"]) == {"parameters", "canonical"}
-    assert (runs["stage"] == "canonical").sum() == 25 * len(full.canonical)
-    # interrupted after the first canonical iteration: the resume continues from it
-    out = tmp_path / "cut"
-    identify(study, out, plots=False)
-    assert len(full.canonical) > 1
-    for d in sorted(out.glob("canonical_*"))[1:]:
-        (d / "record.json").unlink()
-    first = out / "canonical_01" / "record.json"
-    kept = json.loads(first.read_text())
-    first.write_text(json.dumps({**kept, "best_source": "kept from the trail"}))
-    resumed = identify(study, out, resume=True, plots=False)
-    assert resumed.canonical[0].best_source == "kept from the trail"  # not run again
-    assert resumed.x == full.x and resumed.nit == full.nit and resumed.nfev == full.nfev
+def Evaluator(study):
+    """The serial evaluator of a study (the old tsid_fmu.runner.Evaluator)."""
+    from tsid_fmu.evaluate import SerialEvaluator
+    from tsid_fmu.study import prepare
+
+    ev = SerialEvaluator(prepare(study))
+    ev.prepared = ev.spec.experiments
+    return ev
 
 
 def test_noise_weighting_divides_each_output_by_its_noise(lag, tmp_path):
-    from tsid_fmu.runner import Evaluator
-    from tsid_fmu.scoring import noise_level
+    from tsid_fmu.evaluate.cost import noise_level
 
     x = {"tau": TAU, "x0": X0}
     plain = dataclasses.replace(make_study(lag), cost="sse", replicates=1, input_noise=0.0)
@@ -264,8 +243,6 @@ def test_noise_weighting_divides_each_output_by_its_noise(lag, tmp_path):
 
 
 def test_noise_weighting_refuses_a_noise_free_output(lag, tmp_path):
-    from tsid_fmu.runner import Evaluator
-
     _fmu, data = lag
     frame = pd.read_csv(data)
     frame["y_meas"] = 0.5 * frame["time"]  # simulated data written without noise

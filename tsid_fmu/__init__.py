@@ -1,4 +1,13 @@
-"""tsid-fmu: Taguchi-method identification of FMU parameters from measured data."""
+"""tsid-fmu: Taguchi-method identification of FMU parameters from measured data.
+
+The flat public API, over the layers of the data flow (see ``docs/architecture.md``):
+
+- :func:`simulate`: one FMU simulation against a DataFrame of inputs;
+- :func:`identify`: a whole study, returning an :class:`IdentificationResult`;
+- :class:`Study` with :class:`Parameter`, :class:`Experiment` and :class:`Method`,
+  built in Python or read with :meth:`Study.from_toml`;
+- the error types, all derived from :class:`TsidError`.
+"""
 
 from __future__ import annotations
 
@@ -12,17 +21,28 @@ from tsid_fmu.errors import (
     TsidError,
 )
 from tsid_fmu.fmu import simulate
+from tsid_fmu.identify import identify
+from tsid_fmu.result import IdentificationResult
+from tsid_fmu.study import ContributionOptions, Experiment, Method, Parameter, Phase, Study
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = [
     "ArrayError",
     "BuildError",
+    "ContributionOptions",
     "DataError",
+    "Experiment",
     "FMUError",
+    "IdentificationResult",
+    "Method",
+    "Parameter",
+    "Phase",
     "SimulationError",
+    "Study",
     "StudyError",
     "TsidError",
     "__version__",
+    "identify",
     "simulate",
 ]

@@ -28,87 +28,73 @@ def _parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    from tsid_fmu.engine import identify
+    from tsid_fmu.identify import identify
 
     out = Path(args.out) if args.out else Path(args.study).with_suffix("").parent / "results"
     result = identify(
-        args.study,
-        out,
-        resume=args.resume,
-        max_iterations=args.max_iterations,
-        pause_after=args.pause_after,
-        progress=not args.quiet,
-        plots=not args.no_plots,
-        continue_from_run=args.continue_from_run,
-        workers=args.workers,
-        timeout=args.timeout,
+        args.study, out, resume=args.resume, max_iterations=args.max_iterations,
+        pause_after=args.pause_after, progress=not args.quiet, plots=not args.no_plots,
+        continue_from_run=args.continue_from_run, workers=args.workers, timeout=args.timeout,
         scheduler=args.scheduler,
-    )
+    )  # fmt: skip
     print(result.parameters_frame().to_string())
     print()
-    print(f"{result.message}")
-    print(f"best cost {result.fun:.6g} at {result.best_source}; {result.nfev} simulations")
+    print(result.stages_frame()[["kind", "cost", "simulations"]].to_string())
+    print()
+    print(result.message)
+    print(f"cost {result.fun:.6g} on the measured inputs; {result.nfev} simulations")
+    for warning in result.warnings:
+        print(f"warning: {warning}")
     for name, reason in result.weak.items():
-        print(f"weakly constrained: {name}: {reason}")
-    for name, v in (result.get("validation") or {}).items():
-        if isinstance(v, dict) and "cost" in v:
-            print(f"validation {name}: {v['cost_kind']} cost {v['cost']:.6g}")
-    if result.get("comparison"):
-        c = result["comparison"]
-        print(
-            f"grouped phases: cost {c['phased']['cost']:.6g} with {c['phased']['nfev']} "
-            f"simulations; all at once: cost {c['ungrouped']['cost']:.6g} with "
-            f"{c['ungrouped']['nfev']} simulations"
-        )
+        print(f"weakly determined: {name}: {reason}")
+    for name, v in result.validation.items():
+        if "cost" in v:
+            print(f"validation {name}: cost {v['cost']:.6g}")
     print(f"report, tables and plots: {out}/report.md")
-    return 0 if result.status in (0, 2) else 1
+    return {0: 0, 1: 1, 2: 3}[result.status]
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
     import json
 
-    import numpy as np
+    from tsid_fmu.evaluate.cost import metrics
+    from tsid_fmu.evaluate.serial import SerialEvaluator
+    from tsid_fmu.report.plots import fit_plot
+    from tsid_fmu.study import Study, prepare
 
-    from tsid_fmu.report import fit_plot
-    from tsid_fmu.runner import Evaluator
-    from tsid_fmu.scoring import metrics
-    from tsid_fmu.study import load_study
-
-    study = load_study(args.study)
+    study = Study.from_toml(args.study)
     values: dict[str, float] = {}
     if args.result:
         path = Path(args.result)
         path = path / "result.json" if path.is_dir() else path
         try:
             values.update(json.loads(path.read_text())["x"])
-        except (OSError, ValueError, KeyError) as exc:
-            raise StudyError(f"{path}: cannot read identified parameters ({exc})") from None
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise StudyError(f"{path}: cannot read identified parameters ({type(exc).__name__})") from None
     for name, text in _parse_assignments(args.set, "--set").items():
         try:
             values[name] = float(text)
         except ValueError:
             raise StudyError(f"--set {name}={text}: not a number") from None
-    for p in study.parameters:
-        values.setdefault(p.name, float(np.median(p.levels)))
     unknown = sorted(set(values) - set(study.parameter_names))
     if unknown:
         raise StudyError(f"--set: {unknown} are not parameters of the study")
-    with Evaluator(study) as ev:
-        simulated = ev.simulate_clean(values)
-    print("parameters: " + ", ".join(f"{k}={v:.6g}" for k, v in values.items()))
-    for prep, y, err in simulated:
-        if y is None:
-            print(f"{prep.experiment.name}: simulation failed: {err}")
+    # parameters not given keep the FMU's start values
+    spec = prepare(study, None, [n for n in study.parameter_names if n in values])
+    with SerialEvaluator(spec) as ev:
+        simulated = ev.simulate([values], count=False)[0]
+    print("parameters: " + (", ".join(f"{k}={v:.6g}" for k, v in values.items()) or "the FMU's start values"))
+    for e, sim in zip(spec.experiments, simulated, strict=True):
+        if sim.outputs is None:
+            print(f"{e.name}: simulation failed: {sim.error}")
             continue
-        for out_name, m in metrics(prep.time, prep.measured, y, prep.output_names).items():
-            print(
-                f"{prep.experiment.name} / {out_name}: fit {m['fit_percent']:.3f} %, "
-                f"IAE {m['iae']:.6g}, SSE {m['sse']:.6g}, RMSE {m['rmse']:.6g}"
-            )
+        for out_name, m in metrics(e.time, e.measured, sim.outputs, list(e.output_names)).items():
+            print(f"{e.name} / {out_name}: fit {m['fit_percent']:.3f} %, IAE {m['iae']:.6g}, "
+                  f"SSE {m['sse']:.6g}, RMSE {m['rmse']:.6g}")  # fmt: skip
     plot = Path(args.plot)
-    fit_plot(simulated, plot, title="tsid simulate")
+    fit_plot(spec, simulated, plot, title="tsid simulate")
     print(f"plot: {plot}")
-    return 0 if all(err is None for _, _, err in simulated) else 1
+    return 0 if all(sim.error is None for sim in simulated) else 1
 
 
 def _cmd_info(args: argparse.Namespace) -> int:

@@ -65,6 +65,10 @@ RANGES = {
 NOISE = {"w": 1.0, "i": 0.05}
 #: Seed of the voltage design (the excitation is the same for every noise seed).
 DESIGN_SEED = 11
+#: Length of the record (s): 2 s hold 2000 samples, dozens of voltage steps, both time
+#: constants many times over; pythonfmu's per-step cost makes 10 s (10 000 Python
+#: do_step calls, ~1 s per simulation) needlessly slow for a benchmark.
+DURATION = 2.0
 
 SLAVE = '''
 import math
@@ -208,8 +212,8 @@ def simulate(t: np.ndarray, v: np.ndarray, params: dict[str, float]) -> np.ndarr
 
 
 def make_data(seed: int = 1) -> pd.DataFrame:
-    """Return the logged data: columns ``time, V, w, i`` (10 s at 1 kHz)."""
-    t = sample_times()
+    """Return the logged data: columns ``time, V, w, i`` (``DURATION`` s at 1 kHz)."""
+    t = sample_times(DURATION)
     v = voltage(t)
     y = simulate(t, v, TRUTH)
     rng = np.random.default_rng(seed)

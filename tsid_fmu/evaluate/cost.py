@@ -166,8 +166,11 @@ def noise_level(measured: np.ndarray) -> np.ndarray:
 
     Uses the second differences ``y[k+1] - 2 y[k] + y[k-1]``: for a signal sampled much
     faster than it changes they hold almost only the noise, with variance ``6 sigma^2``.
-    The median absolute deviation (times 1.4826) makes the estimate robust to the few
-    samples where the signal jumps (steps, impacts).
+    Two robust estimates are taken and the larger kept: the median absolute deviation
+    (times 1.4826), and the RMS of the 98 % smallest second differences (corrected for
+    the trimming of a Gaussian). Both ignore the few samples where the signal jumps
+    (steps, impacts); the second also sees the noise of a quantised sensor, whose second
+    differences are mostly exactly zero (a median of 0).
 
     Parameters
     ----------
@@ -181,5 +184,12 @@ def noise_level(measured: np.ndarray) -> np.ndarray:
     """
     y = _as_2d(np.asarray(measured, dtype=float))
     d2 = y[2:] - 2.0 * y[1:-1] + y[:-2]
-    mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
-    return 1.4826 * mad / np.sqrt(6.0)
+    mad = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+    small = np.sort(np.abs(d2), axis=0)[: max(1, int(np.ceil(_KEEP * d2.shape[0])))]
+    trimmed = np.sqrt(np.mean(small**2, axis=0)) / _TRIM_RMS
+    return np.maximum(mad, trimmed) / np.sqrt(6.0)
+
+
+_KEEP = 0.98
+#: RMS of the 98 % smallest of standard-normal samples (by magnitude), relative to 1
+_TRIM_RMS = 0.93436

@@ -23,6 +23,7 @@ class SerialEvaluator:
         self.spec = spec
         self._nfev = 0
         self._cache: dict[tuple, tuple[np.ndarray, str | None, np.ndarray | None]] = {}
+        self._known: set[tuple] = set()
         self.sessions: list[FMUSession] = []
         self.cost = Cost(spec.cost)
         try:
@@ -54,6 +55,7 @@ class SerialEvaluator:
         key = tuple(float(params[n]) for n in self.spec.parameter_names)
         if key in self._cache:
             return self._cache[key]
+        counted = self._nfev
         costs = np.zeros(self.n_replicates)
         error, parts = None, []
         for exp, session in zip(self.spec.experiments, self.sessions, strict=True):
@@ -78,7 +80,15 @@ class SerialEvaluator:
             else (costs, None, np.concatenate(parts) if np.all(np.isfinite(costs)) else None)
         )
         self._cache[key] = result
+        if key in self._known:
+            self._nfev = counted
         return result
+
+    def mark_known(self, parameter_sets: Sequence[Mapping[str, float]]) -> None:
+        """Parameter sets an interrupted run simulated already: not counted again."""
+        self._known.update(
+            tuple(float(p[n]) for n in self.spec.parameter_names) for p in parameter_sets
+        )
 
     def evaluate(
         self,

@@ -6,7 +6,7 @@
 * :func:`prepare`: the loaded, weighted experiments an evaluator needs.
 """
 
-from tsid_fmu.study.definition import Study
+from tsid_fmu.study.definition import Study, load_study
 from tsid_fmu.study.prepare import load_experiment, prepare
 from tsid_fmu.study.schema import (
     MAX_REPLICATES,
@@ -26,5 +26,6 @@ __all__ = [
     "Phase",
     "Study",
     "load_experiment",
+    "load_study",
     "prepare",
 ]

@@ -42,7 +42,7 @@ from tsid_fmu.study.schema import (
 )
 from tsid_fmu.study.toml import read_study_file, write_study_file
 
-__all__ = ["Study", "fields_of"]
+__all__ = ["Study", "fields_of", "load_study"]
 
 
 def fields_of(study: Study) -> dict[str, Any]:
@@ -50,7 +50,10 @@ def fields_of(study: Study) -> dict[str, Any]:
     return {f.name: getattr(study, f.name) for f in dataclasses.fields(study)}
 
 
-@dataclass
+_METHOD_FIELDS = frozenset(f.name for f in dataclasses.fields(Method))
+
+
+@dataclass(init=False)
 class Study:
     """Everything an identification needs.
 
@@ -78,6 +81,10 @@ class Study:
         Explicit phases (parameter groups identified in turn; MISO paper).
     contribution : ContributionOptions
         Plan the phases from the MISO paper's contribution analyses.
+    **method_options
+        Method settings given directly (``cost="sse"``, ``replicates=2``, ...) replace
+        those of ``method``; they read back as properties (``study.cost``). An unknown
+        keyword is a ``TypeError``, as in SciPy.
     """
 
     fmu: Path
@@ -92,7 +99,45 @@ class Study:
     phases: list[Phase] = field(default_factory=list)
     contribution: ContributionOptions = field(default_factory=ContributionOptions)
 
-    def __post_init__(self) -> None:
+    def __init__(
+        self,
+        fmu: str | Path,
+        parameters: list[Parameter],
+        experiments: list[Experiment],
+        method: Method | None = None,
+        start_values: dict[str, float] | None = None,
+        interface: str = "auto",
+        step_size: float | None = None,
+        name: str = "study",
+        source: Path | None = None,
+        phases: list[Phase] | None = None,
+        contribution: ContributionOptions | None = None,
+        **method_options: Any,
+    ) -> None:
+        unknown = sorted(set(method_options) - _METHOD_FIELDS)
+        if unknown:
+            raise TypeError(f"Study() got unexpected keyword argument(s) {', '.join(unknown)}")
+        method = method if method is not None else Method()
+        if method_options:
+            try:
+                method = dataclasses.replace(method, **method_options)
+            except StudyError as exc:
+                where = f"{source}: " if source else ""
+                raise StudyError(f"{where}{exc}") from None
+        self.fmu = Path(fmu)
+        self.parameters = parameters
+        self.experiments = experiments
+        self.method = method
+        self.start_values = dict(start_values or {})
+        self.interface = interface
+        self.step_size = step_size
+        self.name = name
+        self.source = source
+        self.phases = list(phases or [])
+        self.contribution = contribution if contribution is not None else ContributionOptions()
+        self._validate()
+
+    def _validate(self) -> None:
         where = f"{self.source}: " if self.source else ""
         try:
             self._check()
@@ -149,6 +194,12 @@ class Study:
         if unknown_values:
             raise StudyError(f"[contribution] values for unknown {unknown_values}")
 
+    def __getattr__(self, name: str) -> Any:
+        # method settings read as attributes of the study: study.cost, study.seed, ...
+        if name in _METHOD_FIELDS and "method" in self.__dict__:
+            return getattr(self.__dict__["method"], name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
     @property
     def parameter_names(self) -> list[str]:
         """Names of the identified parameters, in study order."""
@@ -183,3 +234,8 @@ class Study:
         Data given as DataFrames are written as CSV files beside the TOML file.
         """
         return write_study_file(path, fields_of(self))
+
+
+def load_study(path: str | Path) -> Study:
+    """Read a study from a TOML file (the same as :meth:`Study.from_toml`)."""
+    return Study.from_toml(path)

@@ -16,8 +16,8 @@ from tsid_fmu.study.schema import Experiment
 __all__ = ["NOISE_FLOOR", "load_experiment", "prepare", "prepare_experiment"]
 
 NOISE_FLOOR = 1e-3
-"""With ``weighting = "auto"``, an output that shows no noise is weighed as if its noise
-were this fraction of its RMS value."""
+"""An output that shows no noise has its residuals scaled as if its noise were this
+fraction of its RMS value (only with ``weighting = "none"``; ``"noise"`` refuses it)."""
 
 
 def load_experiment(experiment: Experiment) -> MeasuredData:
@@ -50,18 +50,27 @@ def _weights_and_scale(
     names = list(experiment.outputs)
     user = np.array([(experiment.weights or {}).get(n, 1.0) for n in names], dtype=float)
     sigma = noise_level(measured)
+    sigma = np.array([experiment.noise.get(n, s) for n, s in zip(names, sigma, strict=True)])
     rms = np.sqrt(np.mean(measured**2, axis=0))
     quiet = ~(sigma > 1e-6 * np.maximum(np.ptp(measured, axis=0), 1e-300))
     if study.method.weighting == "noise" and quiet.any():
         flat = [n for n, q in zip(names, quiet, strict=True) if q]
         raise StudyError(
             f'experiment {experiment.name!r}: weighting = "noise" needs noisy outputs, but '
-            f"{', '.join(flat)} shows no noise; give weights instead"
+            f"{', '.join(flat)} shows no noise; give its sensor noise (noise = {{...}}) or "
+            'weights, or set weighting = "none"'
         )
-    scale = np.where(quiet, np.maximum(NOISE_FLOOR * rms, 1e-300), sigma)
-    if study.method.weighting == "none":
-        return user, scale
-    return user / scale ** NOISE_POWER[study.method.cost], scale
+    sigma = np.where(quiet, np.maximum(NOISE_FLOOR * rms, 1e-300), sigma)
+    weights = user if study.method.weighting == "none" else (
+        user / sigma ** NOISE_POWER[study.method.cost]
+    )
+    # residuals are scaled so that, for the sse cost, their sum of squares is the cost
+    with np.errstate(divide="ignore"):
+        if study.method.cost == "sse":
+            scale = 1.0 / np.sqrt(weights)
+        else:
+            scale = sigma / np.sqrt(user)
+    return weights, scale
 
 
 def _noisy_inputs(study: Study, index: int, inputs: np.ndarray | None) -> tuple[np.ndarray, ...]:
@@ -135,7 +144,7 @@ def prepare(
         indices = [by_name[n] for n in experiments]
     return EvaluationSpec(
         fmu=study.fmu,
-        parameter_names=tuple(parameters or study.parameter_names),
+        parameter_names=tuple(study.parameter_names if parameters is None else parameters),
         experiments=tuple(prepare_experiment(study, i) for i in indices),
         cost=study.method.cost,
         start_values=dict(study.start_values),

@@ -163,6 +163,10 @@ class Experiment:
         How each input's samples are held between communication points: ``"previous"``
         (a controller's output, the default) or ``"linear"`` (a measured continuous
         signal, interpolated).
+    noise : mapping of str to float
+        Known noise standard deviation of an output's sensor (e.g. an encoder's
+        quantisation, ``step / sqrt(12)``), in the output's units; outputs not listed
+        get an estimate from the data (:func:`tsid_fmu.evaluate.cost.noise_level`).
     """
 
     data: Any
@@ -176,6 +180,7 @@ class Experiment:
     sample_time: float | None = None
     role: str = "identify"
     hold: dict[str, str] = field(default_factory=dict)
+    noise: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -206,6 +211,10 @@ class Experiment:
         self.start_values = {
             k: check_number(v, f"{where}: start value {k}") for k, v in self.start_values.items()
         }
+        self.noise = {k: check_number(v, f"{where}: noise of {k}") for k, v in self.noise.items()}
+        bad = sorted(k for k, v in self.noise.items() if k not in self.outputs or v <= 0)
+        if bad:
+            raise StudyError(f"{where}: noise must be > 0 and given for outputs only: {bad}")
         for name, how in self.hold.items():
             if name not in self.inputs:
                 raise StudyError(f"{where}: hold given for {name!r}, which is not an input")
@@ -296,21 +305,21 @@ class Method:
     array : str, optional
         Orthogonal array (e.g. ``"L25"``); default the smallest that fits the levels.
     cost : str
-        The study's one objective (:data:`tsid_fmu.evaluate.cost.COSTS`): ``"sse"``
-        (default; with noise weighting the Gaussian maximum-likelihood cost, as in the
-        MISO paper), ``"iae"`` (the SISO paper's), ``"ise"``, ``"rmse"``, ``"nrmse"``.
-        Every stage minimises it and compares parameter sets by it on the measured
-        inputs.
-    weighting : {"auto", "noise", "none"}
-        ``noise`` divides each output's cost by its noise level estimated from the data
-        (squared for ``sse``/``ise``), as a maximum-likelihood fit does, and refuses
-        outputs that show no noise; ``auto`` (default) does the same but weighs a
-        noise-free output as if its noise were 0.1 % of its RMS; ``none`` uses the
-        output weights as given.
+        The study's one objective (:data:`tsid_fmu.evaluate.cost.COSTS`): ``"iae"``
+        (default, the SISO paper's), ``"sse"`` (the MISO paper's; with
+        ``weighting = "noise"`` the Gaussian maximum-likelihood cost, which the intervals
+        and the refinement stage assume), ``"ise"``, ``"rmse"``, ``"nrmse"``. Every
+        stage minimises it and compares parameter sets by it on the measured inputs.
+    weighting : {"none", "noise"}
+        ``noise`` divides each output's cost by its noise level (squared for
+        ``sse``/``ise``), as a maximum-likelihood fit does: the experiment's ``noise``
+        where given (a sensor's known resolution), else estimated from the data; an
+        output that shows no noise is refused (give its ``noise`` or ``weights``).
+        ``none`` (default) uses the output weights as given.
     replicates : int
         Runs per array row: the measured inputs, plus ``replicates - 1`` copies with
         white noise added to the inputs (the SISO paper's robustness step; its S/N is
-        over all of them). Default 1.
+        over all of them). Default 2, as in the SISO paper.
     input_noise : float
         Standard deviation of the replicates' input noise, relative to each input's
         standard deviation. Default 0.01.
@@ -342,9 +351,9 @@ class Method:
     """
 
     array: str | None = None
-    cost: str = "sse"
-    weighting: str = "auto"
-    replicates: int = 1
+    cost: str = "iae"
+    weighting: str = "none"
+    replicates: int = 2
     input_noise: float = 0.01
     seed: int = 0
     max_iterations: int = 20
@@ -362,7 +371,8 @@ class Method:
                 f"unknown cost {self.cost!r}; choose one of {', '.join(sorted(COSTS))}"
             )
         self.cost = self.cost.lower()
-        self.weighting = check_choice(self.weighting, "weighting", ("auto", "noise", "none"))
+        if self.weighting not in ("none", "noise"):
+            raise StudyError(f'weighting must be "none" or "noise", got {self.weighting!r}')
         self.replicates = check_whole(self.replicates, "replicates", 1, MAX_REPLICATES)
         self.input_noise = check_number(self.input_noise, "input_noise")
         if self.input_noise < 0:

@@ -31,7 +31,7 @@ _TOP = {"study", "data", "experiments", "method", "leveling", "parameters", "pha
         "contribution"}  # fmt: skip
 _STUDY = {"name", "fmu", "start_values", "interface", "step_size"}
 _DATA = {"file", "name", "time", "derived", "inputs", "outputs", "weights", "start_values",
-         "sample_time", "role", "hold"}  # fmt: skip
+         "sample_time", "role", "hold", "noise"}  # fmt: skip
 _PARAM = {"levels", "min", "max", "unit"}
 _PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
 _METHOD_TYPES: dict[str, type] = {
@@ -144,6 +144,7 @@ def _experiment(e: Mapping[str, Any], base: Path, where: _Where, label: str, i: 
         sample_time=_get(e, "sample_time", float, where, label),
         role=_get(e, "role", str, where, label, "identify"),
         hold=_map(e, "hold", str, where, label),
+        noise=_map(e, "noise", float, where, label),
     )  # fmt: skip
 
 
@@ -324,7 +325,7 @@ def _experiment_table(e: Experiment, base: Path, stem: str) -> dict[str, Any]:
     for key, out in (("time_column", "time"), ("inputs", "inputs"), ("outputs", "outputs"),
                      ("derived", "derived"), ("weights", "weights"), ("hold", "hold"),
                      ("start_values", "start_values"), ("sample_time", "sample_time"),
-                     ("role", "role")):  # fmt: skip
+                     ("role", "role"), ("noise", "noise")):  # fmt: skip
         if key in fields:
             table[out] = fields[key]
     return table

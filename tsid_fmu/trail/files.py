@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from collections.abc import Callable
@@ -11,7 +12,7 @@ from typing import Any
 
 from tsid_fmu.errors import StudyError
 
-__all__ = ["atomic_write", "read_json", "write_json"]
+__all__ = ["atomic_write", "read_json", "strict", "write_json"]
 
 
 def atomic_write(path: Path, write: Callable[[Path], None] | str | bytes) -> None:
@@ -48,9 +49,25 @@ def atomic_write(path: Path, write: Callable[[Path], None] | str | bytes) -> Non
             tmp_path.unlink()
 
 
+def strict(data: Any) -> Any:
+    """Return ``data`` for strict JSON: non-finite floats become ``None``, numpy scalars
+    and arrays plain numbers and lists, tuples lists, other objects their ``str``."""
+    if isinstance(data, dict):
+        return {str(k): strict(v) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [strict(v) for v in data]
+    if hasattr(data, "tolist"):
+        return strict(data.tolist())
+    if isinstance(data, bool) or data is None or isinstance(data, int | str):
+        return data
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    return str(data)
+
+
 def write_json(path: Path, data: Any) -> None:
     """Write strict JSON (no NaN or infinity) atomically."""
-    atomic_write(path, json.dumps(data, indent=1, allow_nan=False) + "\n")
+    atomic_write(path, json.dumps(strict(data), indent=1, allow_nan=False) + "\n")
 
 
 def read_json(path: Path, what: str) -> Any:

@@ -1,0 +1,188 @@
+"""Accuracy benchmark: tsid against SciPy peers on data from independent simulators.
+
+Every problem's measured data come from an independent solution of the plant's
+equations written in ``benchmarks/problems/`` (never from the FMU being identified),
+with a rig's conventions: commands held per sample, continuous outputs sampled, one
+noise level per sensor. On the same FMU, data and cost (noise-weighted SSE, so that
+``least_squares`` minimises exactly the study's cost), each method runs and is scored:
+
+- **tsid**: the Taguchi stage alone, and the whole study (Taguchi + refinement);
+- **least_squares**: SciPy's trust-region least squares from the centre of the first
+  ranges, and from the two range corners (every parameter at its first level, every
+  parameter at its last level), in the same search coordinates;
+- **differential_evolution**: SciPy's DE over the first ranges with a budget of
+  simulations (no polish).
+
+Printed per problem: simulations, wall time, cost relative to the best cost any method
+found, worst parameter error against the truth, and (tsid) how far the Taguchi stage
+alone got. Run::
+
+    python benchmarks/accuracy.py                 # every problem
+    python benchmarks/accuracy.py siso_encoder dc_motor --workers 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from problems import dc_motor as dc_mod  # noqa: E402
+from problems import local_minima as lm_mod  # noqa: E402
+from problems import miso as miso_mod  # noqa: E402
+from problems import siso as siso_mod  # noqa: E402
+
+from tsid_fmu import Experiment, Method, Parameter, Study, identify  # noqa: E402
+from tsid_fmu.evaluate import make_evaluator  # noqa: E402
+from tsid_fmu.search.space import Space  # noqa: E402
+from tsid_fmu.study import prepare  # noqa: E402
+
+ENCODER_SIGMA = 1e-6 / math.sqrt(12)
+
+
+def study_of(prob, method: Method) -> Study:
+    """The study a user would write for a benchmark problem."""
+    params = [Parameter(n, d["levels"], min=d.get("min", -math.inf), max=d.get("max", math.inf),
+                        unit=d.get("unit", "")) for n, d in prob.parameters.items()]  # fmt: skip
+    exps = [Experiment(e.data, inputs=e.inputs, outputs=e.outputs, derived=e.derived, name=e.name,
+                       noise={"x_m": ENCODER_SIGMA} if "x_m" in e.outputs else {},
+                       hold={k: "linear" for k in ("x_o", "v_o", "a_o") if k in e.inputs})
+            for e in prob.experiments]  # fmt: skip
+    return Study(fmu=prob.fmu, parameters=params, experiments=exps,
+                 start_values=dict(prob.start_values), method=method, name=prob.name)  # fmt: skip
+
+
+PROBLEMS = {
+    "siso_encoder": lambda: siso_mod.siso(encoder=True),
+    "siso_loadcells": lambda: siso_mod.siso(encoder=False),
+    "miso": miso_mod.miso,
+    "dc_motor": dc_mod.dc_motor,
+    "local_minima": lm_mod.local_minima,
+}
+
+METHOD = Method(cost="sse", weighting="noise", replicates=1, refine="least_squares")
+
+
+class Scorer:
+    """Costs and residuals of one problem in the search coordinates, counting simulations."""
+
+    def __init__(self, study: Study, workers: int | None) -> None:
+        self.study = study
+        self.spec = prepare(study)
+        self.ev = make_evaluator(self.spec, workers=workers)
+        self.space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+        self.size = 0
+
+    def x(self, s: np.ndarray) -> dict[str, float]:
+        return self.space.to_x(s)
+
+    def residuals(self, s: np.ndarray) -> np.ndarray:
+        ev = self.ev.evaluate([self.x(s)])
+        r = ev.residuals[0] if ev.residuals else None
+        if r is None or not np.isfinite(ev.costs[0, 0]):
+            return np.full(self.size or 1, 1e10)
+        self.size = r.size
+        return r
+
+    def cost(self, s: np.ndarray) -> float:
+        c = float(self.ev.evaluate([self.x(s)]).costs[0, 0])
+        return c if math.isfinite(c) else 1e300
+
+    def close(self) -> None:
+        self.ev.close()
+
+
+def _row(name, x, cost, nfev, seconds, truth, note=""):
+    return {"method": name, "x": x, "cost": cost, "nfev": nfev, "time": seconds,
+            "note": note, "error": max(abs(x[k] / truth[k] - 1) for k in truth) * 100}  # fmt: skip
+
+
+def run_least_squares(scorer: Scorer, start: np.ndarray, name: str, truth):
+    from scipy.optimize import least_squares
+
+    lo, hi = scorer.space.s_lower, scorer.space.s_upper
+    width = np.minimum(hi - lo, 1.0)
+    s0 = np.clip(start, lo + 1e-9 * width, hi - 1e-9 * width)
+    n0, t0 = scorer.ev.nfev, time.perf_counter()
+    out = least_squares(scorer.residuals, s0, bounds=(lo, hi), method="trf", x_scale="jac")
+    x = scorer.x(out.x)
+    return _row(name, x, scorer.cost(out.x), scorer.ev.nfev - n0, time.perf_counter() - t0,
+                truth, out.message[:40])  # fmt: skip
+
+
+def run_de(scorer: Scorer, budget: int, truth, seed: int = 1):
+    from scipy.optimize import differential_evolution
+
+    p = scorer.space.dim
+    popsize = 15
+    maxiter = max(1, budget // (popsize * p) - 1)
+    bounds = [(-0.5, 0.5)] * p  # the first levels' range of every parameter
+    n0, t0 = scorer.ev.nfev, time.perf_counter()
+    out = differential_evolution(scorer.cost, bounds, popsize=popsize, maxiter=maxiter,
+                                 polish=False, seed=seed, tol=0)  # fmt: skip
+    x = scorer.x(out.x)
+    return _row(f"differential_evolution ({budget} budget)", x, float(out.fun),
+                scorer.ev.nfev - n0, time.perf_counter() - t0, truth)  # fmt: skip
+
+
+def run_tsid(study: Study, truth, workers: int | None):
+    t0 = time.perf_counter()
+    res = identify(study, workers=workers, plots=False)
+    seconds = time.perf_counter() - t0
+    tag = res.stages[0] if res.stages[0].kind != "contribution" else res.stages[1]
+    last_taguchi = [s for s in res.stages if s.kind in ("taguchi", "phase")][-1]
+    taguchi_nfev = sum(s.nfev for s in res.stages if s.kind != "refinement")
+    rows = [
+        _row("tsid: Taguchi stage(s) alone", last_taguchi.x, last_taguchi.cost, taguchi_nfev,
+             math.nan, truth, tag.message[:40]),
+        _row("tsid: whole study", res.x, res.fun, res.nfev, seconds, truth,
+             "; ".join(f"{s.name} {s.nfev}" for s in res.stages)[:60]),
+    ]  # fmt: skip
+    return rows, res
+
+
+def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
+    prob = PROBLEMS[name]()
+    study = study_of(prob, METHOD)
+    rows, _ = run_tsid(study, prob.truth, workers)
+    scorer = Scorer(dataclasses.replace(study, method=dataclasses.replace(METHOD)), workers)
+    try:
+        truth_cost = scorer.cost(scorer.space.to_s(prob.truth))
+        centre = np.zeros(scorer.space.dim)
+        rows.append(run_least_squares(scorer, centre, "least_squares from the centre", prob.truth))
+        first = scorer.space.to_s({n: min(d["levels"]) for n, d in prob.parameters.items()})
+        last = scorer.space.to_s({n: max(d["levels"]) for n, d in prob.parameters.items()})
+        rows.append(run_least_squares(scorer, first, "least_squares from level 1", prob.truth))
+        rows.append(run_least_squares(scorer, last, "least_squares from level 5", prob.truth))
+        rows.append(run_de(scorer, de_budget, prob.truth))
+    finally:
+        scorer.close()
+    best = min(min(r["cost"] for r in rows), truth_cost)
+    print(f"\n## {name}: cost at the truth {truth_cost:.6g}, best found {best:.6g}")
+    print(f"{'method':<44} {'sims':>6} {'time [s]':>9} {'cost / best':>12} "
+          f"{'worst error':>12}  note")  # fmt: skip
+    for r in rows:
+        print(f"{r['method']:<44} {r['nfev']:>6d} {r['time']:>9.1f} {r['cost'] / best:>12.6f} "
+              f"{r['error']:>11.3g}%  {r['note']}")  # fmt: skip
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("problems", nargs="*", default=list(PROBLEMS), choices=list(PROBLEMS))
+    parser.add_argument("--workers", type=int, default=None)
+    parser.add_argument("--de-budget", type=int, default=1500)
+    args = parser.parse_args()
+    for name in args.problems:
+        benchmark(name, args.workers, args.de_budget)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,237 @@
+"""Identify a study: its stages in order, then the evidence for the answer.
+
+``identify`` is the whole data flow in one call: the study (:mod:`tsid_fmu.study`)
+gives the evaluators of each sub-problem (:mod:`tsid_fmu.evaluate`, over the FMU
+runtime :mod:`tsid_fmu.fmu`); the stages (:mod:`tsid_fmu.search`) run the orthogonal
+arrays and re-level; the answer is assessed (:mod:`tsid_fmu.uncertainty`), kept on
+disk as it happens (:mod:`tsid_fmu.trail`) and reported (:mod:`tsid_fmu.report`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.errors import StudyError
+from tsid_fmu.evaluate.factory import make_evaluator
+from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.report.console import ConsoleProgress
+from tsid_fmu.report.files import write_result_files
+from tsid_fmu.report.markdown import markdown_report
+from tsid_fmu.report.plots import convergence_plot, fit_plot, main_effects_plot
+from tsid_fmu.result import IdentificationResult
+from tsid_fmu.search.iteration import ProgressCallback
+from tsid_fmu.search.pipeline import Control, run_stages
+from tsid_fmu.search.record import IterationRecord
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.study.definition import Study
+from tsid_fmu.study.prepare import prepare
+from tsid_fmu.trail.folder import NullStore, Trail
+from tsid_fmu.uncertainty.assess import assess, validate
+
+__all__ = ["identify"]
+
+WEAK_STD_ERROR = 5.0
+"""Relative standard error (percent) above which a parameter is reported as weakly
+determined by the data."""
+
+
+class _Evaluators:
+    """One evaluator per sub-problem (parameters, experiments, fixed values), shared."""
+
+    def __init__(self, study: Study, runner: dict[str, Any], given: Evaluator | None) -> None:
+        self.study, self.runner, self.given = study, runner, given
+        self.pool: dict[tuple, Evaluator] = {}
+        self.specs: dict[tuple, EvaluationSpec] = {}
+
+    def _key(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> tuple:
+        return (tuple(params), tuple(exps), tuple(sorted(fixed.items())))
+
+    def spec(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> EvaluationSpec:
+        key = self._key(params, exps, fixed)
+        if key not in self.specs:
+            base = prepare(self.study, exps, params)
+            start = {**base.start_values, **{k: v for k, v in fixed.items() if k not in params}}
+            self.specs[key] = dataclasses.replace(base, start_values=start)
+        return self.specs[key]
+
+    def get(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> Evaluator:
+        if self.given is not None:
+            return self.given
+        key = self._key(params, exps, fixed)
+        if key not in self.pool:
+            self.pool[key] = make_evaluator(self.spec(params, exps, fixed), **self.runner)
+        return self.pool[key]
+
+    def close(self) -> None:
+        for ev in self.pool.values():
+            ev.close()
+        self.pool.clear()
+
+
+def _plotter(evaluators: _Evaluators, study: Study) -> Callable[[Path, IterationRecord, Space], None]:
+    def draw(folder: Path, record: IterationRecord, space: Space) -> None:
+        describe = {f.name: record.frame.describe(space, f) for f in record.frame.factors
+                    if f.values is None}  # fmt: skip
+        main_effects_plot(record, folder / "main_effects.png", describe)
+        if evaluators.given is not None:
+            return
+        exps = [e.name for e in study.identify_experiments()]
+        spec = evaluators.spec(study.parameter_names, exps, {})
+        x = {**{p.name: record.best_x.get(p.name, math.nan) for p in study.parameters}}
+        if any(math.isnan(v) for v in x.values()):
+            return  # a phase: the other parameters are not part of its record
+        sims = evaluators.get(study.parameter_names, exps, {}).simulate([x], count=False)[0]
+        fit_plot(spec, sims, folder / "fit.png",
+                 title=f"{record.stage}, iteration {record.index}: best so far")  # fmt: skip
+
+    return draw
+
+
+def _status(stages: list[StageResult]) -> tuple[int, str]:
+    last = stages[-1]
+    if last.status == 2:
+        return 2, last.message
+    status = 0 if all(s.status == 0 for s in stages if s.kind != "contribution") else 1
+    return status, "; ".join(f"{s.name}: {s.message}" for s in stages if s.kind != "contribution")
+
+
+def _weak(result: IdentificationResult) -> dict[str, str]:
+    weak = {}
+    u = result.uncertainty
+    if u is None:
+        return weak
+    for n, rel in u.relative.items():
+        low, high = u.intervals.get(n, [None, None])
+        if low is None or high is None:
+            weak[n] = "the data do not determine it (open 95 % interval)"
+        elif rel > WEAK_STD_ERROR:
+            weak[n] = f"the data determine it only to +/-{rel:.2g} % (standard error)"
+    return weak
+
+
+def _finish(
+    study: Study,
+    stages: list[StageResult],
+    evaluators: _Evaluators,
+    store: Trail | NullStore,
+    plots: bool,
+) -> IdentificationResult:
+    status, message = _status(stages)
+    x = {n: stages[-1].x.get(n, math.nan) for n in study.parameter_names}
+    nit = sum(len(s.records) for s in stages)
+    nfev = sum(s.nfev for s in stages)
+    result = IdentificationResult(x=x, fun=stages[-1].cost, nfev=nfev, success=status == 0,
+                                  status=status, message=message, nit=nit, stages=stages,
+                                  study=study)  # fmt: skip
+    result.contribution = {n: [float(r.anova.contribution[n]) for r in result.iterations
+                               if n in r.names] for n in study.parameter_names}  # fmt: skip
+    if status == 2 or evaluators.given is not None:
+        return result
+    exps = [e.name for e in study.identify_experiments()]
+    spec = evaluators.spec(study.parameter_names, exps, {})
+    ev = evaluators.get(study.parameter_names, exps, {})
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    found = assess(ev, spec, space, x)
+    result.fun, result.fit, result.noise = found.fun, found.fit, found.noise
+    result.uncertainty = found.uncertainty
+    result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
+    result.warnings = found.warnings + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
+    result.weak = _weak(result)
+    checks = [e.name for e in study.experiments if e.role == "validate"]
+    if checks:
+        vspec = evaluators.spec(study.parameter_names, checks, {})
+        result.validation = validate(evaluators.get(study.parameter_names, checks, {}), vspec, x)
+    if isinstance(store, Trail):
+        write_result_files(result, store.out)
+        store.write_text("report.md", markdown_report(result))
+        if plots:
+            fit_plot(spec, found.simulated, store.out / "fit.png",
+                     title="Identified model vs measured data")  # fmt: skip
+            convergence_plot(stages, store.out / "convergence.png")
+    return result
+
+
+def identify(
+    study: Study | str | Path,
+    out: str | Path | None = None,
+    *,
+    resume: bool = False,
+    workers: int | None = None,
+    timeout: float | None = None,
+    scheduler: Any = None,
+    progress: bool | ProgressCallback = False,
+    plots: bool = True,
+    max_iterations: int | None = None,
+    pause_after: int | None = None,
+    continue_from_run: int | None = None,
+    evaluator: Evaluator | None = None,
+) -> IdentificationResult:
+    """Identify the parameters of a study's FMU from its measured data.
+
+    Parameters
+    ----------
+    study : Study or path
+        The study, or the path of its TOML file.
+    out : path, optional
+        Folder for the audit trail, plots and report, written as each iteration ends.
+    resume : bool
+        Continue the study already in ``out`` (after an interruption, or after a person
+        edited the last ``next_levels.toml``).
+    workers : int, optional
+        Worker processes for the runs (default: the available cores; 1 runs in this
+        process). The result is the same for any number.
+    timeout : float, optional
+        Time limit per simulation in seconds (default: derived from the first runs).
+    scheduler : str or distributed.Client, optional
+        A ``dask.distributed`` scheduler to send the runs to.
+    progress : bool or callable
+        True prints progress to stderr; a callable receives ``(event, info)``.
+    plots : bool
+        Draw the plots (main effects and fit per iteration, fit and convergence).
+    max_iterations : int, optional
+        Override the Taguchi iteration limit of each stage.
+    pause_after : int, optional
+        Pause after this iteration of the current stage (review, edit
+        ``next_levels.toml``, then ``resume``).
+    continue_from_run : int, optional
+        With ``resume``: centre the next levels on this (1-based) run of the last
+        iteration, as the MISO paper continued from its runs 7 and 4.
+    evaluator : Evaluator, optional
+        Score parameter sets with this instead (not closed here; no fit, intervals or
+        report files are computed).
+
+    Returns
+    -------
+    IdentificationResult
+        ``x``, ``fun``, ``nfev``, ``success``, ``status``, ``message``, the ``stages``
+        and the ``intervals``, with ``to_pandas()`` and ``to_dict()``.
+    """
+    if not isinstance(study, Study):
+        study = Study.from_toml(study)
+    if resume and out is None:
+        raise StudyError("resume needs the output folder of the study (out=...)")
+    if continue_from_run is not None and not resume:
+        raise StudyError("continue_from_run needs resume=True and the study's folder")
+    callback = ConsoleProgress() if progress is True else (progress or None)
+    evaluators = _Evaluators(study, {"workers": workers, "timeout": timeout,
+                                     "scheduler": scheduler}, evaluator)  # fmt: skip
+    try:
+        store: Trail | NullStore = NullStore()
+        if out is not None:
+            draw = _plotter(evaluators, study) if plots else None
+            store = Trail(out, study, resume=resume, on_iteration=draw)
+        control = Control(pause_after, max_iterations, continue_from_run)
+        stages = run_stages(study, evaluators, store, callback, control)
+        result = _finish(study, stages, evaluators, store, plots)
+        result.out_dir = Path(out) if out is not None else None
+    finally:
+        evaluators.close()
+    if callback:
+        callback("done", {"result": result})
+    return result

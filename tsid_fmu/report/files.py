@@ -1,0 +1,47 @@
+"""Files other tools and scripts read: ``result.json``, ``parameters.csv``, ``parameters.ssv``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+from tsid_fmu.result import IdentificationResult
+from tsid_fmu.trail.files import atomic_write, write_json
+
+__all__ = ["parameter_set_ssv", "write_result_files"]
+
+
+def parameter_set_ssv(
+    values: dict[str, float], descriptions: dict[str, str] | None = None, name: str = "tsid"
+) -> str:
+    """Return an SSP 1.0 parameter-value document (``.ssv``) holding ``values``."""
+    ns = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+    ET.register_namespace("ssv", ns)
+    root = ET.Element(f"{{{ns}}}ParameterSet", {"version": "1.0", "name": name})
+    params = ET.SubElement(root, f"{{{ns}}}Parameters")
+    for key, value in values.items():
+        attrs = {"name": key}
+        if descriptions and descriptions.get(key):
+            attrs["description"] = descriptions[key]
+        p = ET.SubElement(params, f"{{{ns}}}Parameter", attrs)
+        ET.SubElement(p, f"{{{ns}}}Real", {"value": repr(float(value))})
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def write_result_files(result: IdentificationResult, out: Path) -> None:
+    """Write ``result.json``, ``parameters.csv`` and ``parameters.ssv`` into ``out``."""
+    study = result.study
+    data = result.to_dict()
+    if study is not None:
+        data = {"study": study.name, "fmu": str(study.fmu), **data}
+    write_json(out / "result.json", data)
+    if study is None:
+        return
+    atomic_write(out / "parameters.csv", result.parameters_frame().to_csv())
+    units = {p.name: p.unit for p in study.parameters}
+    values = dict(result.x)
+    values.update({k: v for k, v in study.start_values.items() if k not in values})
+    desc = {k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in values}
+    desc.update({k: "fixed in the study" for k in study.start_values})
+    atomic_write(out / "parameters.ssv", parameter_set_ssv(values, desc, name=study.name))

@@ -1,0 +1,131 @@
+"""``report.md``: the whole study as text a person reads from top to bottom."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from tsid_fmu.result import STATUS, IdentificationResult
+from tsid_fmu.search.record import IterationRecord
+from tsid_fmu.search.stage import StageResult
+
+__all__ = ["markdown_report", "markdown_table"]
+
+
+def _cell(v: Any) -> str:
+    if isinstance(v, float):
+        return "-" if math.isnan(v) else f"{v:.5g}"
+    return str(v).replace("|", "/").replace("\n", " ")
+
+
+def markdown_table(frame: Any) -> str:
+    """Return a DataFrame as a Markdown table (numbers to 5 significant figures)."""
+    cols = [frame.index.name or ""] + [str(c) for c in frame.columns]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for idx, row in frame.iterrows():
+        lines.append("| " + " | ".join([_cell(idx)] + [_cell(v) for v in row]) + " |")
+    return "\n".join(lines)
+
+
+def _stage_folder(stage: StageResult, index: int) -> str:
+    if stage.kind == "taguchi":
+        return ""
+    if stage.kind == "phase":
+        return f"phase_{index:02d}/"
+    return f"{stage.kind}/"
+
+
+def _stages(result: IdentificationResult) -> list[str]:
+    lines = ["## Stages", "",
+             "Each stage's answer and its cost on the measured inputs of its experiments; "
+             "the cost fall is relative to the stage before.", "",
+             markdown_table(result.stages_frame()), ""]  # fmt: skip
+    phase = 0
+    for st in result.stages:
+        if not st.records:
+            continue
+        phase += st.kind == "phase"
+        folder = _stage_folder(st, phase)
+        lines += [f"### {st.name}", "", "| iteration | array | factors | case | best cost | "
+                  "found at | next centred on | simulations |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for rec in st.records:
+            kind = "parameters" if rec.frame.axis_aligned else "rotated"
+            lines.append(
+                f"| [{rec.index}]({folder}iteration_{rec.index:02d}/) | {rec.array} | {kind} | "
+                f"{rec.decision.case} | {rec.best_cost:.6g} | {rec.best_source} | "
+                f"{rec.centre_source} | {rec.nfev} |"
+            )
+        lines.append("")
+    return lines
+
+
+def _fit(result: IdentificationResult) -> list[str]:
+    lines = ["## Fit at the identified parameters (measured inputs)", "",
+             "fit % = 100 (1 - NRMSE), NRMSE = |error| / |measured - its mean|.", ""]  # fmt: skip
+    for exp, per_output in result.fit.items():
+        for output, m in per_output.items():
+            if not isinstance(m, dict):
+                lines.append(f"- {exp}: {m}")
+                continue
+            sigma = result.noise.get(exp, {}).get(output)
+            beside = f" (noise in the data: {sigma:.3g})" if sigma is not None else ""
+            lines.append(f"- {exp} / {output}: fit {m['fit_percent']:.3f} %, RMSE "
+                         f"{m['rmse']:.5g}{beside}, IAE {m['iae']:.5g}")  # fmt: skip
+    return [*lines, ""]
+
+
+def _failed_runs(records: Sequence[IterationRecord]) -> list[str]:
+    rows = [(rec.stage, rec.index, run + 1, err) for rec in records
+            for run, err in enumerate(rec.errors) if err]  # fmt: skip
+    if not rows:
+        return []
+    out = [f"## Failed runs ({len(rows)}, each scored worst; the study went on)", "",
+           "| stage | iteration | run | reason |", "|---|---|---|---|"]  # fmt: skip
+    out += [f"| {s} | {i} | {r} | {_cell(e)} |" for s, i, r, e in rows]
+    return [*out, ""]
+
+
+def _uncertainty(result: IdentificationResult) -> list[str]:
+    u = result.uncertainty
+    if u is None:
+        return []
+    lines = ["## What the data determine", "", f"Intervals: {u.method}. Combinations of "
+             "parameters, best determined first (standard error in search units: 1 = the "
+             "width of the first levels' range):", ""]  # fmt: skip
+    for c in u.combinations:
+        terms = " ".join(f"{w:+.2f} {n}" for n, w in c["terms"].items())
+        state = "determined" if c["determined"] else "**not determined**"
+        lines.append(f"- {terms}: standard error {c['std_error']:.3g} ({state})")
+    return [*lines, ""]
+
+
+def markdown_report(result: IdentificationResult) -> str:
+    """Return the text of ``report.md``."""
+    study = result.study
+    name = study.name if study else "study"
+    cost = study.method.cost if study else "cost"
+    lines = [
+        f"# Identification report: {name}", "",
+        f"- FMU: `{study.fmu if study else '-'}`",
+        f"- Result: **{result.message}** (status {result.status}: {STATUS[result.status]}; "
+        f"{result.nit} Taguchi iterations, {result.nfev} simulations)",
+        f"- Cost ({cost}, measured inputs of the identification experiments): {result.fun:.6g}",
+        "",
+    ]  # fmt: skip
+    if result.warnings:
+        lines += ["## Warnings", "", *[f"- {w}" for w in result.warnings], ""]
+    lines += ["## Identified parameters", "", markdown_table(result.parameters_frame()), ""]
+    if result.weak:
+        lines += ["## Weakly determined parameters", "",
+                  *[f"- **{k}**: {v}" for k, v in result.weak.items()], ""]  # fmt: skip
+    lines += _uncertainty(result) + _fit(result) + _stages(result)
+    lines += _failed_runs(result.iterations)
+    if result.validation:
+        lines += ["## Validation experiments (all inputs together)", ""]
+        for exp, v in result.validation.items():
+            lines.append(f"- {exp}: " + (f"simulation failed: {v['error']}" if "error" in v else
+                         f"{cost} cost {v['cost']:.6g}"))  # fmt: skip
+        lines.append("")
+    lines += ["![fit](fit.png)", "", "![convergence](convergence.png)", ""]
+    return "\n".join(lines)

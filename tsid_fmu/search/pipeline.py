@@ -1,0 +1,216 @@
+"""The stages of a study, run in order, each resumable from what the trail holds.
+
+A single-group study runs one ``taguchi`` stage over all parameters. A phased study
+(explicit ``[[phases]]``, or ``[contribution] enabled``) runs the ``contribution``
+analyses, one ``phase`` stage per parameter group, and a joint phase over all
+parameters on all identification experiments. Either may end with the optional
+``refinement`` stage. Every stage gets its own evaluator spec (its parameters, its
+experiments, the others held at their current values) and reports its answer, its cost
+on its measured inputs, its simulations and why it stopped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Protocol
+
+from tsid_fmu.errors import StudyError
+from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.search.frame import Frame
+from tsid_fmu.search.iteration import ProgressCallback
+from tsid_fmu.search.phases import Evaluators, centre_values, joint_levels, plan_phases
+from tsid_fmu.search.record import IterationRecord
+from tsid_fmu.search.refine import refine_stage
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.taguchi import TaguchiRun, frame_from_run, taguchi_stage
+from tsid_fmu.study.definition import Study
+from tsid_fmu.study.schema import Parameter, Phase
+
+__all__ = ["Control", "Evaluators", "StageStore", "run_stages"]
+
+
+class StageStore(Protocol):
+    """Where stages and iterations are kept (the audit trail, or nothing)."""
+
+    def iterations(self, key: str) -> list[IterationRecord]: ...
+    def override(self, key: str, record: IterationRecord, space: Space) -> Frame | None: ...
+    def stage(self, key: str) -> StageResult | None: ...
+    def write_iteration(self, key: str, record: IterationRecord, space: Space) -> None: ...
+    def write_stage(self, key: str, result: StageResult) -> None: ...
+
+
+@dataclass
+class Control:
+    """How this call runs the study: limits, pauses, a person's choice of run."""
+
+    pause_after: int | None = None
+    max_iterations: int | None = None
+    continue_from_run: int | None = None
+
+
+@dataclass
+class _Context:
+    study: Study
+    evaluators: Evaluators
+    store: StageStore
+    progress: ProgressCallback | None
+    control: Control
+
+
+class _Recorder:
+    def __init__(self, store: StageStore, key: str, space: Space) -> None:
+        self.store, self.key, self.space = store, key, space
+
+    def iteration(self, record: IterationRecord) -> None:
+        self.store.write_iteration(self.key, record, self.space)
+
+
+def _taguchi(
+    ctx: _Context, key: str, name: str, kind: str, params: list[Parameter], exps: list[str],
+    current: Mapping[str, float], nfev_before: int, max_iterations: int | None,
+) -> StageResult:  # fmt: skip
+    """Run (or continue) one Taguchi-kind stage of ``params`` on ``exps``."""
+    method = ctx.study.method
+    levels = {p.name: list(p.levels) for p in params}
+    space = Space(levels, {p.name: p.bounds for p in params}, method.leveling)
+    names = [p.name for p in params]
+    fixed = {k: v for k, v in current.items() if k not in names}
+    prior = ctx.store.iterations(key)
+    override, note = None, None
+    if prior:
+        override = ctx.store.override(key, prior[-1], space)
+        note = "levels edited by a person" if override is not None else None
+        if ctx.control.continue_from_run is not None:
+            run = ctx.control.continue_from_run
+            override = frame_from_run(prior[-1], run - 1, space, method)
+            note = f"continued from iteration {prior[-1].index}, run {run} (chosen)"
+    run = TaguchiRun(
+        name=name, space=space, first=Frame.from_levels(space, levels), method=method,
+        fixed=fixed, prior=prior, override=override, override_note=note,
+        nfev_before=nfev_before, max_iterations=max_iterations,
+        pause_after=ctx.control.pause_after, experiments=list(exps),
+    )  # fmt: skip
+    evaluator = ctx.evaluators.get(names, list(exps), fixed)
+    if prior and hasattr(evaluator, "mark_known"):
+        # what the interrupted run simulated is not counted again (it was in memory)
+        evaluator.mark_known(_simulated_sets(prior))
+    result = taguchi_stage(run, evaluator, _Recorder(ctx.store, key, space), ctx.progress)
+    result.kind = kind
+    if result.status != 2:
+        ctx.store.write_stage(key, result)
+    return result
+
+
+def _simulated_sets(records: list[IterationRecord]) -> list[dict[str, float]]:
+    sets = []
+    for rec in records:
+        sets += [dict(zip(rec.parameters, map(float, row), strict=True)) for row in rec.sets]
+        sets.append({k: float(v) for k, v in rec.prediction["x"].items()})
+    return sets
+
+
+def _refinement(ctx: _Context, last: StageResult, exps: list[str]) -> StageResult:
+    study = ctx.study
+    start = {n: last.x[n] for n in study.parameter_names}
+    done = ctx.store.stage("refinement")
+    if done is not None and done.extra.get("start") == start:
+        return done
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
+    cost = float(evaluator.evaluate([start]).costs[0, 0])
+    result = refine_stage("refinement", space, start, cost, evaluator, study.method,
+                          progress=ctx.progress)  # fmt: skip
+    result.experiments = list(exps)
+    result.extra["start"] = start
+    ctx.store.write_stage("refinement", result)
+    return result
+
+
+def _phases(ctx: _Context, stages: list[StageResult]) -> list[Phase]:
+    study = ctx.study
+    ident = [e.name for e in study.identify_experiments()]
+    if study.phases:
+        return [Phase(p.parameters, list(p.experiments) or ident, p.name, p.array, p.max_iterations)
+                for p in study.phases]  # fmt: skip
+    plan = ctx.store.stage("contribution")
+    if plan is None:
+        if ctx.progress:
+            ctx.progress("stage", {"name": "contribution", "message": "contribution analyses"})
+        plan = plan_phases(study, ctx.evaluators)
+        ctx.store.write_stage("contribution", plan)
+    stages.append(plan)
+    return [Phase(**p) for p in plan.extra["phases"]]
+
+
+def _phase_stage(
+    ctx: _Context, key: str, name: str, params: list[Parameter], exps: list[str],
+    current: dict[str, float], nfev: int, array: str | None, limit: int | None,
+) -> StageResult:  # fmt: skip
+    if ctx.progress and not ctx.store.iterations(key):
+        ctx.progress("stage", {"name": name, "message": f"{name} on {', '.join(exps)}"})
+    sub = ctx
+    if array is not None:
+        method = dataclasses.replace(ctx.study.method, array=array)
+        sub = dataclasses.replace(ctx, study=dataclasses.replace(ctx.study, method=method))
+    return _taguchi(sub, key, name, "phase", params, exps, current, nfev,
+                    ctx.control.max_iterations or limit)  # fmt: skip
+
+
+def _run_phased(ctx: _Context) -> list[StageResult]:
+    study, stages = ctx.study, []
+    phases = _phases(ctx, stages)
+    missing = sorted(set(study.parameter_names) - {n for p in phases for n in p.parameters})
+    if missing:
+        raise StudyError(f"no phase identifies {missing}; add them to a [[phases]] entry")
+    ident = [e.name for e in study.identify_experiments()]
+    current, nfev = centre_values(study), sum(s.nfev for s in stages)
+    by_name = {p.name: p for p in study.parameters}
+    for i, ph in enumerate(phases):
+        result = _phase_stage(
+            ctx, f"phase_{i + 1:02d}", f"{ph.name}: {', '.join(ph.parameters)}",
+            [by_name[n] for n in ph.parameters], list(ph.experiments), current, nfev,
+            ph.array, ph.max_iterations,
+        )  # fmt: skip
+        stages.append(result)
+        current.update({n: result.x[n] for n in ph.parameters})
+        nfev += result.nfev
+        if result.status == 2:
+            return stages
+    if study.contribution.refine_jointly and (len(phases) > 1 or len(ident) > 1):
+        key = f"phase_{len(phases) + 1:02d}"
+        result = _phase_stage(ctx, key, "joint phase: all parameters",
+                              joint_levels(study, current), ident, current, nfev, None, None)  # fmt: skip
+        stages.append(result)
+    return stages
+
+
+def run_stages(
+    study: Study,
+    evaluators: Evaluators,
+    store: StageStore,
+    progress: ProgressCallback | None = None,
+    control: Control | None = None,
+) -> list[StageResult]:
+    """Run every stage of a study in order; return their results.
+
+    Stages the store already holds as finished are read back, not run again; an
+    interrupted Taguchi stage continues from its last complete iteration. A paused
+    stage (status 2) ends the list.
+    """
+    ctx = _Context(study, evaluators, store, progress, control or Control())
+    if study.phases or study.contribution.enabled:
+        stages = _run_phased(ctx)
+    else:
+        # a Taguchi stage always continues from its iterations on disk: finished, it
+        # returns at once; stopped at a limit, it goes on if the limit now allows
+        exps = [e.name for e in study.identify_experiments()]
+        stages = [_taguchi(ctx, "", "taguchi", "taguchi", list(study.parameters), exps, {}, 0,
+                           ctx.control.max_iterations)]  # fmt: skip
+    if study.method.refine != "none" and stages[-1].status != 2:
+        exps = [e.name for e in study.identify_experiments()]
+        stages.append(_refinement(ctx, stages[-1], exps))
+    return stages

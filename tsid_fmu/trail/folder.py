@@ -1,0 +1,194 @@
+"""The audit trail of a study on disk: one folder per iteration, written as it ends.
+
+Layout of the output folder::
+
+    study.toml                 the study, as run (written by Study.to_toml)
+    iteration_01/ ...          the Taguchi stage of a one-group study:
+        levels.csv             levels of each factor
+        runs.csv               array rows: levels, values, cost per replicate, S/N, errors
+        response.csv           mean S/N per level, delta, rank (the response table)
+        response_means.csv     mean cost per level, delta, rank
+        anova.csv              ANOVA of the S/N with percent contribution
+        decision.json          re-leveling case and reason per factor
+        next_levels.toml       proposed levels of the next iteration (a person may edit)
+        main_effects.png, fit.png
+        record.json            written last: marks the iteration complete
+    stage.json                 the finished Taguchi stage of a one-group study
+    contribution/stage.json    the contribution analyses of a phased study
+    phase_01/ ...              each phase: iteration_NN/ and stage.json
+    refinement/stage.json      the refinement stage
+    result.json, parameters.csv, parameters.ssv, report.md, fit.png, convergence.png
+
+Every file is written to a temporary name and renamed into place, so an interrupted
+study leaves either the old file or the new one, never half of one. ``--resume`` reads
+the complete iterations and finished stages back and continues.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+from tsid_fmu.errors import StudyError
+from tsid_fmu.search.frame import Frame
+from tsid_fmu.search.record import IterationRecord
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.study.definition import Study
+from tsid_fmu.trail.files import atomic_write, read_json, write_json
+from tsid_fmu.trail.levels import read_next_levels, write_next_levels
+
+__all__ = ["NullStore", "Trail"]
+
+_MARKERS = ("stage.json", "result.json", "record.json")
+
+
+class NullStore:
+    """A store that keeps nothing (a study run without an output folder)."""
+
+    def iterations(self, key: str) -> list[IterationRecord]:
+        """Return no iterations."""
+        return []
+
+    def override(self, key: str, record: IterationRecord, space: Space) -> Frame | None:
+        """Return no edited levels."""
+        return None
+
+    def stage(self, key: str) -> StageResult | None:
+        """Return no finished stage."""
+        return None
+
+    def write_iteration(self, key: str, record: IterationRecord, space: Space) -> None:
+        """Keep nothing."""
+
+    def write_stage(self, key: str, result: StageResult) -> None:
+        """Keep nothing."""
+
+
+class Trail:
+    """Reads and writes the audit trail of one study.
+
+    Parameters
+    ----------
+    out : path
+        Output folder.
+    study : Study
+        The study whose trail this is.
+    resume : bool
+        Continue the study in ``out``; without it a folder holding a study is refused.
+    on_iteration : callable, optional
+        Called as ``on_iteration(folder, record, space)`` after an iteration's tables
+        are written and before its ``record.json`` (the report draws its plots there).
+    """
+
+    def __init__(
+        self,
+        out: str | Path,
+        study: Study,
+        resume: bool = False,
+        on_iteration: Callable[[Path, IterationRecord, Space], None] | None = None,
+    ) -> None:
+        self.out = Path(out)
+        self.study = study
+        self.on_iteration = on_iteration
+        found = [p for m in _MARKERS for p in self.out.rglob(m)] if self.out.is_dir() else []
+        if found and not resume:
+            raise StudyError(
+                f"{self.out} already holds a study; continue it with --resume, or choose "
+                "another --out folder"
+            )
+        if resume and not self.out.is_dir():
+            raise StudyError(f"{self.out}: nothing to resume (no such folder)")
+        self.out.mkdir(parents=True, exist_ok=True)
+        if not (self.out / "study.toml").exists():
+            if study.source is not None and Path(study.source).is_file():
+                atomic_write(self.out / "study.toml", Path(study.source).read_bytes())
+
+    def stage_dir(self, key: str) -> Path:
+        """Folder of a stage (``""`` is the output folder itself)."""
+        return self.out / key if key else self.out
+
+    def iteration_dir(self, key: str, index: int) -> Path:
+        """Folder of iteration ``index`` of a stage."""
+        return self.stage_dir(key) / f"iteration_{index:02d}"
+
+    def iterations(self, key: str) -> list[IterationRecord]:
+        """Return a stage's complete iterations; an interrupted one is removed (redone)."""
+        records: list[IterationRecord] = []
+        while (path := self.iteration_dir(key, len(records) + 1) / "record.json").exists():
+            data = read_json(path, "iteration record")
+            try:
+                records.append(IterationRecord.from_dict(data))
+            except (KeyError, TypeError, ValueError) as exc:
+                raise StudyError(f"{path}: damaged iteration record ({exc})") from None
+        if records and records[-1].parameters != self._parameters(records[-1]):
+            raise StudyError(
+                f"{self.stage_dir(key)}: the trail identifies {records[-1].parameters} but the "
+                "study now has other parameters; use a new --out folder"
+            )
+        stale = self.iteration_dir(key, len(records) + 1)
+        if stale.exists():
+            shutil.rmtree(stale)
+        return records
+
+    def _parameters(self, record: IterationRecord) -> list[str]:
+        names = set(self.study.parameter_names)
+        return record.parameters if set(record.parameters) <= names else sorted(names)
+
+    def override(self, key: str, record: IterationRecord, space: Space) -> Frame | None:
+        """Levels a person wrote into the last ``next_levels.toml``, if they differ."""
+        path = self.iteration_dir(key, record.index) / "next_levels.toml"
+        if not path.exists():
+            return None
+        frame = read_next_levels(path, space)
+        proposed = (
+            Frame.from_dict(record.extra["next"]["frame"])
+            if "next" in record.extra
+            else record.next_frame
+        )
+        same = frame.to_dict()["factors"] == proposed.to_dict()["factors"] and (
+            frame.axis_aligned or list(frame.centre) == list(proposed.centre)
+        )
+        return None if same else frame
+
+    def stage(self, key: str) -> StageResult | None:
+        """Return a finished stage written by :meth:`write_stage`, or None."""
+        path = self.stage_dir(key) / "stage.json"
+        if not path.exists():
+            return None
+        try:
+            return StageResult.from_dict(read_json(path, "stage record"))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise StudyError(f"{path}: damaged stage record ({exc})") from None
+
+    def write_stage(self, key: str, result: StageResult) -> None:
+        """Mark a stage finished: its summary in ``stage.json``."""
+        write_json(self.stage_dir(key) / "stage.json", result.to_dict())
+
+    def write_iteration(self, key: str, record: IterationRecord, space: Space) -> None:
+        """Write every file of a finished iteration; ``record.json`` last."""
+        d = self.iteration_dir(key, record.index)
+        d.mkdir(parents=True, exist_ok=True)
+        n = max(len(v) for v in record.levels.values())
+        lines = ["factor," + ",".join(f"level {i + 1}" for i in range(n))]
+        lines += [f + "," + ",".join(repr(float(v)) for v in record.levels[f]) for f in record.names]
+        atomic_write(d / "levels.csv", "\n".join(lines) + "\n")
+        atomic_write(d / "runs.csv", record.runs_frame().to_csv(index=False))
+        atomic_write(d / "response.csv", record.response.to_pandas().to_csv())
+        atomic_write(d / "response_means.csv", record.response_means.to_pandas().to_csv())
+        atomic_write(d / "anova.csv", record.anova.to_pandas().to_csv())
+        write_json(d / "decision.json", record.decision.to_dict())
+        nxt = record.extra.get("next")
+        frame = Frame.from_dict(nxt["frame"]) if nxt else record.next_frame
+        note = nxt["note"] if nxt else record.decision.message
+        atomic_write(d / "next_levels.toml", write_next_levels(d, record, space, frame, note))
+        if self.on_iteration is not None:
+            self.on_iteration(d, record, space)
+        write_json(d / "record.json", record.to_dict())
+
+    def write_text(self, name: str, text: str) -> Path:
+        """Write a text file into the output folder."""
+        atomic_write(self.out / name, text)
+        return self.out / name
+

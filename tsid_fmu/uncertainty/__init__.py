@@ -1,0 +1,17 @@
+"""How well the data determine the answer: sensitivities, intervals, fit and mismatch."""
+
+from tsid_fmu.uncertainty.assess import MISMATCH, Assessment, assess, validate
+from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, uncertainty
+from tsid_fmu.uncertainty.sensitivity import Sensitivities, sensitivities
+
+__all__ = [
+    "MISMATCH",
+    "Z95",
+    "Assessment",
+    "Sensitivities",
+    "Uncertainty",
+    "assess",
+    "sensitivities",
+    "uncertainty",
+    "validate",
+]

@@ -1,0 +1,96 @@
+"""The evidence at the answer: cost, fit, noise, intervals, validation, warnings."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.evaluate.cost import Cost, metrics, noise_level
+from tsid_fmu.evaluate.protocol import Evaluator, Simulated
+from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty.intervals import Uncertainty, uncertainty
+from tsid_fmu.uncertainty.sensitivity import sensitivities
+
+__all__ = ["MISMATCH", "Assessment", "assess", "validate"]
+
+MISMATCH = 1.5
+"""Residual RMS above this many times an output's noise estimate is reported as model
+(or solver) mismatch."""
+
+
+@dataclass
+class Assessment:
+    """What :func:`assess` found at a parameter set."""
+
+    fun: float
+    fit: dict[str, Any] = field(default_factory=dict)
+    noise: dict[str, dict[str, float]] = field(default_factory=dict)
+    simulated: list[Simulated] = field(default_factory=list)
+    uncertainty: Uncertainty | None = None
+    warnings: list[str] = field(default_factory=list)
+    nfev: int = 0
+
+
+def _fit(spec: EvaluationSpec, sims: list[Simulated]) -> tuple[dict, dict, list[str]]:
+    fit: dict[str, Any] = {}
+    noise: dict[str, dict[str, float]] = {}
+    warnings = []
+    for e, sim in zip(spec.experiments, sims, strict=True):
+        sigma = noise_level(e.measured)
+        noise[e.name] = dict(zip(e.output_names, map(float, sigma), strict=True))
+        if sim.outputs is None:
+            fit[e.name] = {"error": sim.error}
+            continue
+        fit[e.name] = metrics(e.time, e.measured, sim.outputs, list(e.output_names))
+        for name, s in zip(e.output_names, sigma, strict=True):
+            rmse = fit[e.name][name]["rmse"]
+            if s > 0 and rmse > MISMATCH * s:
+                warnings.append(
+                    f"{e.name} / {name}: residual RMS {rmse:.3g} is {rmse / s:.1f} times the "
+                    f"noise in the data ({s:.3g}): the model (or its solver) does not explain "
+                    "these data; the intervals below assume it does"
+                )
+    return fit, noise, warnings
+
+
+def assess(
+    evaluator: Evaluator, spec: EvaluationSpec, space: Space, x: Mapping[str, float]
+) -> Assessment:
+    """Evaluate the answer ``x``: its cost, fit, the noise, intervals and warnings.
+
+    The simulations of the fit and of the sensitivities are counted (``nfev``) but they
+    are not part of any stage.
+    """
+    start = evaluator.nfev
+    fun = float(evaluator.evaluate([dict(x)]).costs[0, 0])
+    sims = evaluator.simulate([dict(x)], count=False)[0]
+    fit, noise, warnings = _fit(spec, sims)
+    out = Assessment(fun=fun, fit=fit, noise=noise, simulated=sims, warnings=warnings)
+    varied = {n: float(x[n]) for n in space.names}
+    sens = sensitivities(evaluator, spec, space, varied) if math.isfinite(fun) else None
+    if sens is not None:
+        out.uncertainty = uncertainty(sens, space, varied)
+    out.nfev = evaluator.nfev - start
+    return out
+
+
+def validate(
+    evaluator: Evaluator, spec: EvaluationSpec, x: Mapping[str, float]
+) -> dict[str, Any]:
+    """Simulate the validation experiments at ``x``; return cost and fit per experiment."""
+    sims = evaluator.simulate([dict(x)], count=False)[0]
+    cost = Cost(spec.cost)
+    out: dict[str, Any] = {}
+    for e, sim in zip(spec.experiments, sims, strict=True):
+        if sim.outputs is None:
+            out[e.name] = {"error": sim.error}
+            continue
+        value = float(np.dot(cost.per_output(e.time, e.measured, sim.outputs), e.weights))
+        out[e.name] = {"cost": value,
+                       "fit": metrics(e.time, e.measured, sim.outputs, list(e.output_names))}  # fmt: skip
+    return out
