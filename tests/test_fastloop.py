@@ -16,7 +16,7 @@ from fmu_factory import build_c_fmu, lag_response
 from tsid_fmu import fastloop
 from tsid_fmu.driver import FMUSession
 from tsid_fmu.errors import SimulationError
-from tsid_fmu.scoring import Cost
+from tsid_fmu.evaluate.cost import Cost
 
 REPO = Path(__file__).resolve().parents[1]
 needs_numba = pytest.mark.skipif(not fastloop.numba_available(), reason="Numba not installed")
