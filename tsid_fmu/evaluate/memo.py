@@ -167,9 +167,11 @@ class MemoEvaluator:
         for k, res in fresh.items():
             if res is not None:
                 self._residuals.put(k, res)
-        costs = np.array([self._costs[k][0] for k in keys]).reshape(len(keys), -1)
+        costs = np.zeros((len(keys), self.n_replicates))
+        for i, k in enumerate(keys):
+            costs[i] = self._costs[k][0]
         return Evaluation(
-            costs=costs if keys else np.zeros((0, self.n_replicates)),
+            costs=costs,
             errors=[self._costs[k][1] for k in keys],
             nfev=nfev,
             residuals=[fresh[k] for k in keys],

@@ -31,22 +31,34 @@ _NAN = float("nan")
 def frozen_array(a: object, *, ndim: int | None = None) -> np.ndarray:
     """Return ``a`` as a read-only, C-contiguous float64 array (copied unless already so).
 
-    An array that is already all of these is returned as it is, so that its identity (by
-    which :class:`~tsid_fmu.driver.FMUSession` remembers checked inputs) is kept.
+    An array that is already all of these, and whose bases are read-only too, is returned
+    as it is, so that its identity (by which :class:`~tsid_fmu.driver.FMUSession`
+    remembers the arrays it has checked) is kept. ``ndim=2`` makes a 1-D array a column.
     """
     if (
         isinstance(a, np.ndarray)
         and a.dtype == np.float64
         and a.flags.c_contiguous
-        and not a.flags.writeable
         and (ndim is None or a.ndim == ndim)
+        and _read_only(a)
     ):
         return a
-    out = np.array(a, dtype=np.float64, order="C", copy=True)
-    if ndim == 2 and out.ndim == 1:
-        out = out[:, None]
+    arr = np.asarray(a, dtype=np.float64)
+    if ndim == 2 and arr.ndim == 1:
+        arr = arr.reshape(-1, 1)
+    out = np.array(arr, dtype=np.float64, order="C", copy=True)
     out.flags.writeable = False
     return out
+
+
+def _read_only(a: np.ndarray) -> bool:
+    """Return True if neither ``a`` nor any array it is a view of can be written."""
+    base: object = a
+    while isinstance(base, np.ndarray):
+        if base.flags.writeable:
+            return False
+        base = base.base
+    return True
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,12 +128,21 @@ class PreparedExperiment:
         if self.inputs is not None:
             put(self, "inputs", frozen_array(self.inputs, ndim=2))
         put(self, "noisy_inputs", tuple(frozen_array(a, ndim=2) for a in self.noisy_inputs))
-        put(self, "weights", frozen_array(self.weights).reshape(-1))
-        put(self, "scale", frozen_array(self.scale).reshape(-1))
+        put(self, "weights", frozen_array(np.reshape(self.weights, -1)))
+        put(self, "scale", frozen_array(np.reshape(self.scale, -1)))
         put(self, "start_values", {str(k): float(v) for k, v in self.start_values.items()})
         put(self, "hold", {str(k): str(v) for k, v in self.hold.items()})
         self._check_shapes()
         self._check_weights()
+
+    def __setstate__(self, state: dict) -> None:
+        # numpy arrays come out of a pickle writeable: make them read-only again, so that
+        # a worker's FMU sessions check them once, not at every simulation
+        for value in state.values():
+            for a in value if isinstance(value, tuple) else (value,):
+                if isinstance(a, np.ndarray):
+                    a.flags.writeable = False
+        self.__dict__.update(state)
 
     def _fail(self, message: str) -> StudyError:
         return StudyError(f"experiment {self.name!r}: {message}")
