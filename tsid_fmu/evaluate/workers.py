@@ -341,11 +341,14 @@ class LocalPool:
 
     def _dispatch(self, pending: deque[int], jobs: list[Job]) -> None:
         quota = self.recycle_after
+        n_ready = sum(w.ready for w in self.workers)
         for w in list(self.workers):
             while (
                 w.ready
                 and pending
-                and len(w.inflight) < PREFETCH
+                # a job queued behind another only while there is enough for every
+                # worker, so that none sits idle at the end while another has two
+                and len(w.inflight) < (PREFETCH if len(pending) > n_ready else 1)
                 and (quota is None or w.sent < quota)
             ):
                 index = pending.popleft()
