@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import FMUError, StudyError, TsidError
-from tsid_fmu.evaluate.memo import RESIDUAL_CACHE, Job, MemoEvaluator, OnResult
-from tsid_fmu.evaluate.runner import SetResult, SimResult, failed_result
+from tsid_fmu.evaluate.memo import RESIDUAL_CACHE, MemoEvaluator
+from tsid_fmu.evaluate.runner import Job, OnResult, SetResult, SimResult, failed_result
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.evaluate.timelimit import TimeLimit
 from tsid_fmu.evaluate.workers import LocalPool, children_allowed

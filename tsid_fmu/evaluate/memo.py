@@ -21,16 +21,16 @@ Memo keys are :meth:`EvaluationSpec.key`: the exact float values in parameter or
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluation, Progress, Simulated
-from tsid_fmu.evaluate.runner import SetResult, SimResult
+from tsid_fmu.evaluate.runner import Job, OnResult, SetResult, SimResult
 from tsid_fmu.evaluate.spec import EvaluationSpec
 
-__all__ = ["RESIDUAL_CACHE", "Job", "MemoEvaluator"]
+__all__ = ["OUTPUT_CACHE", "RESIDUAL_CACHE", "MemoEvaluator"]
 
 RESIDUAL_CACHE = 256
 """Default number of parameter sets whose residuals an evaluator keeps."""
@@ -38,10 +38,6 @@ OUTPUT_CACHE = 32
 """Default number of parameter sets whose simulated outputs an evaluator keeps."""
 
 Key = tuple[float, ...]
-Job = tuple[str, dict[str, float], bool]
-"""``(kind, parameters, full)``: kind ``"run"`` (score; ``full=False``: measured inputs
-only) or ``"sim"`` (simulate on the measured inputs)."""
-OnResult = Callable[[int, Any], None]
 
 
 class _LRU(OrderedDict):
@@ -105,7 +101,7 @@ class MemoEvaluator:
     # -- to be provided ------------------------------------------------------------------
 
     def _run_jobs(self, jobs: list[Job], on_result: OnResult) -> None:
-        """Run ``jobs``; call ``on_result(index, SetResult or SimResult)`` for each."""
+        """Run ``jobs`` (:meth:`SetRunner.run_job`); call ``on_result(index, result)``."""
         raise NotImplementedError
 
     def _batch_done(self) -> None:

@@ -25,7 +25,8 @@ from __future__ import annotations
 import os
 
 from tsid_fmu.errors import SimulationError, StudyError
-from tsid_fmu.evaluate.memo import RESIDUAL_CACHE, Job, MemoEvaluator, OnResult
+from tsid_fmu.evaluate.memo import RESIDUAL_CACHE, MemoEvaluator
+from tsid_fmu.evaluate.runner import Job, OnResult
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.evaluate.timelimit import TimeLimit
 from tsid_fmu.evaluate.workers import LocalPool

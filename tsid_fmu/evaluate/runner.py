@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -30,7 +30,23 @@ from tsid_fmu.evaluate.protocol import Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.fastloop import warm_up
 
-__all__ = ["Monitor", "SetResult", "SetRunner", "SimResult", "failed_result", "warm_up"]
+__all__ = [
+    "Job",
+    "Monitor",
+    "OnResult",
+    "SetResult",
+    "SetRunner",
+    "SimResult",
+    "failed_result",
+    "warm_up",
+]
+
+Job = tuple[str, dict[str, float], bool]
+"""``(kind, parameters, full)``: kind ``"run"`` scores a set (:meth:`SetRunner.run`;
+``full=False``: the measured inputs only), ``"sim"`` simulates it on the measured inputs
+(:meth:`SetRunner.simulate`)."""
+OnResult = Callable[[int, Any], None]
+"""``on_result(job index, SetResult or SimResult)``."""
 
 
 @dataclass
@@ -189,6 +205,11 @@ class SetRunner:
             y.flags.writeable = False
             out.append(Simulated(experiment.name, y, None))
         return SimResult(out, self.started, durations)
+
+    def run_job(self, job: Job) -> SetResult | SimResult:
+        """Run a :data:`Job`: :meth:`run` or :meth:`simulate`."""
+        kind, params, full = job
+        return self.simulate(params) if kind == "sim" else self.run(params, full)
 
     def close(self) -> None:
         """Free the FMU sessions (instances and extracted folders)."""

@@ -11,8 +11,8 @@ for either.
 from __future__ import annotations
 
 from tsid_fmu.errors import SimulationError
-from tsid_fmu.evaluate.memo import RESIDUAL_CACHE, Job, MemoEvaluator, OnResult
-from tsid_fmu.evaluate.runner import SetRunner
+from tsid_fmu.evaluate.memo import RESIDUAL_CACHE, MemoEvaluator
+from tsid_fmu.evaluate.runner import Job, OnResult, SetRunner
 from tsid_fmu.evaluate.spec import EvaluationSpec
 
 __all__ = ["SerialEvaluator"]
@@ -47,9 +47,8 @@ class SerialEvaluator(MemoEvaluator):
         runner = self._runner
         if runner is None:
             raise SimulationError(f"{self.spec.fmu.name}: the evaluator is closed")
-        for index, (kind, params, full) in enumerate(jobs):
-            result = runner.simulate(params) if kind == "sim" else runner.run(params, full)
-            on_result(index, result)
+        for index, job in enumerate(jobs):
+            on_result(index, runner.run_job(job))
 
     def close(self) -> None:
         """Free the FMU sessions (instances and extracted folders)."""

@@ -31,19 +31,24 @@ import time
 import types
 import warnings
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
 from tsid_fmu.errors import FMUError, TsidError
-from tsid_fmu.evaluate.runner import SetResult, SetRunner, SimResult, failed_result, warm_up
+from tsid_fmu.evaluate.runner import (
+    Job,
+    OnResult,
+    SetResult,
+    SetRunner,
+    SimResult,
+    failed_result,
+    warm_up,
+)
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.evaluate.timelimit import TimeLimit
 
 __all__ = ["LocalPool", "children_allowed", "exit_reason"]
-
-Job = tuple[str, dict[str, float], bool]
-OnResult = Callable[[int, Any], None]
 
 SHUTDOWN_GRACE = 2.0  # seconds a worker gets to close its FMU before it is killed
 PREFETCH = 2  # jobs in flight per worker, so it never waits for the parent between jobs
@@ -96,14 +101,14 @@ def _worker_main(conn: Connection, spec: EvaluationSpec, state: Any) -> None:
                 return
             if msg[0] != "job":
                 return  # "stop"
-            _, seq, kind, params, full = msg
+            _, seq, *job = msg
             monitor.begin(seq)
             result: SetResult | SimResult
             try:
-                result = runner.simulate(params) if kind == "sim" else runner.run(params, full)
+                result = runner.run_job(tuple(job))  # type: ignore[arg-type]
             except Exception as exc:  # never lose the reason of a failed set
                 where = monitor.where()
-                result = failed_result(spec, kind, _reason(exc), nfev=runner.started, where=where)
+                result = failed_result(spec, job[0], _reason(exc), nfev=runner.started, where=where)
             conn.send(("done", seq, result))
     finally:
         runner.close()
