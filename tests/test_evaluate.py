@@ -214,6 +214,26 @@ def test_results_and_counters_do_not_depend_on_the_number_of_workers(spec, seria
             _assert_same(_run_batches(ev), serial_batches)
 
 
+def test_an_interrupted_batch_leaves_the_pool_usable(spec, serial_batches):
+    class Interrupt(Exception):
+        pass
+
+    def progress(done, total):
+        if done == 2:
+            raise Interrupt  # as Ctrl-C would, while other sets are running
+
+    with PoolEvaluator(spec, workers=2) as ev:
+        with pytest.raises(Interrupt):
+            ev.evaluate(BATCHES[0], progress=progress)
+        assert ev.nfev == 2 * 4  # the two sets finished are kept, and only they count
+        got = ev.evaluate(BATCHES[0])
+        assert got.nfev == 7 * 4 and ev.nfev == 9 * 4
+    expected = serial_batches[0][0]
+    np.testing.assert_array_equal(got.costs, expected.costs)
+    for a, b in zip(got.residuals, expected.residuals, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_dask_gives_the_same_results_and_counters(spec, serial_batches):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(

@@ -156,13 +156,12 @@ class MemoEvaluator:
             if full:
                 result.costs.flags.writeable = False
                 self._costs[k] = (result.costs, result.error)
-            fresh[k] = result.residuals
+            fresh[k] = result.residuals  # the LRU may drop it before this batch ends
+            if result.residuals is not None:
+                self._residuals.put(k, result.residuals)
             done = self._report(progress, done, len(keys), len(where[k]))
 
         self._run(jobs, on_result)
-        for k, res in fresh.items():
-            if res is not None:
-                self._residuals.put(k, res)
         costs = np.zeros((len(keys), self.n_replicates))
         for i, k in enumerate(keys):
             costs[i] = self._costs[k][0]

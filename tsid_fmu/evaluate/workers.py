@@ -327,22 +327,30 @@ class LocalPool:
     def run(self, jobs: list[Job], on_result: OnResult) -> None:
         """Run ``jobs``; call ``on_result(index, SetResult or SimResult)`` for each.
 
-        Never raises for a job: a crash or time-out gives that job a failed result.
+        Never raises for a job: a crash or time-out gives that job a failed result. When
+        the caller is interrupted (Ctrl-C), the workers that still hold jobs of this call
+        are replaced, so that no late reply reaches a later call.
         """
         pending: deque[int] = deque(range(len(jobs)))
-        while pending or any(w.inflight for w in self.workers):
-            self._dispatch(pending, jobs)
-            if not self.workers:
-                for i in pending:
-                    on_result(i, failed_result(self.spec, jobs[i][0], "no worker process is left"))
-                return
-            busy = [w for w in self.workers if w.inflight or not w.ready]
-            ready = wait(
-                [w.conn for w in busy] + [w.process.sentinel for w in busy],
-                timeout=self._wait_time(busy),
-            )
-            for w in busy:
-                self._service(w, ready, pending, jobs, on_result)
+        try:
+            while pending or any(w.inflight for w in self.workers):
+                self._dispatch(pending, jobs)
+                if not self.workers:
+                    for i in pending:
+                        reason = "no worker process is left"
+                        on_result(i, failed_result(self.spec, jobs[i][0], reason))
+                    return
+                busy = [w for w in self.workers if w.inflight or not w.ready]
+                ready = wait(
+                    [w.conn for w in busy] + [w.process.sentinel for w in busy],
+                    timeout=self._wait_time(busy),
+                )
+                for w in busy:
+                    self._service(w, ready, pending, jobs, on_result)
+        except BaseException:
+            for w in [w for w in self.workers if w.inflight]:
+                self._replace(w)
+            raise
 
     def _dispatch(self, pending: deque[int], jobs: list[Job]) -> None:
         quota = self.recycle_after
