@@ -275,6 +275,9 @@ class DaskEvaluator(MemoEvaluator):
                     on_result(i, value)
         except TimeoutError:
             pass
+        except BaseException:  # interrupted: nothing of this call may run on
+            self.client.cancel([fut for fut in futures if fut not in finished])
+            raise
         late = [fut for fut in futures if fut not in finished]
         for fut in late:
             for i in futures[fut]:
