@@ -193,7 +193,7 @@ class MemoEvaluator:
         found: dict[Key, list[Simulated]] = {}
         jobs: list[tuple[Key, Job]] = []
         for k in dict.fromkeys(keys):
-            hit = self._outputs.get_recent(k) if self._outputs.size else None
+            hit = self._outputs.get_recent(k)
             if hit is None:
                 jobs.append((k, ("sim", self.spec.values(k), True)))
             else:
@@ -202,12 +202,11 @@ class MemoEvaluator:
         def on_result(index: int, result: SimResult) -> None:
             if count:
                 self._nfev += result.nfev
-            found[jobs[index][0]] = result.simulated
+            k = jobs[index][0]
+            found[k] = result.simulated  # the LRU may drop it before this batch ends
+            self._outputs.put(k, result.simulated)
 
         self._run(jobs, on_result)
-        for k, _ in jobs:
-            if self._outputs.size:
-                self._outputs.put(k, found[k])
         return [list(found[k]) for k in keys]
 
     def _run(self, jobs: list[tuple[Key, Job]], on_result: OnResult) -> None:
