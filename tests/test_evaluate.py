@@ -234,6 +234,20 @@ def test_an_interrupted_batch_leaves_the_pool_usable(spec, serial_batches):
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_worker_killed_between_batches_fails_no_set(spec, serial_batches):
+    import os
+    import signal
+
+    with PoolEvaluator(spec, workers=2) as ev:
+        ev.evaluate(BATCHES[0][:2])
+        for w in ev._pool.workers:  # e.g. the kernel's out-of-memory killer, while idle
+            os.kill(w.process.pid, signal.SIGKILL)
+            w.process.join(5)
+        got = ev.evaluate(BATCHES[0][2:])
+        assert got.errors == [None] * 7 and got.nfev == 7 * 4
+    np.testing.assert_array_equal(got.costs, serial_batches[0][0].costs[2:])
+
+
 def test_dask_gives_the_same_results_and_counters(spec, serial_batches):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(

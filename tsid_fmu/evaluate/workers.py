@@ -198,16 +198,19 @@ class _Worker:
         self.sent = 0
 
     def send(self, seq: int, index: int, job: Job) -> None:
+        self.conn.send(("job", seq, *job))
         self.inflight.append((seq, index))
         self.sent += 1
-        self.conn.send(("job", seq, *job))
 
     def running(self) -> tuple[int, float]:
         """Return ``(simulations started, start time)`` of the running job's simulation."""
-        s = self.state
-        if not self.inflight or int(s[_SEQ]) != self.inflight[0][0]:
+        if not self.begun():
             return 0, 0.0
-        return int(s[_STARTED]), float(s[_SINCE])
+        return int(self.state[_STARTED]), float(self.state[_SINCE])
+
+    def begun(self) -> bool:
+        """Return True if the oldest job in flight has started."""
+        return bool(self.inflight) and int(self.state[_SEQ]) == self.inflight[0][0]
 
     def where(self) -> tuple[int, int] | None:
         started, _ = self.running()
@@ -368,7 +371,10 @@ class LocalPool:
                 self._seq += 1
                 try:
                     w.send(self._seq, index, jobs[index])
-                except (OSError, BrokenPipeError):  # it died: its sentinel tells the rest
+                except (OSError, BrokenPipeError):  # it died: the job goes elsewhere
+                    pending.appendleft(index)
+                    if not w.inflight:  # else its sentinel tells the rest
+                        self._replace(w)
                     break
 
     def _wait_time(self, busy: list[_Worker]) -> float | None:
@@ -434,10 +440,13 @@ class LocalPool:
             reason = f"{self.limit.exceeded()}; the worker was killed and replaced"
         started, _ = w.running()
         where = w.where()
-        _seq, index = w.inflight.popleft()
+        begun = w.begun()
         pending.extendleft(i for _, i in reversed(w.inflight))  # run them elsewhere, next
         w.inflight.clear()
         self._replace(w)
+        if not begun:  # it died between jobs (killed from outside): nothing was lost
+            return
+        index = pending.popleft()
         on_result(
             index, failed_result(self.spec, jobs[index][0], reason, nfev=started, where=where)
         )
