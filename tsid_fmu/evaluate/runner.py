@@ -182,10 +182,12 @@ class SetRunner:
                 per_output = self.cost.per_output(experiment.time, experiment.measured, y)
                 value = float(np.dot(per_output, experiment.weights))
                 values.append(value if math.isfinite(value) else math.inf)
-                if r == 0:
-                    residuals.append(((y - experiment.measured) / experiment.scale).ravel())
+                if r == 0:  # y is this run's own array: scaled in place, no copy
+                    np.subtract(y, experiment.measured, out=y)
+                    np.divide(y, experiment.scale, out=y)
+                    residuals.append(y.reshape(-1))
             costs[: len(values)] += values
-        out = np.concatenate(residuals).astype(np.float64, copy=False)
+        out = residuals[0] if len(residuals) == 1 else np.concatenate(residuals)
         out.flags.writeable = False
         return SetResult(costs, None, out, self.started, durations)
 
