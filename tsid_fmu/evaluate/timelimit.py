@@ -65,12 +65,16 @@ class TimeLimit:
         self.timeout = timeout
         self.auto = timeout is None
         self._durations: list[float] = []
+        self._median = math.nan
         self._fixed = False
 
     def observe(self, durations: Iterable[float]) -> None:
         """Record the durations of successful simulations (automatic limit only)."""
         if self.auto and not self._fixed:
+            before = len(self._durations)
             self._durations.extend(durations)
+            if len(self._durations) > before:  # the pool asks for the limit at every wake
+                self._median = statistics.median(self._durations)
 
     def end_batch(self) -> None:
         """End a batch: the automatic limit is fixed once it has seen a simulation."""
@@ -83,7 +87,7 @@ class TimeLimit:
             return self.timeout or None
         if not self._durations:
             return AUTO_FIRST_S
-        return max(AUTO_MIN_S, AUTO_FACTOR * statistics.median(self._durations))
+        return max(AUTO_MIN_S, AUTO_FACTOR * self._median)
 
     def exceeded(self) -> str:
         """Return the reason given to a parameter set stopped by the limit."""
