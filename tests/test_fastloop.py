@@ -14,9 +14,9 @@ from crash_factory import build_crash_fmu
 from fmu_factory import build_c_fmu, lag_response
 
 from tsid_fmu.errors import SimulationError
+from tsid_fmu.evaluate.cost import Cost
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.fmu import compiled as fastloop
-from tsid_fmu.scoring import Cost
 
 REPO = Path(__file__).resolve().parents[1]
 needs_numba = pytest.mark.skipif(not fastloop.numba_available(), reason="Numba not installed")

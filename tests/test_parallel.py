@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 
@@ -10,11 +11,16 @@ import pandas as pd
 import pytest
 from crash_factory import build_crash_fmu
 from fmu_factory import build_c_fmu
+from spec_helpers import experiment, make_spec
 
 from tsid_fmu.errors import FMUError, StudyError
-from tsid_fmu.parallel import ParallelEvaluator, available_cores, make_evaluator
-from tsid_fmu.runner import Evaluator
-from tsid_fmu.study import Experiment, Parameter, Study
+from tsid_fmu.evaluate import (
+    DaskEvaluator,
+    PoolEvaluator,
+    SerialEvaluator,
+    available_cores,
+    make_evaluator,
+)
 
 
 def _frame(seed: int, n: int = 801) -> pd.DataFrame:
@@ -35,29 +41,27 @@ def fmus(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def lag_study(fmus):
-    return Study(
-        fmu=fmus["lag"],
-        parameters=[Parameter("tau", [0.01, 0.03, 0.1]), Parameter("x0", [-0.5, 0.0, 0.5])],
-        experiments=[
-            Experiment(data=_frame(1), inputs={"u": "u"}, outputs={"y": "y"}, name="a"),
-            Experiment(data=_frame(2), inputs={"u": "u"}, outputs={"y": "y2"}, name="b"),
+def lag_spec(fmus):
+    noise = {"replicates": 3, "input_noise": 0.02, "seed": 11}
+    return make_spec(
+        fmus["lag"],
+        ["tau", "x0"],
+        [
+            experiment(_frame(1), {"u": "u"}, {"y": "y"}, name="a", index=0, **noise),
+            experiment(_frame(2), {"u": "u"}, {"y": "y2"}, name="b", index=1, **noise),
         ],
-        replicates=3,
-        input_noise=0.02,
-        seed=11,
+        cost="iae",
     )
 
 
 @pytest.fixture(scope="module")
-def crash_study(fmus):
-    return Study(
-        fmu=fmus["crash"],
-        parameters=[Parameter("gain", [0.5, 1.0, 2.0])],
-        experiments=[Experiment(data=_frame(3), inputs={"u": "u"}, outputs={"y": "y"})],
+def crash_spec(fmus):
+    return make_spec(
+        fmus["crash"],
+        ["gain"],
+        [experiment(_frame(3), {"u": "u"}, {"y": "y"}, replicates=2, input_noise=0.01, seed=5)],
+        cost="iae",
         start_values={"abort_above": 10.0, "segv_above": 20.0, "hang_above": 30.0},
-        replicates=2,
-        seed=5,
     )
 
 
@@ -72,15 +76,15 @@ SETS = [
 
 
 @pytest.fixture(scope="module")
-def serial(lag_study):
-    with Evaluator(lag_study) as ev:
-        return ev.evaluate(SETS), ev.simulate_clean(SETS[1])
+def serial(lag_spec):
+    with SerialEvaluator(lag_spec) as ev:
+        return ev.evaluate(SETS), ev.simulate([SETS[1]])[0]
 
 
-def test_parallel_costs_are_bit_identical_to_serial(lag_study, serial):
+def test_parallel_costs_are_bit_identical_to_serial(lag_spec, serial):
     expected, _ = serial
     seen = []
-    with ParallelEvaluator(lag_study, workers=2) as pe:
+    with PoolEvaluator(lag_spec, workers=2) as pe:
         assert pe.n_replicates == 3
         got = pe.evaluate(SETS, progress=lambda done, total: seen.append((done, total)))
         assert pe.nfev == got.nfev
@@ -88,101 +92,92 @@ def test_parallel_costs_are_bit_identical_to_serial(lag_study, serial):
     assert got.errors == expected.errors
     assert "tau must be positive" in got.errors[2] and got.errors[2].startswith("a: ")
     assert seen == [(k, len(SETS)) for k in range(1, len(SETS) + 1)]
-    # more work than serial only on the failed row (serial stops it at its first failure)
-    assert got.nfev >= expected.nfev
+    # the same work as serial, the failed row included (it stops at its first failure)
+    assert got.nfev == expected.nfev
 
 
-def test_simulate_clean_and_recycling_match_serial(lag_study, serial):
+def test_simulate_and_recycling_match_serial(lag_spec, serial):
     expected, clean = serial
-    with ParallelEvaluator(lag_study, workers=2, recycle_after=2) as pe:
+    with PoolEvaluator(lag_spec, workers=2, recycle_after=2, residual_cache=2) as pe:
         got = pe.evaluate(SETS)
         again = pe.evaluate(SETS[:2])
-        sim = pe.simulate_clean(SETS[1])
+        sim = pe.simulate([SETS[1]])[0]
     np.testing.assert_array_equal(got.costs, expected.costs)
     np.testing.assert_array_equal(again.costs, expected.costs[:2])
-    for (p1, y1, e1), (p2, y2, e2) in zip(sim, clean, strict=True):
-        assert p1.experiment.name == p2.experiment.name and e1 is None and e2 is None
-        np.testing.assert_array_equal(y1, y2)
+    for s1, s2 in zip(sim, clean, strict=True):
+        assert s1.experiment == s2.experiment and s1.error is None and s2.error is None
+        np.testing.assert_array_equal(s1.outputs, s2.outputs)
 
 
-def test_make_evaluator_chooses_serial_or_parallel(lag_study):
-    with make_evaluator(lag_study, workers=1) as ev:
-        assert type(ev) is Evaluator
-    with make_evaluator(lag_study, workers=1, timeout=5.0) as ev:
-        assert isinstance(ev, ParallelEvaluator) and ev.workers == 1
+def test_make_evaluator_chooses_serial_or_parallel(lag_spec):
+    with make_evaluator(lag_spec, workers=1) as ev:
+        assert type(ev) is SerialEvaluator
+    with make_evaluator(lag_spec, workers=1, timeout=5.0) as ev:
+        assert isinstance(ev, PoolEvaluator) and ev.workers == 1
     assert available_cores() >= 1
 
 
-def test_startup_errors_are_raised_like_serial(lag_study, fmus):
-    import dataclasses
-
-    bad = dataclasses.replace(lag_study, parameters=[Parameter("tua", [1.0, 2.0])])
+def test_startup_errors_are_raised_like_serial(lag_spec, fmus):
+    bad = dataclasses.replace(lag_spec, parameter_names=("tua",))
     with pytest.raises(FMUError, match=r"unknown parameter 'tua'.*Did you mean 'tau'"):
-        ParallelEvaluator(bad, workers=2)
+        SerialEvaluator(bad)
+    with pytest.raises(FMUError, match=r"unknown parameter 'tua'.*Did you mean 'tau'"):
+        PoolEvaluator(bad, workers=2)
     with pytest.raises(StudyError, match="workers must be at least 1"):
-        ParallelEvaluator(lag_study, workers=0)
+        PoolEvaluator(lag_spec, workers=0)
 
 
-def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_study):
+def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_spec):
     sets = [{"gain": 1.0}, {"gain": 15.0}, {"gain": 2.0}, {"gain": 25.0}, {"gain": 0.5}]
-    with Evaluator(crash_study) as ev:
+    with SerialEvaluator(crash_spec) as ev:
         good = ev.evaluate([sets[0], sets[2], sets[4]])
-    with ParallelEvaluator(crash_study, workers=2) as pe:
+        later = ev.evaluate([{"gain": 3.0}])
+    with PoolEvaluator(crash_spec, workers=2) as pe:
         got = pe.evaluate(sets)
-        after = pe.evaluate([sets[0]])  # the pool still works
+        after = pe.evaluate([{"gain": 3.0}])  # the pool still works (a set not seen yet)
     np.testing.assert_array_equal(got.costs[[0, 2, 4]], good.costs)
     assert np.all(np.isinf(got.costs[[1, 3]]))
     assert "worker crashed (signal 6 SIGABRT)" in got.errors[1]
     assert "worker crashed (signal 11 SIGSEGV)" in got.errors[3]
+    assert got.errors[1].startswith("experiment: replicate 1: ")  # the measured input first
     assert got.errors[0] is None and got.errors[2] is None and got.errors[4] is None
-    np.testing.assert_array_equal(after.costs, good.costs[:1])
+    assert got.residuals[1] is None and got.residuals[3] is None
+    np.testing.assert_array_equal(after.costs, later.costs)
+    # a crashed set counts the simulation that crashed, as a failed one would
+    assert got.nfev == good.nfev + 2 and after.nfev == later.nfev == 2
 
 
-def test_hanging_row_is_stopped_by_the_time_limit(crash_study):
+def test_hanging_row_is_stopped_by_the_time_limit(crash_spec):
     sets = [{"gain": 1.0}, {"gain": 35.0}, {"gain": 2.0}]
-    with ParallelEvaluator(crash_study, workers=2, timeout=1.0) as pe:
+    with PoolEvaluator(crash_spec, workers=2, timeout=1.0) as pe:
         got = pe.evaluate(sets)
     assert math.isinf(got.costs[1, 0]) and math.isinf(got.costs[1, 1])
     assert "time limit of 1 s per simulation exceeded" in got.errors[1]
     assert np.all(np.isfinite(got.costs[[0, 2]]))
 
 
-def test_whole_study_is_bit_identical_serial_and_parallel(lag_study):
-    import tsid_fmu.engine as engine
-
-    study = Study(
-        fmu=lag_study.fmu,
-        parameters=[Parameter("tau", [0.01, 0.03, 0.1]), Parameter("x0", [-0.5, 0.0, 0.5])],
-        experiments=lag_study.experiments[:1],
-        max_iterations=3,
-        seed=2,
-    )
-    serial = engine.identify(study, plots=False)
-    with ParallelEvaluator(study, workers=2) as pe:
-        parallel = engine.identify(study, plots=False, evaluator=pe)
-    assert parallel.x == serial.x and parallel.fun == serial.fun
-    for a, b in zip(serial.iterations, parallel.iterations, strict=True):
-        np.testing.assert_array_equal(a.costs, b.costs)
-
-
-def test_missing_dask_is_a_clear_error(lag_study, monkeypatch):
+def test_missing_dask_is_a_clear_error(lag_spec, monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)
     with pytest.raises(StudyError, match=r"pip install tsid-fmu\[dask\]"):
-        ParallelEvaluator(lag_study, scheduler="tcp://127.0.0.1:1")
+        DaskEvaluator(lag_spec, "tcp://127.0.0.1:1")
+    with pytest.raises(StudyError, match=r"pip install tsid-fmu\[dask\]"):
+        make_evaluator(lag_spec, scheduler="tcp://127.0.0.1:1")
 
 
-def test_dask_local_cluster_gives_the_same_costs(lag_study, serial, tmp_path):
+def test_dask_local_cluster_gives_the_same_costs(lag_spec, serial, tmp_path):
     distributed = pytest.importorskip("distributed")
     expected, clean = serial
     with distributed.LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster:
-        with ParallelEvaluator(lag_study, scheduler=cluster.scheduler_address) as pe:
+        with DaskEvaluator(lag_spec, cluster.scheduler_address) as pe:
             got = pe.evaluate(SETS)
-            sim = pe.simulate_clean(SETS[1])
+            sim = pe.simulate([SETS[1]])[0]
     np.testing.assert_array_equal(got.costs, expected.costs)
-    assert got.errors == expected.errors
-    np.testing.assert_array_equal(sim[0][1], clean[0][1])
+    assert got.errors == expected.errors and got.nfev == expected.nfev
+    for a, b in zip(got.residuals, expected.residuals, strict=True):
+        assert (a is None and b is None) or np.array_equal(a, b)
+    np.testing.assert_array_equal(sim[0].outputs, clean[0].outputs)
 
 
 def test_script_without_main_guard_can_run_workers(fmus, tmp_path):
@@ -192,14 +187,15 @@ def test_script_without_main_guard_can_run_workers(fmus, tmp_path):
 
     script = tmp_path / "unguarded.py"
     script.write_text(
-        "import numpy as np, pandas as pd\n"
-        "from tsid_fmu.parallel import ParallelEvaluator\n"
-        "from tsid_fmu.study import Experiment, Parameter, Study\n"
+        "import numpy as np\n"
+        "from tsid_fmu.evaluate import EvaluationSpec, PoolEvaluator, PreparedExperiment\n"
         "t = np.arange(101) * 1e-2\n"
-        "df = pd.DataFrame({'time': t, 'u': np.sin(t), 'y': np.sin(t)})\n"
-        f"st = Study(fmu={str(fmus['lag'])!r}, parameters=[Parameter('tau', [0.1, 0.2])],\n"
-        "           experiments=[Experiment(data=df, inputs={'u': 'u'}, outputs={'y': 'y'})])\n"
-        "with ParallelEvaluator(st, workers=2) as pe:\n"
+        "e = PreparedExperiment(name='e', time=t, input_names=('u',), output_names=('y',),\n"
+        "    inputs=np.sin(t)[:, None], measured=np.sin(t)[:, None], weights=np.ones(1),\n"
+        "    scale=np.ones(1))\n"
+        f"spec = EvaluationSpec(fmu={str(fmus['lag'])!r}, parameter_names=('tau',),\n"
+        "    experiments=(e,))\n"
+        "with PoolEvaluator(spec, workers=2) as pe:\n"
         "    print('COST', pe.evaluate([{'tau': 0.1}]).costs[0, 0])\n"
     )
     repo = Path(__file__).resolve().parents[1]
@@ -210,35 +206,16 @@ def test_script_without_main_guard_can_run_workers(fmus, tmp_path):
     assert proc.stdout.count("COST") == 1
 
 
-def test_dask_isolates_crashes_and_hangs(crash_study):
+def test_dask_isolates_crashes_and_hangs(crash_spec):
     distributed = pytest.importorskip("distributed")
     sets = [{"gain": 1.0}, {"gain": 25.0}, {"gain": 35.0}, {"gain": 2.0}]
-    with Evaluator(crash_study) as ev:
+    with SerialEvaluator(crash_spec) as ev:
         good = ev.evaluate([sets[0], sets[3]])
     with distributed.LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster:
-        with ParallelEvaluator(crash_study, scheduler=cluster.scheduler_address, timeout=1.0) as pe:
+        with DaskEvaluator(crash_spec, cluster.scheduler_address, timeout=1.0) as pe:
             got = pe.evaluate(sets)
     np.testing.assert_array_equal(got.costs[[0, 3]], good.costs)
     assert "worker crashed (signal 11 SIGSEGV)" in got.errors[1]
     assert "time limit of 1 s per simulation exceeded" in got.errors[2]
-
-
-def test_a_study_survives_crashing_rows_and_reports_them(crash_study, tmp_path):
-    """Rows whose FMU segfaults are scored worst, the workers are replaced, the study
-    finishes, and report.md lists the crashed rows with the signal."""
-    import dataclasses
-
-    import tsid_fmu.engine as engine
-
-    study = dataclasses.replace(
-        crash_study, parameters=[Parameter("gain", [0.5, 1.0, 25.0])], max_iterations=2
-    )
-    res = engine.identify(study, tmp_path / "out", plots=False, workers=2, timeout=20.0)
-    first = res.iterations[0]
-    crashed = [e for e in first.errors if e]
-    assert len(crashed) == 3 and all("SIGSEGV" in e for e in crashed)
-    assert math.isfinite(res.fun) and res.x["gain"] < 25.0
-    report = (tmp_path / "out" / "report.md").read_text()
-    assert "## Failed runs" in report and "worker crashed (signal 11 SIGSEGV)" in report

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from tsid_fmu.errors import StudyError
-from tsid_fmu.scoring import Cost, fit_percent, metrics
+from tsid_fmu.evaluate.cost import Cost, fit_percent, metrics
 
 
 def test_costs_on_known_signals():
@@ -40,7 +40,7 @@ def test_unknown_cost_is_named():
 
 
 def test_noise_level_sees_white_noise_through_signal_and_steps():
-    from tsid_fmu.scoring import noise_level
+    from tsid_fmu.evaluate.cost import noise_level
 
     t = np.arange(0, 10, 1e-3)
     smooth = 100 * np.sin(2 * np.pi * t) + np.where(t % 2 < 1, 50.0, -50.0)  # with steps

@@ -4,6 +4,10 @@ The SISO paper scores a row by the integral of the absolute error (IAE); the MIS
 paper by the sum of squared errors (SSE). RMSE, NRMSE and the fit percentage
 ``100 * (1 - NRMSE)`` are offered for reporting and as alternatives. With several
 outputs the per-output costs are combined with weights.
+
+:func:`noise_level` estimates each measured output's noise, which the study layer uses for
+noise weighting (:data:`NOISE_POWER`) and as the residual scale of an
+:class:`~tsid_fmu.evaluate.spec.PreparedExperiment`.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import numpy as np
 
 from tsid_fmu.errors import StudyError
 
-__all__ = ["COSTS", "Cost", "fit_percent", "metrics"]
+__all__ = ["COSTS", "NOISE_POWER", "Cost", "fit_percent", "metrics", "noise_level"]
 
 
 def _iae(t: np.ndarray, e: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -1,0 +1,257 @@
+"""Where the simulations run: one parameter set over every experiment and replicate.
+
+:class:`SetRunner` owns one :class:`~tsid_fmu.fmu.FMUSession` per experiment
+(extracted and instantiated once, reset between runs). Every evaluator runs a parameter
+set through exactly this code -- in its own process, in a local worker process or on a
+Dask worker -- so a set's costs, residuals, error and simulation count are the same bits
+wherever it ran.
+
+The order is fixed: experiments in spec order, and within one its replicates, replicate 1
+(the measured inputs) first. The first failure ends the set: the remaining simulations of
+the set are not run, its costs are all ``inf``, and the reason is
+``"<experiment>: <message>"``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from tsid_fmu.errors import TsidError
+from tsid_fmu.evaluate.cost import Cost
+from tsid_fmu.evaluate.protocol import Simulated
+from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.fmu import FMUSession
+from tsid_fmu.fmu.compiled import warm_up
+
+__all__ = [
+    "Job",
+    "Monitor",
+    "OnResult",
+    "SetResult",
+    "SetRunner",
+    "SimResult",
+    "failed_result",
+    "warm_up",
+]
+
+Job = tuple[str, dict[str, float], bool]
+"""``(kind, parameters, full)``: kind ``"run"`` scores a set (:meth:`SetRunner.run`;
+``full=False``: the measured inputs only), ``"sim"`` simulates it on the measured inputs
+(:meth:`SetRunner.simulate`)."""
+OnResult = Callable[[int, Any], None]
+"""``on_result(job index, SetResult or SimResult)``."""
+
+
+@dataclass
+class SetResult:
+    """What scoring one parameter set gave.
+
+    Attributes
+    ----------
+    costs : numpy.ndarray
+        Shape ``(n_replicates,)``; all ``inf`` when the set failed. Only column 0 is
+        computed when only the measured inputs were asked for.
+    error : str or None
+        ``"<experiment>: <message>"`` of the first failure.
+    residuals : numpy.ndarray or None
+        Scaled residuals on the measured inputs (read-only float64), None if failed.
+    nfev : int
+        Simulations started for this set (the failed one included).
+    durations : list of float
+        Seconds each successful simulation took.
+    """
+
+    costs: np.ndarray
+    error: str | None
+    residuals: np.ndarray | None
+    nfev: int
+    durations: list[float] = field(default_factory=list)
+
+
+@dataclass
+class SimResult:
+    """What simulating one parameter set on the measured inputs gave."""
+
+    simulated: list[Simulated]
+    nfev: int
+    durations: list[float] = field(default_factory=list)
+
+
+class Monitor(Protocol):
+    """Told when each simulation starts and ends (a worker's watchdog reads it)."""
+
+    def started(self, experiment: int, replicate: int, count: int) -> None:
+        """Note that simulation ``count`` of the set starts (``experiment``, ``replicate``)."""
+
+    def finished(self) -> None:
+        """Note that the simulation that started last has returned."""
+
+
+class _NoMonitor:
+    def started(self, experiment: int, replicate: int, count: int) -> None:
+        pass
+
+    def finished(self) -> None:
+        pass
+
+
+class SetRunner:
+    """Score parameter sets of a spec in this process, one :class:`FMUSession` per experiment.
+
+    Parameters
+    ----------
+    spec : EvaluationSpec
+        What to simulate and how to score it.
+    monitor : Monitor, optional
+        Told about every simulation (worker processes publish it for their parent).
+
+    Raises
+    ------
+    FMUError
+        An FMU session cannot be opened (file, platform, variable names).
+    """
+
+    def __init__(self, spec: EvaluationSpec, monitor: Monitor | None = None) -> None:
+        self.spec = spec
+        self.monitor: Monitor = monitor or _NoMonitor()
+        self.cost = Cost(spec.cost)
+        self.n_replicates = spec.n_replicates
+        self.plans = [e.replicate_plan(self.n_replicates) for e in spec.experiments]
+        self.started = 0  # simulations started for the current set
+        self.sessions: list[FMUSession] = []
+        try:
+            for e in spec.experiments:
+                options: dict = {"hold": dict(e.hold)} if e.hold else {}
+                self.sessions.append(
+                    FMUSession(
+                        spec.fmu,
+                        inputs=e.input_names,
+                        outputs=e.output_names,
+                        parameters=spec.parameter_names,
+                        interface=spec.interface,  # type: ignore[arg-type]
+                        step_size=spec.step_size,
+                        start_values={**spec.start_values, **e.start_values},
+                        **options,
+                    )
+                )
+        except BaseException:
+            self.close()
+            raise
+
+    def _simulate(self, e: int, r: int, params: Mapping[str, float]) -> np.ndarray:
+        experiment = self.spec.experiments[e]
+        self.started += 1
+        self.monitor.started(e, r, self.started)
+        try:
+            return self.sessions[e].simulate(
+                experiment.time, experiment.replicate_inputs(r), params
+            )
+        finally:
+            self.monitor.finished()
+
+    def run(self, params: Mapping[str, float], full: bool = True) -> SetResult:
+        """Score one parameter set (``full=False``: the measured inputs only).
+
+        Failures of the FMU (:class:`~tsid_fmu.errors.TsidError`) end the set and are
+        returned; any other exception propagates.
+        """
+        self.started = 0
+        costs = np.zeros(self.n_replicates)
+        residuals: list[np.ndarray] = []
+        durations: list[float] = []
+        for e, (experiment, plan) in enumerate(zip(self.spec.experiments, self.plans, strict=True)):
+            values: list[float] = []
+            for r in range(self.n_replicates if full else 1):
+                if plan[r] != r:  # the same inputs as an earlier replicate: the same cost
+                    values.append(values[plan[r]])
+                    continue
+                t0 = time.monotonic()
+                try:
+                    y = self._simulate(e, r, params)
+                except TsidError as exc:
+                    costs[:] = math.inf
+                    return SetResult(costs, f"{experiment.name}: {exc}", None, self.started)
+                durations.append(time.monotonic() - t0)
+                per_output = self.cost.per_output(experiment.time, experiment.measured, y)
+                value = float(np.dot(per_output, experiment.weights))
+                values.append(value if math.isfinite(value) else math.inf)
+                if r == 0:  # y is this run's own array: scaled in place, no copy
+                    np.subtract(y, experiment.measured, out=y)
+                    np.divide(y, experiment.scale, out=y)
+                    residuals.append(y.reshape(-1))
+            costs[: len(values)] += values
+        out = residuals[0] if len(residuals) == 1 else np.concatenate(residuals)
+        out.flags.writeable = False
+        return SetResult(costs, None, out, self.started, durations)
+
+    def simulate(self, params: Mapping[str, float]) -> SimResult:
+        """Simulate every experiment on its measured inputs (each one even if another fails)."""
+        self.started = 0
+        out: list[Simulated] = []
+        durations: list[float] = []
+        for e, experiment in enumerate(self.spec.experiments):
+            t0 = time.monotonic()
+            try:
+                y = self._simulate(e, 0, params)
+            except TsidError as exc:
+                out.append(Simulated(experiment.name, None, str(exc)))
+                continue
+            durations.append(time.monotonic() - t0)
+            y.flags.writeable = False
+            out.append(Simulated(experiment.name, y, None))
+        return SimResult(out, self.started, durations)
+
+    def run_job(self, job: Job) -> SetResult | SimResult:
+        """Run a :data:`Job`: :meth:`run` or :meth:`simulate`."""
+        kind, params, full = job
+        return self.simulate(params) if kind == "sim" else self.run(params, full)
+
+    def close(self) -> None:
+        """Free the FMU sessions (instances and extracted folders)."""
+        for s in self.sessions:
+            try:
+                s.close()
+            except TsidError:
+                pass
+        self.sessions = []
+
+
+def failed_result(
+    spec: EvaluationSpec,
+    kind: str,
+    reason: str,
+    *,
+    nfev: int = 0,
+    where: tuple[int, int] | None = None,
+) -> SetResult | SimResult:
+    """Return the result of a job that did not finish (worker crashed, time limit, lost).
+
+    Parameters
+    ----------
+    spec : EvaluationSpec
+        The evaluation.
+    kind : {"run", "sim"}
+        Scoring (:meth:`SetRunner.run`) or simulating (:meth:`SetRunner.simulate`).
+    reason : str
+        What happened.
+    nfev : int
+        Simulations the task had started.
+    where : tuple of int, optional
+        ``(experiment, replicate)`` of the simulation that was running, if known.
+    """
+    prefix = ""
+    if where is not None:
+        e, r = where
+        prefix = f"{spec.experiments[e].name}: "
+        if spec.n_replicates > 1:
+            prefix += f"replicate {r + 1}: "
+    if kind == "sim":
+        return SimResult([Simulated(x.name, None, reason) for x in spec.experiments], nfev, [])
+    costs = np.full(spec.n_replicates, math.inf)
+    return SetResult(costs, prefix + reason, None, nfev, [])
