@@ -71,6 +71,24 @@ end LoopSwitch;
 """
 
 
+# A rate that is on only while x = t is inside a band [0.54, 0.56], which lies inside
+# one internal step [0.5, 0.6]: the relation flips and flips back within that step, and
+# neither end of it sees the band. Exact: y = clip(t - 0.54, 0, 2 w).
+BAND = """
+model Band "Time spent inside a narrow band, crossed within one internal step"
+  parameter Real w = 0.01 "Half width of the band";
+  output Real y "Time spent inside the band";
+  Real x(start = 0, fixed = true) "Position, equal to time";
+  Real q(start = 0, fixed = true) "Time spent inside the band";
+equation
+  der(x) = 1;
+  der(q) = if INSIDE then 1 else 0;
+  y = q;
+  annotation(__tsid_fmu(fixedStepSize = 0.1));
+end Band;
+"""
+
+
 def _build(tmp_path, source: str, name: str, version: int = 2):
     mo = tmp_path / f"{name}.mo"
     mo.write_text(source)
@@ -113,6 +131,19 @@ def test_if_expression_becomes_event_indicator_and_me_locates_switches(tmp_path,
     # an unlocated jump of the acceleration (g1 + g2)*h^2 ~ 5e-5 would cause per switch
     assert np.max(np.abs(me["y"] - exact)) < 1e-6
     assert np.max(np.abs(cs["y"] - exact)) < 1e-6
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("inside", ["abs(x - 0.55) <= w", "(x - 0.55)^2 <= w^2"])
+def test_cs_locates_a_switch_that_flips_back_within_one_internal_step(tmp_path, version, inside):
+    fmu = _build(tmp_path, BAND.replace("INSIDE", inside), "Band", version)
+    kw = {"step_size": 0.1, "output_interval": 0.1, "stop_time": 1.0, "output": ["y"]}
+    res = simulate_fmu(str(fmu), fmi_type="CoSimulation", **kw)
+    assert len(res) == 11  # one communication step per internal step
+    exact = np.clip(res["time"] - 0.54, 0.0, 0.02)
+    # without both switches located, RK4 sees the band at its midpoint stages only, and
+    # y ends near 0.067 instead of 0.02
+    np.testing.assert_allclose(res["y"], exact, rtol=0, atol=1e-9)
 
 
 def test_relations_inside_no_event_are_not_event_indicators(tmp_path):

@@ -45,14 +45,12 @@ Data: independent piecewise-exact solution (examples/lsea_siso/make_data.py), F_
 per sample. F_o = F_of - F_or is the sum of two independent load-cell noises, so its
 sigma is sqrt(2) times a cell's. x_m is an encoder reading (quantised to 1 um, no
 other noise): its sigma is the quantisation's, 1 um/sqrt(12) = 0.29 um, which makes it
-a very precise channel. The FMU (internal RK4 step fixedStepSize = 1e-4 s, event
-location on its indicators only at the end of internal steps) misses passages through
-the stick band |v_m| <= V_z that last less than one internal step (e.g. a velocity
-reversal under a large spring force takes ~80 us); this moves x_m by ~3.7 um RMS (about
-13 quantisation sigmas) but F_o by only ~0.006 sigma. The FMU converges to the
-independent solution as its step shrinks: x_m RMS 0.31 sigma at fixedStepSize 2e-5,
-0.25 at 1e-5, 0.02 at 1e-6 (0.01 s per run at 1e-4, 0.7 s at 1e-6). A benchmark that
-weighs x_m by its true sigma at the default step will see that model error.
+a very precise channel. The FMU (internal RK4 step fixedStepSize = 1e-4 s, relations
+frozen over a step, switches located by bisection, including a passage through the
+stick band |v_m| <= V_z that lasts less than one internal step, e.g. ~40-80 us where
+the velocity reverses under a large spring force) agrees with the independent solution
+to x_m RMS 0.001 sigma (0.3 nm) and F_o RMS ~5e-7 sigma at its default step (0.01 s
+per run), so x_m can be weighed by its true sigma.
 V_z = 0.001 m/s is a fixed model constant (start_values)."""
 
 
@@ -134,8 +132,8 @@ def self_check() -> None:
             rx, mx = rms_over_sigma(y[:, 1], x_m, problem.noise["x_m"])
             print(
                 f"FMU (fixedStepSize {step:.0e} s, {took:.2f} s) vs independent at the truth: "
-                f"F_o RMS {rf:.4f} sigma (max {mf:.3f}); x_m RMS {rx:.3f} sigma (max {mx:.2f}), "
-                f"i.e. {rx * problem.noise['x_m'] * 1e6:.3f} um RMS"
+                f"F_o RMS {rf:.2g} sigma (max {mf:.2g}); x_m RMS {rx:.2g} sigma (max {mx:.2g}), "
+                f"i.e. {rx * problem.noise['x_m'] * 1e6:.2g} um RMS"
             )
 
 

@@ -8,14 +8,15 @@ run time by CasADi's ``fast_newton`` root finder, which CasADi can generate C co
 
 Two forms are built from the same model:
 
-* the *live* form (Co-Simulation): ``ode(t, x, u, p) -> der(x)``,
+* the *live* form (Co-Simulation outputs): ``ode(t, x, u, p) -> der(x)``,
   ``eval(t, x, u, p) -> (der(x), w)`` and ``zc(t, x, u, p) -> z``, the relations
   evaluated wherever the functions are;
-* the *frozen* form (Model Exchange, ``frozen=True``): the same functions with a fifth
-  argument ``c``, the values (0 or 1) of the model's relations, which are discrete states
-  changed only at events, and ``rel(t, x, u, p, c) -> (z, s)``, one event indicator
-  ``z_k = hi_k - lo_k`` per relation ``lo_k < hi_k`` (or ``<=``) and its scale
-  ``s_k = |lo_k| + |hi_k|`` for the hysteresis.
+* the *frozen* form (Model Exchange and the Co-Simulation integrator, ``frozen=True``):
+  the same functions with a fifth argument ``c``, the values (0 or 1) of the model's
+  relations, which are discrete states changed only at events, and
+  ``rel(t, x, u, p, c) -> (z, s)``, one event indicator ``z_k = hi_k - lo_k`` per
+  relation ``lo_k < hi_k`` (or ``<=``) and its scale ``s_k = |lo_k| + |hi_k|`` for the
+  hysteresis.
 """
 
 from __future__ import annotations

@@ -3,15 +3,19 @@
 The CasADi functions of :mod:`.causalize` are code-generated into ``model_casadi.c``:
 
 ``<id>_ode(t, x, u, p) -> der(x)``
-    the right-hand side used by the Co-Simulation integrator (relations live);
+    the right-hand side with the relations live (Co-Simulation integrator of a model
+    without relations);
 ``<id>_eval(t, x, u, p) -> (der(x), w)``
     derivatives plus all algebraic variables ``w = [outputs, locals]`` (relations live);
 ``<id>_zc(t, x, u, p) -> z``
-    the indicators whose sign changes the Co-Simulation integrator locates;
+    live indicators, one per relation (located by the Co-Simulation integrator of a
+    model whose only relations are inside ``noEvent``);
 ``<id>_eval_me(t, x, u, p, c) -> (der(x), w)``
-    Model Exchange: the same with the relations frozen to ``c`` (discrete states);
+    the same with the relations frozen to ``c`` (discrete states), for Model Exchange
+    and the Co-Simulation integrator;
 ``<id>_rel(t, x, u, p, c) -> (z, s)``
-    Model Exchange: one event indicator ``z_k = hi_k - lo_k`` per relation, and its scale.
+    one event indicator ``z_k = hi_k - lo_k`` per relation, and its scale (Model
+    Exchange, and the switches the Co-Simulation integrator locates).
 
 ``model.h`` describes the value-reference layout and the relations to the generic
 wrappers in ``tsid_fmu/build/c/`` (``tsid_core.c`` with ``fmi2Functions.c`` or
@@ -114,18 +118,19 @@ def _header(model: FlatModel, causal: Causalized, guid: str, nz: int, nrel: int)
 /* Start values (index = value reference) and names, for reset and log messages. */
 extern const double model_start[N_REAL];
 extern const char *const model_names[N_REAL];
-/* Relations that are discrete states in Model Exchange: text and strictness (lo < hi). */
+/* Relations that are discrete states: text and strictness (lo < hi). */
 extern const char *const model_rel_text[NREL + 1];
 extern const int model_rel_strict[NREL + 1];
 
-/* Co-Simulation (relations evaluated live). Each returns 0 on success. */
+/* Live equations (relations evaluated as written). Each returns 0 on success. */
 int model_ode(double t, const double *x, const double *u, const double *p, double *dx);
 int model_eval(double t, const double *x, const double *u, const double *p,
                double *dx, double *w);
 /* Indicators z (NZ of them): one per relation a < b / a <= b, z = b - a. */
 int model_zc(double t, const double *x, const double *u, const double *p, double *z);
 
-/* Model Exchange: c[k] (0 or 1) is the value of relation k, a discrete state. */
+/* Frozen equations (Model Exchange, Co-Simulation integrator): c[k] (0 or 1) is the
+ * value of relation k, a discrete state. */
 int model_eval_me(double t, const double *x, const double *u, const double *p,
                   const double *c, double *dx, double *w);
 /* Event indicators z[k] = hi - lo of relation k, and scales s[k] = |lo| + |hi|. */

@@ -17,6 +17,17 @@
  * as is). */
 #define EVENT_TIME_TOL 1e-10
 #define MAX_EVENTS_PER_STEP 8
+/* Slopes of the indicators: finite differences along the flow over this fraction of
+ * fixedStepSize. A rest of a step shorter than MIN_PROBED_STEP [s] is only checked at
+ * its end. */
+#define SLOPE_REL_STEP 1e-6
+#define MIN_PROBED_STEP 1e-9
+/* Newton search for the first crossing: at most this many steps to a predicted zero,
+ * each that much beyond it (relative), plus EVENT_TIME_TOL. */
+#define NEWTON_PROBES 6
+#define NEWTON_OVERSHOOT 1e-3
+/* Return code of an internal step whose relations do not settle (see csModes). */
+#define STEP_UNSETTLED 2
 
 #define X(d) ((d)->r + X_OFF)
 #define DX(d) ((d)->r + DX_OFF)
@@ -284,90 +295,300 @@ static const double *inputsAt(Core *core, double tc, double t, double *buf) {
     return buf;
 }
 
-/* One classical Runge-Kutta step of size h from time t. */
-static int rk4Step(Core *core, double tc, double t, double h) {
-    CoreData *d = &core->d;
-    double k1[NX + 1], k2[NX + 1], k3[NX + 1], k4[NX + 1], xt[NX + 1], ub[NU + 1];
-    double *x = X(d);
-    const double *p = P(d), *u;
+/* ----------------------------------------- Co-Simulation: modes and indicators
+ *
+ * With relations (NREL > 0), Co-Simulation integrates like Model Exchange: each relation
+ * is frozen at its value c[k] (d->c) over an internal step, so that every RK4 stage
+ * evaluates the same smooth branch, and the indicators are z_k = hi - lo of the
+ * relations (model_rel, no hysteresis): a crossing is a relation whose value at the end
+ * of a step differs from c[k]. Where the bisection then tries a shorter step, that step
+ * follows the smooth continuation of the branch, so the crossing is located where that
+ * branch meets it, not where a stage happened to see the next branch. Without
+ * relations, the live indicators model_zc (relations inside noEvent) are used with the
+ * live equations. */
+
+/* Right-hand side of the Co-Simulation integrator at a stage. */
+static int csRhs(Core *core, double t, const double *x, const double *u, double *dx) {
+#if NREL > 0
+    double w[NW + 1];
+    return model_eval_me(t, x, u, P(&core->d), core->d.c, dx, w);
+#else
+    return model_ode(t, x, u, P(&core->d), dx);
+#endif
+}
+
+#if NZ_CS > 0
+/* Indicators of the Co-Simulation integrator at (t, x, u), with the modes d->c. */
+static int csIndicators(Core *core, double t, const double *x, const double *u, double *z) {
+#if NREL > 0
+    double s[NREL + 1];
+    return model_rel(t, x, u, P(&core->d), core->d.c, z, s);
+#else
+    return model_zc(t, x, u, P(&core->d), z);
+#endif
+}
+
+/* Sign class of indicator k: the value of its relation. */
+static int csClass(int k, double z) {
+#if NREL > 0
+    return model_rel_strict[k] ? z > 0.0 : z >= 0.0;
+#else
+    (void)k;
+    return z >= 0.0;
+#endif
+}
+
+/* Index of the first indicator whose sign class differs, or -1. */
+static int crossed(const double *z0, const double *z1) {
     int i;
-    if (!(u = inputsAt(core, tc, t, ub)) || model_ode(t, x, u, p, k1)) return 1;
+    for (i = 0; i < NZ_CS; i++) {
+        if (csClass(i, z0[i]) != csClass(i, z1[i])) return i;
+    }
+    return -1;
+}
+#endif
+
+#if NZ_CS > 0
+/* Time over which the slopes of the indicators are taken as finite differences along
+ * the flow (the inputs are taken as constant over it). */
+static double slopeDelta(const Core *core) {
+    return SLOPE_REL_STEP * core->d.r[VR_FIXED_STEP];
+}
+#endif
+
+/* One classical Runge-Kutta step of size h from time t. With slope0 != NULL, also the
+ * slope of the indicators at the start (forward difference along the first stage, with
+ * the inputs of time t; d->z must hold the indicators there); with k4 != NULL, the last
+ * stage (the direction of the flow at the end). */
+static int rk4Step(Core *core, double tc, double t, double h, double *slope0, double *k4) {
+    CoreData *d = &core->d;
+    double k1[NX + 1], k2[NX + 1], k3[NX + 1], k4b[NX + 1], xt[NX + 1], ub[NU + 1];
+    double *x = X(d);
+    const double *u;
+    int i;
+    if (!k4) k4 = k4b;
+    if (!(u = inputsAt(core, tc, t, ub)) || csRhs(core, t, x, u, k1)) return 1;
+#if NZ_CS > 0
+    if (slope0) {
+        double zs[NZ_CS + 1], delta = slopeDelta(core);
+        for (i = 0; i < NX; i++) xt[i] = x[i] + delta * k1[i];
+        if (csIndicators(core, t + delta, xt, u, zs)) return 1;
+        for (i = 0; i < NZ_CS; i++) slope0[i] = (zs[i] - d->z[i]) / delta;
+    }
+#else
+    (void)slope0;
+#endif
     for (i = 0; i < NX; i++) xt[i] = x[i] + 0.5 * h * k1[i];
-    if (!(u = inputsAt(core, tc, t + 0.5 * h, ub)) || model_ode(t + 0.5 * h, xt, u, p, k2)) {
+    if (!(u = inputsAt(core, tc, t + 0.5 * h, ub)) || csRhs(core, t + 0.5 * h, xt, u, k2)) {
         return 1;
     }
     for (i = 0; i < NX; i++) xt[i] = x[i] + 0.5 * h * k2[i];
-    if (model_ode(t + 0.5 * h, xt, u, p, k3)) return 1;
+    if (csRhs(core, t + 0.5 * h, xt, u, k3)) return 1;
     for (i = 0; i < NX; i++) xt[i] = x[i] + h * k3[i];
-    if (!(u = inputsAt(core, tc, t + h, ub)) || model_ode(t + h, xt, u, p, k4)) return 1;
+    if (!(u = inputsAt(core, tc, t + h, ub)) || csRhs(core, t + h, xt, u, k4)) return 1;
     for (i = 0; i < NX; i++) x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     return 0;
 }
 
-#if NZ > 0
-/* Index of the first indicator whose sign class (z >= 0) differs, or -1. */
-static int crossed(const double *z0, const double *z1) {
+#if NZ_CS > 0
+/* Indicators z at the state after a step that ended at time t; with slope != NULL
+ * also their slope there: backward difference along k4, the last stage of that step. */
+static int zcAt(Core *core, double tc, double t, double *z, const double *k4,
+                double *slope) {
+    double ub[NU + 1], xb[NX + 1], zb[NZ_CS + 1], delta = slopeDelta(core);
+    const double *x = X(&core->d), *u = inputsAt(core, tc, t, ub);
     int i;
-    for (i = 0; i < NZ; i++) {
-        if ((z0[i] >= 0.0) != (z1[i] >= 0.0)) return i;
-    }
-    return -1;
+    if (!u || csIndicators(core, t, x, u, z)) return 1;
+    if (!slope) return 0;
+    for (i = 0; i < NX; i++) xb[i] = x[i] - delta * k4[i];
+    if (csIndicators(core, t - delta, xb, u, zb)) return 1;
+    for (i = 0; i < NZ_CS; i++) slope[i] = (z[i] - zb[i]) / delta;
+    return 0;
 }
 
-/* Live indicators z after a step that ended at time t. */
-static int zcAt(Core *core, double tc, double t, double *z) {
-    double ub[NU + 1];
-    const double *u = inputsAt(core, tc, t, ub);
-    return !u || model_zc(t, X(&core->d), u, P(&core->d), z);
+/* Modes (relations as written at the current state, time t) and the indicators d->z
+ * that go with them. Relations that depend on relations are iterated. Returns 0, 1 if
+ * an evaluation failed, STEP_UNSETTLED if the relations do not settle. */
+static int csModes(Core *core, double tc, double t) {
+#if NREL > 0
+    CoreData *d = &core->d;
+    int it, k, changed = 1;
+    for (it = 0; changed && it <= NREL + 1; it++) {
+        if (zcAt(core, tc, t, d->z, NULL, NULL)) return 1;
+        changed = 0;
+        for (k = 0; k < NREL; k++) {
+            double v = csClass(k, d->z[k]) ? 1.0 : 0.0;
+            if (v != d->c[k]) {
+                d->c[k] = v;
+                changed = 1;
+            }
+        }
+    }
+    return changed ? STEP_UNSETTLED : 0;
+#else
+    return zcAt(core, tc, t, core->d.z, NULL, NULL);
+#endif
+}
+
+/* Shortest time in which an indicator, now z with slope s, reaches zero at that rate,
+ * among those still in their sign class of the start of the step (z0) and moving
+ * towards zero. -1: none. */
+static double timeToZero(const double *z0, const double *z, const double *s) {
+    double best = -1.0;
+    int i;
+    for (i = 0; i < NZ_CS; i++) {
+        int side = csClass(i, z0[i]);
+        double toward = side ? -s[i] : s[i], tz;
+        if (csClass(i, z[i]) != side || !(toward > 0.0)) continue;
+        tz = fabs(z[i]) / toward;
+        if (best < 0.0 || tz < best) best = tz;
+    }
+    return best;
+}
+
+/* Earliest time in (after, h) at which an indicator that has the same sign class at
+ * both ends of a step of size h may have crossed zero and come back: where the
+ * tangents at both ends intersect, if they meet on the other side of zero. That point
+ * bounds a concave (convex) indicator from above (below). -1: none. */
+static double doubleCrossing(const double *z0, const double *s0, const double *z1,
+                             const double *s1, double h, double after) {
+    double best = -1.0;
+    int i;
+    for (i = 0; i < NZ_CS; i++) {
+        int side = csClass(i, z0[i]);
+        double toward = side ? -s0[i] : s0[i], away = side ? s1[i] : -s1[i], tx;
+        if (csClass(i, z1[i]) != side || !(toward > 0.0 && away > 0.0)) continue;
+        tx = (z1[i] - z0[i] - s1[i] * h) / (s0[i] - s1[i]);
+        if (!(tx > after && tx < h) || csClass(i, z0[i] + s0[i] * tx) == side) continue;
+        if (best < 0.0 || tx < best) best = tx;
+    }
+    return best;
+}
+
+/* Takes a step of size tx from (t, x0): sets *changed if the sign classes differ from
+ * d->z at its end, and there the indicators z and, with slope != NULL, their slope. */
+static int probeAt(Core *core, double tc, double t, double tx, const double *x0, double *z,
+                   double *slope, int *changed) {
+    double k4[NX + 1];
+    memcpy(X(&core->d), x0, sizeof(double) * (NX + 1));
+    if (rk4Step(core, tc, t, tx, NULL, k4)) return 1;
+    if (zcAt(core, tc, t + tx, z, k4, slope)) return 1;
+    *changed = crossed(core->d.z, z) >= 0;
+    return 0;
+}
+
+/* Shortest step from (t, x0) after which a bracket [0, hi] is known to hold a change of
+ * the sign classes from d->z, within a step of size h whose end has the indicators z1
+ * and the slopes s1 (s0: at its start; both NULL: only the end is checked).
+ *
+ * 1. Newton: while an indicator, at its slope, would reach zero inside the step, step
+ *    to just past that point and look again from there. Until the first change the
+ *    step follows the smooth branch of the modes of its start, so this finds the first
+ *    crossing of an indicator that moves towards zero, however the branch would go on
+ *    after it (a band crossed and left again inside one step, say).
+ * 2. The end of the step: its sign classes, and where the tangents at both ends say an
+ *    indicator may have crossed zero and come back (doubleCrossing), checked by a step
+ *    to that point.
+ * hi = -1: no change found; the state is then the one after the step of size h. */
+static int firstChange(Core *core, double tc, double t, double h, const double *x0,
+                       const double *z1, const double *s0, const double *s1, double *hi) {
+    CoreData *d = &core->d;
+    double x1[NX + 1], zx[NZ_CS + 1], sx[NZ_CS + 1], zp[NZ_CS + 1], sp[NZ_CS + 1];
+    double tp = 0.0, tx;
+    int it, changed = 0;
+    *hi = crossed(d->z, z1) >= 0 ? h : -1.0;
+    if (!s0) return 0;
+    memcpy(x1, X(d), sizeof(double) * (NX + 1));
+    memcpy(zp, d->z, sizeof(double) * NZ_CS);
+    memcpy(sp, s0, sizeof(double) * NZ_CS);
+    for (it = 0; it < NEWTON_PROBES; it++) {
+        double tz = timeToZero(d->z, zp, sp);
+        if (tz < 0.0) break;
+        tx = tp + tz * (1.0 + NEWTON_OVERSHOOT) + EVENT_TIME_TOL;
+        if (tx >= (*hi > 0.0 ? *hi : h)) break;
+        if (probeAt(core, tc, t, tx, x0, zx, sx, &changed)) return 1;
+        if (changed) {
+            *hi = tx;
+            return 0;
+        }
+        tp = tx;
+        memcpy(zp, zx, sizeof(double) * NZ_CS);
+        memcpy(sp, sx, sizeof(double) * NZ_CS);
+    }
+    tx = doubleCrossing(d->z, s0, z1, s1, h, tp);
+    while (tx > 0.0 && (*hi < 0.0 || tx < *hi)) {
+        if (probeAt(core, tc, t, tx, x0, zx, NULL, &changed)) return 1;
+        if (changed) {
+            *hi = tx;
+            return 0;
+        }
+        tx = doubleCrossing(d->z, s0, z1, s1, h, tx);
+    }
+    memcpy(X(d), x1, sizeof(double) * (NX + 1));
+    return 0;
 }
 #endif
 
 /* One internal step of size h from t with event location. d->z must hold the
- * indicators at (t, x); on return it holds them at the new state. */
+ * indicators at (t, x) (csModes); on return it holds them at the new state. Returns 0,
+ * 1 if an evaluation failed, STEP_UNSETTLED if the relations do not settle.
+ *
+ * The first change of the sign classes inside the (rest of the) step (firstChange) is
+ * located by bisection, the step is taken up to just before it and then over it, the
+ * modes are updated there, and the rest of the step is checked again in the same way. */
 static int stepWithEvents(Core *core, double tc, double t, double h) {
-#if NZ > 0
+#if NZ_CS > 0
     CoreData *d = &core->d;
-    double x0[NX + 1], z1[NZ + 1];
+    double x0[NX + 1], z1[NZ_CS + 1], s0[NZ_CS + 1], s1[NZ_CS + 1], k4[NX + 1];
     double tau = 0.0; /* part of the step already taken */
-    int events = 0;
+    int events = 0, rc;
     while (h - tau > 0.0) {
-        double rest = h - tau;
+        double rest = h - tau, lo = 0.0, hi = -1.0;
+        int probe = rest > MIN_PROBED_STEP;
         memcpy(x0, X(d), sizeof(double) * (NX + 1));
-        if (rk4Step(core, tc, t + tau, rest)) return 1;
-        if (zcAt(core, tc, t + h, z1)) return 1;
-        if (events < MAX_EVENTS_PER_STEP && crossed(d->z, z1) >= 0) {
-            double lo = 0.0, hi = rest;
-            while (hi - lo > EVENT_TIME_TOL) {
-                double mid = 0.5 * (lo + hi);
-                memcpy(X(d), x0, sizeof(double) * (NX + 1));
-                if (rk4Step(core, tc, t + tau, mid)) return 1;
-                if (zcAt(core, tc, t + tau + mid, z1)) return 1;
-                if (crossed(d->z, z1) >= 0) hi = mid; else lo = mid;
-            }
-            /* advance to just before the first crossing, so that no stage of the step
-             * sees the branch after it, then over the crossing by at most
-             * EVENT_TIME_TOL, and continue from there */
-            memcpy(X(d), x0, sizeof(double) * (NX + 1));
-            if (lo > 0.0 && rk4Step(core, tc, t + tau, lo)) return 1;
-            if (rk4Step(core, tc, t + tau + lo, hi - lo)) return 1;
-            if (zcAt(core, tc, t + tau + hi, z1)) return 1;
-            memcpy(d->z, z1, sizeof(double) * NZ);
-            tau += hi;
-            events++;
-            continue;
+        if (rk4Step(core, tc, t + tau, rest, probe ? s0 : NULL, k4)) return 1;
+        if (zcAt(core, tc, t + h, z1, k4, probe ? s1 : NULL)) return 1;
+        if (events >= MAX_EVENTS_PER_STEP) {
+            /* the rest of the step is taken as is; modes from where it ends */
+            return csModes(core, tc, t + h);
         }
-        memcpy(d->z, z1, sizeof(double) * NZ);
-        break;
+        if (firstChange(core, tc, t + tau, rest, x0, z1, probe ? s0 : NULL, s1, &hi)) {
+            return 1;
+        }
+        if (hi < 0.0) {
+            memcpy(d->z, z1, sizeof(double) * NZ_CS);
+            return 0;
+        }
+        while (hi - lo > EVENT_TIME_TOL) {
+            double mid = 0.5 * (lo + hi);
+            memcpy(X(d), x0, sizeof(double) * (NX + 1));
+            if (rk4Step(core, tc, t + tau, mid, NULL, NULL)) return 1;
+            if (zcAt(core, tc, t + tau + mid, z1, NULL, NULL)) return 1;
+            if (crossed(d->z, z1) >= 0) hi = mid; else lo = mid;
+        }
+        /* advance to just before the first change, so that no stage of the step sees
+         * the branch after it, then over it by at most EVENT_TIME_TOL, and continue
+         * from there with the modes there */
+        memcpy(X(d), x0, sizeof(double) * (NX + 1));
+        if (lo > 0.0 && rk4Step(core, tc, t + tau, lo, NULL, NULL)) return 1;
+        if (rk4Step(core, tc, t + tau + lo, hi - lo, NULL, NULL)) return 1;
+        if ((rc = csModes(core, tc, t + tau + hi)) != 0) return rc;
+        tau += hi;
+        events++;
     }
     return 0;
 #else
-    return rk4Step(core, tc, t, h);
+    return rk4Step(core, tc, t, h, NULL, NULL);
 #endif
 }
 
 static CoreStatus stepFailed(Core *core, double tc, double tEnd, int bad, const char *caller) {
     CoreData *d = &core->d;
-    if (bad < 0) {
+    if (bad == -STEP_UNSETTLED) {
+        coreLog(core, CoreError, "logStatusError",
+                "%s: the relations do not settle in [%g, %g] (they depend on each other)",
+                caller, tc, tEnd);
+    } else if (bad < 0) {
         coreLog(core, CoreError, "logStatusError",
                 "%s: evaluation of the model equations failed in [%g, %g]", caller, tc, tEnd);
     } else {
@@ -400,20 +621,22 @@ CoreStatus coreDoStep(Core *core, double tc, double hc, const char *caller) {
     CoreData *d = &core->d;
     double h = d->r[VR_FIXED_STEP], tEnd = tc + hc, nReal, hSub;
     long long n, k;
-    int bad = -1, i;
+    int bad = -1, i, rc;
     if (coreCheckStep(core, tc, hc, caller) != CoreOK) return CoreError;
     core->tRequested = -HUGE_VAL;
-    /* inputs may have changed since the last step: indicators at the current point */
-    if (NZ > 0 && model_zc(d->time, X(d), U(d), P(d), d->z)) {
-        return stepFailed(core, tc, tEnd, -1, caller);
-    }
+#if NZ_CS > 0
+    /* inputs may have changed since the last step: modes and indicators at this point */
+    if ((rc = csModes(core, tc, tc)) != 0) return stepFailed(core, tc, tEnd, -rc, caller);
+#endif
     nReal = hc / h;
     n = (long long)floor(nReal + 0.5);
     if (n >= 1 && fabs(nReal - (double)n) <= 1e-9 * nReal) {
         /* communication step is a multiple of the internal step: t = t0 + k*h */
         for (k = 0; k < n; k++) {
             double t = d->startTime + (double)d->nSteps * h;
-            if (stepWithEvents(core, tc, t, h)) return stepFailed(core, tc, tEnd, -1, caller);
+            if ((rc = stepWithEvents(core, tc, t, h)) != 0) {
+                return stepFailed(core, tc, tEnd, -rc, caller);
+            }
             d->nSteps++;
             if (!allFinite(X(d), NX, &bad)) return stepFailed(core, tc, tEnd, bad, caller);
         }
@@ -424,8 +647,8 @@ CoreStatus coreDoStep(Core *core, double tc, double hc, const char *caller) {
         if (n < 1) n = 1;
         hSub = hc / (double)n;
         for (k = 0; k < n; k++) {
-            if (stepWithEvents(core, tc, tc + (double)k * hSub, hSub)) {
-                return stepFailed(core, tc, tEnd, -1, caller);
+            if ((rc = stepWithEvents(core, tc, tc + (double)k * hSub, hSub)) != 0) {
+                return stepFailed(core, tc, tEnd, -rc, caller);
             }
             if (!allFinite(X(d), NX, &bad)) return stepFailed(core, tc, tEnd, bad, caller);
         }

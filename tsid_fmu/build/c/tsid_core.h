@@ -4,14 +4,17 @@
  * generated model.h / model.c:
  *   - the real array r[] (value reference = index): states, derivatives, inputs,
  *     outputs + locals, parameters, fixedStepSize;
- *   - live equations for Co-Simulation: model_ode, model_eval, model_zc;
- *   - frozen equations for Model Exchange: model_eval_me and model_rel, in which every
- *     relation of the model (outside noEvent) is a discrete state c[k] in {0, 1}.
+ *   - live equations: model_ode, model_eval, model_zc;
+ *   - frozen equations: model_eval_me and model_rel, in which every relation of the
+ *     model (outside noEvent) is a discrete state c[k] in {0, 1}.
  *
- * Co-Simulation: classical RK4 at the fixed internal step fixedStepSize, event location
- * by bisection on the live indicators, inputs held over a communication step, or
- * interpolated: first order with FMI 2.0 input derivatives, or set by the importer at
- * each stage time through the FMI 3.0 intermediate update.
+ * Co-Simulation: classical RK4 at the fixed internal step fixedStepSize on the frozen
+ * equations (the live ones if the model has no relation), the relations set as written
+ * at the start of each communication step and after each switch; switches located by
+ * bisection, also one that flips back within an internal step (see tsid_core.c).
+ * Inputs held over a communication step, or interpolated: first order with FMI 2.0
+ * input derivatives, or set by the importer at each stage time through the FMI 3.0
+ * intermediate update. Outputs at communication points from the live equations.
  *
  * Model Exchange: relation k is the discrete state c[k]; between events the right-hand
  * side is smooth. Its event indicator is e_k = z_k + eps_k if c[k] = 1 and
@@ -31,6 +34,14 @@
 
 #include "model.h"
 
+/* Indicators of the Co-Simulation integrator: the relations (as in Model Exchange, see
+ * tsid_core.c), or without them the live indicators (relations inside noEvent). */
+#if NREL > 0
+#define NZ_CS NREL
+#else
+#define NZ_CS NZ
+#endif
+
 /* Relative hysteresis of the Model Exchange relations (see above). */
 #define TSID_HYSTERESIS 1e-10
 /* Event iterations (relation changes at one event instant) before giving up. */
@@ -47,8 +58,8 @@ typedef struct {
     long long nSteps;  /* internal steps since startTime (Co-Simulation) */
     int dirty;         /* derivatives and outputs must be recomputed */
     int modesValid;    /* Model Exchange: c[] was set from the relations */
-    double z[NZ + 1];  /* Co-Simulation: live indicators at the current state */
-    double c[NREL + 1]; /* Model Exchange: relation values, discrete states */
+    double z[NZ_CS + 1]; /* Co-Simulation: indicators at the current state */
+    double c[NREL + 1]; /* relation values, discrete states (ME and CS) */
     double du[NU + 1]; /* Co-Simulation: first derivatives of the inputs (FMI 2.0) */
     int hasDu;         /* some du[] was set for the next communication step */
 } CoreData;
