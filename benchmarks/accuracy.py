@@ -34,29 +34,51 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from problems import dc_motor as dc_mod  # noqa: E402
-from problems import local_minima as lm_mod  # noqa: E402
-from problems import miso as miso_mod  # noqa: E402
-from problems import siso as siso_mod  # noqa: E402
+from problems import dc_motor as dc_mod
+from problems import local_minima as lm_mod
+from problems import miso as miso_mod
+from problems import siso as siso_mod
 
-from tsid_fmu import Experiment, Method, Parameter, Study, identify  # noqa: E402
-from tsid_fmu.evaluate import make_evaluator  # noqa: E402
-from tsid_fmu.search.space import Space  # noqa: E402
-from tsid_fmu.study import prepare  # noqa: E402
+from tsid_fmu import Experiment, Method, Parameter, Study, identify
+from tsid_fmu.evaluate import make_evaluator
+from tsid_fmu.search.space import Space
+from tsid_fmu.study import prepare
 
 ENCODER_SIGMA = 1e-6 / math.sqrt(12)
 
 
 def study_of(prob, method: Method) -> Study:
     """The study a user would write for a benchmark problem."""
-    params = [Parameter(n, d["levels"], min=d.get("min", -math.inf), max=d.get("max", math.inf),
-                        unit=d.get("unit", "")) for n, d in prob.parameters.items()]  # fmt: skip
-    exps = [Experiment(e.data, inputs=e.inputs, outputs=e.outputs, derived=e.derived, name=e.name,
-                       noise={"x_m": ENCODER_SIGMA} if "x_m" in e.outputs else {},
-                       hold={k: "linear" for k in ("x_o", "v_o", "a_o") if k in e.inputs})
-            for e in prob.experiments]  # fmt: skip
-    return Study(fmu=prob.fmu, parameters=params, experiments=exps,
-                 start_values=dict(prob.start_values), method=method, name=prob.name)  # fmt: skip
+    params = [
+        Parameter(
+            n,
+            d["levels"],
+            min=d.get("min", -math.inf),
+            max=d.get("max", math.inf),
+            unit=d.get("unit", ""),
+        )
+        for n, d in prob.parameters.items()
+    ]
+    exps = [
+        Experiment(
+            e.data,
+            inputs=e.inputs,
+            outputs=e.outputs,
+            derived=e.derived,
+            name=e.name,
+            noise={"x_m": ENCODER_SIGMA} if "x_m" in e.outputs else {},
+            hold={k: "linear" for k in ("x_o", "v_o", "a_o") if k in e.inputs},
+        )
+        for e in prob.experiments
+    ]
+    return Study(
+        fmu=prob.fmu,
+        parameters=params,
+        experiments=exps,
+        start_values=dict(prob.start_values),
+        method=method,
+        name=prob.name,
+    )
 
 
 PROBLEMS = {
@@ -100,8 +122,15 @@ class Scorer:
 
 
 def _row(name, x, cost, nfev, seconds, truth, note=""):
-    return {"method": name, "x": x, "cost": cost, "nfev": nfev, "time": seconds,
-            "note": note, "error": max(abs(x[k] / truth[k] - 1) for k in truth) * 100}  # fmt: skip
+    return {
+        "method": name,
+        "x": x,
+        "cost": cost,
+        "nfev": nfev,
+        "time": seconds,
+        "note": note,
+        "error": max(abs(x[k] / truth[k] - 1) for k in truth) * 100,
+    }
 
 
 def run_least_squares(scorer: Scorer, start: np.ndarray, name: str, truth):
@@ -113,8 +142,15 @@ def run_least_squares(scorer: Scorer, start: np.ndarray, name: str, truth):
     n0, t0 = scorer.ev.nfev, time.perf_counter()
     out = least_squares(scorer.residuals, s0, bounds=(lo, hi), method="trf", x_scale="jac")
     x = scorer.x(out.x)
-    return _row(name, x, scorer.cost(out.x), scorer.ev.nfev - n0, time.perf_counter() - t0,
-                truth, out.message[:40])  # fmt: skip
+    return _row(
+        name,
+        x,
+        scorer.cost(out.x),
+        scorer.ev.nfev - n0,
+        time.perf_counter() - t0,
+        truth,
+        out.message[:40],
+    )
 
 
 def run_de(scorer: Scorer, budget: int, truth, seed: int = 1):
@@ -125,11 +161,18 @@ def run_de(scorer: Scorer, budget: int, truth, seed: int = 1):
     maxiter = max(1, budget // (popsize * p) - 1)
     bounds = [(-0.5, 0.5)] * p  # the first levels' range of every parameter
     n0, t0 = scorer.ev.nfev, time.perf_counter()
-    out = differential_evolution(scorer.cost, bounds, popsize=popsize, maxiter=maxiter,
-                                 polish=False, seed=seed, tol=0)  # fmt: skip
+    out = differential_evolution(
+        scorer.cost, bounds, popsize=popsize, maxiter=maxiter, polish=False, seed=seed, tol=0
+    )
     x = scorer.x(out.x)
-    return _row(f"differential_evolution ({budget} budget)", x, float(out.fun),
-                scorer.ev.nfev - n0, time.perf_counter() - t0, truth)  # fmt: skip
+    return _row(
+        f"differential_evolution ({budget} budget)",
+        x,
+        float(out.fun),
+        scorer.ev.nfev - n0,
+        time.perf_counter() - t0,
+        truth,
+    )
 
 
 def run_tsid(study: Study, truth, workers: int | None):
@@ -140,11 +183,25 @@ def run_tsid(study: Study, truth, workers: int | None):
     last_taguchi = [s for s in res.stages if s.kind in ("taguchi", "phase")][-1]
     taguchi_nfev = sum(s.nfev for s in res.stages if s.kind != "refinement")
     rows = [
-        _row("tsid: Taguchi stage(s) alone", last_taguchi.x, last_taguchi.cost, taguchi_nfev,
-             math.nan, truth, tag.message[:40]),
-        _row("tsid: whole study", res.x, res.fun, res.nfev, seconds, truth,
-             "; ".join(f"{s.name} {s.nfev}" for s in res.stages)[:60]),
-    ]  # fmt: skip
+        _row(
+            "tsid: Taguchi stage(s) alone",
+            last_taguchi.x,
+            last_taguchi.cost,
+            taguchi_nfev,
+            math.nan,
+            truth,
+            tag.message[:40],
+        ),
+        _row(
+            "tsid: whole study",
+            res.x,
+            res.fun,
+            res.nfev,
+            seconds,
+            truth,
+            "; ".join(f"{s.name} {s.nfev}" for s in res.stages)[:60],
+        ),
+    ]
     return rows, res
 
 
@@ -166,11 +223,14 @@ def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
         scorer.close()
     best = min(min(r["cost"] for r in rows), truth_cost)
     print(f"\n## {name}: cost at the truth {truth_cost:.6g}, best found {best:.6g}")
-    print(f"{'method':<44} {'sims':>6} {'time [s]':>9} {'cost / best':>12} "
-          f"{'worst error':>12}  note")  # fmt: skip
+    print(
+        f"{'method':<44} {'sims':>6} {'time [s]':>9} {'cost / best':>12} {'worst error':>12}  note"
+    )
     for r in rows:
-        print(f"{r['method']:<44} {r['nfev']:>6d} {r['time']:>9.1f} {r['cost'] / best:>12.6f} "
-              f"{r['error']:>11.3g}%  {r['note']}")  # fmt: skip
+        print(
+            f"{r['method']:<44} {r['nfev']:>6d} {r['time']:>9.1f} {r['cost'] / best:>12.6f} "
+            f"{r['error']:>11.3g}%  {r['note']}"
+        )
     return rows
 
 

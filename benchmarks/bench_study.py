@@ -14,12 +14,12 @@ import os
 import time
 
 import numpy as np
-from _common import REPO, cores
-
 import tsid_fmu.engine as engine
-from tsid_fmu.fmu import compiled as fastloop
+from _common import REPO, cores
 from tsid_fmu.parallel import ParallelEvaluator
 from tsid_fmu.runner import Evaluator
+
+from tsid_fmu.fmu import compiled as fastloop
 from tsid_fmu.study import load_study
 
 STUDY = REPO / "examples" / "lsea_siso" / "study.toml"

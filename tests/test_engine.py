@@ -214,18 +214,9 @@ def test_resume_right_after_a_rerun_decision_continues_the_same_way(tmp_path):
     assert "rerun" in resumed.iterations[first_rerun - 1].extra
 
 
-def Evaluator(study):
-    """The serial evaluator of a study (the old tsid_fmu.runner.Evaluator)."""
-    from tsid_fmu.evaluate import SerialEvaluator
-    from tsid_fmu.study import prepare
-
-    ev = SerialEvaluator(prepare(study))
-    ev.prepared = ev.spec.experiments
-    return ev
-
-
 def test_noise_weighting_divides_each_output_by_its_noise(lag, tmp_path):
     from tsid_fmu.evaluate.cost import noise_level
+    from tsid_fmu.study import serial_evaluator as Evaluator
 
     x = {"tau": TAU, "x0": X0}
     plain = dataclasses.replace(make_study(lag), cost="sse", replicates=1, input_noise=0.0)
@@ -243,6 +234,8 @@ def test_noise_weighting_divides_each_output_by_its_noise(lag, tmp_path):
 
 
 def test_noise_weighting_refuses_a_noise_free_output(lag, tmp_path):
+    from tsid_fmu.study import serial_evaluator as Evaluator
+
     _fmu, data = lag
     frame = pd.read_csv(data)
     frame["y_meas"] = 0.5 * frame["time"]  # simulated data written without noise

@@ -13,7 +13,6 @@ from crash_factory import build_crash_fmu
 from fmu_factory import build_c_fmu
 from spec_helpers import experiment, make_spec
 
-from tsid_fmu.fmu import FMUSession
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate import (
     Cost,
@@ -25,6 +24,7 @@ from tsid_fmu.evaluate import (
     make_evaluator,
 )
 from tsid_fmu.evaluate import timelimit as timelimit_module
+from tsid_fmu.fmu import FMUSession
 
 
 def _frame(seed: int, n: int = 401) -> pd.DataFrame:

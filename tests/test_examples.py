@@ -1,8 +1,8 @@
 """The bundled examples of the two papers, end to end on the committed FMUs.
 
-These assert the accuracy the current engine reaches (see the closing notes of the
-SISO and MISO issues for the targets that are not met yet), and the identifiability
-facts that shaped the examples.
+Their data come from independent solutions of the equations (``examples/*/make_data.py``),
+never from the FMUs, with a rig's conventions: held commands, continuous measured
+signals, one noise level per sensor.
 """
 
 from pathlib import Path
@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tsid_fmu.engine import identify
+from tsid_fmu import identify
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.study import load_study
 
@@ -43,16 +43,16 @@ def test_siso_force_alone_hardly_sees_the_scale():
 
 
 @pytest.mark.slow
-def test_siso_example_identifies_stiffness_and_mass(tmp_path):
+def test_siso_example_identifies_the_parameters(tmp_path):
     study = load_study(EXAMPLES / "lsea_siso" / "study.toml")
     res = identify(study, tmp_path / "out", plots=False)
     err = rel_err(res.x, SISO_TRUTH)
-    assert res.nit <= 12 and res.canonical  # 6 Taguchi + up to 6 canonical iterations
-    assert res.success and res.canonical[-1].converged, res.message
+    assert res.success, res.message
+    assert [s.kind for s in res.stages] == ["taguchi", "refinement"]
     for name in ("F_cm", "F_vm", "M_m", "K_s"):
         assert err[name] < 0.01, err
     assert err["B_s"] < 0.10, err
-    # never worse than the truth by much: the fit is close to the noise floor
+    assert res.nfev <= 500
     assert res.fit["measured"]["F_o"]["fit_percent"] > 97
     assert (tmp_path / "out" / "report.md").is_file()
 
@@ -61,27 +61,23 @@ def test_siso_example_identifies_stiffness_and_mass(tmp_path):
 def test_miso_example_contribution_phases_and_validation(tmp_path):
     study = load_study(EXAMPLES / "lsea_miso" / "study.toml")
     res = identify(study, tmp_path / "out", plots=False)
+    plan = res.stages[0]
+    assert plan.kind == "contribution"
     # Step i: the force input produces the larger output, so its subsystem comes first
-    assert res.input_contribution.experiments[0] == "force only"
-    # Step ii: m1 and K_s are in the first group (with C_1, which acts in the same
-    # 1-5 Hz band in this plant); m2 and C_2 do not act with the stage locked
-    first = res.groups["force only"][0]
+    assert plan.extra["input"]["experiments"][0] == "force only"
+    # Step ii: m1 and K_s are in the first group; m2 and C_2 do not act with the stage
+    # locked, so they are left for the motion experiment
+    first = plan.extra["groups"]["force only"][0]
     assert {"m1", "K_s"} <= set(first)
-    pc = res.parameter_contribution["force only"].percent
-    assert pc["m2"] == 0 and pc["C_2"] == 0
-    assert res.phases[0]["experiments"] == ["force only"]
-    assert any(p["experiments"] == ["motion only"] for p in res.phases)
-    # superposition check on both inputs together is reported
-    total = res.validation["_total_cost"]
-    assert np.isfinite(total) and res.validation["both inputs"]["cost_kind"] == "sse"
-    err = rel_err(res.x, MISO_TRUTH)
-    assert err["m1"] < 0.01 and err["K_s"] < 0.01, err
-    for name in ("C_d", "C_1", "m2", "C_2"):
-        assert err[name] < 0.10 or name in res.weak, (name, err[name], res.weak)
+    assert plan.extra["percent"]["force only"]["m2"] == 0
+    phases = [s for s in res.stages if s.kind == "phase"]
+    assert phases[0].experiments == ["force only"]
+    assert any(s.experiments == ["motion only"] for s in phases)
+    # the superposition check on both inputs together is reported
+    assert np.isfinite(res.validation["both inputs"]["cost"])
+    # the force-only data fix only ratios to K_s; together the experiments fix them well
+    x = res.x
+    assert abs((x["m1"] / x["K_s"]) / (0.45 / 5000.0) - 1) < 0.02
+    assert abs((x["C_1"] / x["K_s"]) / (20.0 / 5000.0) - 1) < 0.02
     report = (tmp_path / "out" / "report.md").read_text()
-    assert "Input contribution" in report and "Superposition check" in report
-    # the same study without grouping, side by side (cost and simulations)
-    comp = res.comparison
-    assert comp["phased"]["nfev"] > 0 and comp["ungrouped"]["nfev"] > 0
-    assert np.isfinite(comp["phased"]["cost"]) and np.isfinite(comp["ungrouped"]["cost"])
-    assert "Why grouping: the same study without it" in report
+    assert "## Stages" in report and "contribution" in report

@@ -5,8 +5,8 @@ import pandas as pd
 import pytest
 from fmu_factory import build_pythonfmu, pythonfmu_available
 
+from tsid_fmu import identify
 from tsid_fmu.build import build_fmu
-from tsid_fmu.engine import identify
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.study import Experiment, Parameter, Study
 

@@ -10,9 +10,9 @@ def test_standard_errors_match_least_squares_theory_for_the_lag(tmp_path):
     import pandas as pd
     from fmu_factory import build_c_fmu, lag_response
 
-    from tsid_fmu.identifiability import standard_errors
-    from tsid_fmu.runner import Evaluator
     from tsid_fmu.study import Experiment, Parameter, Study
+    from tsid_fmu.study import serial_evaluator as Evaluator
+    from tsid_fmu.uncertainty import standard_errors
 
     t = np.arange(0, 5.0 + 1e-9, 0.01)
     u = np.where((t % 2.0) < 1.0, 1.0, -0.5)

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from tsid_fmu.errors import StudyError
 from tsid_fmu.doe.leveling import LevelingOptions, make_levels, relevel
+from tsid_fmu.errors import StudyError
 
 
 def test_case1_interior_best_recentres_and_narrows():

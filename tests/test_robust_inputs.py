@@ -24,10 +24,10 @@ from fmu_factory import build_c_fmu, lag_response
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from tsid_fmu.arrays import select_array
+from tsid_fmu import identify
 from tsid_fmu.cli import main
 from tsid_fmu.data import load_data
-from tsid_fmu.engine import identify
+from tsid_fmu.doe import select_array
 from tsid_fmu.errors import ArrayError, DataError, StudyError, TsidError
 from tsid_fmu.study import load_study
 

@@ -32,11 +32,18 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path(args.study).with_suffix("").parent / "results"
     result = identify(
-        args.study, out, resume=args.resume, max_iterations=args.max_iterations,
-        pause_after=args.pause_after, progress=not args.quiet, plots=not args.no_plots,
-        continue_from_run=args.continue_from_run, workers=args.workers, timeout=args.timeout,
+        args.study,
+        out,
+        resume=args.resume,
+        max_iterations=args.max_iterations,
+        pause_after=args.pause_after,
+        progress=not args.quiet,
+        plots=not args.no_plots,
+        continue_from_run=args.continue_from_run,
+        workers=args.workers,
+        timeout=args.timeout,
         scheduler=args.scheduler,
-    )  # fmt: skip
+    )
     print(result.parameters_frame().to_string())
     print()
     print(result.stages_frame()[["kind", "cost", "simulations"]].to_string())
@@ -70,7 +77,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         try:
             values.update(json.loads(path.read_text())["x"])
         except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise StudyError(f"{path}: cannot read identified parameters ({type(exc).__name__})") from None
+            raise StudyError(
+                f"{path}: cannot read identified parameters ({type(exc).__name__})"
+            ) from None
     for name, text in _parse_assignments(args.set, "--set").items():
         try:
             values[name] = float(text)
@@ -83,14 +92,19 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     spec = prepare(study, None, [n for n in study.parameter_names if n in values])
     with SerialEvaluator(spec) as ev:
         simulated = ev.simulate([values], count=False)[0]
-    print("parameters: " + (", ".join(f"{k}={v:.6g}" for k, v in values.items()) or "the FMU's start values"))
+    print(
+        "parameters: "
+        + (", ".join(f"{k}={v:.6g}" for k, v in values.items()) or "the FMU's start values")
+    )
     for e, sim in zip(spec.experiments, simulated, strict=True):
         if sim.outputs is None:
             print(f"{e.name}: simulation failed: {sim.error}")
             continue
         for out_name, m in metrics(e.time, e.measured, sim.outputs, list(e.output_names)).items():
-            print(f"{e.name} / {out_name}: fit {m['fit_percent']:.3f} %, IAE {m['iae']:.6g}, "
-                  f"SSE {m['sse']:.6g}, RMSE {m['rmse']:.6g}")  # fmt: skip
+            print(
+                f"{e.name} / {out_name}: fit {m['fit_percent']:.3f} %, IAE {m['iae']:.6g}, "
+                f"SSE {m['sse']:.6g}, RMSE {m['rmse']:.6g}"
+            )
     plot = Path(args.plot)
     fit_plot(spec, simulated, plot, title="tsid simulate")
     print(f"plot: {plot}")
@@ -125,24 +139,31 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue the study in --out")
     p.add_argument("--max-iterations", type=int, help="override the study's limit")
     p.add_argument(
-        "--pause-after", type=int, metavar="N",
+        "--pause-after",
+        type=int,
+        metavar="N",
         help="stop after N iterations to review/edit next_levels.toml, then --resume",
-    )  # fmt: skip
+    )
     p.add_argument(
-        "--continue-from-run", type=int, metavar="N",
+        "--continue-from-run",
+        type=int,
+        metavar="N",
         help="with --resume: centre the next levels on run N of the last iteration",
-    )  # fmt: skip
+    )
     p.add_argument(
         "--workers", type=int, metavar="N", help="worker processes (default: all cores; 1 = serial)"
     )
     p.add_argument(
-        "--timeout", type=float, metavar="SECONDS",
+        "--timeout",
+        type=float,
+        metavar="SECONDS",
         help="time limit per simulation; a run past it fails and the study goes on",
-    )  # fmt: skip
+    )
     p.add_argument(
-        "--scheduler", metavar="ADDRESS",
+        "--scheduler",
+        metavar="ADDRESS",
         help="run simulations on this dask.distributed scheduler (needs tsid-fmu[dask])",
-    )  # fmt: skip
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=_cmd_identify)

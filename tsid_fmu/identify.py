@@ -52,7 +52,9 @@ class _Evaluators:
     def _key(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> tuple:
         return (tuple(params), tuple(exps), tuple(sorted(fixed.items())))
 
-    def spec(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> EvaluationSpec:
+    def spec(
+        self, params: list[str], exps: list[str], fixed: Mapping[str, float]
+    ) -> EvaluationSpec:
         key = self._key(params, exps, fixed)
         if key not in self.specs:
             base = prepare(self.study, exps, params)
@@ -74,10 +76,15 @@ class _Evaluators:
         self.pool.clear()
 
 
-def _plotter(evaluators: _Evaluators, study: Study) -> Callable[[Path, IterationRecord, Space], None]:
+def _plotter(
+    evaluators: _Evaluators, study: Study
+) -> Callable[[Path, IterationRecord, Space], None]:
     def draw(folder: Path, record: IterationRecord, space: Space) -> None:
-        describe = {f.name: record.frame.describe(space, f) for f in record.frame.factors
-                    if f.values is None}  # fmt: skip
+        describe = {
+            f.name: record.frame.describe(space, f)
+            for f in record.frame.factors
+            if f.values is None
+        }
         main_effects_plot(record, folder / "main_effects.png", describe)
         if evaluators.given is not None:
             return
@@ -87,8 +94,12 @@ def _plotter(evaluators: _Evaluators, study: Study) -> Callable[[Path, Iteration
         if any(math.isnan(v) for v in x.values()):
             return  # a phase: the other parameters are not part of its record
         sims = evaluators.get(study.parameter_names, exps, {}).simulate([x], count=False)[0]
-        fit_plot(spec, sims, folder / "fit.png",
-                 title=f"{record.stage}, iteration {record.index}: best so far")  # fmt: skip
+        fit_plot(
+            spec,
+            sims,
+            folder / "fit.png",
+            title=f"{record.stage}, iteration {record.index}: best so far",
+        )
 
     return draw
 
@@ -126,11 +137,21 @@ def _finish(
     x = {n: stages[-1].x.get(n, math.nan) for n in study.parameter_names}
     nit = sum(len(s.records) for s in stages)
     nfev = sum(s.nfev for s in stages)
-    result = IdentificationResult(x=x, fun=stages[-1].cost, nfev=nfev, success=status == 0,
-                                  status=status, message=message, nit=nit, stages=stages,
-                                  study=study)  # fmt: skip
-    result.contribution = {n: [float(r.anova.contribution[n]) for r in result.iterations
-                               if n in r.names] for n in study.parameter_names}  # fmt: skip
+    result = IdentificationResult(
+        x=x,
+        fun=stages[-1].cost,
+        nfev=nfev,
+        success=status == 0,
+        status=status,
+        message=message,
+        nit=nit,
+        stages=stages,
+        study=study,
+    )
+    result.contribution = {
+        n: [float(r.anova.contribution[n]) for r in result.iterations if n in r.names]
+        for n in study.parameter_names
+    }
     if status == 2 or evaluators.given is not None:
         return result
     exps = [e.name for e in study.identify_experiments()]
@@ -151,8 +172,12 @@ def _finish(
         write_result_files(result, store.out)
         store.write_text("report.md", markdown_report(result))
         if plots:
-            fit_plot(spec, found.simulated, store.out / "fit.png",
-                     title="Identified model vs measured data")  # fmt: skip
+            fit_plot(
+                spec,
+                found.simulated,
+                store.out / "fit.png",
+                title="Identified model vs measured data",
+            )
             convergence_plot(stages, store.out / "convergence.png")
     return result
 
@@ -219,8 +244,9 @@ def identify(
     if continue_from_run is not None and not resume:
         raise StudyError("continue_from_run needs resume=True and the study's folder")
     callback = ConsoleProgress() if progress is True else (progress or None)
-    evaluators = _Evaluators(study, {"workers": workers, "timeout": timeout,
-                                     "scheduler": scheduler}, evaluator)  # fmt: skip
+    evaluators = _Evaluators(
+        study, {"workers": workers, "timeout": timeout, "scheduler": scheduler}, evaluator
+    )
     try:
         store: Trail | NullStore = NullStore()
         if out is not None:

@@ -119,14 +119,23 @@ class IdentificationResult:
 
         return clean(
             {
-                "x": self.x, "fun": self.fun, "nfev": self.nfev, "success": self.success,
-                "status": self.status, "message": self.message, "nit": self.nit,
-                "stages": [s.to_dict() for s in self.stages], "intervals": self.intervals,
+                "x": self.x,
+                "fun": self.fun,
+                "nfev": self.nfev,
+                "success": self.success,
+                "status": self.status,
+                "message": self.message,
+                "nit": self.nit,
+                "stages": [s.to_dict() for s in self.stages],
+                "intervals": self.intervals,
                 "uncertainty": self.uncertainty.to_dict() if self.uncertainty else None,
-                "fit": self.fit, "noise": self.noise, "validation": self.validation,
-                "weak": self.weak, "warnings": self.warnings,
+                "fit": self.fit,
+                "noise": self.noise,
+                "validation": self.validation,
+                "weak": self.weak,
+                "warnings": self.warnings,
             }
-        )  # fmt: skip
+        )
 
     def to_pandas(self) -> pd.DataFrame:
         """Return every run of every Taguchi iteration as one DataFrame."""
@@ -142,8 +151,16 @@ class IdentificationResult:
         rows, before = [], math.inf
         for s in self.stages:
             gain = (before - s.cost) / before if math.isfinite(before) and before else math.nan
-            rows.append({"stage": s.name, "kind": s.kind, "cost": s.cost, "simulations": s.nfev,
-                         "cost fall [%]": 100 * gain, "message": s.message})  # fmt: skip
+            rows.append(
+                {
+                    "stage": s.name,
+                    "kind": s.kind,
+                    "cost": s.cost,
+                    "simulations": s.nfev,
+                    "cost fall [%]": 100 * gain,
+                    "message": s.message,
+                }
+            )
             before = s.cost if s.kind != "contribution" else before
         return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
 
@@ -158,12 +175,14 @@ class IdentificationResult:
             se = self.uncertainty.relative.get(p.name, math.nan) if self.uncertainty else math.nan
             rows.append(
                 {
-                    "parameter": p.name, "value": self.x[p.name], "unit": p.unit,
+                    "parameter": p.name,
+                    "value": self.x[p.name],
+                    "unit": p.unit,
                     "95% low": math.nan if low is None else low,
                     "95% high": math.nan if high is None else high,
                     "std error [%]": se,
                     "first levels": f"{min(p.levels):.6g} .. {max(p.levels):.6g}",
                     "weakly determined": self.weak.get(p.name, ""),
                 }
-            )  # fmt: skip
+            )
         return pd.DataFrame(rows).set_index("parameter") if rows else pd.DataFrame()

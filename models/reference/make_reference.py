@@ -21,8 +21,10 @@ Modelica source or the FMU):
     just changed does not trigger again at the same instant. Between events each mode
     is a smooth ODE; between input steps the input is constant.
 ``LSEA_MISO``
-    The inputs of the combined experiment of ``examples/lsea_miso/combined.csv`` (motor
-    force and stage motion), first 3 s at 1 kHz, model defaults (K_s = 5e4 N/m). The
+    The inputs of the combined experiment of ``examples/lsea_miso/make_data.py`` (its
+    motor force and its stage motion with exact velocity and acceleration, from the
+    functions that make the example data, not from the logged file), first 3 s at 1 kHz,
+    model defaults (K_s = 5e4 N/m). The
     model is linear, so the solution for piecewise-linear inputs is exact: the matrix
     exponential of the system augmented with the input and its slope, over each
     sample interval.
@@ -32,6 +34,7 @@ Run:  python models/reference/make_reference.py   (rewrites the files beside it)
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
 from pathlib import Path
 
@@ -219,10 +222,14 @@ MISO_INPUTS = ["F_m", "x_o", "v_o", "a_o"]
 
 def miso_input(opt: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
     """Return the combined experiment's inputs (1 kHz) up to StopTime."""
-    data = np.genfromtxt(EXAMPLES / "lsea_miso" / "combined.csv", delimiter=",", names=True)
-    keep = data["time"] <= opt["StopTime"] + 1e-9
-    t = np.round(data["time"][keep], 9)
-    return t, np.column_stack([data[n][keep] for n in MISO_INPUTS])
+    spec = importlib.util.spec_from_file_location(
+        "tsid_miso_make_data", EXAMPLES / "lsea_miso" / "make_data.py"
+    )
+    gen = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(gen)  # type: ignore[union-attr]
+    t = np.round(np.arange(round(opt["StopTime"] * 1000) + 1) * 1e-3, 9)
+    x_o, v_o, a_o = gen.stage_motion(t)[:3]
+    return t, np.column_stack([gen.motor_force(t), x_o, v_o, a_o])
 
 
 def miso_reference(opt: dict[str, float]) -> dict[str, np.ndarray]:

@@ -27,7 +27,8 @@ class LevelingOptions:
         Reduction rate: factor applied to the half-width of a range that is narrowed
         (Case 1 with an interior best, Case 2). Default 0.5.
     n_levels : int or None
-        Number of levels of later iterations; default: as many as the first iteration.
+        Number of levels of later iterations; default: as many as the first iteration
+        for parameters, three for rotated factors.
     refine : bool
         If true, an interior best is refined by the vertex of a parabola through the S/N
         of the best level and its two neighbours (clipped to between them).
@@ -78,11 +79,11 @@ class LevelingOptions:
         checks = [
             (
                 math.isfinite(self.significance_db) and self.significance_db >= 0,
-                f"significance_db must be a finite number >= 0, got {self.significance_db}",
+                f"significance_db must be >= 0 (and finite), got {self.significance_db}",
             ),
             (
                 math.isfinite(self.tolerance) and self.tolerance > 0,
-                f"tolerance must be a finite number > 0, got {self.tolerance}",
+                f"tolerance must be > 0 (and finite), got {self.tolerance}",
             ),
             (0 < self.shrink < 1, f"shrink must be between 0 and 1, got {self.shrink}"),
             (
@@ -103,7 +104,9 @@ class LevelingOptions:
                 f"expand must be > 0, got {self.expand}",
             ),
             (
-                isinstance(self.stall, int) and not isinstance(self.stall, bool) and self.stall >= 0,
+                isinstance(self.stall, int)
+                and not isinstance(self.stall, bool)
+                and self.stall >= 0,
                 f"stall must be an integer >= 0, got {self.stall!r}",
             ),
             (

@@ -18,7 +18,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic, overload
 
-from tsid_fmu.fmu import steploop
+import tsid_fmu.fmu.steploop as steploop
 
 __all__ = ["loop2", "loop3"]
 

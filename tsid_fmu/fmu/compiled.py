@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from tsid_fmu.fmu import steploop
+import tsid_fmu.fmu.steploop as steploop
 
 __all__ = ["LOOP_ENV", "backend", "cs_loop", "numba_available", "warm_up"]
 
@@ -53,7 +53,7 @@ def numba_available() -> bool:
 
 def _build() -> dict[int, Loop]:
     """Import (compile on first call, or load from Numba's cache) the compiled loops."""
-    from tsid_fmu.fmu import _numba  # imports Numba: only when it is wanted
+    import tsid_fmu.fmu._numba as _numba  # imports Numba: only when it is wanted
 
     return {2: _numba.loop2, 3: _numba.loop3}
 

@@ -14,8 +14,8 @@ import re
 from pathlib import Path
 from typing import Any
 
+import tsid_fmu.fmu.steploop as steploop
 from tsid_fmu.errors import FMUError
-from tsid_fmu.fmu import steploop
 
 __all__ = ["load_fmu", "loop_functions"]
 

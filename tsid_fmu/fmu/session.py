@@ -37,8 +37,10 @@ from typing import Any, Literal
 
 import numpy as np
 
+import tsid_fmu.fmu.exchange as exchange
+import tsid_fmu.fmu.grid as grid
+import tsid_fmu.fmu.steploop as steploop
 from tsid_fmu.errors import FMUError, SimulationError
-from tsid_fmu.fmu import exchange, grid, steploop
 from tsid_fmu.fmu.archive import safe_extract
 from tsid_fmu.fmu.compiled import cs_loop
 from tsid_fmu.fmu.instance import Instance, Values

@@ -47,15 +47,19 @@ class ConsoleProgress:
         elif event == "refinement":
             self._print(f"== refinement (least squares) from cost {info['cost']:.6g} ...")
         elif event == "refinement done":
-            self._print(f"refinement: cost {info['cost']:.6g} [{info['nfev']} simulations, "
-                        f"{now - self.t0:.1f} s]")  # fmt: skip
+            self._print(
+                f"refinement: cost {info['cost']:.6g} [{info['nfev']} simulations, "
+                f"{now - self.t0:.1f} s]"
+            )
         elif event == "done":
             res = info["result"]
-            self._print(f"{res.message} ({res.nit} Taguchi iterations, {res.nfev} simulations, "
-                        f"{now - self.t0:.1f} s)")  # fmt: skip
+            self._print(
+                f"{res.message} ({res.nit} Taguchi iterations, {res.nfev} simulations, "
+                f"{now - self.t0:.1f} s)"
+            )
 
     def _row(self, info: dict[str, Any], now: float) -> None:
-        """A live row counter with the time left, on terminals only."""
+        """Show a live run counter with the time left (on terminals only)."""
         done, total = info["done"], info["total"]
         if not self.live or (now - self._last < 0.1 and done != total):
             return

@@ -37,18 +37,28 @@ def _stage_folder(stage: StageResult, index: int) -> str:
 
 
 def _stages(result: IdentificationResult) -> list[str]:
-    lines = ["## Stages", "",
-             "Each stage's answer and its cost on the measured inputs of its experiments; "
-             "the cost fall is relative to the stage before.", "",
-             markdown_table(result.stages_frame()), ""]  # fmt: skip
+    lines = [
+        "## Stages",
+        "",
+        "Each stage's answer and its cost on the measured inputs of its experiments; "
+        "the cost fall is relative to the stage before.",
+        "",
+        markdown_table(result.stages_frame()),
+        "",
+    ]
     phase = 0
     for st in result.stages:
         if not st.records:
             continue
         phase += st.kind == "phase"
         folder = _stage_folder(st, phase)
-        lines += [f"### {st.name}", "", "| iteration | array | factors | case | best cost | "
-                  "found at | next centred on | simulations |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        lines += [
+            f"### {st.name}",
+            "",
+            "| iteration | array | factors | case | best cost | "
+            "found at | next centred on | simulations |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
         for rec in st.records:
             kind = "parameters" if rec.frame.axis_aligned else "rotated"
             lines.append(
@@ -61,8 +71,12 @@ def _stages(result: IdentificationResult) -> list[str]:
 
 
 def _fit(result: IdentificationResult) -> list[str]:
-    lines = ["## Fit at the identified parameters (measured inputs)", "",
-             "fit % = 100 (1 - NRMSE), NRMSE = |error| / |measured - its mean|.", ""]  # fmt: skip
+    lines = [
+        "## Fit at the identified parameters (measured inputs)",
+        "",
+        "fit % = 100 (1 - NRMSE), NRMSE = |error| / |measured - its mean|.",
+        "",
+    ]
     for exp, per_output in result.fit.items():
         for output, m in per_output.items():
             if not isinstance(m, dict):
@@ -70,18 +84,28 @@ def _fit(result: IdentificationResult) -> list[str]:
                 continue
             sigma = result.noise.get(exp, {}).get(output)
             beside = f" (noise in the data: {sigma:.3g})" if sigma is not None else ""
-            lines.append(f"- {exp} / {output}: fit {m['fit_percent']:.3f} %, RMSE "
-                         f"{m['rmse']:.5g}{beside}, IAE {m['iae']:.5g}")  # fmt: skip
+            lines.append(
+                f"- {exp} / {output}: fit {m['fit_percent']:.3f} %, RMSE "
+                f"{m['rmse']:.5g}{beside}, IAE {m['iae']:.5g}"
+            )
     return [*lines, ""]
 
 
 def _failed_runs(records: Sequence[IterationRecord]) -> list[str]:
-    rows = [(rec.stage, rec.index, run + 1, err) for rec in records
-            for run, err in enumerate(rec.errors) if err]  # fmt: skip
+    rows = [
+        (rec.stage, rec.index, run + 1, err)
+        for rec in records
+        for run, err in enumerate(rec.errors)
+        if err
+    ]
     if not rows:
         return []
-    out = [f"## Failed runs ({len(rows)}, each scored worst; the study went on)", "",
-           "| stage | iteration | run | reason |", "|---|---|---|---|"]  # fmt: skip
+    out = [
+        f"## Failed runs ({len(rows)}, each scored worst; the study went on)",
+        "",
+        "| stage | iteration | run | reason |",
+        "|---|---|---|---|",
+    ]
     out += [f"| {s} | {i} | {r} | {_cell(e)} |" for s, i, r, e in rows]
     return [*out, ""]
 
@@ -90,9 +114,14 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
     u = result.uncertainty
     if u is None:
         return []
-    lines = ["## What the data determine", "", f"Intervals: {u.method}. Combinations of "
-             "parameters, best determined first (standard error in search units: 1 = the "
-             "width of the first levels' range):", ""]  # fmt: skip
+    lines = [
+        "## What the data determine",
+        "",
+        f"Intervals: {u.method}. Combinations of "
+        "parameters, best determined first (standard error in search units: 1 = the "
+        "width of the first levels' range):",
+        "",
+    ]
     for c in u.combinations:
         terms = " ".join(f"{w:+.2f} {n}" for n, w in c["terms"].items())
         state = "determined" if c["determined"] else "**not determined**"
@@ -106,26 +135,37 @@ def markdown_report(result: IdentificationResult) -> str:
     name = study.name if study else "study"
     cost = study.method.cost if study else "cost"
     lines = [
-        f"# Identification report: {name}", "",
+        f"# Identification report: {name}",
+        "",
         f"- FMU: `{study.fmu if study else '-'}`",
         f"- Result: **{result.message}** (status {result.status}: {STATUS[result.status]}; "
         f"{result.nit} Taguchi iterations, {result.nfev} simulations)",
         f"- Cost ({cost}, measured inputs of the identification experiments): {result.fun:.6g}",
         "",
-    ]  # fmt: skip
+    ]
     if result.warnings:
         lines += ["## Warnings", "", *[f"- {w}" for w in result.warnings], ""]
     lines += ["## Identified parameters", "", markdown_table(result.parameters_frame()), ""]
     if result.weak:
-        lines += ["## Weakly determined parameters", "",
-                  *[f"- **{k}**: {v}" for k, v in result.weak.items()], ""]  # fmt: skip
+        lines += [
+            "## Weakly determined parameters",
+            "",
+            *[f"- **{k}**: {v}" for k, v in result.weak.items()],
+            "",
+        ]
     lines += _uncertainty(result) + _fit(result) + _stages(result)
     lines += _failed_runs(result.iterations)
     if result.validation:
         lines += ["## Validation experiments (all inputs together)", ""]
         for exp, v in result.validation.items():
-            lines.append(f"- {exp}: " + (f"simulation failed: {v['error']}" if "error" in v else
-                         f"{cost} cost {v['cost']:.6g}"))  # fmt: skip
+            lines.append(
+                f"- {exp}: "
+                + (
+                    f"simulation failed: {v['error']}"
+                    if "error" in v
+                    else f"{cost} cost {v['cost']:.6g}"
+                )
+            )
         lines.append("")
     lines += ["![fit](fit.png)", "", "![convergence](convergence.png)", ""]
     return "\n".join(lines)

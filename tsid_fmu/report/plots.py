@@ -33,7 +33,9 @@ def _save(fig: Any, path: Path) -> None:
     plt.close(fig)
 
 
-def main_effects_plot(rec: IterationRecord, path: Path, describe: dict[str, str] | None = None) -> None:
+def main_effects_plot(
+    rec: IterationRecord, path: Path, describe: dict[str, str] | None = None
+) -> None:
     """Plot the mean S/N of each level of each factor (the papers' Figs. 7-9).
 
     Parameters
@@ -66,8 +68,9 @@ def main_effects_plot(rec: IterationRecord, path: Path, describe: dict[str, str]
         ax.grid(True, alpha=0.3)
     axes[0][0].set_ylabel("mean S/N [dB]")
     axes[0][-1].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{rec.stage}, iteration {rec.index}: S/N main effects ({rec.array})",
-                 fontsize=10, y=1.08)  # fmt: skip
+    fig.suptitle(
+        f"{rec.stage}, iteration {rec.index}: S/N main effects ({rec.array})", fontsize=10, y=1.08
+    )
     _save(fig, path)
 
 
@@ -80,12 +83,18 @@ def fit_plot(
 ) -> None:
     """Plot measured and simulated outputs, and their difference, for each experiment."""
     plt = _pyplot()
-    panels = [(e, sim, j) for e, sim in zip(spec.experiments, simulated, strict=True)
-              for j in range(len(e.output_names))]  # fmt: skip
+    panels = [
+        (e, sim, j)
+        for e, sim in zip(spec.experiments, simulated, strict=True)
+        for j in range(len(e.output_names))
+    ]
     fig, axes = plt.subplots(
-        2 * len(panels), 1, figsize=(9, 3.2 * len(panels)), squeeze=False,
+        2 * len(panels),
+        1,
+        figsize=(9, 3.2 * len(panels)),
+        squeeze=False,
         gridspec_kw={"height_ratios": [3, 1] * len(panels)},
-    )  # fmt: skip
+    )
     for k, (e, sim, j) in enumerate(panels):
         ax, ax_e = axes[2 * k][0], axes[2 * k + 1][0]
         name = e.output_names[j]
@@ -95,8 +104,9 @@ def fit_plot(
             ax.plot(e.time, sim.outputs[:, j], color="tab:red", lw=0.9, label="simulated")
             ax_e.plot(e.time, sim.outputs[:, j] - e.measured[:, j], color="tab:red", lw=0.6)
         else:
-            ax.text(0.5, 0.5, f"simulation failed: {sim.error}", transform=ax.transAxes,
-                    ha="center")  # fmt: skip
+            ax.text(
+                0.5, 0.5, f"simulation failed: {sim.error}", transform=ax.transAxes, ha="center"
+            )
         ax.set_ylabel(f"{name} [{unit}]" if unit else name)
         ax.set_title(f"{e.name}: {name}", fontsize=9)
         ax.legend(loc="upper right", fontsize=8)

@@ -85,6 +85,15 @@ class Frame:
     factors: list[Factor]
     note: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    anchor: dict[str, float] | None = None
+
+    def coords(self, space: Space) -> Space:
+        """Return the coordinates the centre and directions are in.
+
+        The stage's search space, or linear coordinates anchored at ``anchor`` (rotated
+        factors).
+        """
+        return space if self.anchor is None else space.anchored(self.anchor)
 
     @property
     def axis_aligned(self) -> bool:
@@ -100,7 +109,7 @@ class Frame:
     def from_levels(
         cls, space: Space, levels: Mapping[str, Sequence[float]], note: str = ""
     ) -> Frame:
-        """An axis-aligned frame with exact levels per parameter (centred mid-range)."""
+        """Make an axis-aligned frame with exact levels per parameter (centred mid-range)."""
         factors, centre = [], np.zeros(space.dim)
         for j, name in enumerate(space.names):
             values = sorted(float(v) for v in levels[name])
@@ -132,14 +141,16 @@ class Frame:
                 sets.append({f.name: float(f.values[row[k]]) for k, f in enumerate(self.factors)})  # type: ignore[index]
             else:
                 z = np.array([f.offsets[row[k]] for k, f in enumerate(self.factors)])
-                sets.append(space.to_x(self.point(z)))
+                sets.append(self.coords(space).to_x(self.point(z)))
         return sets
 
     def at_offsets(self, space: Space, z: np.ndarray) -> dict[str, float]:
-        """Parameter set at offsets ``z`` (for parameters: values interpolated in the
-        working domain between the exact levels).
+        """Return the parameter set at offsets ``z`` along the factors.
+
+        For parameters the values are interpolated in the working domain between the
+        exact levels.
         """
-        return space.to_x(self.point(z))
+        return self.coords(space).to_x(self.point(z))
 
     def coordinates(self, s: np.ndarray) -> np.ndarray:
         """Offsets along each factor of the point ``s`` (least squares if not square)."""
@@ -149,6 +160,7 @@ class Frame:
     def spans(self, space: Space) -> dict[str, float]:
         """Largest relative change of any parameter across each factor's levels."""
         out = {}
+        space = self.coords(space)
         base = space.to_x(self.centre)
         for f in self.factors:
             lo = space.to_x(self.centre + f.offsets[0] * f.direction)
@@ -160,6 +172,7 @@ class Frame:
         """Say which parameters a factor moves: ``+0.71 lg F_vm -0.70 lg B_s``."""
         if factor.values is not None:
             return factor.name
+        space = self.coords(space)
         u = space.u_direction(factor.direction)
         terms = [(abs(c), c, space.label(j)) for j, c in enumerate(u) if abs(c) >= 0.05]
         terms.sort(reverse=True)
@@ -172,6 +185,7 @@ class Frame:
             "factors": [f.to_dict() for f in self.factors],
             "note": self.note,
             "extra": self.extra,
+            "anchor": self.anchor,
         }
 
     @classmethod
@@ -182,4 +196,7 @@ class Frame:
             factors=[Factor.from_dict(f) for f in d["factors"]],
             note=str(d.get("note", "")),
             extra=dict(d.get("extra", {})),
+            anchor=None
+            if d.get("anchor") is None
+            else {k: float(v) for k, v in d["anchor"].items()},
         )

@@ -25,8 +25,8 @@ import numpy as np
 
 from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.doe.rules import main_effect_optimum
-from tsid_fmu.errors import StudyError
-from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.errors import ArrayError, StudyError
+from tsid_fmu.evaluate.protocol import Evaluation, Evaluator
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.nextlevels import next_frame
 from tsid_fmu.search.record import IterationRecord
@@ -73,13 +73,60 @@ def predict(
 def _choose_centre(
     method: Method, best_run: Best, predicted: Best, best: Best
 ) -> tuple[dict[str, float], str] | None:
-    """The parameter set the next levels are centred on, by the study's selection rule."""
+    """Pick the parameter set the next levels are centred on (the selection rule)."""
     if method.selection == "main_effects":
         return dict(predicted.x), "the predicted optimum"
     if method.selection == "best_run":
         pick = best_run if best_run.cost <= best.cost else best
         return dict(pick.x), pick.source
     return dict(best.x), best.source
+
+
+def _axes(
+    space: Space,
+    centre: dict[str, float],
+    sets: list[dict[str, float]],
+    residuals: list[np.ndarray | None],
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Principal axes of the surface the runs show, in coordinates anchored at ``centre``."""
+    coords = space.anchored(centre)
+    points = [(coords.to_s(x), r) for x, r in zip(sets, residuals, strict=True)]
+    return principal_axes(points, coords.to_s(centre))
+
+
+def _record(
+    index: int,
+    stage: str,
+    array: str,
+    columns: list[int],
+    frame: Frame,
+    space: Space,
+    level_index: np.ndarray,
+    sets: list[dict[str, float]],
+    ev: Evaluation,
+) -> IterationRecord:
+    """Make the record of the runs (decision, prediction and best come later)."""
+    return IterationRecord(
+        index=index,
+        stage=stage,
+        array=array,
+        columns=columns,
+        frame=frame,
+        parameters=list(space.names),
+        level_index=level_index,
+        sets=np.array([[s[n] for n in space.names] for s in sets]),
+        costs=ev.costs,
+        errors=list(ev.errors),
+        decision=None,  # type: ignore[arg-type]
+        prediction={},
+        best_x={},
+        best_cost=math.inf,
+        best_source="",
+        centre_source="",
+        nfev=0,
+        nfev_total=0,
+        next_frame=frame,
+    )
 
 
 def run_iteration(
@@ -101,7 +148,10 @@ def run_iteration(
         Every run of the array failed (the message gives the first reason).
     """
     n_levels = [f.n_levels for f in frame.factors]
-    array, columns = select_array(n_levels, name=method.array)
+    try:
+        array, columns = select_array(n_levels, name=method.array)
+    except ArrayError:  # the study's array is for its first levels; later ones may differ
+        array, columns = select_array(n_levels)
     level_index = np.asarray(array.table[:, columns], dtype=int)
     sets = frame.parameter_sets(space, level_index)
     start = evaluator.nfev
@@ -116,13 +166,7 @@ def run_iteration(
             f"{stage}, iteration {index}: every run of {array.name} failed; first reason: "
             f"{ev.errors[0]}"
         )
-    record = IterationRecord(
-        index=index, stage=stage, array=array.name, columns=list(columns), frame=frame,
-        parameters=list(space.names), level_index=level_index,
-        sets=np.array([[s[n] for n in space.names] for s in sets]), costs=ev.costs,
-        errors=list(ev.errors), decision=None, prediction={}, best_x={}, best_cost=math.inf,  # type: ignore[arg-type]
-        best_source="", centre_source="", nfev=0, nfev_total=0, next_frame=frame,
-    )  # fmt: skip
+    record = _record(index, stage, array.name, list(columns), frame, space, level_index, sets, ev)
     sn_means = record.sn_means()
     x_pred, z_pred = predict(frame, space, sn_means, method.leveling.refine)
     conf = evaluator.evaluate([x_pred])
@@ -137,16 +181,18 @@ def run_iteration(
     centre = _choose_centre(method, best_run, predicted, new_best)
     axes = None
     if method.rotate and ev.residuals is not None and conf.residuals is not None:
-        points = [(space.to_s(s), r) for s, r in zip(sets, ev.residuals, strict=True)]
-        points.append((space.to_s(x_pred), conf.residuals[0]))
-        found = principal_axes(points, space.to_s(centre[0]))
-        axes = None if found is None else found[0]
+        axes = _axes(space, centre[0], [*sets, x_pred], [*ev.residuals, conf.residuals[0]])
     contribution = record.anova.contribution
-    decision, following = next_frame(frame, space, sn_means, centre, method.leveling,
-                                     contribution, axes)  # fmt: skip
+    decision, following = next_frame(
+        frame, space, sn_means, centre, method.leveling, contribution, axes
+    )
     record.decision = decision
-    record.prediction = {"x": x_pred, "cost": predicted.cost, "error": conf.errors[0],
-                         "offsets": [float(z) for z in z_pred]}  # fmt: skip
+    record.prediction = {
+        "x": x_pred,
+        "cost": predicted.cost,
+        "error": conf.errors[0],
+        "offsets": [float(z) for z in z_pred],
+    }
     record.best_x, record.best_cost, record.best_source = new_best.x, new_best.cost, new_best.source
     record.centre_source = centre[1]
     record.nfev = evaluator.nfev - start

@@ -23,6 +23,12 @@ from tsid_fmu.search.space import Space
 
 __all__ = ["MAX_HALF_WIDTH", "next_frame"]
 
+ROTATED_LEVELS = 3
+"""Levels of rotated factors unless ``n_levels`` says otherwise: along principal axes the
+surface is close to quadratic, and three levels (an L18 for five factors, an L9 for up
+to four) give each factor's parabola for fewer runs than five levels (the MISO paper
+identifies with three-level L9 arrays throughout)."""
+
 MAX_HALF_WIDTH = 0.5
 """Largest half-width of a rotated factor, in search coordinates (the first levels of
 every parameter span one unit)."""
@@ -52,17 +58,22 @@ def _rotated_decisions(
     z = frame.coordinates(centre_s)
     decisions = []
     for k, f in enumerate(frame.factors):
-        state = FactorState(choose_flat[f.name], small[f.name], minor[f.name], any_significant,
-                            converged)  # fmt: skip
+        state = FactorState(
+            choose_flat[f.name], small[f.name], minor[f.name], any_significant, converged
+        )
         text = (
             f"ANOVA contribution {contribution.get(f.name, 100.0):.2g} %" if minor[f.name] else ""
         )
         decision, centre_z, half = decide_factor(
-            f.name, np.asarray(f.offsets), np.asarray(sn_means[f.name], dtype=float), state,
-            options, centre=(float(z[k]), f"{centre_label} (offset {z[k]:+.4g})"),
+            f.name,
+            np.asarray(f.offsets),
+            np.asarray(sn_means[f.name], dtype=float),
+            state,
+            options,
+            centre=(float(z[k]), f"{centre_label} (offset {z[k]:+.4g})"),
             minor_text=text,
-        )  # fmt: skip
-        n = options.n_levels or f.n_levels
+        )
+        n = options.n_levels or ROTATED_LEVELS
         decision.optimum = float(centre_z)
         decision.levels = [float(v) for v in np.linspace(-half, half, n)]
         decision.reason += f"; next half-width {half:.4g} (was {f.half_width:.4g})"
@@ -93,29 +104,102 @@ def _rotated_frame(
     frame: Frame,
     space: Space,
     decision: LevelingDecision,
-    centre_s: np.ndarray,
-    axes: np.ndarray | None,
+    centre_x: dict[str, float],
+    axes: tuple[np.ndarray, np.ndarray] | None,
     options: LevelingOptions,
 ) -> Frame:
+    """Make the next frame: rotated factors in coordinates anchored at the new centre.
+
+    The box of half-widths decided for the current factors is carried into the new
+    coordinates (scaled by the ratio of the two coordinates' local scales at the new
+    centre), then measured along each new axis.
+    """
+    old, new = frame.coords(space), space.anchored(centre_x)
+    scale = np.array(
+        [
+            old.local_scale(j, centre_x[n]) / new.local_scale(j, centre_x[n])
+            for j, n in enumerate(space.names)
+        ]
+    )
     half = _half_widths(frame, space, decision)
-    box = sum((h * h * np.outer(f.direction, f.direction) for h, f in zip(half, frame.factors,
-               strict=True)), np.zeros((space.dim, space.dim)))  # fmt: skip
-    directions = axes if axes is not None else np.column_stack([f.direction for f in frame.factors])
-    taken = set(space.names)
-    prefix = "A" if not any(n.startswith("A") and n[1:].isdigit() for n in taken) else "Z"
+    box = sum(
+        (
+            h * h * np.outer(scale * f.direction, scale * f.direction)
+            for h, f in zip(half, frame.factors, strict=True)
+        ),
+        np.zeros((space.dim, space.dim)),
+    )
+    if axes is not None:
+        directions, curvature = axes
+    else:
+        directions = np.column_stack([scale * f.direction for f in frame.factors])
+        directions /= np.linalg.norm(directions, axis=0)
+        curvature = None
+    prefix = "Z" if any(n.startswith("A") and n[1:].isdigit() for n in space.names) else "A"
+    widths = _widths(directions, curvature, box, frame, half, scale)
+    widths = np.minimum(widths, _positive_limit(space, new, centre_x, directions))
     factors = []
     for k in range(directions.shape[1]):
-        v = directions[:, k]
-        h = min(float(np.sqrt(max(v @ box @ v, 0.0))), MAX_HALF_WIDTH)
-        h = max(h, 1e-12)
-        n = options.n_levels or frame.factors[k].n_levels
-        factors.append(Factor(f"{prefix}{k + 1}", v.copy(), np.linspace(-h, h, n)))
+        n = options.n_levels or ROTATED_LEVELS
+        factors.append(
+            Factor(
+                f"{prefix}{k + 1}", directions[:, k].copy(), np.linspace(-widths[k], widths[k], n)
+            )
+        )
     note = (
-        "rotated factors: principal axes of the cost surface fitted to the last runs"
+        "rotated factors: principal axes of the cost surface the runs show"
         if axes is not None
         else "rotated factors kept from the previous iteration"
     )
-    return Frame(centre=space.clip(np.asarray(centre_s, dtype=float)), factors=factors, note=note)
+    return Frame(centre=np.zeros(space.dim), factors=factors, note=note, anchor=dict(centre_x))
+
+
+POSITIVE_MARGIN = 0.75
+"""A rotated factor's levels may move a parameter searched in log10 by at most this
+fraction of its value (so it stays positive, as its log10 coordinate guarantees)."""
+
+
+def _positive_limit(
+    space: Space, coords: Space, centre_x: Mapping[str, float], directions: np.ndarray
+) -> np.ndarray:
+    """Largest half-width of each rotated factor that keeps log parameters positive."""
+    limit = np.full(directions.shape[1], np.inf)
+    for j, n in enumerate(space.names):
+        if not space.log[j]:
+            continue
+        room = POSITIVE_MARGIN * abs(centre_x[n]) / coords.width[j]
+        with np.errstate(divide="ignore"):
+            limit = np.minimum(limit, room / np.abs(directions[j]))
+    return limit
+
+
+def _widths(
+    directions: np.ndarray,
+    curvature: np.ndarray | None,
+    box: np.ndarray,
+    frame: Frame,
+    half: list[float],
+    scale: np.ndarray,
+) -> np.ndarray:
+    """Half-widths of the new factors.
+
+    With the surface's curvatures, each new factor gets the half-width at which the
+    surface predicts the same rise of the cost, the geometric mean of the rises the
+    decided box gives along the current factors (so a flat combination gets wide
+    levels, a stiff one narrow levels); without them, the box's extent along each
+    direction. Never more than :data:`MAX_HALF_WIDTH`.
+    """
+    if curvature is None:
+        out = np.sqrt(np.maximum(np.einsum("ik,ij,jk->k", directions, box, directions), 0.0))
+    else:
+        hess = directions @ np.diag(curvature) @ directions.T
+        along = np.array(
+            [(scale * f.direction) @ hess @ (scale * f.direction) for f in frame.factors]
+        )
+        rise = float(np.exp(np.mean(np.log(np.maximum(along * np.square(half), 1e-300)))))
+        top = max(float(curvature.max()), 1e-300)
+        out = np.sqrt(rise / np.maximum(curvature, 1e-12 * top))
+    return np.clip(out, 1e-12, MAX_HALF_WIDTH)
 
 
 def next_frame(
@@ -125,7 +209,7 @@ def next_frame(
     centre: tuple[dict[str, float], str] | None,
     options: LevelingOptions,
     contribution: Mapping[str, float],
-    axes: np.ndarray | None,
+    axes: tuple[np.ndarray, np.ndarray] | None,
 ) -> tuple[LevelingDecision, Frame]:
     """Decide the cases of an iteration's factors and make the next frame.
 
@@ -145,8 +229,9 @@ def next_frame(
         Re-leveling rules.
     contribution : mapping
         ANOVA percent contribution of each factor.
-    axes : numpy.ndarray or None
-        Principal axes for a rotated next frame (columns), or None to keep the kind of
+    axes : (numpy.ndarray, numpy.ndarray) or None
+        Principal axes (columns) and curvatures of the cost surface, in coordinates
+        anchored at the centre, for a rotated next frame; or None to keep the kind of
         frame (axis-aligned stays axis-aligned, rotated keeps its directions).
 
     Returns
@@ -158,17 +243,22 @@ def next_frame(
     """
     if frame.axis_aligned:
         decision = relevel(
-            frame.level_values(space), sn_means, options, bounds=space.bounds,
-            centre=None if centre is None else centre[0], contribution=contribution,
+            frame.level_values(space),
+            sn_means,
+            options,
+            bounds=space.bounds,
+            centre=None if centre is None else centre[0],
+            contribution=contribution,
             centre_label=centre[1] if centre else "the best run",
-        )  # fmt: skip
+        )
         if axes is None:
             return decision, Frame.from_levels(space, decision.next_levels())
     else:
         if centre is None:
             raise ValueError("a rotated frame needs a centre")
-        centre_s = space.to_s(centre[0])
-        decision = _rotated_decisions(frame, space, sn_means, centre_s, centre[1], options,
-                                      contribution)  # fmt: skip
-    centre_s = space.to_s(centre[0]) if centre is not None else frame.centre
-    return decision, _rotated_frame(frame, space, decision, centre_s, axes, options)
+        centre_s = frame.coords(space).to_s(centre[0])
+        decision = _rotated_decisions(
+            frame, space, sn_means, centre_s, centre[1], options, contribution
+        )
+    centre_x = centre[0] if centre is not None else frame.coords(space).to_x(frame.centre)
+    return decision, _rotated_frame(frame, space, decision, centre_x, axes, options)

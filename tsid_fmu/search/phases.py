@@ -38,11 +38,13 @@ __all__ = ["centre_values", "joint_levels", "plan_phases"]
 class Evaluators(Protocol):
     """Specs and evaluators of sub-problems (see :mod:`tsid_fmu.search.pipeline`)."""
 
-    def spec(self, parameters: list[str], experiments: list[str],
-             fixed: Mapping[str, float]) -> EvaluationSpec: ...  # fmt: skip
+    def spec(
+        self, parameters: list[str], experiments: list[str], fixed: Mapping[str, float]
+    ) -> EvaluationSpec: ...
 
-    def get(self, parameters: list[str], experiments: list[str],
-            fixed: Mapping[str, float]) -> Evaluator: ...  # fmt: skip
+    def get(
+        self, parameters: list[str], experiments: list[str], fixed: Mapping[str, float]
+    ) -> Evaluator: ...
 
 
 def centre_values(study: Study) -> dict[str, float]:
@@ -86,8 +88,9 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
     order, nfev = list(ident), 0
     if len(ident) > 1:
         spec = evaluators.spec(study.parameter_names, ident, centre)
-        inc = input_contribution({e.name: e.measured for e in spec.experiments},
-                                 _active_inputs(spec))  # fmt: skip
+        inc = input_contribution(
+            {e.name: e.measured for e in spec.experiments}, _active_inputs(spec)
+        )
         extra["input"] = dataclasses.asdict(inc)
         order = inc.experiments
     remaining, phases = list(study.parameter_names), []
@@ -96,8 +99,11 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
             break
         first = {p.name: p.levels for p in study.parameters}
         values = {n: study.contribution.values.get(n) or oat_values(first[n]) for n in remaining}
-        sets = [{**{m: centre[m] for m in remaining}, n: float(v)}
-                for n, vals in values.items() for v in vals]  # fmt: skip
+        sets = [
+            {**{m: centre[m] for m in remaining}, n: float(v)}
+            for n, vals in values.items()
+            for v in vals
+        ]
         fixed = {m: centre[m] for m in study.parameter_names if m not in remaining}
         result = evaluators.get(remaining, [exp], fixed).evaluate(sets)
         nfev += result.nfev
@@ -115,12 +121,19 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
     for i, ph in enumerate(phases):
         ph.name = f"phase {i + 1}"
     extra["phases"] = [dataclasses.asdict(p) for p in phases]
-    what = "; ".join(f"{p.name}: {', '.join(p.parameters)} on {', '.join(p.experiments)}"
-                     for p in phases)  # fmt: skip
+    what = "; ".join(
+        f"{p.name}: {', '.join(p.parameters)} on {', '.join(p.experiments)}" for p in phases
+    )
     return StageResult(
-        name="contribution", kind="contribution", x=dict(centre), cost=float("nan"), nfev=nfev,
-        message=f"{len(phases)} phases planned ({what})", experiments=ident, extra=extra,
-    )  # fmt: skip
+        name="contribution",
+        kind="contribution",
+        x=dict(centre),
+        cost=float("nan"),
+        nfev=nfev,
+        message=f"{len(phases)} phases planned ({what})",
+        experiments=ident,
+        extra=extra,
+    )
 
 
 def joint_levels(study: Study, current: Mapping[str, float]) -> list[Parameter]:

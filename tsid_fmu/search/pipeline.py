@@ -17,8 +17,6 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from tsid_fmu.errors import StudyError
-from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.phases import Evaluators, centre_values, joint_levels, plan_phases
@@ -36,11 +34,20 @@ __all__ = ["Control", "Evaluators", "StageStore", "run_stages"]
 class StageStore(Protocol):
     """Where stages and iterations are kept (the audit trail, or nothing)."""
 
-    def iterations(self, key: str) -> list[IterationRecord]: ...
-    def override(self, key: str, record: IterationRecord, space: Space) -> Frame | None: ...
-    def stage(self, key: str) -> StageResult | None: ...
-    def write_iteration(self, key: str, record: IterationRecord, space: Space) -> None: ...
-    def write_stage(self, key: str, result: StageResult) -> None: ...
+    def iterations(self, key: str) -> list[IterationRecord]:
+        """Return a stage's complete iterations."""
+
+    def override(self, key: str, record: IterationRecord, space: Space) -> Frame | None:
+        """Return levels a person edited after ``record``, if any."""
+
+    def stage(self, key: str) -> StageResult | None:
+        """Return a finished stage."""
+
+    def write_iteration(self, key: str, record: IterationRecord, space: Space) -> None:
+        """Keep a finished iteration."""
+
+    def write_stage(self, key: str, result: StageResult) -> None:
+        """Keep a finished stage."""
 
 
 @dataclass
@@ -70,9 +77,16 @@ class _Recorder:
 
 
 def _taguchi(
-    ctx: _Context, key: str, name: str, kind: str, params: list[Parameter], exps: list[str],
-    current: Mapping[str, float], nfev_before: int, max_iterations: int | None,
-) -> StageResult:  # fmt: skip
+    ctx: _Context,
+    key: str,
+    name: str,
+    kind: str,
+    params: list[Parameter],
+    exps: list[str],
+    current: Mapping[str, float],
+    nfev_before: int,
+    max_iterations: int | None,
+) -> StageResult:
     """Run (or continue) one Taguchi-kind stage of ``params`` on ``exps``."""
     method = ctx.study.method
     levels = {p.name: list(p.levels) for p in params}
@@ -89,11 +103,19 @@ def _taguchi(
             override = frame_from_run(prior[-1], run - 1, space, method)
             note = f"continued from iteration {prior[-1].index}, run {run} (chosen)"
     run = TaguchiRun(
-        name=name, space=space, first=Frame.from_levels(space, levels), method=method,
-        fixed=fixed, prior=prior, override=override, override_note=note,
-        nfev_before=nfev_before, max_iterations=max_iterations,
-        pause_after=ctx.control.pause_after, experiments=list(exps),
-    )  # fmt: skip
+        name=name,
+        space=space,
+        first=Frame.from_levels(space, levels),
+        method=method,
+        fixed=fixed,
+        prior=prior,
+        override=override,
+        override_note=note,
+        nfev_before=nfev_before,
+        max_iterations=max_iterations,
+        pause_after=ctx.control.pause_after,
+        experiments=list(exps),
+    )
     evaluator = ctx.evaluators.get(names, list(exps), fixed)
     if prior and hasattr(evaluator, "mark_known"):
         # what the interrupted run simulated is not counted again (it was in memory)
@@ -122,8 +144,9 @@ def _refinement(ctx: _Context, last: StageResult, exps: list[str]) -> StageResul
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
     cost = float(evaluator.evaluate([start]).costs[0, 0])
-    result = refine_stage("refinement", space, start, cost, evaluator, study.method,
-                          progress=ctx.progress)  # fmt: skip
+    result = refine_stage(
+        "refinement", space, start, cost, evaluator, study.method, progress=ctx.progress
+    )
     result.experiments = list(exps)
     result.extra["start"] = start
     ctx.store.write_stage("refinement", result)
@@ -134,8 +157,10 @@ def _phases(ctx: _Context, stages: list[StageResult]) -> list[Phase]:
     study = ctx.study
     ident = [e.name for e in study.identify_experiments()]
     if study.phases:
-        return [Phase(p.parameters, list(p.experiments) or ident, p.name, p.array, p.max_iterations)
-                for p in study.phases]  # fmt: skip
+        return [
+            Phase(p.parameters, list(p.experiments) or ident, p.name, p.array, p.max_iterations)
+            for p in study.phases
+        ]
     plan = ctx.store.stage("contribution")
     if plan is None:
         if ctx.progress:
@@ -147,17 +172,25 @@ def _phases(ctx: _Context, stages: list[StageResult]) -> list[Phase]:
 
 
 def _phase_stage(
-    ctx: _Context, key: str, name: str, params: list[Parameter], exps: list[str],
-    current: dict[str, float], nfev: int, array: str | None, limit: int | None,
-) -> StageResult:  # fmt: skip
+    ctx: _Context,
+    key: str,
+    name: str,
+    params: list[Parameter],
+    exps: list[str],
+    current: dict[str, float],
+    nfev: int,
+    array: str | None,
+    limit: int | None,
+) -> StageResult:
     if ctx.progress and not ctx.store.iterations(key):
         ctx.progress("stage", {"name": name, "message": f"{name} on {', '.join(exps)}"})
     sub = ctx
     if array is not None:
         method = dataclasses.replace(ctx.study.method, array=array)
         sub = dataclasses.replace(ctx, study=dataclasses.replace(ctx.study, method=method))
-    return _taguchi(sub, key, name, "phase", params, exps, current, nfev,
-                    ctx.control.max_iterations or limit)  # fmt: skip
+    return _taguchi(
+        sub, key, name, "phase", params, exps, current, nfev, ctx.control.max_iterations or limit
+    )
 
 
 def _run_phased(ctx: _Context) -> list[StageResult]:
@@ -171,10 +204,16 @@ def _run_phased(ctx: _Context) -> list[StageResult]:
     by_name = {p.name: p for p in study.parameters}
     for i, ph in enumerate(phases):
         result = _phase_stage(
-            ctx, f"phase_{i + 1:02d}", f"{ph.name}: {', '.join(ph.parameters)}",
-            [by_name[n] for n in ph.parameters], list(ph.experiments), current, nfev,
-            ph.array, ph.max_iterations,
-        )  # fmt: skip
+            ctx,
+            f"phase_{i + 1:02d}",
+            f"{ph.name}: {', '.join(ph.parameters)}",
+            [by_name[n] for n in ph.parameters],
+            list(ph.experiments),
+            current,
+            nfev,
+            ph.array,
+            ph.max_iterations,
+        )
         stages.append(result)
         current.update({n: result.x[n] for n in ph.parameters})
         nfev += result.nfev
@@ -182,8 +221,17 @@ def _run_phased(ctx: _Context) -> list[StageResult]:
             return stages
     if study.contribution.refine_jointly and (len(phases) > 1 or len(ident) > 1):
         key = f"phase_{len(phases) + 1:02d}"
-        result = _phase_stage(ctx, key, "joint phase: all parameters",
-                              joint_levels(study, current), ident, current, nfev, None, None)  # fmt: skip
+        result = _phase_stage(
+            ctx,
+            key,
+            "joint phase: all parameters",
+            joint_levels(study, current),
+            ident,
+            current,
+            nfev,
+            None,
+            None,
+        )
         stages.append(result)
     return stages
 
@@ -208,8 +256,19 @@ def run_stages(
         # a Taguchi stage always continues from its iterations on disk: finished, it
         # returns at once; stopped at a limit, it goes on if the limit now allows
         exps = [e.name for e in study.identify_experiments()]
-        stages = [_taguchi(ctx, "", "taguchi", "taguchi", list(study.parameters), exps, {}, 0,
-                           ctx.control.max_iterations)]  # fmt: skip
+        stages = [
+            _taguchi(
+                ctx,
+                "",
+                "taguchi",
+                "taguchi",
+                list(study.parameters),
+                exps,
+                {},
+                0,
+                ctx.control.max_iterations,
+            )
+        ]
     if study.method.refine != "none" and stages[-1].status != 2:
         exps = [e.name for e in study.identify_experiments()]
         stages.append(_refinement(ctx, stages[-1], exps))

@@ -144,16 +144,19 @@ class IterationRecord:
 
     @property
     def response_means(self) -> ResponseTable:
-        """Mean cost per level of each factor (the response table for means; failed
-        runs count as the worst finite cost).
+        """Mean cost per level of each factor (the response table for means).
+
+        Failed runs count as the worst finite cost.
         """
         c = self.mean_costs
         finite = c[np.isfinite(c)]
         worst = float(finite.max()) if finite.size else 1.0
         return response_table(
-            self.level_index, np.where(np.isfinite(c), c, worst), self.names,
+            self.level_index,
+            np.where(np.isfinite(c), c, worst),
+            self.names,
             n_levels=self.n_levels,
-        )  # fmt: skip
+        )
 
     @property
     def anova(self) -> AnovaTable:
@@ -169,8 +172,11 @@ class IterationRecord:
         """Return the runs of this iteration as a :class:`pandas.DataFrame`."""
         import pandas as pd
 
-        data: dict[str, Any] = {"stage": self.stage, "iteration": self.index,
-                                "run": np.arange(1, len(self.sets) + 1)}  # fmt: skip
+        data: dict[str, Any] = {
+            "stage": self.stage,
+            "iteration": self.index,
+            "run": np.arange(1, len(self.sets) + 1),
+        }
         for j, n in enumerate(self.names):
             data[f"{n} level"] = self.level_index[:, j] + 1
         for j, n in enumerate(self.parameters):
@@ -187,17 +193,27 @@ class IterationRecord:
         pred = dict(self.prediction)
         pred["cost"] = json_float(float(pred.get("cost", math.inf)))
         return {
-            "index": self.index, "stage": self.stage, "array": self.array,
-            "columns": list(self.columns), "frame": self.frame.to_dict(),
-            "parameters": list(self.parameters), "level_index": self.level_index.tolist(),
+            "index": self.index,
+            "stage": self.stage,
+            "array": self.array,
+            "columns": list(self.columns),
+            "frame": self.frame.to_dict(),
+            "parameters": list(self.parameters),
+            "level_index": self.level_index.tolist(),
             "sets": self.sets.tolist(),
             "costs": [[json_float(c) for c in row] for row in self.costs],
-            "errors": self.errors, "decision": self.decision.to_dict(), "prediction": pred,
-            "best_x": self.best_x, "best_cost": json_float(self.best_cost),
-            "best_source": self.best_source, "centre_source": self.centre_source,
-            "nfev": self.nfev, "nfev_total": self.nfev_total,
-            "next_frame": self.next_frame.to_dict(), "extra": self.extra,
-        }  # fmt: skip
+            "errors": self.errors,
+            "decision": self.decision.to_dict(),
+            "prediction": pred,
+            "best_x": self.best_x,
+            "best_cost": json_float(self.best_cost),
+            "best_source": self.best_source,
+            "centre_source": self.centre_source,
+            "nfev": self.nfev,
+            "nfev_total": self.nfev_total,
+            "next_frame": self.next_frame.to_dict(),
+            "extra": self.extra,
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> IterationRecord:
@@ -205,16 +221,24 @@ class IterationRecord:
         pred = dict(d["prediction"])
         pred["cost"] = unjson_float(pred.get("cost"))
         return cls(
-            index=int(d["index"]), stage=str(d["stage"]), array=str(d["array"]),
-            columns=[int(c) for c in d["columns"]], frame=Frame.from_dict(d["frame"]),
+            index=int(d["index"]),
+            stage=str(d["stage"]),
+            array=str(d["array"]),
+            columns=[int(c) for c in d["columns"]],
+            frame=Frame.from_dict(d["frame"]),
             parameters=[str(p) for p in d["parameters"]],
             level_index=np.asarray(d["level_index"], dtype=int),
             sets=np.asarray(d["sets"], dtype=float),
             costs=np.array([[unjson_float(c) for c in row] for row in d["costs"]], dtype=float),
-            errors=list(d["errors"]), decision=LevelingDecision.from_dict(d["decision"]),
-            prediction=pred, best_x={k: float(v) for k, v in d["best_x"].items()},
-            best_cost=unjson_float(d["best_cost"]), best_source=str(d["best_source"]),
-            centre_source=str(d["centre_source"]), nfev=int(d["nfev"]),
-            nfev_total=int(d["nfev_total"]), next_frame=Frame.from_dict(d["next_frame"]),
+            errors=list(d["errors"]),
+            decision=LevelingDecision.from_dict(d["decision"]),
+            prediction=pred,
+            best_x={k: float(v) for k, v in d["best_x"].items()},
+            best_cost=unjson_float(d["best_cost"]),
+            best_source=str(d["best_source"]),
+            centre_source=str(d["centre_source"]),
+            nfev=int(d["nfev"]),
+            nfev_total=int(d["nfev_total"]),
+            next_frame=Frame.from_dict(d["next_frame"]),
             extra=dict(d.get("extra", {})),
-        )  # fmt: skip
+        )

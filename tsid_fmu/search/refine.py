@@ -54,8 +54,9 @@ class _Problem:
             raise _Budget
         ev = self.evaluator.evaluate(sets)
         out = []
-        for x, cost, r in zip(sets, ev.costs[:, 0], ev.residuals or [None] * len(sets),
-                              strict=True):  # fmt: skip
+        for x, cost, r in zip(
+            sets, ev.costs[:, 0], ev.residuals or [None] * len(sets), strict=True
+        ):
             if r is None or not np.isfinite(cost):
                 r = np.full(self.size or 1, _FAILED)
             self.size = self.size or r.size
@@ -122,15 +123,26 @@ def refine_stage(
     problem.best = (float(start_cost), {n: float(start[n]) for n in space.names})
     s0 = space.to_s(start)
     width = space.s_upper - space.s_lower
-    s0 = np.clip(s0, space.s_lower + 1e-9 * np.minimum(width, 1.0),
-                 space.s_upper - 1e-9 * np.minimum(width, 1.0))  # fmt: skip
+    s0 = np.clip(
+        s0,
+        space.s_lower + 1e-9 * np.minimum(width, 1.0),
+        space.s_upper - 1e-9 * np.minimum(width, 1.0),
+    )
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
     extra: dict[str, Any] = {"method": "scipy.optimize.least_squares(method='trf')"}
     try:
-        out = least_squares(problem.fun, s0, jac=problem.jac,
-                            bounds=(space.s_lower, space.s_upper), method="trf",
-                            ftol=1e-8, xtol=1e-8, gtol=1e-8, max_nfev=10_000)  # fmt: skip
+        out = least_squares(
+            problem.fun,
+            s0,
+            jac=problem.jac,
+            bounds=(space.s_lower, space.s_upper),
+            method="trf",
+            ftol=1e-8,
+            xtol=1e-8,
+            gtol=1e-8,
+            max_nfev=10_000,
+        )
         status, message = 0, f"least squares: {out.message}"
         extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
     except _Budget:
@@ -141,6 +153,12 @@ def refine_stage(
     if progress:
         progress("refinement done", {"stage": name, "cost": cost, "nfev": nfev})
     return StageResult(
-        name=name, kind="refinement", x={**(fixed or {}), **x}, cost=cost, nfev=nfev,
-        message=message, status=status, extra=extra,
-    )  # fmt: skip
+        name=name,
+        kind="refinement",
+        x={**(fixed or {}), **x},
+        cost=cost,
+        nfev=nfev,
+        message=message,
+        status=status,
+        extra=extra,
+    )

@@ -44,8 +44,10 @@ class Space:
     ) -> None:
         self.names = tuple(levels)
         self.log = np.array([use_log_scale(levels[n], options) for n in self.names])
-        u = [np.log10(levels[n]) if lg else np.asarray(levels[n], float)
-             for n, lg in zip(self.names, self.log, strict=True)]  # fmt: skip
+        u = [
+            np.log10(levels[n]) if lg else np.asarray(levels[n], float)
+            for n, lg in zip(self.names, self.log, strict=True)
+        ]
         self.origin = np.array([0.5 * (v.max() + v.min()) for v in u])
         self.width = np.array([max(v.max() - v.min(), 1e-300) for v in u])
         self.bounds = {n: tuple(map(float, bounds[n])) for n in self.names}
@@ -67,8 +69,9 @@ class Space:
         return len(self.names)
 
     def to_s(self, x: Mapping[str, float]) -> np.ndarray:
-        """Return the coordinates of a parameter set (values at or below 0 of a log
-        parameter map to the lower end of the bounds).
+        """Return the coordinates of a parameter set.
+
+        Values at or below 0 of a log parameter map to the lower end of the bounds.
         """
         return np.array([self.coordinate(j, x[n]) for j, n in enumerate(self.names)])
 
@@ -101,6 +104,39 @@ class Space:
         v = np.asarray(d) * self.width
         norm = np.linalg.norm(v)
         return v / norm if norm > 0 else v
+
+    def local_scale(self, j: int, value: float) -> float:
+        """Change of parameter ``j`` per unit of its coordinate, at ``value``.
+
+        For a log parameter at (or below) its smallest first level, the scale at that
+        level: a value at a bound of 0 keeps a usable scale.
+        """
+        if self.log[j]:
+            smallest = 10.0 ** (self.origin[j] - 0.5 * self.width[j])
+            return max(abs(float(value)), smallest) * math.log(10.0) * float(self.width[j])
+        return float(self.width[j])
+
+    def anchored(self, x: Mapping[str, float]) -> Space:
+        """Linear coordinates about ``x`` with this space's local scale there.
+
+        ``s_j = (value_j - x_j) / scale_j``: a straight line in these coordinates is a
+        straight line in the parameters (so valleys along sums of parameters, such as a
+        total damping, stay straight), and near ``x`` a unit step means what it means in
+        this space (so log parameters keep their relative resolution).
+        """
+        out = object.__new__(Space)
+        out.names = self.names
+        out.bounds = self.bounds
+        out.log = np.zeros(self.dim, dtype=bool)
+        out.origin = np.array([float(x[n]) for n in self.names])
+        out.width = np.array(
+            [max(self.local_scale(j, x[n]), 1e-300) for j, n in enumerate(self.names)]
+        )
+        lo = np.array([self.bounds[n][0] for n in self.names])
+        hi = np.array([self.bounds[n][1] for n in self.names])
+        out.s_lower = (lo - out.origin) / out.width
+        out.s_upper = (hi - out.origin) / out.width
+        return out
 
     def label(self, j: int) -> str:
         """Name of parameter ``j``'s working-domain coordinate (``lg K_s`` or ``M_m``)."""

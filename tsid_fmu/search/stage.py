@@ -62,7 +62,7 @@ class StageResult:
         return self.status == 0
 
     def to_dict(self) -> dict[str, Any]:
-        """The summary written into ``result.json`` (``records`` are kept apart)."""
+        """Return the summary written into ``result.json`` (records are kept apart)."""
         return {
             "name": self.name,
             "kind": self.kind,
@@ -82,8 +82,14 @@ class StageResult:
     ) -> StageResult:
         """Re-create a stage written by :meth:`to_dict`, with its records."""
         return cls(
-            name=str(d["name"]), kind=str(d["kind"]), x={k: float(v) for k, v in d["x"].items()},
-            cost=unjson_float(d["cost"]), nfev=int(d["nfev"]), message=str(d["message"]),
-            status=int(d.get("status", 0)), records=list(records or []),
-            experiments=list(d.get("experiments", [])), extra=dict(d.get("extra", {})),
-        )  # fmt: skip
+            name=str(d["name"]),
+            kind=str(d["kind"]),
+            x={k: float(v) for k, v in d["x"].items()},
+            cost=unjson_float(d["cost"]),
+            nfev=int(d["nfev"]),
+            message=str(d["message"]),
+            status=int(d.get("status", 0)),
+            records=list(records or []),
+            experiments=list(d.get("experiments", [])),
+            extra=dict(d.get("extra", {})),
+        )

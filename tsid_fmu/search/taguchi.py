@@ -34,7 +34,8 @@ RERUN_AFTER = 2
 class Recorder(Protocol):
     """Receives each finished iteration (the audit trail writes it to disk)."""
 
-    def iteration(self, record: IterationRecord) -> None: ...
+    def iteration(self, record: IterationRecord) -> None:
+        """Keep a finished iteration."""
 
 
 @dataclass
@@ -58,7 +59,7 @@ class TaguchiRun:
 def _next_best(
     records: list[IterationRecord], run: TaguchiRun
 ) -> tuple[IterationRecord, int] | None:
-    """The run to re-conduct from when the last iterations did not lower the cost."""
+    """Find the run to re-conduct from when the last iterations did not lower the cost."""
     if len(records) < RERUN_AFTER + 1:
         return None
     last, src = records[-1], records[-1 - RERUN_AFTER]
@@ -78,11 +79,18 @@ def _next_best(
 
 
 def frame_from_run(record: IterationRecord, run: int, space: Space, method: Method) -> Frame:
-    """The next frame of ``record`` centred on its run ``run`` (0-based) instead."""
+    """Make the next frame of ``record`` centred on its run ``run`` (0-based) instead."""
     x = {n: float(v) for n, v in zip(record.parameters, record.sets[run], strict=True)}
     label = f"iteration {record.index}, run {run + 1}"
-    _, frame = next_frame(record.frame, space, record.sn_means(), (x, label), method.leveling,
-                          record.anova.contribution, None)  # fmt: skip
+    _, frame = next_frame(
+        record.frame,
+        space,
+        record.sn_means(),
+        (x, label),
+        method.leveling,
+        record.anova.contribution,
+        None,
+    )
     return frame
 
 
@@ -111,8 +119,10 @@ def _stalled(records: list[IterationRecord], method: Method) -> str | None:
     if n == 0 or len(records) < n + 1:
         return None
     recent = records[-n:]
-    if not all(all(d.delta_db < method.leveling.significance_db for d in r.decision.parameters)
-               for r in recent):  # fmt: skip
+    if not all(
+        all(d.delta_db < method.leveling.significance_db for d in r.decision.parameters)
+        for r in recent
+    ):
         return None
     before = records[-n - 1].best_cost
     if before - recent[-1].best_cost > method.leveling.stall_rtol * abs(before):
@@ -172,8 +182,9 @@ def taguchi_stage(
         index = len(records) + 1
         if progress:
             progress("iteration", {"stage": run.name, "iteration": index, "frame": frame})
-        rec = run_iteration(index, run.name, frame, run.space, evaluator, run.method, best, nfev,
-                            progress)  # fmt: skip
+        rec = run_iteration(
+            index, run.name, frame, run.space, evaluator, run.method, best, nfev, progress
+        )
         if pending is not None:
             rec.extra["rerun"] = pending[0]
             if pending[1] is not None:
@@ -211,7 +222,13 @@ def _result(
 ) -> StageResult:
     x = {**run.fixed, **(best.x if best else {})}
     return StageResult(
-        name=run.name, kind="taguchi", x=x, cost=best.cost if best else float("inf"),
-        nfev=nfev - run.nfev_before, message=message, status=status, records=records,
+        name=run.name,
+        kind="taguchi",
+        x=x,
+        cost=best.cost if best else float("inf"),
+        nfev=nfev - run.nfev_before,
+        message=message,
+        status=status,
+        records=records,
         experiments=list(run.experiments),
-    )  # fmt: skip
+    )

@@ -7,7 +7,7 @@
 """
 
 from tsid_fmu.study.definition import Study, load_study
-from tsid_fmu.study.prepare import load_experiment, prepare
+from tsid_fmu.study.prepare import load_experiment, prepare, serial_evaluator
 from tsid_fmu.study.schema import (
     MAX_REPLICATES,
     ContributionOptions,
@@ -28,4 +28,5 @@ __all__ = [
     "load_experiment",
     "load_study",
     "prepare",
+    "serial_evaluator",
 ]

@@ -166,7 +166,7 @@ class Study:
         if not isinstance(self.method, Method):
             raise StudyError(f"method must be a Method, got {type(self.method).__name__}")
         self.start_values = {
-            k: check_number(v, f"[study] start value {k}") for k, v in self.start_values.items()
+            k: check_number(v, f"[study] start_values {k}") for k, v in self.start_values.items()
         }
         self.interface = check_choice(self.interface, "interface", ("auto", "cs", "me"))
         if self.step_size is not None:
@@ -214,7 +214,7 @@ class Study:
         return {p.name: p.bounds for p in self.parameters}
 
     def identify_experiments(self) -> list[Experiment]:
-        """The experiments that are fitted (role ``identify``)."""
+        """Return the experiments that are fitted (role ``identify``)."""
         return [e for e in self.experiments if e.role == "identify"]
 
     @classmethod

@@ -9,11 +9,12 @@ import numpy as np
 from tsid_fmu.data.measured import MeasuredData, load_data
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import NOISE_POWER, noise_level
+from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Experiment
 
-__all__ = ["NOISE_FLOOR", "load_experiment", "prepare", "prepare_experiment"]
+__all__ = ["NOISE_FLOOR", "load_experiment", "prepare", "prepare_experiment", "serial_evaluator"]
 
 NOISE_FLOOR = 1e-3
 """An output that shows no noise has its residuals scaled as if its noise were this
@@ -28,13 +29,18 @@ def load_experiment(experiment: Experiment) -> MeasuredData:
     derived = experiment.derived or None
     if hasattr(data, "columns") and hasattr(data, "iloc"):
         return MeasuredData.from_frame(
-            data, time_column=experiment.time_column, source=experiment.name, derived=derived,
+            data,
+            time_column=experiment.time_column,
+            source=experiment.name,
+            derived=derived,
             sample_time=experiment.sample_time,
-        )  # fmt: skip
+        )
     return load_data(
-        data, time_column=experiment.time_column, derived=derived,
+        data,
+        time_column=experiment.time_column,
+        derived=derived,
         sample_time=experiment.sample_time,
-    )  # fmt: skip
+    )
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -61,8 +67,10 @@ def _weights_and_scale(
             'weights, or set weighting = "none"'
         )
     sigma = np.where(quiet, np.maximum(NOISE_FLOOR * rms, 1e-300), sigma)
-    weights = user if study.method.weighting == "none" else (
-        user / sigma ** NOISE_POWER[study.method.cost]
+    weights = (
+        user
+        if study.method.weighting == "none"
+        else (user / sigma ** NOISE_POWER[study.method.cost])
     )
     # residuals are scaled so that, for the sse cost, their sum of squares is the cost
     with np.errstate(divide="ignore"):
@@ -151,3 +159,14 @@ def prepare(
         interface=study.interface,
         step_size=study.step_size,
     )
+
+
+def serial_evaluator(study: Study, experiments: Sequence[str] | None = None) -> SerialEvaluator:
+    """Make an in-process evaluator of a study's experiments (for scripts and tests).
+
+    ``prepared`` holds its prepared experiments (the spec's), as the first release's
+    ``Evaluator(study)`` had.
+    """
+    ev = SerialEvaluator(prepare(study, experiments))
+    ev.prepared = ev.spec.experiments  # type: ignore[attr-defined]
+    return ev

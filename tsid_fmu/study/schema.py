@@ -43,7 +43,7 @@ def check_number(value: Any, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise StudyError(f"{what} must be a number, got {value!r}")
     if not math.isfinite(value):
-        raise StudyError(f"{what} must be a finite number, got {value!r}")
+        raise StudyError(f"{what} must be finite, got {value!r}")
     return float(value)
 
 
@@ -66,9 +66,10 @@ def check_whole(value: Any, what: str, low: int, high: int | None = None) -> int
 
 
 def check_choice(value: Any, what: str, allowed: tuple[str, ...]) -> str:
-    """Return ``value`` if it is one of ``allowed``."""
+    """Return ``value`` if it is one of ``allowed`` (the message lists them)."""
     if value not in allowed:
-        raise StudyError(f"{what} must be one of {', '.join(map(repr, allowed))}, got {value!r}")
+        choices = ", ".join(map(repr, allowed[:-1])) + f" or {allowed[-1]!r}"
+        raise StudyError(f"{what} must be {choices}, got {value!r}")
     return str(value)
 
 
@@ -101,7 +102,7 @@ class Parameter:
         if isinstance(self.levels, str | bytes) or not hasattr(self.levels, "__iter__"):
             raise StudyError(f"parameter {self.name!r}: levels must be a list of numbers")
         self.levels = sorted(
-            check_number(v, f"parameter {self.name!r}: level") for v in self.levels
+            check_number(v, f"parameter {self.name!r}: levels") for v in self.levels
         )
         if len(self.levels) < 2:
             raise StudyError(f"parameter {self.name!r}: needs at least 2 levels")
@@ -191,7 +192,7 @@ class Experiment:
             raise StudyError(f"{where}: no outputs to compare with the data")
         if self.weights is not None:
             self.weights = {
-                k: check_number(v, f"{where}: weight of {k}") for k, v in self.weights.items()
+                k: check_number(v, f"{where}: weights of {k}") for k, v in self.weights.items()
             }
             if any(v < 0 for v in self.weights.values()):
                 raise StudyError(f"{where}: weights must be >= 0, got {self.weights}")
@@ -303,7 +304,8 @@ class Method:
     Parameters
     ----------
     array : str, optional
-        Orthogonal array (e.g. ``"L25"``); default the smallest that fits the levels.
+        Orthogonal array (e.g. ``"L25"``) of the first levels, and of later iterations
+        whose factors it fits; default (and otherwise) the smallest that fits.
     cost : str
         The study's one objective (:data:`tsid_fmu.evaluate.cost.COSTS`): ``"iae"``
         (default, the SISO paper's), ``"sse"`` (the MISO paper's; with

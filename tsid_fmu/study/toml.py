@@ -27,29 +27,79 @@ __all__ = ["read_study_file", "study_from_document", "write_study_file"]
 MAX_FILE_BYTES = 16 * 1024**2
 """Largest study file read."""
 
-_TOP = {"study", "data", "experiments", "method", "leveling", "parameters", "phases",
-        "contribution"}  # fmt: skip
+_TOP = {
+    "study",
+    "data",
+    "experiments",
+    "method",
+    "leveling",
+    "parameters",
+    "phases",
+    "contribution",
+}
 _STUDY = {"name", "fmu", "start_values", "interface", "step_size"}
-_DATA = {"file", "name", "time", "derived", "inputs", "outputs", "weights", "start_values",
-         "sample_time", "role", "hold", "noise"}  # fmt: skip
+_DATA = {
+    "file",
+    "name",
+    "time",
+    "derived",
+    "inputs",
+    "outputs",
+    "weights",
+    "start_values",
+    "sample_time",
+    "role",
+    "hold",
+    "noise",
+}
 _PARAM = {"levels", "min", "max", "unit"}
 _PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
 _METHOD_TYPES: dict[str, type] = {
-    "array": str, "cost": str, "weighting": str, "replicates": int, "input_noise": float,
-    "seed": int, "max_iterations": int, "max_simulations": int, "selection": str,
-    "rotate": bool, "max_reruns": int, "refine": str, "refine_max_nfev": int,
-}  # fmt: skip
+    "array": str,
+    "cost": str,
+    "weighting": str,
+    "replicates": int,
+    "input_noise": float,
+    "seed": int,
+    "max_iterations": int,
+    "max_simulations": int,
+    "selection": str,
+    "rotate": bool,
+    "max_reruns": int,
+    "refine": str,
+    "refine_max_nfev": int,
+}
 _LEVELING_TYPES: dict[str, type] = {
-    "significance_db": float, "tolerance": float, "shrink": float, "n_levels": int,
-    "refine": bool, "selective": bool, "scale": str, "log_ratio": float,
-    "min_contribution": float, "expand": float, "stall": int, "stall_rtol": float,
-}  # fmt: skip
+    "significance_db": float,
+    "tolerance": float,
+    "shrink": float,
+    "n_levels": int,
+    "refine": bool,
+    "selective": bool,
+    "scale": str,
+    "log_ratio": float,
+    "min_contribution": float,
+    "expand": float,
+    "stall": int,
+    "stall_rtol": float,
+}
 _CONTRIB_TYPES: dict[str, type] = {
-    "enabled": bool, "group_ratio": float, "min_percent": float, "values": dict,
-    "compare_ungrouped": bool, "refine_jointly": bool, "refine_span": float,
-}  # fmt: skip
-_TYPE_NAMES = {float: "a number", int: "an integer", str: "a string", bool: "true or false",
-               list: "a list", dict: "a table"}  # fmt: skip
+    "enabled": bool,
+    "group_ratio": float,
+    "min_percent": float,
+    "values": dict,
+    "compare_ungrouped": bool,
+    "refine_jointly": bool,
+    "refine_span": float,
+}
+_TYPE_NAMES = {
+    float: "a number",
+    int: "an integer",
+    str: "a string",
+    bool: "true or false",
+    list: "a list",
+    dict: "a table",
+}
 
 
 class _Where:
@@ -135,8 +185,13 @@ def _experiment(e: Mapping[str, Any], base: Path, where: _Where, label: str, i: 
     if not outputs:
         raise where.error(label, 'needs outputs = { FMU_VARIABLE = "column" }')
     return _build(
-        where, label, Experiment, data=path, inputs=_map(e, "inputs", str, where, label),
-        outputs=outputs, name=_get(e, "name", str, where, label, path.stem or f"exp{i + 1}"),
+        where,
+        label,
+        Experiment,
+        data=path,
+        inputs=_map(e, "inputs", str, where, label),
+        outputs=outputs,
+        name=_get(e, "name", str, where, label, path.stem or f"exp{i + 1}"),
         time_column=_get(e, "time", str, where, label, "time"),
         derived=_map(e, "derived", str, where, label),
         weights=_map(e, "weights", float, where, label) if "weights" in e else None,
@@ -145,7 +200,7 @@ def _experiment(e: Mapping[str, Any], base: Path, where: _Where, label: str, i: 
         role=_get(e, "role", str, where, label, "identify"),
         hold=_map(e, "hold", str, where, label),
         noise=_map(e, "noise", float, where, label),
-    )  # fmt: skip
+    )
 
 
 def _experiments(doc: Mapping[str, Any], base: Path, where: _Where) -> list[Experiment]:
@@ -181,7 +236,7 @@ def _parameters(doc: Mapping[str, Any], where: _Where) -> list[Parameter]:
                 min=_get(spec, "min", float, where, label, -math.inf),
                 max=_get(spec, "max", float, where, label, math.inf),
                 unit=_get(spec, "unit", str, where, label, ""),
-            )  # fmt: skip
+            )
         )
     return out
 
@@ -207,7 +262,7 @@ def _phases(doc: Mapping[str, Any], where: _Where) -> list[Phase]:
                 name=_get(ph, "name", str, where, label, ""),
                 array=_get(ph, "array", str, where, label),
                 max_iterations=_get(ph, "max_iterations", int, where, label),
-            )  # fmt: skip
+            )
         )
     return phases
 
@@ -322,10 +377,18 @@ def _experiment_table(e: Experiment, base: Path, stem: str) -> dict[str, Any]:
         file = name
     table: dict[str, Any] = {"file": file, "name": e.name}
     fields = _non_default(e)
-    for key, out in (("time_column", "time"), ("inputs", "inputs"), ("outputs", "outputs"),
-                     ("derived", "derived"), ("weights", "weights"), ("hold", "hold"),
-                     ("start_values", "start_values"), ("sample_time", "sample_time"),
-                     ("role", "role"), ("noise", "noise")):  # fmt: skip
+    for key, out in (
+        ("time_column", "time"),
+        ("inputs", "inputs"),
+        ("outputs", "outputs"),
+        ("derived", "derived"),
+        ("weights", "weights"),
+        ("hold", "hold"),
+        ("start_values", "start_values"),
+        ("sample_time", "sample_time"),
+        ("role", "role"),
+        ("noise", "noise"),
+    ):
         if key in fields:
             table[out] = fields[key]
     return table

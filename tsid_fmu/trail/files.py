@@ -50,8 +50,11 @@ def atomic_write(path: Path, write: Callable[[Path], None] | str | bytes) -> Non
 
 
 def strict(data: Any) -> Any:
-    """Return ``data`` for strict JSON: non-finite floats become ``None``, numpy scalars
-    and arrays plain numbers and lists, tuples lists, other objects their ``str``."""
+    """Return ``data`` for strict JSON.
+
+    Non-finite floats become ``None``, numpy scalars and arrays plain numbers and lists,
+    tuples lists, other objects their ``str``.
+    """
     if isinstance(data, dict):
         return {str(k): strict(v) for k, v in data.items()}
     if isinstance(data, list | tuple):

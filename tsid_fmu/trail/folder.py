@@ -172,7 +172,9 @@ class Trail:
         d.mkdir(parents=True, exist_ok=True)
         n = max(len(v) for v in record.levels.values())
         lines = ["factor," + ",".join(f"level {i + 1}" for i in range(n))]
-        lines += [f + "," + ",".join(repr(float(v)) for v in record.levels[f]) for f in record.names]
+        lines += [
+            f + "," + ",".join(repr(float(v)) for v in record.levels[f]) for f in record.names
+        ]
         atomic_write(d / "levels.csv", "\n".join(lines) + "\n")
         atomic_write(d / "runs.csv", record.runs_frame().to_csv(index=False))
         atomic_write(d / "response.csv", record.response.to_pandas().to_csv())
@@ -191,4 +193,3 @@ class Trail:
         """Write a text file into the output folder."""
         atomic_write(self.out / name, text)
         return self.out / name
-

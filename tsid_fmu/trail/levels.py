@@ -28,8 +28,9 @@ def _fmt(values: Any) -> str:
     return "[" + ", ".join(repr(float(v)) for v in values) + "]"
 
 
-def write_next_levels(path: Path, record: IterationRecord, space: Space, frame: Frame,
-                      note: str) -> str:  # fmt: skip
+def write_next_levels(
+    path: Path, record: IterationRecord, space: Space, frame: Frame, note: str
+) -> str:
     """Return the text of ``next_levels.toml`` for ``frame`` (proposed after ``record``)."""
     head = (
         f"# Levels for iteration {record.index + 1} of {record.stage}: {note}.\n"
@@ -39,21 +40,30 @@ def write_next_levels(path: Path, record: IterationRecord, space: Space, frame: 
     reasons = {d.name: f"{d.case}: {d.reason}" for d in record.decision.parameters}
     if frame.axis_aligned:
         body = "[levels]\n" + "".join(
-            f"{f.name} = {_fmt(f.values)}" + (f"  # {reasons[f.name]}" if f.name in reasons else "")
+            f"{f.name} = {_fmt(f.values)}"
+            + (f"  # {reasons[f.name]}" if f.name in reasons else "")
             + "\n"
             for f in frame.factors
-        )  # fmt: skip
+        )
         return head + body
-    centre = space.to_x(frame.centre)
+    centre = frame.coords(space).to_x(frame.centre)
     body = "[centre]\n" + "".join(f"{n} = {centre[n]!r}\n" for n in space.names)
     for f in frame.factors:
-        direction = ", ".join(f"{n} = {float(c)!r}" for n, c in zip(space.names, f.direction,
-                                                                    strict=True))  # fmt: skip
+        direction = ", ".join(
+            f"{n} = {float(c)!r}" for n, c in zip(space.names, f.direction, strict=True)
+        )
         body += (
             f"\n[[factors]]  # {frame.describe(space, f)}\nname = {f.name!r}\n"
             f"direction = {{ {direction} }}\noffsets = {_fmt(f.offsets)}\n"
         )
-    return head + "# Rotated factors: directions in search coordinates (see the report).\n" + body
+    return (
+        head
+        + (
+            "# Rotated factors: directions in coordinates (value - centre) / scale, where a\n"
+            "# parameter's scale is its change per unit at the centre (see the report).\n"
+        )
+        + body
+    )
 
 
 def _numbers(path: Path, name: str, values: Any) -> list[float]:
@@ -89,8 +99,10 @@ def _rotated_frame(path: Path, doc: dict, space: Space) -> Frame:
     centre, factors = doc.get("centre"), doc.get("factors")
     if not isinstance(centre, dict) or not isinstance(factors, list) or not factors:
         raise StudyError(f"{path}: needs a [levels] table, or [centre] and [[factors]]")
-    x = {n: _numbers(path, f"centre {n}", [centre.get(n), centre.get(n, 0) + 1])[0]
-         for n in space.names}  # fmt: skip
+    x = {
+        n: _numbers(path, f"centre {n}", [centre.get(n), centre.get(n, 0) + 1])[0]
+        for n in space.names
+    }
     out = []
     for i, f in enumerate(factors):
         if not isinstance(f, dict) or not isinstance(f.get("direction"), dict):
@@ -99,11 +111,12 @@ def _rotated_frame(path: Path, doc: dict, space: Space) -> Frame:
         if not np.all(np.isfinite(d)) or np.linalg.norm(d) == 0:
             raise StudyError(f"{path}: [[factors]] #{i + 1} direction must be finite, not zero")
         offsets = _numbers(path, f"[[factors]] #{i + 1} offsets", f.get("offsets"))
-        out.append(Factor(str(f.get("name", f"A{i + 1}")), d / np.linalg.norm(d),
-                          np.asarray(offsets)))  # fmt: skip
+        out.append(
+            Factor(str(f.get("name", f"A{i + 1}")), d / np.linalg.norm(d), np.asarray(offsets))
+        )
     if len(out) != space.dim:
         raise StudyError(f"{path}: needs {space.dim} [[factors]], got {len(out)}")
-    return Frame(centre=space.to_s(x), factors=out)
+    return Frame(centre=np.zeros(space.dim), factors=out, anchor=x)
 
 
 def read_next_levels(path: Path, space: Space) -> Frame:

@@ -1,6 +1,6 @@
 """How well the data determine the answer: sensitivities, intervals, fit and mismatch."""
 
-from tsid_fmu.uncertainty.assess import MISMATCH, Assessment, assess, validate
+from tsid_fmu.uncertainty.assess import MISMATCH, Assessment, assess, standard_errors, validate
 from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, uncertainty
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, sensitivities
 
@@ -12,6 +12,7 @@ __all__ = [
     "Uncertainty",
     "assess",
     "sensitivities",
+    "standard_errors",
     "uncertainty",
     "validate",
 ]

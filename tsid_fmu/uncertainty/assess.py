@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.evaluate.cost import Cost, metrics, noise_level
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
@@ -16,7 +17,7 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.uncertainty.intervals import Uncertainty, uncertainty
 from tsid_fmu.uncertainty.sensitivity import sensitivities
 
-__all__ = ["MISMATCH", "Assessment", "assess", "validate"]
+__all__ = ["MISMATCH", "Assessment", "assess", "standard_errors", "validate"]
 
 MISMATCH = 1.5
 """Residual RMS above this many times an output's noise estimate is reported as model
@@ -79,9 +80,7 @@ def assess(
     return out
 
 
-def validate(
-    evaluator: Evaluator, spec: EvaluationSpec, x: Mapping[str, float]
-) -> dict[str, Any]:
+def validate(evaluator: Evaluator, spec: EvaluationSpec, x: Mapping[str, float]) -> dict[str, Any]:
     """Simulate the validation experiments at ``x``; return cost and fit per experiment."""
     sims = evaluator.simulate([dict(x)], count=False)[0]
     cost = Cost(spec.cost)
@@ -91,6 +90,21 @@ def validate(
             out[e.name] = {"error": sim.error}
             continue
         value = float(np.dot(cost.per_output(e.time, e.measured, sim.outputs), e.weights))
-        out[e.name] = {"cost": value,
-                       "fit": metrics(e.time, e.measured, sim.outputs, list(e.output_names))}  # fmt: skip
+        out[e.name] = {
+            "cost": value,
+            "fit": metrics(e.time, e.measured, sim.outputs, list(e.output_names)),
+        }
     return out
+
+
+def standard_errors(evaluator: Evaluator, x: Mapping[str, float]) -> Uncertainty | None:
+    """Cramer-Rao standard errors of ``x`` from an evaluator's experiments.
+
+    The derivatives are taken in linear coordinates (steps of 0.04 % of each value), the
+    noise of each output from its residual RMS at ``x``.
+    """
+    levels = {n: [0.9 * v, 1.1 * v] if v else [-0.1, 0.1] for n, v in x.items()}
+    bounds = {n: (-math.inf, math.inf) for n in x}
+    space = Space(levels, bounds, LevelingOptions(scale="linear"))
+    sens = sensitivities(evaluator, evaluator.spec, space, dict(x))
+    return None if sens is None else uncertainty(sens, space, dict(x))

@@ -72,6 +72,11 @@ class Uncertainty:
     noise: dict[str, list[float]] = field(default_factory=dict)
     method: str = "Cramer-Rao bound, noise from the residuals"
 
+    @property
+    def sigma(self) -> dict[str, list[float]]:
+        """The noise used per experiment and output (the same as :attr:`noise`)."""
+        return self.noise
+
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-serialisable copy (non-finite numbers as ``None``)."""
 
@@ -86,12 +91,17 @@ class Uncertainty:
 
         return clean(
             {
-                "values": self.values, "std_error": self.std_error, "relative": self.relative,
-                "intervals": self.intervals, "correlation": self.correlation,
-                "combinations": self.combinations, "condition": self.condition,
-                "noise": self.noise, "method": self.method,
+                "values": self.values,
+                "std_error": self.std_error,
+                "relative": self.relative,
+                "intervals": self.intervals,
+                "correlation": self.correlation,
+                "combinations": self.combinations,
+                "condition": self.condition,
+                "noise": self.noise,
+                "method": self.method,
             }
-        )  # fmt: skip
+        )
 
 
 def _whitened(sens: Sensitivities) -> tuple[np.ndarray, dict[str, list[float]]]:

@@ -88,7 +88,9 @@ def sensitivities(
         ]
         jac.append(np.stack(cols, axis=-1))
     return Sensitivities(
-        names=list(space.names), residuals=residuals, jacobian=jac,
+        names=list(space.names),
+        residuals=residuals,
+        jacobian=jac,
         experiments=[e.name for e in spec.experiments],
         output_names=[list(e.output_names) for e in spec.experiments],
-    )  # fmt: skip
+    )
