@@ -157,7 +157,10 @@ def _finish(
     exps = [e.name for e in study.identify_experiments()]
     spec = evaluators.spec(study.parameter_names, exps, {})
     ev = evaluators.get(study.parameter_names, exps, {})
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    # intervals in log10 for every positive-valued parameter: relative precision, positive
+    # bounds, and combinations that read as products and ratios
+    log = dataclasses.replace(study.method.leveling, scale="log")
+    space = Space(study.first_levels(), study.bounds(), log)
     found = assess(ev, spec, space, x)
     result.fun, result.fit, result.noise = found.fun, found.fit, found.noise
     result.uncertainty = found.uncertainty

@@ -154,6 +154,10 @@ def _rotated_frame(
     return Frame(centre=np.zeros(space.dim), factors=factors, note=note, anchor=dict(centre_x))
 
 
+GROWTH = 1.5
+"""Most a rotated factor's half-width may exceed the extent of the decided box along
+it: the curvature shapes the levels, the papers' cases still set their size."""
+
 POSITIVE_MARGIN = 0.75
 """A rotated factor's levels may move a parameter searched in log10 by at most this
 fraction of its value (so it stays positive, as its log10 coordinate guarantees)."""
@@ -189,8 +193,9 @@ def _widths(
     levels, a stiff one narrow levels); without them, the box's extent along each
     direction. Never more than :data:`MAX_HALF_WIDTH`.
     """
+    extent = np.sqrt(np.maximum(np.einsum("ik,ij,jk->k", directions, box, directions), 0.0))
     if curvature is None:
-        out = np.sqrt(np.maximum(np.einsum("ik,ij,jk->k", directions, box, directions), 0.0))
+        out = extent
     else:
         hess = directions @ np.diag(curvature) @ directions.T
         along = np.array(
@@ -199,6 +204,8 @@ def _widths(
         rise = float(np.exp(np.mean(np.log(np.maximum(along * np.square(half), 1e-300)))))
         top = max(float(curvature.max()), 1e-300)
         out = np.sqrt(rise / np.maximum(curvature, 1e-12 * top))
+        # the cases decided the box: a new factor may widen at most GROWTH times over it
+        out = np.minimum(out, GROWTH * extent)
     return np.clip(out, 1e-12, MAX_HALF_WIDTH)
 
 

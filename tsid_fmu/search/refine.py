@@ -119,7 +119,8 @@ def refine_stage(
     """
     from scipy.optimize import least_squares
 
-    problem = _Problem(space, evaluator, method.refine_max_nfev, fixed or {})
+    limit = method.refine_max_nfev or 30 * (space.dim + 1) * len(evaluator.spec.experiments)
+    problem = _Problem(space, evaluator, limit, fixed or {})
     problem.best = (float(start_cost), {n: float(start[n]) for n in space.names})
     s0 = space.to_s(start)
     width = space.s_upper - space.s_lower
@@ -147,7 +148,7 @@ def refine_stage(
         extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
     except _Budget:
         status = 1
-        message = f"simulation limit ({method.refine_max_nfev}) of the refinement reached"
+        message = f"simulation limit ({limit}) of the refinement reached"
     cost, x = problem.best
     nfev = evaluator.nfev - problem.start
     if progress:

@@ -346,8 +346,9 @@ class Method:
     refine : {"none", "least_squares"}
         Optional refinement stage after the Taguchi stage: a trust-region least-squares
         polish of the same cost (``"sse"`` only). Default ``"none"``.
-    refine_max_nfev : int
-        Most simulations of the refinement stage. Default 200.
+    refine_max_nfev : int, optional
+        Most simulations of the refinement stage; default ``30 (p + 1)`` times the
+        number of identification experiments (about thirty Jacobians).
     leveling : LevelingOptions
         Re-leveling thresholds and rules.
     """
@@ -364,7 +365,7 @@ class Method:
     rotate: bool = True
     max_reruns: int = 2
     refine: str = "none"
-    refine_max_nfev: int = 200
+    refine_max_nfev: int | None = None
     leveling: LevelingOptions = field(default_factory=LevelingOptions)
 
     def __post_init__(self) -> None:
@@ -394,6 +395,7 @@ class Method:
             raise StudyError(
                 f'refine = "least_squares" minimises the sse cost; the study uses {self.cost!r}'
             )
-        self.refine_max_nfev = check_whole(self.refine_max_nfev, "refine_max_nfev", 1)
+        if self.refine_max_nfev is not None:
+            self.refine_max_nfev = check_whole(self.refine_max_nfev, "refine_max_nfev", 1)
         if not isinstance(self.leveling, LevelingOptions):
             raise StudyError("leveling must be a LevelingOptions")

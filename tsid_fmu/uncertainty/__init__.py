@@ -2,6 +2,7 @@
 
 from tsid_fmu.uncertainty.assess import MISMATCH, Assessment, assess, standard_errors, validate
 from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, uncertainty
+from tsid_fmu.uncertainty.residuals import Whiteness, ljung_box, long_run_covariance
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, sensitivities
 
 __all__ = [
@@ -10,7 +11,10 @@ __all__ = [
     "Assessment",
     "Sensitivities",
     "Uncertainty",
+    "Whiteness",
     "assess",
+    "ljung_box",
+    "long_run_covariance",
     "sensitivities",
     "standard_errors",
     "uncertainty",

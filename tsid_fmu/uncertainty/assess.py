@@ -14,8 +14,9 @@ from tsid_fmu.evaluate.cost import Cost, metrics, noise_level
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
-from tsid_fmu.uncertainty.intervals import Uncertainty, uncertainty
-from tsid_fmu.uncertainty.sensitivity import sensitivities
+from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, uncertainty
+from tsid_fmu.uncertainty.profile import CHI2_95, ProfileProblem, profile_intervals
+from tsid_fmu.uncertainty.sensitivity import Sensitivities, sensitivities
 
 __all__ = ["MISMATCH", "Assessment", "assess", "standard_errors", "validate"]
 
@@ -76,8 +77,61 @@ def assess(
     sens = sensitivities(evaluator, spec, space, varied) if math.isfinite(fun) else None
     if sens is not None:
         out.uncertainty = uncertainty(sens, space, varied)
+    if out.uncertainty is not None and sens is not None and spec.cost == "sse":
+        _widen_by_profile(evaluator, spec, space, varied, fun, sens, out.uncertainty)
+    if out.uncertainty is not None and out.uncertainty.coloured:
+        u = out.uncertainty
+        out.warnings.append(
+            f"residuals are coloured ({', '.join(u.coloured)}): standard errors that assume "
+            f"white noise would be optimistic by ~x{u.inflation:.3g}; the intervals reported "
+            "use a HAC covariance that allows for it"
+        )
     out.nfev = evaluator.nfev - start
     return out
+
+
+def _widen_by_profile(
+    evaluator: Evaluator,
+    spec: EvaluationSpec,
+    space: Space,
+    x: dict[str, float],
+    cost: float,
+    sens: Sensitivities,
+    u: Uncertainty,
+) -> None:
+    """Make every interval at least as wide as the parameter's profile-likelihood one."""
+    blocks = [
+        jac / e.scale[None, :, None] for e, jac in zip(spec.experiments, sens.jacobian, strict=True)
+    ]
+    jacobian = np.vstack([b.reshape(-1, b.shape[-1]) for b in blocks])
+    n, p = jacobian.shape
+    threshold = CHI2_95 * max(cost / max(n - p, 1), 1e-300) * u.inflation**2
+    # linear coordinates with the same local scale: a valley along a sum of parameters is
+    # straight there, so the chord re-fit follows it (the Jacobian is the same at x)
+    line = space.anchored(x)
+    problem = ProfileProblem(evaluator, line, line.to_s(x), cost, jacobian, threshold)
+    steps = {
+        name: u.std_error[name] / space.local_scale(j, x[name])
+        for j, name in enumerate(space.names)
+    }
+    u.profile = profile_intervals(problem, steps)
+    for name, (low, high) in u.profile.items():
+        c_low, c_high = u.intervals.get(name, [None, None])
+        u.intervals[name] = [
+            None if low is None or c_low is None else min(low, c_low),
+            None if high is None or c_high is None else max(high, c_high),
+        ]
+        # the standard error reported is the wider interval's half-width / 1.96
+        if low is None or high is None:
+            u.std_error[name] = u.relative[name] = math.inf
+        else:
+            u.std_error[name] = max(u.std_error[name], 0.5 * (high - low) / Z95)
+            if x[name]:
+                u.relative[name] = 100 * u.std_error[name] / abs(x[name])
+    u.method = (
+        "the wider of a HAC sandwich (Newey-West, at least the Cramer-Rao bound) and the "
+        "profile likelihood"
+    )
 
 
 def validate(evaluator: Evaluator, spec: EvaluationSpec, x: Mapping[str, float]) -> dict[str, Any]:

@@ -1,14 +1,20 @@
 """Confidence intervals of the identified parameters, and what the data determine.
 
 From the sensitivities at the answer (:mod:`tsid_fmu.uncertainty.sensitivity`), each
-output is whitened by its noise, estimated from its own residuals (the residual RMS at
-the answer), and the Fisher information ``F = J^T J`` of the search coordinates gives the
-covariance ``F^-1`` (Cramer-Rao). The 95 % interval of each parameter is the value of
-its coordinate +/- 1.96 standard errors, mapped back to parameter units (asymmetric for
-parameters searched in log10). The eigenvectors of ``F`` name the combinations of
-parameters the data determine well (large eigenvalues) and those they do not; a
-parameter dominated by an undetermined combination gets an interval with an open end
-(``None``) rather than a small, false one.
+output is whitened by its residual RMS at the answer (its noise as the fit sees it).
+The Fisher matrix ``F = J^T J`` of the search coordinates gives the Cramer-Rao
+covariance ``F^-1``, which holds for white residuals. Residuals that are correlated in
+time (a model that misses something, a quantised sensor) make it too small, so the
+covariance used is the HAC sandwich ``F^-1 S F^-1``, ``S`` the Newey-West long-run
+covariance of the score contributions ``J_t r_t`` of every output series
+(:mod:`tsid_fmu.uncertainty.residuals`), and never less than the Cramer-Rao one. For
+white residuals the two agree.
+
+The 95 % interval of each parameter is its coordinate +/- 1.96 standard errors, mapped
+back to parameter units (asymmetric for parameters in log10). The eigenvectors of ``F``
+name the combinations of parameters the data determine and those they do not; a
+parameter dominated by an undetermined combination gets an open interval (``None``)
+rather than a small, false one.
 """
 
 from __future__ import annotations
@@ -21,9 +27,10 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty.residuals import bartlett_bandwidth, ljung_box, long_run_covariance
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
 
-__all__ = ["Z95", "Uncertainty", "uncertainty"]
+__all__ = ["UNDETERMINED", "Z95", "Uncertainty", "uncertainty"]
 
 Z95 = 1.959963984540054
 """Two-sided 95 % quantile of the standard normal distribution."""
@@ -35,17 +42,18 @@ range) is *not determined* by the data."""
 
 @dataclass
 class Uncertainty:
-    """Standard errors, intervals and determined combinations at the answer.
+    """Standard errors, intervals, residual diagnostics and determined combinations.
 
     Attributes
     ----------
     values : dict
         The parameter values analysed.
     std_error : dict
-        Standard error of each parameter's search coordinate, in parameter units near
-        the value (``value * ln 10 * se`` for log parameters).
+        Standard error of each parameter, in parameter units near the value.
     relative : dict
         Standard error relative to the value, in percent.
+    cramer_rao : dict
+        The Cramer-Rao (white-residual) relative standard error, in percent.
     intervals : dict
         95 % interval ``[low, high]`` per parameter; ``None`` for an end the data do not
         determine.
@@ -53,11 +61,18 @@ class Uncertainty:
         Correlation coefficients of the estimates.
     combinations : list of dict
         Eigen-combinations of the Fisher matrix, best determined first: ``{"terms":
-        {parameter: weight}, "std_error": se in search units, "determined": bool}``.
+        {coordinate: weight}, "std_error": in search units, "percent": relative standard
+        error of the combination when all its parameters are in log10, "determined"}``.
     condition : float
         Condition number of the Fisher matrix.
     noise : dict
-        Noise standard deviation used for each experiment's outputs (residual RMS).
+        Residual RMS of each experiment's outputs at the answer.
+    whiteness : dict
+        Per experiment and output: Ljung-Box p-value, lag-1 autocorrelation, whether
+        white, and the HAC bandwidth.
+    inflation : float
+        Median over the parameters of the HAC standard error over the Cramer-Rao one: how
+        optimistic white-residual standard errors would be.
     method : str
         How the intervals were computed.
     """
@@ -65,17 +80,31 @@ class Uncertainty:
     values: dict[str, float]
     std_error: dict[str, float] = field(default_factory=dict)
     relative: dict[str, float] = field(default_factory=dict)
+    cramer_rao: dict[str, float] = field(default_factory=dict)
     intervals: dict[str, list[float | None]] = field(default_factory=dict)
     correlation: dict[str, dict[str, float]] = field(default_factory=dict)
     combinations: list[dict[str, Any]] = field(default_factory=list)
     condition: float = float("nan")
     noise: dict[str, list[float]] = field(default_factory=dict)
-    method: str = "Cramer-Rao bound, noise from the residuals"
+    whiteness: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    inflation: float = 1.0
+    profile: dict[str, list[float | None]] = field(default_factory=dict)
+    method: str = "HAC sandwich (Newey-West), at least the Cramer-Rao bound"
 
     @property
     def sigma(self) -> dict[str, list[float]]:
         """The noise used per experiment and output (the same as :attr:`noise`)."""
         return self.noise
+
+    @property
+    def coloured(self) -> list[str]:
+        """``experiment / output`` of every residual series that is not white."""
+        return [
+            f"{e} / {o}"
+            for e, outs in self.whiteness.items()
+            for o, w in outs.items()
+            if not w["white"]
+        ]
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-serialisable copy (non-finite numbers as ``None``)."""
@@ -89,75 +118,134 @@ class Uncertainty:
                 return [clean(w) for w in v]
             return v
 
-        return clean(
-            {
-                "values": self.values,
-                "std_error": self.std_error,
-                "relative": self.relative,
-                "intervals": self.intervals,
-                "correlation": self.correlation,
-                "combinations": self.combinations,
-                "condition": self.condition,
-                "noise": self.noise,
-                "method": self.method,
-            }
+        keys = (
+            "values",
+            "std_error",
+            "relative",
+            "cramer_rao",
+            "intervals",
+            "correlation",
+            "combinations",
+            "condition",
+            "noise",
+            "whiteness",
+            "inflation",
+            "profile",
+            "method",
         )
+        return clean({k: getattr(self, k) for k in keys})
 
 
-def _whitened(sens: Sensitivities) -> tuple[np.ndarray, dict[str, list[float]]]:
-    """Stack the Jacobians, each output divided by its residual RMS."""
-    blocks, noise = [], {}
-    for name, r, jac in zip(sens.experiments, sens.residuals, sens.jacobian, strict=True):
+def _series(
+    sens: Sensitivities,
+) -> tuple[np.ndarray, list[tuple[str, str, np.ndarray, np.ndarray]]]:
+    """Whitened Jacobian of everything, and each output's (residual, Jacobian) series."""
+    blocks, series = [], []
+    for name, outs, r, jac in zip(
+        sens.experiments, sens.output_names, sens.residuals, sens.jacobian, strict=True
+    ):
         sigma = np.sqrt(np.mean(r**2, axis=0))
         sigma = np.where(sigma > 0, sigma, 1.0)
-        noise[name] = [float(v) for v in sigma]
-        blocks.append((jac / sigma[None, :, None]).reshape(-1, jac.shape[-1]))
-    return np.vstack(blocks), noise
+        for k, out in enumerate(outs):
+            rk, jk = r[:, k] / sigma[k], jac[:, k, :] / sigma[k]
+            series.append((name, out, rk, jk))
+            blocks.append(jk)
+    return np.vstack(blocks), series
+
+
+def _covariances(
+    fisher: np.ndarray, series: list[tuple[str, str, np.ndarray, np.ndarray]], out: Uncertainty
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cramer-Rao and HAC covariances, and the eigen-decomposition of the Fisher matrix."""
+    values, vectors = np.linalg.eigh(fisher)
+    top = max(float(values.max()), 1e-300)
+    keep = values > 1e-14 * top
+    inv = np.where(keep, 1.0 / np.maximum(values, 1e-300), 0.0)
+    pinv = (vectors * inv) @ vectors.T
+    middle = np.zeros_like(fisher)
+    for name, output, r, jac in series:
+        bandwidth = bartlett_bandwidth(r)
+        middle += long_run_covariance(jac * r[:, None], bandwidth)
+        test = ljung_box(r)
+        out.whiteness.setdefault(name, {})[output] = {
+            "p_value": test.p_value,
+            "rho1": test.rho1,
+            "white": test.white,
+            "bandwidth": bandwidth,
+        }
+    crb = pinv
+    hac = pinv @ middle @ pinv
+    # never below the Cramer-Rao bound on the diagonal (HAC estimates are noisy too)
+    cov = hac + np.diag(np.maximum(np.diag(crb) - np.diag(hac), 0.0))
+    if not keep.all():  # directions the data do not see at all: infinite variance
+        unseen = (vectors[:, ~keep] ** 2).sum(axis=1) > 1e-6
+        cov = cov + np.diag(np.where(unseen, np.inf, 0.0))
+        crb = crb + np.diag(np.where(unseen, np.inf, 0.0))
+    out.condition = float(top / max(float(values.min()), 1e-300))
+    return crb, cov, values, vectors
 
 
 def _interval(space: Space, j: int, s: float, half: float) -> list[float | None]:
+    if not math.isfinite(half) or half > 2 * UNDETERMINED:
+        return [None, None]
     low_s, high_s = s - half, s + half
     low = None if low_s < space.s_lower[j] - 1.0 else space.value(j, low_s)
     high = None if high_s > space.s_upper[j] + 1.0 else space.value(j, high_s)
-    if half > 2 * UNDETERMINED:
-        low = high = None
     return [low, high]
 
 
+def _combinations(space: Space, values: np.ndarray, vectors: np.ndarray, cov: np.ndarray) -> list:
+    out = []
+    for k in np.argsort(values)[::-1]:
+        v = vectors[:, k]
+        var = float(v @ np.where(np.isfinite(cov), cov, 0.0) @ v)
+        unseen = bool(np.any(~np.isfinite(np.diag(cov))[np.abs(v) > 1e-3]))
+        se = math.inf if unseen or values[k] <= 0 else math.sqrt(max(var, 0.0))
+        u = space.u_direction(v)
+        terms = {space.label(j): round(float(c), 3) for j, c in enumerate(u) if abs(c) >= 0.05}
+        used = [j for j, c in enumerate(u) if abs(c) >= 0.05]
+        # standard error along the unit direction in log10 units, as a relative change
+        scale = float(np.linalg.norm(v * space.width))
+        percent = (
+            100 * math.log(10) * se * scale
+            if all(space.log[j] for j in used) and math.isfinite(se)
+            else math.nan
+        )
+        out.append(
+            {"terms": terms, "std_error": se, "percent": percent, "determined": se < UNDETERMINED}
+        )
+    return out
+
+
 def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Uncertainty | None:
-    """Compute the standard errors, intervals and combinations (see the module doc).
+    """Compute standard errors, intervals, diagnostics and combinations (module doc).
 
     Returns ``None`` if the outputs do not depend on the parameters at all.
     """
-    jac, noise = _whitened(sens)
+    jac, series = _series(sens)
     fisher = jac.T @ jac
     if not np.all(np.isfinite(fisher)) or not np.any(fisher):
         return None
-    values, vectors = np.linalg.eigh(fisher)
-    top = max(float(values.max()), 1e-300)
-    inv = np.where(values > 1e-14 * top, 1.0 / np.maximum(values, 1e-300), np.inf)
-    cov = (vectors * np.where(np.isfinite(inv), inv, 0.0)) @ vectors.T
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    weak = ~np.isfinite(inv)
-    if weak.any():  # directions the data do not see at all: infinite variance
-        se = se + np.where((vectors[:, weak] ** 2).sum(axis=1) > 1e-6, np.inf, 0.0)
+    out = Uncertainty(values={n: float(x[n]) for n in space.names})
+    for name, r in zip(sens.experiments, sens.residuals, strict=True):
+        out.noise[name] = [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
+    crb, cov, values, vectors = _covariances(fisher, series, out)
+    se, se_crb = np.sqrt(np.clip(np.diag(cov), 0, None)), np.sqrt(np.clip(np.diag(crb), 0, None))
     s0 = space.to_s(x)
-    out = Uncertainty(values={n: float(x[n]) for n in space.names}, noise=noise)
-    out.condition = float(top / max(float(values.min()), 1e-300))
+    ratios = []
     for j, n in enumerate(space.names):
-        width = space.width[j] * se[j]  # in working-domain units (decades for log)
-        out.std_error[n] = float(abs(x[n]) * math.log(10) * width) if space.log[j] else float(width)
+        out.std_error[n] = float(space.local_scale(j, x[n]) * se[j])
         out.relative[n] = float(100 * out.std_error[n] / abs(x[n])) if x[n] else math.inf
+        crb_n = float(space.local_scale(j, x[n]) * se_crb[j])
+        out.cramer_rao[n] = float(100 * crb_n / abs(x[n])) if x[n] else math.inf
         out.intervals[n] = _interval(space, j, float(s0[j]), Z95 * float(se[j]))
-    d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(d, d)
+        if 0 < se_crb[j] < math.inf and math.isfinite(se[j]):
+            ratios.append(se[j] / se_crb[j])
+    out.inflation = float(np.median(ratios)) if ratios else 1.0
+    finite = np.where(np.isfinite(cov), cov, 0.0)
+    d = np.sqrt(np.clip(np.diag(finite), 1e-300, None))
+    corr = finite / np.outer(d, d)
     for i, n in enumerate(space.names):
         out.correlation[n] = {m: float(corr[i, k]) for k, m in enumerate(space.names)}
-    for k in np.argsort(values)[::-1]:
-        v = space.u_direction(vectors[:, k])
-        se_k = 1.0 / math.sqrt(values[k]) if values[k] > 1e-14 * top else math.inf
-        terms = {space.label(j): round(float(c), 3) for j, c in enumerate(v) if abs(c) >= 0.05}
-        out.combinations.append(
-            {"terms": terms, "std_error": se_k, "determined": se_k < UNDETERMINED}
-        )
+    out.combinations = _combinations(space, values, vectors, cov)
     return out
