@@ -126,6 +126,17 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
         terms = " ".join(f"{w:+.2f} {n}" for n, w in c["terms"].items())
         state = "determined" if c["determined"] else "**not determined**"
         lines.append(f"- {terms}: standard error {c['std_error']:.3g} ({state})")
+    for g in u.scale_groups:
+        ratios = ", ".join(f"{k} to +/-{v:.2g} %" for k, v in g["ratios"].items())
+        outside = [n for n in u.values if n not in g["parameters"]]
+        lines.append(
+            f"- {', '.join(g['parameters'])}: the data fix their ratios ({ratios}) but their "
+            f"common scale only to +/-{g['scale_percent']:.2g} % (standard error): only "
+            f"what does not scale with them ({', '.join(outside) or 'nothing'}) sets it"
+        )
+    for name, (low, high) in result.intervals.items():
+        if low is None or high is None:
+            lines.append(f"- **{name}**: the data do not determine it: its 95 % interval is open")
     return [*lines, ""]
 
 

@@ -14,7 +14,7 @@ from tsid_fmu.evaluate.cost import Cost, metrics, noise_level
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
-from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, uncertainty
+from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, scale_groups, uncertainty
 from tsid_fmu.uncertainty.profile import CHI2_95, ProfileProblem, profile_intervals
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, sensitivities
 
@@ -79,6 +79,8 @@ def assess(
         out.uncertainty = uncertainty(sens, space, varied)
     if out.uncertainty is not None and sens is not None and spec.cost == "sse":
         _widen_by_profile(evaluator, spec, space, varied, fun, sens, out.uncertainty)
+    if out.uncertainty is not None:
+        out.uncertainty.scale_groups = scale_groups(out.uncertainty, space)
     if out.uncertainty is not None and out.uncertainty.coloured:
         u = out.uncertainty
         out.warnings.append(

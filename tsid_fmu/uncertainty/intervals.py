@@ -89,6 +89,7 @@ class Uncertainty:
     whiteness: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     inflation: float = 1.0
     profile: dict[str, list[float | None]] = field(default_factory=dict)
+    scale_groups: list[dict[str, Any]] = field(default_factory=list)
     method: str = "HAC sandwich (Newey-West), at least the Cramer-Rao bound"
 
     @property
@@ -131,6 +132,7 @@ class Uncertainty:
             "whiteness",
             "inflation",
             "profile",
+            "scale_groups",
             "method",
         )
         return clean({k: getattr(self, k) for k in keys})
@@ -248,4 +250,71 @@ def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Un
     for i, n in enumerate(space.names):
         out.correlation[n] = {m: float(corr[i, k]) for k, m in enumerate(space.names)}
     out.combinations = _combinations(space, values, vectors, cov)
+    out.cov = cov  # type: ignore[attr-defined]
+    return out
+
+
+RATIO_GAIN = 4.0
+"""A ratio of two parameters counts as determined when its relative standard error is
+at least this many times smaller than each parameter's own."""
+
+
+def scale_groups(u: Uncertainty, space: Space) -> list[dict[str, Any]]:
+    """Find groups of parameters whose ratios the data fix better than the parameters.
+
+    A model that depends on some parameters only through their ratios (a mass and a
+    stiffness through a natural frequency) lets the data fix those ratios well and the
+    group's common scale poorly. Parameters are joined when the relative standard error
+    of their ratio (from the covariance) is :data:`RATIO_GAIN` times smaller than both
+    of theirs (which include the profile likelihood).
+
+    Returns
+    -------
+    list of dict
+        ``{"parameters": [...], "ratios": {"a/b": percent}, "scale_percent": percent}``.
+    """
+    cov = getattr(u, "cov", None)
+    if cov is None:
+        return []
+    names = list(space.names)
+    idx = [j for j, n in enumerate(names) if space.log[j] and math.isfinite(u.relative[n])]
+    w = space.width * math.log(10.0) * 100.0  # percent per search unit, for log parameters
+    parent = {j: j for j in idx}
+
+    def root(j: int) -> int:
+        while parent[j] != j:
+            j = parent[j]
+        return j
+
+    ratios: dict[tuple[int, int], float] = {}
+    for a in idx:
+        for b in idx:
+            if b <= a:
+                continue
+            var = cov[a, a] * w[a] ** 2 + cov[b, b] * w[b] ** 2 - 2 * cov[a, b] * w[a] * w[b]
+            pct = math.sqrt(max(var, 0.0)) if np.isfinite(var) else math.inf
+            weaker = min(u.relative[names[a]], u.relative[names[b]])
+            if weaker > 1.0 and pct * RATIO_GAIN < weaker:
+                ratios[(a, b)] = pct
+                parent[root(b)] = root(a)
+    groups: dict[int, list[int]] = {}
+    for j in idx:
+        groups.setdefault(root(j), []).append(j)
+    out = []
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        ref = min(members, key=lambda j: u.relative[names[j]])
+        found = {
+            f"{names[a]}/{names[b]}": p
+            for (a, b), p in ratios.items()
+            if a in members and b in members
+        }
+        out.append(
+            {
+                "parameters": [names[j] for j in members],
+                "ratios": found,
+                "scale_percent": u.relative[names[ref]],
+            }
+        )
     return out
