@@ -81,3 +81,8 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     assert abs((x["C_1"] / x["K_s"]) / (20.0 / 5000.0) - 1) < 0.02
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## Stages" in report and "contribution" in report
+    # the same study without grouping, side by side (cost and simulations)
+    comp = res.extra["comparison"]
+    assert comp["phased"]["nfev"] > 0 and comp["ungrouped"]["nfev"] > 0
+    assert np.isfinite(comp["phased"]["cost"]) and np.isfinite(comp["ungrouped"]["cost"])
+    assert "Why grouping: the same study without it" in report

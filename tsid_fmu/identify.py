@@ -25,7 +25,7 @@ from tsid_fmu.report.markdown import markdown_report
 from tsid_fmu.report.plots import convergence_plot, fit_plot, main_effects_plot
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.search.iteration import ProgressCallback
-from tsid_fmu.search.pipeline import Control, run_stages
+from tsid_fmu.search.pipeline import Control, run_stages, run_ungrouped
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
@@ -126,6 +126,22 @@ def _weak(result: IdentificationResult) -> dict[str, str]:
     return weak
 
 
+def _compare_ungrouped(
+    study: Study, evaluators: _Evaluators, store: Trail | NullStore, result: IdentificationResult
+) -> dict[str, Any]:
+    """Run the same study without grouping, to set beside the phased one."""
+    alone = run_ungrouped(study, evaluators, store)
+    return {
+        "phased": {"cost": result.fun, "nfev": result.nfev, "x": dict(result.x)},
+        "ungrouped": {
+            "cost": alone.cost,
+            "nfev": alone.nfev,
+            "x": dict(alone.x),
+            "message": alone.message,
+        },
+    }
+
+
 def _finish(
     study: Study,
     stages: list[StageResult],
@@ -167,6 +183,8 @@ def _finish(
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
     result.warnings = found.warnings + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
     result.weak = _weak(result)
+    if study.contribution.enabled and study.contribution.compare_ungrouped:
+        result.extra["comparison"] = _compare_ungrouped(study, evaluators, store, result)
     checks = [e.name for e in study.experiments if e.role == "validate"]
     if checks:
         vspec = evaluators.spec(study.parameter_names, checks, {})

@@ -134,6 +134,7 @@ class IdentificationResult:
                 "validation": self.validation,
                 "weak": self.weak,
                 "warnings": self.warnings,
+                "comparison": self.extra.get("comparison"),
             }
         )
 

@@ -178,5 +178,17 @@ def markdown_report(result: IdentificationResult) -> str:
                 )
             )
         lines.append("")
+    comp = result.extra.get("comparison")
+    if comp:
+        ph, un = comp["phased"], comp["ungrouped"]
+        lines += [
+            "## Why grouping: the same study without it",
+            "",
+            "| | cost (identification experiments) | simulations |",
+            "|---|---|---|",
+            f"| grouped, in phases | {ph['cost']:.6g} | {ph['nfev']} |",
+            f"| all parameters in one array | {un['cost']:.6g} | {un['nfev']} |",
+            "",
+        ]
     lines += ["![fit](fit.png)", "", "![convergence](convergence.png)", ""]
     return "\n".join(lines)

@@ -28,7 +28,7 @@ from tsid_fmu.search.taguchi import TaguchiRun, frame_from_run, taguchi_stage
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Parameter, Phase
 
-__all__ = ["Control", "Evaluators", "StageStore", "run_stages"]
+__all__ = ["Control", "Evaluators", "StageStore", "run_stages", "run_ungrouped"]
 
 
 class StageStore(Protocol):
@@ -273,3 +273,43 @@ def run_stages(
         exps = [e.name for e in study.identify_experiments()]
         stages.append(_refinement(ctx, stages[-1], exps))
     return stages
+
+
+def run_ungrouped(
+    study: Study,
+    evaluators: Evaluators,
+    store: StageStore,
+    progress: ProgressCallback | None = None,
+) -> StageResult:
+    """Identify every parameter in one Taguchi stage on every identification experiment.
+
+    The MISO paper groups parameters and identifies them in phases; this runs the same
+    study without grouping (from the first levels, with the same refinement), kept in
+    the trail as ``ungrouped/``, so the report can show what grouping gained or cost.
+    The simulations are not part of the study's ``nfev``.
+    """
+    ctx = _Context(study, evaluators, store, progress, Control())
+    exps = [e.name for e in study.identify_experiments()]
+    if progress:
+        progress("stage", {"name": "ungrouped", "message": "comparison: all parameters at once"})
+    stage = _taguchi(
+        ctx,
+        "ungrouped",
+        "ungrouped comparison",
+        "taguchi",
+        list(study.parameters),
+        exps,
+        {},
+        0,
+        None,
+    )
+    if study.method.refine == "none" or stage.status == 2:
+        return stage
+    evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    polished = refine_stage(
+        "ungrouped refinement", space, stage.x, stage.cost, evaluator, study.method
+    )
+    polished.nfev += stage.nfev
+    polished.records = stage.records
+    return polished

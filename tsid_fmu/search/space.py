@@ -71,7 +71,8 @@ class Space:
     def to_s(self, x: Mapping[str, float]) -> np.ndarray:
         """Return the coordinates of a parameter set.
 
-        Values at or below 0 of a log parameter map to the lower end of the bounds.
+        Values at or below 0 of a log parameter map three decades below its smallest
+        first level.
         """
         return np.array([self.coordinate(j, x[n]) for j, n in enumerate(self.names)])
 
@@ -79,15 +80,19 @@ class Space:
         """Return parameter ``j``'s coordinate at ``value``."""
         v = float(value)
         if self.log[j]:
-            u = math.log10(v) if v > 0 else self.origin[j] + self.s_lower[j] * self.width[j]
+            # 0 (or less) has no log10: it maps three decades below the smallest first
+            # level, a finite coordinate that reads back as a tiny positive value
+            u = math.log10(v) if v > 0 else self.origin[j] - 0.5 * self.width[j] - 3.0
         else:
             u = v
         return float((u - self.origin[j]) / self.width[j])
 
     def value(self, j: int, s: float) -> float:
         """Return parameter ``j``'s value at coordinate ``s``, clipped to its bounds."""
-        u = self.origin[j] + s * self.width[j]
-        v = 10.0**u if self.log[j] else u
+        if not math.isfinite(s):
+            s = math.copysign(1e300, s) if not math.isnan(s) else 0.0
+        u = self.origin[j] + max(min(s, 1e300), -1e300) * self.width[j]
+        v = 10.0 ** min(max(u, -300.0), 300.0) if self.log[j] else u
         bmin, bmax = self.bounds[self.names[j]]
         return float(min(max(v, bmin), bmax))
 
