@@ -236,11 +236,14 @@ def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("problems", nargs="*", default=list(PROBLEMS), choices=list(PROBLEMS))
+    parser.add_argument("problems", nargs="*", help=f"any of {', '.join(PROBLEMS)} (default all)")
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--de-budget", type=int, default=1500)
     args = parser.parse_args()
-    for name in args.problems:
+    unknown = sorted(set(args.problems) - set(PROBLEMS))
+    if unknown:
+        parser.error(f"unknown problem(s) {unknown}; choose from {', '.join(PROBLEMS)}")
+    for name in args.problems or list(PROBLEMS):
         benchmark(name, args.workers, args.de_budget)
 
 
