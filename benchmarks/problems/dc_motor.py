@@ -29,27 +29,17 @@ import numpy as np
 import pandas as pd
 from scipy.linalg import expm
 
-if __package__:
-    from .base import (
-        Problem,
-        ProblemExperiment,
-        cached_path,
-        describe,
-        parameter,
-        rms_over_sigma,
-        sample_times,
-    )
-else:  # run as a script, or loaded from a file path
+if not __package__:  # run as a script, or loaded from a file path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from problems.base import (
-        Problem,
-        ProblemExperiment,
-        cached_path,
-        describe,
-        parameter,
-        rms_over_sigma,
-        sample_times,
-    )
+from problems.base import (
+    Problem,
+    ProblemExperiment,
+    cached_path,
+    describe,
+    parameter,
+    rms_over_sigma,
+    sample_times,
+)
 
 #: Truth: a small brushed DC motor (SI units).
 TRUTH = {"R": 2.0, "L": 5e-3, "J": 5e-5, "b": 2e-4, "Kt": 0.05}

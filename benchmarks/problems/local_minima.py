@@ -38,27 +38,17 @@ import numpy as np
 import pandas as pd
 from scipy.integrate import solve_ivp
 
-if __package__:
-    from .base import (
-        Problem,
-        ProblemExperiment,
-        cached_path,
-        describe,
-        parameter,
-        rms_over_sigma,
-        sample_times,
-    )
-else:  # run as a script, or loaded from a file path
+if not __package__:  # run as a script, or loaded from a file path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from problems.base import (
-        Problem,
-        ProblemExperiment,
-        cached_path,
-        describe,
-        parameter,
-        rms_over_sigma,
-        sample_times,
-    )
+from problems.base import (
+    Problem,
+    ProblemExperiment,
+    cached_path,
+    describe,
+    parameter,
+    rms_over_sigma,
+    sample_times,
+)
 
 TRUTH = {"omega": 13.0, "zeta": 0.02, "k": 2.5}
 RANGES = {"omega": (2.0, 20.0, "rad/s"), "zeta": (0.005, 0.1, "1"), "k": (0.5, 5.0, "1")}

@@ -17,27 +17,17 @@ from pathlib import Path
 
 import numpy as np
 
-if __package__:
-    from .base import (
-        REPO,
-        Problem,
-        ProblemExperiment,
-        describe,
-        load_module,
-        parameter,
-        rms_over_sigma,
-    )
-else:  # run as a script, or loaded from a file path
+if not __package__:  # run as a script, or loaded from a file path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from problems.base import (
-        REPO,
-        Problem,
-        ProblemExperiment,
-        describe,
-        load_module,
-        parameter,
-        rms_over_sigma,
-    )
+from problems.base import (
+    REPO,
+    Problem,
+    ProblemExperiment,
+    describe,
+    load_module,
+    parameter,
+    rms_over_sigma,
+)
 
 FMU = REPO / "fmus" / "LSEA_MISO.fmu"
 GENERATOR = REPO / "examples" / "lsea_miso" / "make_data.py"

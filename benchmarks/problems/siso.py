@@ -15,18 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-if __package__:
-    from .base import REPO, Problem, ProblemExperiment, describe, load_module, rms_over_sigma
-else:  # run as a script, or loaded from a file path
+if not __package__:  # run as a script, or loaded from a file path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from problems.base import (
-        REPO,
-        Problem,
-        ProblemExperiment,
-        describe,
-        load_module,
-        rms_over_sigma,
-    )
+from problems.base import REPO, Problem, ProblemExperiment, describe, load_module, rms_over_sigma
 
 FMU = REPO / "fmus" / "LSEA_SISO.fmu"
 GENERATOR = REPO / "examples" / "lsea_siso" / "make_data.py"

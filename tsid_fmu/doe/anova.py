@@ -65,6 +65,31 @@ class AnovaTable:
     residual_ss: float = field(repr=False, default=0.0)
     residual_dof: int = field(repr=False, default=0)
 
+    def _rows(self) -> list[tuple[str, list]]:
+        """Return the rows, ``(source, [dof, SS, MS, F, p, P %, pure %, pooled])``."""
+        rows = [
+            (
+                n,
+                [
+                    self.dof[n],
+                    self.ss[n],
+                    self.ms[n],
+                    self.f[n],
+                    self.p[n],
+                    self.contribution[n],
+                    self.pure_contribution[n],
+                    n in self.pooled,
+                ],
+            )
+            for n in self.factor_names
+        ]
+        error = [self.error_dof, self.error_ss, self.error_ms, np.nan, np.nan]
+        error += [self.error_contribution, self.error_pure_contribution, False]
+        rows.append(("error", error))
+        total = [self.dof_total, self.ss_total, np.nan, np.nan, np.nan, 100.0, 100.0, False]
+        rows.append(("total", total))
+        return rows
+
     def to_pandas(self) -> pd.DataFrame:
         """Return the ANOVA table.
 
@@ -76,35 +101,11 @@ class AnovaTable:
         """
         import pandas as pd
 
-        rows = []
-        for n in self.factor_names:
-            rows.append(
-                [
-                    self.dof[n],
-                    self.ss[n],
-                    self.ms[n],
-                    self.f[n],
-                    self.p[n],
-                    self.contribution[n],
-                    self.pure_contribution[n],
-                    n in self.pooled,
-                ]
-            )
-        rows.append(
-            [
-                self.error_dof,
-                self.error_ss,
-                self.error_ms,
-                np.nan,
-                np.nan,
-                self.error_contribution,
-                self.error_pure_contribution,
-                False,
-            ]
-        )
-        rows.append([self.dof_total, self.ss_total, np.nan, np.nan, np.nan, 100.0, 100.0, False])
+        rows = self._rows()
         columns = ["dof", "SS", "MS", "F", "p", "contribution %", "pure contribution %", "pooled"]
-        df = pd.DataFrame(rows, index=[*self.factor_names, "error", "total"], columns=columns)
+        df = pd.DataFrame(
+            [values for _, values in rows], index=[name for name, _ in rows], columns=columns
+        )
         df.index.name = "source"
         return df
 
@@ -115,43 +116,12 @@ class AnovaTable:
             f"  {'source':<{name_w}} {'dof':>4} {'SS':>11} {'MS':>11} {'F':>9} {'p':>8}"
             f" {'P %':>7} {'pure %':>7}",
         ]
-
-        def row(name: str, dof, ss, ms, f, p, c, pc, tag="") -> str:
-            return (
+        for name, (dof, ss, ms, f, p, c, pc, pooled) in self._rows():
+            tag = "  (pooled)" if pooled else ""
+            lines.append(
                 f"  {name:<{name_w}} {dof:>4d} {ss:>11.5g} {ms:>11.5g} {f:>9.4g} {p:>8.3g}"
                 f" {c:>7.2f} {pc:>7.2f}{tag}"
             )
-
-        for n in self.factor_names:
-            tag = "  (pooled)" if n in self.pooled else ""
-            lines.append(
-                row(
-                    n,
-                    self.dof[n],
-                    self.ss[n],
-                    self.ms[n],
-                    self.f[n],
-                    self.p[n],
-                    self.contribution[n],
-                    self.pure_contribution[n],
-                    tag,
-                )
-            )
-        lines.append(
-            row(
-                "error",
-                self.error_dof,
-                self.error_ss,
-                self.error_ms,
-                np.nan,
-                np.nan,
-                self.error_contribution,
-                self.error_pure_contribution,
-            )
-        )
-        lines.append(
-            row("total", self.dof_total, self.ss_total, np.nan, np.nan, np.nan, 100.0, 100.0)
-        )
         lines.append(")")
         return "\n".join(lines)
 
