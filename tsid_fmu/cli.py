@@ -4,7 +4,8 @@ Every ending is one exit status (:data:`EXIT_STATUSES`) and, for an error, one l
 stderr, never a traceback: errors of the package (:class:`~tsid_fmu.errors.TsidError`,
 bad input) exit with 2, an environment error (full disk, read-only folder) with 4
 naming the path, an interrupted study with 130 saying how to resume, and a closed
-pipe (``tsid info FMU | head``) quietly with 141.
+pipe (``tsid info FMU | head``) quietly with 141. Only a bug in tsid-fmu prints a
+traceback, and exits with 70, so that a script never takes a crash for a result.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ exit status:
   3    paused for review (--pause-after): edit next_levels.toml, then --resume
   4    environment error: disk full, folder read-only, no permission (one line
        naming the path)
+  70   internal error: a bug in tsid-fmu (the traceback is printed: please report it)
   130  interrupted (Ctrl-C): finished iterations are kept, continue with --resume
   141  the reader of the output went away (tsid info FMU | head): ends quietly
 """
@@ -253,6 +255,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 130
+    except Exception:  # a bug: the traceback is what a report of it needs
+        import traceback
+
+        traceback.print_exc()
+        print(
+            "tsid: internal error: this is a bug in tsid-fmu; please report it with the "
+            "command you ran and the traceback above",
+            file=sys.stderr,
+        )
+        return 70
 
 
 if __name__ == "__main__":  # pragma: no cover
