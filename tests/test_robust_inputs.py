@@ -80,9 +80,9 @@ BAD_DATA = [
      r"row 3 repeats the previous time"),
     ("back.csv", "time,u,y\n0,1,0\n0.02,1,0\n0.01,1,0\n", r"row 3 goes back"),
     ("text.csv", "time,u,y\n0,1,0\n0.01,one,0\n0.02,1,0\n",
-     r"column 'u' has non-numeric value 'one' in row 2"),
+     r"column 'u' has a non-numeric value in row 2$"),  # issue 13: the cell is not quoted
     ("ttext.csv", "time,u,y\n0,1,0\nsoon,1,0\n0.02,1,0\n",
-     r"column 'time' has non-numeric value 'soon'"),
+     r"column 'time' has a non-numeric value in row 2$"),
     ("empty.csv", "", r"empty\.csv: the file is empty"),
     ("blank.csv", "\n\n\n", r"blank\.csv: (the file is empty|no data|cannot read)"),
     ("header.csv", "time,u,y\n", r"header\.csv: (no data|at least 2 samples)"),

@@ -1,20 +1,39 @@
 """Command line: ``tsid identify | simulate | info | build``.
 
-Errors of the package (:class:`~tsid_fmu.errors.TsidError`) are printed as one line
-naming what is wrong, with exit status 2; an interrupted study exits with 130 and says
-how to resume.
+Every ending is one exit status (:data:`EXIT_STATUSES`) and, for an error, one line on
+stderr, never a traceback: errors of the package (:class:`~tsid_fmu.errors.TsidError`,
+bad input) exit with 2, an environment error (full disk, read-only folder) with 4
+naming the path, an interrupted study with 130 saying how to resume, and a closed
+pipe (``tsid info FMU | head``) quietly with 141. Only a bug in tsid-fmu prints a
+traceback, and exits with 70, so that a script never takes a crash for a result.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from tsid_fmu.errors import StudyError, TsidError
 
-__all__ = ["main"]
+__all__ = ["EXIT_STATUSES", "main"]
+
+EXIT_STATUSES = """\
+exit status:
+  0    converged
+  1    stopped at a limit (iterations, simulations) with a valid result
+  2    bad input: a study, data or FMU file, or an output folder that holds another
+       study or is in use (one line on stderr naming the file, key or folder)
+  3    paused for review (--pause-after): edit next_levels.toml, then --resume
+  4    environment error: disk full, folder read-only, no permission (one line
+       naming the path)
+  70   internal error: a bug in tsid-fmu (the traceback is printed: please report it)
+  130  interrupted (Ctrl-C): finished iterations are kept, continue with --resume
+  141  the reader of the output went away (tsid info FMU | head): ends quietly
+"""
 
 
 def _parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
@@ -129,7 +148,10 @@ def _cmd_build(args: argparse.Namespace) -> int:
 def make_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``tsid``."""
     parser = argparse.ArgumentParser(
-        prog="tsid", description="Taguchi-method identification of FMU parameters."
+        prog="tsid",
+        description="Taguchi-method identification of FMU parameters.",
+        epilog=EXIT_STATUSES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -185,20 +207,64 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _environment(exc: OSError) -> str:
+    """One line for an environment error, naming the path."""
+    reason = exc.strerror or type(exc).__name__
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        reason += " (the disk is full)"
+    elif exc.errno == errno.EROFS:
+        reason += " (the folder is on a read-only file system)"
+    where = exc.filename if exc.filename is not None else "(path not known)"
+    return f"cannot write or read {os.fsdecode(where)!s}: {reason}"
+
+
+def _quiet_stdout() -> None:
+    """After a broken pipe: send what is left of stdout nowhere (no second error)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # pragma: no cover - stdout without a descriptor
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; return the exit status."""
+    """Run the command line; return the exit status (see :data:`EXIT_STATUSES`)."""
     args = make_parser().parse_args(argv)
     try:
-        return args.func(args)
+        status = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return status
     except TsidError as exc:
         print(f"tsid: error: {exc}", file=sys.stderr)
         return 2
+    except RecursionError:
+        print("tsid: error: an input file is nested too deeply to read", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 141
+    except OSError as exc:
+        print(f"tsid: error: {_environment(exc)}", file=sys.stderr)
+        return 4
+    except MemoryError:
+        print("tsid: error: out of memory", file=sys.stderr)
+        return 4
     except KeyboardInterrupt:
         print(
             "\ntsid: interrupted; finished iterations are kept - continue with --resume",
             file=sys.stderr,
         )
         return 130
+    except Exception:  # a bug: the traceback is what a report of it needs
+        import traceback
+
+        traceback.print_exc()
+        print(
+            "tsid: internal error: this is a bug in tsid-fmu; please report it with the "
+            "command you ran and the traceback above",
+            file=sys.stderr,
+        )
+        return 70
 
 
 if __name__ == "__main__":  # pragma: no cover

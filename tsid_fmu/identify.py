@@ -268,8 +268,8 @@ def identify(
     evaluators = _Evaluators(
         study, {"workers": workers, "timeout": timeout, "scheduler": scheduler}, evaluator
     )
+    store: Trail | NullStore = NullStore()
     try:
-        store: Trail | NullStore = NullStore()
         if out is not None:
             draw = _plotter(evaluators, study) if plots else None
             store = Trail(out, study, resume=resume, on_iteration=draw)
@@ -279,6 +279,7 @@ def identify(
         result.out_dir = Path(out) if out is not None else None
     finally:
         evaluators.close()
+        store.close()  # the output folder's lock
     if callback:
         callback("done", {"result": result})
     return result

@@ -27,6 +27,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from tsid_fmu.data.derivative import DEFAULT_WINDOW, derivative
+from tsid_fmu.data.names import describe_columns
 from tsid_fmu.errors import DataError
 
 __all__ = ["CONSTANTS", "FUNCTIONS", "MAX_LENGTH", "evaluate", "names_used"]
@@ -255,10 +256,9 @@ def evaluate(
         with np.errstate(all="ignore"):
             value = _Evaluator(columns, sample_time)(tree.body)
     except _Refused as exc:
-        names = ", ".join(str(c) for c in columns)
         raise DataError(
             f"{source}: derived channel {channel!r} = {expression!r} {exc}; "
-            f"columns are {names} (functions: {', '.join(FUNCTIONS)})"
+            f"{describe_columns(list(columns))} (functions: {', '.join(FUNCTIONS)})"
         ) from None
     n = len(next(iter(columns.values()))) if columns else 0
     return np.broadcast_to(np.asarray(value, dtype=np.float64), (n,)).copy()

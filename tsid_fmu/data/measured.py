@@ -3,9 +3,11 @@
 Every problem is a :class:`~tsid_fmu.errors.DataError` whose message names the file
 and the column and row at fault, e.g.::
 
-    data.csv: column 'F_of' has non-numeric value 'n/a' in row 17
+    data.csv: column 'F_of' has a non-numeric value in row 17
 
 Rows are counted like a spreadsheet user reads them: row 1 is the first data row.
+Messages never quote the file's contents: not a cell, and column names only when the
+first line looks like a header (:mod:`tsid_fmu.data.names`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tsid_fmu.data.expressions import evaluate
+from tsid_fmu.data.names import column_label, describe_columns, safe_names
 from tsid_fmu.errors import DataError
 
 if TYPE_CHECKING:
@@ -70,11 +73,7 @@ class MeasuredData:
             No such column (the message lists the columns and close matches).
         """
         if name not in self.frame.columns:
-            close = difflib.get_close_matches(name, self.names, n=3, cutoff=0.6)
-            hint = f" Did you mean {', '.join(map(repr, close))}?" if close else ""
-            raise DataError(
-                f"{self.path}: no column {name!r}; columns are {', '.join(self.names)}.{hint}"
-            )
+            raise DataError(f"{self.path}: no column {name!r}; {_listing(name, self.names)}")
         return self.frame[name].to_numpy(dtype=np.float64)
 
     def columns(self, names: Sequence[str]) -> np.ndarray:
@@ -133,11 +132,9 @@ class MeasuredData:
         if frame.shape[0] == 0 or frame.shape[1] == 0:
             raise DataError(f"{source}: no data (the table is empty)")
         if time_column not in frame.columns:
-            close = difflib.get_close_matches(time_column, list(frame.columns), n=3, cutoff=0.5)
-            hint = f" Did you mean {', '.join(map(repr, close))}?" if close else ""
             raise DataError(
-                f"{source}: time column {time_column!r} not found; columns are "
-                f"{', '.join(frame.columns)}.{hint}"
+                f"{source}: time column {time_column!r} not found; "
+                + _listing(time_column, list(frame.columns), cutoff=0.5)
             )
         frame = _to_numeric(frame, source)
         _check_finite(frame, source)
@@ -175,11 +172,32 @@ def _to_numeric(frame: pd.DataFrame, source: str) -> pd.DataFrame:
         if bad.any():
             pos = int(np.flatnonzero(bad.to_numpy())[0])
             raise DataError(
-                f"{source}: column {name!r} has non-numeric value "
-                f"{col.iloc[pos]!r} in row {pos + 1}"
+                f"{source}: {column_label(name, list(frame.columns))} has a non-numeric "
+                f"value in row {pos + 1}"
             )
         out[name] = converted.astype(np.float64)
     return pd.DataFrame(out, index=frame.index)
+
+
+def _listing(name: str, names: list[str], cutoff: float = 0.6) -> str:
+    """``columns are ...`` and the close matches, when the names may be shown."""
+    if not safe_names(names):
+        return describe_columns(names)
+    close = difflib.get_close_matches(name, names, n=3, cutoff=cutoff)
+    hint = f" Did you mean {', '.join(map(repr, close))}?" if close else ""
+    return f"{describe_columns(names)}.{hint}"
+
+
+def _reason(exc: BaseException) -> str:
+    """Why a reader failed, in words that never quote the file."""
+    import pandas as pd
+
+    if isinstance(exc, UnicodeDecodeError):
+        return f"not {exc.encoding} text (byte {exc.start + 1})"
+    if isinstance(exc, pd.errors.ParserError | csv.Error | FileNotFoundError | PermissionError):
+        text = str(exc) if not isinstance(exc, OSError) else (exc.strerror or "")
+        return text.splitlines()[0][:200] if text else type(exc).__name__
+    return type(exc).__name__
 
 
 def _check_finite(frame: pd.DataFrame, source: str) -> None:
@@ -190,7 +208,8 @@ def _check_finite(frame: pd.DataFrame, source: str) -> None:
         row = int(np.flatnonzero(bad.any(axis=1))[0])
         col = int(np.flatnonzero(bad[row])[0])
         what = "missing (NaN)" if np.isnan(values[row, col]) else f"{values[row, col]}"
-        raise DataError(f"{source}: column {frame.columns[col]!r} is {what} in row {row + 1}")
+        label = column_label(frame.columns[col], list(frame.columns))
+        raise DataError(f"{source}: {label} is {what} in row {row + 1}")
 
 
 def _derive(
@@ -256,13 +275,13 @@ def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) ->
     except DataError:
         raise
     except (OSError, ValueError, pd.errors.ParserError, UnicodeDecodeError, csv.Error) as exc:
-        raise DataError(f"{path}: cannot read the file: {exc}") from exc
+        raise DataError(f"{path}: cannot read the file: {_reason(exc)}") from None
     if columns is not None:
         missing = [c for c in columns if c not in frame.columns]
         if missing:
             raise DataError(
                 f"{path}: column(s) {', '.join(map(repr, missing))} not found; "
-                f"columns are {', '.join(map(str, frame.columns))}"
+                + describe_columns(list(frame.columns))
             )
         frame = frame[list(columns)]
     return frame
@@ -283,9 +302,14 @@ def _read_mat(path: Path, options: Mapping[str, Any]) -> pd.DataFrame:
         raise DataError(f"{path}: no 1-D numeric variables in the .mat file")
     lengths = {len(v) for v in vectors.values()}
     if len(lengths) > 1:
+        shown = (
+            vectors
+            if safe_names(vectors)
+            else {f"#{i + 1}": v for i, v in enumerate(vectors.values())}
+        )
         raise DataError(
             f"{path}: the .mat variables have different lengths: "
-            + ", ".join(f"{k}={len(v)}" for k, v in vectors.items())
+            + ", ".join(f"{k}={len(v)}" for k, v in shown.items())
         )
     return pd.DataFrame(vectors)
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import FMUError
-from tsid_fmu.fmu.variables import variable_info
+from tsid_fmu.fmu.variables import check_fmi_version, variable_info
 
 __all__ = ["fmu_info", "read_fmu_description"]
 
@@ -34,6 +34,9 @@ def read_fmu_description(path: Path) -> Any:
     try:
         with zipfile.ZipFile(path) as archive:
             size = archive.getinfo("modelDescription.xml").file_size
+            if size <= MAX_DESCRIPTION_BYTES:
+                with archive.open("modelDescription.xml") as fh:
+                    check_fmi_version(fh, path)
     except KeyError:
         raise FMUError(f"{path}: not a valid FMU, modelDescription.xml is missing") from None
     except (zipfile.BadZipFile, OSError) as exc:

@@ -8,10 +8,13 @@ closest names the model has.
 from __future__ import annotations
 
 import difflib
+import zipfile
+import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
+from xml.etree import ElementTree
 
 from tsid_fmu.errors import FMUError
 
@@ -20,6 +23,7 @@ __all__ = [
     "INT_TYPES",
     "REAL_TYPES",
     "VariableInfo",
+    "check_fmi_version",
     "choose_interface",
     "find_variable",
     "parse_start",
@@ -103,6 +107,40 @@ def suggest(name: str, candidates: Sequence[str]) -> str:
     return f" Did you mean {', '.join(repr(c) for c in close)}?" if close else ""
 
 
+def check_fmi_version(source: str | Path | IO[bytes], fmu: object) -> str:
+    """Return the ``fmiVersion`` of a model description if it is 2.0 or 3.x.
+
+    Only the root element is read, before FMPy parses the rest, so that an FMI 1.0
+    FMU, or one whose version string is damaged, is named as such (FMPy would fail on
+    it with an unrelated ``int()`` or ``NoneType`` error).
+
+    Raises
+    ------
+    FMUError
+        Naming the FMU, the version found and what is supported.
+    """
+    try:
+        root = next(iter(ElementTree.iterparse(source, events=("start",))))[1]
+    except (ElementTree.ParseError, StopIteration, OSError, ValueError, EOFError, RuntimeError,
+            NotImplementedError, zipfile.BadZipFile, zlib.error) as exc:  # fmt: skip
+        raise FMUError(f"{fmu}: cannot read modelDescription.xml ({type(exc).__name__})") from None
+    version = root.get("fmiVersion")
+    fmi1 = root.get("numberOfContinuousStates") is not None  # an FMI 1.0 attribute
+    if version == "2.0" or (version is not None and version.startswith("3.") and not fmi1):
+        return version
+    supported = "tsid-fmu supports FMI 2.0 and 3.0: export the model as one of these"
+    if version is not None and version.strip() == "1.0":
+        raise FMUError(f"{fmu}: an FMI 1.0 FMU (fmiVersion '1.0'); {supported}")
+    if fmi1:
+        raise FMUError(
+            f"{fmu}: an FMI 1.0 FMU (it has numberOfContinuousStates) with a damaged "
+            f"fmiVersion {version!r}; {supported}"
+        )
+    if version is None:
+        raise FMUError(f"{fmu}: modelDescription.xml has no fmiVersion; {supported}")
+    raise FMUError(f"{fmu}: FMI version {version!r} is not supported; {supported}")
+
+
 def read_description(md_file: Path, fmu: Path) -> Any:
     """Read ``modelDescription.xml`` with FMPy (no schema validation).
 
@@ -115,6 +153,7 @@ def read_description(md_file: Path, fmu: Path) -> Any:
 
     if not md_file.is_file():
         raise FMUError(f"{fmu}: not a valid FMU, modelDescription.xml is missing")
+    check_fmi_version(md_file, fmu)
     try:
         md = read_model_description(str(md_file), validate=False)
     except Exception as exc:  # FMPy raises bare Exception / lxml errors

@@ -10,18 +10,29 @@ from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 
-__all__ = ["markdown_report", "markdown_table"]
+__all__ = ["escape", "markdown_report", "markdown_table"]
+
+
+def escape(text: Any) -> str:
+    r"""Return ``text`` as it may be printed into the report: no control characters.
+
+    Names and messages come from study files, data files and FMUs; a terminal escape
+    sequence (ESC ``[2J``), a newline or a bidirectional override in one of them is
+    shown as its Python escape (``\x1b[2J``) instead of acting on whoever reads the
+    report.
+    """
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
 
 
 def _cell(v: Any) -> str:
     if isinstance(v, float):
         return "-" if math.isnan(v) else f"{v:.5g}"
-    return str(v).replace("|", "/").replace("\n", " ")
+    return escape(v).replace("|", "/")
 
 
 def markdown_table(frame: Any) -> str:
     """Return a DataFrame as a Markdown table (numbers to 5 significant figures)."""
-    cols = [frame.index.name or ""] + [str(c) for c in frame.columns]
+    cols = [_cell(frame.index.name or "")] + [_cell(str(c)) for c in frame.columns]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for idx, row in frame.iterrows():
         lines.append("| " + " | ".join([_cell(idx)] + [_cell(v) for v in row]) + " |")
@@ -53,7 +64,7 @@ def _stages(result: IdentificationResult) -> list[str]:
         phase += st.kind == "phase"
         folder = _stage_folder(st, phase)
         lines += [
-            f"### {st.name}",
+            f"### {escape(st.name)}",
             "",
             "| iteration | array | factors | case | best cost | "
             "found at | next centred on | simulations |",
@@ -80,12 +91,12 @@ def _fit(result: IdentificationResult) -> list[str]:
     for exp, per_output in result.fit.items():
         for output, m in per_output.items():
             if not isinstance(m, dict):
-                lines.append(f"- {exp}: {m}")
+                lines.append(f"- {escape(exp)}: {escape(m)}")
                 continue
             sigma = result.noise.get(exp, {}).get(output)
             beside = f" (noise in the data: {sigma:.3g})" if sigma is not None else ""
             lines.append(
-                f"- {exp} / {output}: fit {m['fit_percent']:.3f} %, RMSE "
+                f"- {escape(exp)} / {escape(output)}: fit {m['fit_percent']:.3f} %, RMSE "
                 f"{m['rmse']:.5g}{beside}, IAE {m['iae']:.5g}"
             )
     return [*lines, ""]
@@ -93,7 +104,7 @@ def _fit(result: IdentificationResult) -> list[str]:
 
 def _failed_runs(records: Sequence[IterationRecord]) -> list[str]:
     rows = [
-        (rec.stage, rec.index, run + 1, err)
+        (escape(rec.stage), rec.index, run + 1, err)
         for rec in records
         for run, err in enumerate(rec.errors)
         if err
@@ -123,7 +134,7 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
         "",
     ]
     for c in u.combinations:
-        terms = " ".join(f"{w:+.2f} {n}" for n, w in c["terms"].items())
+        terms = " ".join(f"{w:+.2f} {escape(n)}" for n, w in c["terms"].items())
         state = "determined" if c["determined"] else "**not determined**"
         lines.append(f"- {terms}: standard error {c['std_error']:.3g} ({state})")
     for g in u.scale_groups:
@@ -143,25 +154,25 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
 def markdown_report(result: IdentificationResult) -> str:
     """Return the text of ``report.md``."""
     study = result.study
-    name = study.name if study else "study"
+    name = escape(study.name) if study else "study"
     cost = study.method.cost if study else "cost"
     lines = [
         f"# Identification report: {name}",
         "",
-        f"- FMU: `{study.fmu if study else '-'}`",
-        f"- Result: **{result.message}** (status {result.status}: {STATUS[result.status]}; "
+        f"- FMU: `{escape(study.fmu) if study else '-'}`",
+        f"- Result: **{escape(result.message)}** (status {result.status}: {STATUS[result.status]}; "
         f"{result.nit} Taguchi iterations, {result.nfev} simulations)",
         f"- Cost ({cost}, measured inputs of the identification experiments): {result.fun:.6g}",
         "",
     ]
     if result.warnings:
-        lines += ["## Warnings", "", *[f"- {w}" for w in result.warnings], ""]
+        lines += ["## Warnings", "", *[f"- {escape(w)}" for w in result.warnings], ""]
     lines += ["## Identified parameters", "", markdown_table(result.parameters_frame()), ""]
     if result.weak:
         lines += [
             "## Weakly determined parameters",
             "",
-            *[f"- **{k}**: {v}" for k, v in result.weak.items()],
+            *[f"- **{escape(k)}**: {escape(v)}" for k, v in result.weak.items()],
             "",
         ]
     lines += _uncertainty(result) + _fit(result) + _stages(result)
@@ -170,9 +181,9 @@ def markdown_report(result: IdentificationResult) -> str:
         lines += ["## Validation experiments (all inputs together)", ""]
         for exp, v in result.validation.items():
             lines.append(
-                f"- {exp}: "
+                f"- {escape(exp)}: "
                 + (
-                    f"simulation failed: {v['error']}"
+                    f"simulation failed: {escape(v['error'])}"
                     if "error" in v
                     else f"{cost} cost {v['cost']:.6g}"
                 )

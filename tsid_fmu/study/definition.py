@@ -39,6 +39,7 @@ from tsid_fmu.study.schema import (
     Phase,
     check_choice,
     check_number,
+    check_text,
 )
 from tsid_fmu.study.toml import read_study_file, write_study_file
 
@@ -169,6 +170,7 @@ class Study:
             k: check_number(v, f"[study] start_values {k}") for k, v in self.start_values.items()
         }
         self.interface = check_choice(self.interface, "interface", ("auto", "cs", "me"))
+        check_text(self.name, "[study] name")
         if self.step_size is not None:
             self.step_size = check_number(self.step_size, "[study] step_size")
             if self.step_size < 1e-9:
@@ -181,7 +183,7 @@ class Study:
 
     def _check_phases(self, names: list[str], exp_names: list[str]) -> None:
         for i, ph in enumerate(self.phases):
-            ph.name = ph.name or f"phase {i + 1}"
+            ph.name = check_text(ph.name or f"phase {i + 1}", f"[[phases]] #{i + 1} name")
             unknown = sorted(set(ph.parameters) - set(names))
             if unknown or not ph.parameters:
                 raise StudyError(

@@ -25,6 +25,7 @@ __all__ = [
     "Phase",
     "check_choice",
     "check_number",
+    "check_text",
     "check_whole",
 ]
 
@@ -63,6 +64,13 @@ def check_whole(value: Any, what: str, low: int, high: int | None = None) -> int
     if high is not None and value > high:
         raise StudyError(f"{what} must be an integer from {low} to {high}, got {value!r}")
     return int(value)
+
+
+def check_text(value: Any, what: str) -> str:
+    """Return ``value`` if it is printable text (no control characters, no escapes)."""
+    if not isinstance(value, str) or not value.isprintable():
+        raise StudyError(f"{what} must be printable text, got {value!r}")
+    return value
 
 
 def check_choice(value: Any, what: str, allowed: tuple[str, ...]) -> str:
@@ -188,6 +196,7 @@ class Experiment:
             is_path = isinstance(self.data, str | Path)
             self.name = Path(self.data).stem if is_path else "experiment"
         where = f"experiment {self.name!r}"
+        check_text(self.name, f"{where}: name")
         if not self.outputs:
             raise StudyError(f"{where}: no outputs to compare with the data")
         if self.weights is not None:

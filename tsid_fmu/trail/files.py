@@ -26,7 +26,22 @@ def atomic_write(path: Path, write: Callable[[Path], None] | str | bytes) -> Non
         Destination.
     write : str, bytes or callable
         Content, or a function that writes the file at the path it is given.
+
+    Raises
+    ------
+    OSError
+        The folder cannot be written (full disk, read-only, no permission); its
+        ``filename`` is ``path``, whatever step failed.
     """
+    try:
+        _write_replace(path, write)
+    except OSError as exc:
+        if exc.filename == str(path) or exc.errno is None:
+            raise
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+
+
+def _write_replace(path: Path, write: Callable[[Path], None] | str | bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     os.close(fd)
@@ -77,5 +92,5 @@ def read_json(path: Path, what: str) -> Any:
     """Read a JSON file of the trail; a damaged one is a StudyError naming it."""
     try:
         return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
         raise StudyError(f"{path}: damaged {what} ({type(exc).__name__})") from None

@@ -2,7 +2,9 @@
 
 Layout of the output folder::
 
-    study.toml                 the study, as run (written by Study.to_toml)
+    fingerprint.json           the normalised study, FMU and data hashes (who owns it)
+    .tsid.lock                 locked (fcntl.flock) while a study writes the folder
+    study.toml                 the study file, as run
     iteration_01/ ...          the Taguchi stage of a one-group study:
         levels.csv             levels of each factor
         runs.csv               array rows: levels, values, cost per replicate, S/N, errors
@@ -12,7 +14,8 @@ Layout of the output folder::
         decision.json          re-leveling case and reason per factor
         next_levels.toml       proposed levels of the next iteration (a person may edit)
         main_effects.png, fit.png
-        record.json            written last: marks the iteration complete
+        record.json            written last: marks the iteration complete; lists the
+                               hashes of the files above and carries its own digest
     stage.json                 the finished Taguchi stage of a one-group study
     contribution/stage.json    the contribution analyses of a phased study
     phase_01/ ...              each phase: iteration_NN/ and stage.json
@@ -21,7 +24,9 @@ Layout of the output folder::
 
 Every file is written to a temporary name and renamed into place, so an interrupted
 study leaves either the old file or the new one, never half of one. ``--resume`` reads
-the complete iterations and finished stages back and continues.
+the complete iterations and finished stages back, checks their digests and file hashes
+(:mod:`tsid_fmu.trail.integrity`) and continues; a folder of another study, or one
+holding files tsid-fmu did not write, is refused (:mod:`tsid_fmu.trail.owner`).
 """
 
 from __future__ import annotations
@@ -37,11 +42,11 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
 from tsid_fmu.trail.files import atomic_write, read_json, write_json
+from tsid_fmu.trail.integrity import file_hashes, seal, unseal, verify_files
 from tsid_fmu.trail.levels import read_next_levels, write_next_levels
+from tsid_fmu.trail.owner import FolderLock, check_owner, fingerprint, write_fingerprint
 
 __all__ = ["NullStore", "Trail"]
-
-_MARKERS = ("stage.json", "result.json", "record.json")
 
 
 class NullStore:
@@ -65,9 +70,14 @@ class NullStore:
     def write_stage(self, key: str, result: StageResult) -> None:
         """Keep nothing."""
 
+    def close(self) -> None:
+        """Nothing to release."""
+
 
 class Trail:
-    """Reads and writes the audit trail of one study.
+    """Reads and writes the audit trail of one study, holding the folder's lock.
+
+    Call :meth:`close` (or use it as a context manager) to release the lock.
 
     Parameters
     ----------
@@ -77,6 +87,8 @@ class Trail:
         The study whose trail this is.
     resume : bool
         Continue the study in ``out``; without it a folder holding a study is refused.
+        A folder holding another study, or files tsid-fmu did not write, is refused
+        either way, and left as it was.
     on_iteration : callable, optional
         Called as ``on_iteration(folder, record, space)`` after an iteration's tables
         are written and before its ``record.json`` (the report draws its plots there).
@@ -92,18 +104,29 @@ class Trail:
         self.out = Path(out)
         self.study = study
         self.on_iteration = on_iteration
-        found = [p for m in _MARKERS for p in self.out.rglob(m)] if self.out.is_dir() else []
-        if found and not resume:
-            raise StudyError(
-                f"{self.out} already holds a study; continue it with --resume, or choose "
-                "another --out folder"
-            )
-        if resume and not self.out.is_dir():
-            raise StudyError(f"{self.out}: nothing to resume (no such folder)")
+        items = fingerprint(study)
+        check_owner(self.out, items, resume, locked=False)
         self.out.mkdir(parents=True, exist_ok=True)
-        if not (self.out / "study.toml").exists():
-            if study.source is not None and Path(study.source).is_file():
-                atomic_write(self.out / "study.toml", Path(study.source).read_bytes())
+        self._lock = FolderLock(self.out)
+        self._lock.acquire()
+        try:
+            if check_owner(self.out, items, resume, locked=True):
+                write_fingerprint(self.out, items)
+                if study.source is not None and Path(study.source).is_file():
+                    atomic_write(self.out / "study.toml", Path(study.source).read_bytes())
+        except BaseException:
+            self._lock.release()
+            raise
+
+    def close(self) -> None:
+        """Release the folder's lock."""
+        self._lock.release()
+
+    def __enter__(self) -> Trail:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def stage_dir(self, key: str) -> Path:
         """Folder of a stage (``""`` is the output folder itself)."""
@@ -117,7 +140,9 @@ class Trail:
         """Return a stage's complete iterations; an interrupted one is removed (redone)."""
         records: list[IterationRecord] = []
         while (path := self.iteration_dir(key, len(records) + 1) / "record.json").exists():
-            data = read_json(path, "iteration record")
+            advice = f"restore it, or delete {path.parent} and the iterations after it to redo them"
+            data = unseal(read_json(path, "iteration record"), path, "iteration record", advice)
+            verify_files(path.parent, data.pop("files", None), path)
             try:
                 records.append(IterationRecord.from_dict(data))
             except (KeyError, TypeError, ValueError) as exc:
@@ -158,13 +183,20 @@ class Trail:
         if not path.exists():
             return None
         try:
-            return StageResult.from_dict(read_json(path, "stage record"))
+            return StageResult.from_dict(
+                unseal(
+                    read_json(path, "stage record"),
+                    path,
+                    "stage record",
+                    "restore it, or delete it to finish the stage again",
+                )
+            )
         except (KeyError, TypeError, ValueError) as exc:
             raise StudyError(f"{path}: damaged stage record ({exc})") from None
 
     def write_stage(self, key: str, result: StageResult) -> None:
         """Mark a stage finished: its summary in ``stage.json``."""
-        write_json(self.stage_dir(key) / "stage.json", result.to_dict())
+        write_json(self.stage_dir(key) / "stage.json", seal(result.to_dict()))
 
     def write_iteration(self, key: str, record: IterationRecord, space: Space) -> None:
         """Write every file of a finished iteration; ``record.json`` last."""
@@ -187,7 +219,7 @@ class Trail:
         atomic_write(d / "next_levels.toml", write_next_levels(d, record, space, frame, note))
         if self.on_iteration is not None:
             self.on_iteration(d, record, space)
-        write_json(d / "record.json", record.to_dict())
+        write_json(d / "record.json", seal({**record.to_dict(), "files": file_hashes(d)}))
 
     def write_text(self, name: str, text: str) -> Path:
         """Write a text file into the output folder."""

@@ -77,6 +77,12 @@ def _numbers(path: Path, name: str, values: Any) -> list[float]:
     return out
 
 
+def _number(path: Path, name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise StudyError(f"{path}: {name} must be a finite number, got {value!r}")
+    return float(value)
+
+
 def _levels_frame(path: Path, table: dict, space: Space) -> Frame:
     unknown = sorted(set(table) - set(space.names))
     missing = sorted(set(space.names) - set(table))
@@ -99,15 +105,15 @@ def _rotated_frame(path: Path, doc: dict, space: Space) -> Frame:
     centre, factors = doc.get("centre"), doc.get("factors")
     if not isinstance(centre, dict) or not isinstance(factors, list) or not factors:
         raise StudyError(f"{path}: needs a [levels] table, or [centre] and [[factors]]")
-    x = {
-        n: _numbers(path, f"centre {n}", [centre.get(n), centre.get(n, 0) + 1])[0]
-        for n in space.names
-    }
+    x = {n: _number(path, f"centre {n}", centre.get(n)) for n in space.names}
     out = []
     for i, f in enumerate(factors):
         if not isinstance(f, dict) or not isinstance(f.get("direction"), dict):
             raise StudyError(f"{path}: [[factors]] #{i + 1} needs name, direction and offsets")
-        d = np.array([float(f["direction"].get(n, 0.0)) for n in space.names])
+        where = f"[[factors]] #{i + 1} direction {{}}"
+        d = np.array(
+            [_number(path, where.format(n), f["direction"].get(n, 0.0)) for n in space.names]
+        )
         if not np.all(np.isfinite(d)) or np.linalg.norm(d) == 0:
             raise StudyError(f"{path}: [[factors]] #{i + 1} direction must be finite, not zero")
         offsets = _numbers(path, f"[[factors]] #{i + 1} offsets", f.get("offsets"))
@@ -134,6 +140,8 @@ def read_next_levels(path: Path, space: Space) -> Frame:
         raise StudyError(f"{path}: cannot read ({type(exc).__name__})") from None
     except tomllib.TOMLDecodeError as exc:
         raise StudyError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise StudyError(f"{path}: not valid TOML: nested too deeply") from None
     if isinstance(doc.get("levels"), dict):
         return _levels_frame(path, doc["levels"], space)
     return _rotated_frame(path, doc, space)
