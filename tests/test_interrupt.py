@@ -176,7 +176,7 @@ def test_sigint_exits_130_and_says_how_to_resume(study, uninterrupted, tmp_path)
     assert "interrupted" in err and "--resume" in err and "Traceback" not in err
     _assert_trail_is_whole(out)
     # a clean interruption also removes the FMU's extraction folder
-    assert not list(tmp.glob("tsid-fmu-*"))
+    assert not list(tmp.glob("tsid-*")), "temporary folders (FMU extractions, workers) left"
 
     final = _run(study, out, tmp, "--resume")
     assert final.returncode == uninterrupted["rc"], final.stderr

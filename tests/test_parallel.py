@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -127,7 +129,16 @@ def test_startup_errors_are_raised_like_serial(lag_spec, fmus):
         PoolEvaluator(lag_spec, workers=0)
 
 
-def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_spec):
+@pytest.fixture
+def own_tmp(tmp_path, monkeypatch) -> Path:
+    """A temporary folder of the test's own for everything the evaluators extract."""
+    d = tmp_path / "tmp"
+    d.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(d))
+    return d
+
+
+def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_spec, own_tmp):
     sets = [{"gain": 1.0}, {"gain": 15.0}, {"gain": 2.0}, {"gain": 25.0}, {"gain": 0.5}]
     with SerialEvaluator(crash_spec) as ev:
         good = ev.evaluate([sets[0], sets[2], sets[4]])
@@ -135,6 +146,9 @@ def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_spec):
     with PoolEvaluator(crash_spec, workers=2) as pe:
         got = pe.evaluate(sets)
         after = pe.evaluate([{"gain": 3.0}])  # the pool still works (a set not seen yet)
+        # each worker extracts the FMU into a folder of its own, which the parent owns
+        scratch = list(own_tmp.glob("tsid-worker-*"))
+        assert len(scratch) == 2 and all(list(d.glob("tsid-fmu-*")) for d in scratch)
     np.testing.assert_array_equal(got.costs[[0, 2, 4]], good.costs)
     assert np.all(np.isinf(got.costs[[1, 3]]))
     assert "worker crashed (signal 6 SIGABRT)" in got.errors[1]
@@ -145,15 +159,18 @@ def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_spec):
     np.testing.assert_array_equal(after.costs, later.costs)
     # a crashed set counts the simulation that crashed, as a failed one would
     assert got.nfev == good.nfev + 2 and after.nfev == later.nfev == 2
+    # crashed workers' extracted FMUs are removed as well as the stopped ones'
+    assert not list(own_tmp.glob("tsid-*"))
 
 
-def test_hanging_row_is_stopped_by_the_time_limit(crash_spec):
+def test_hanging_row_is_stopped_by_the_time_limit(crash_spec, own_tmp):
     sets = [{"gain": 1.0}, {"gain": 35.0}, {"gain": 2.0}]
     with PoolEvaluator(crash_spec, workers=2, timeout=1.0) as pe:
         got = pe.evaluate(sets)
     assert math.isinf(got.costs[1, 0]) and math.isinf(got.costs[1, 1])
     assert "time limit of 1 s per simulation exceeded" in got.errors[1]
     assert np.all(np.isfinite(got.costs[[0, 2]]))
+    assert not list(own_tmp.glob("tsid-*"))  # the killed worker's folder is removed too
 
 
 def test_missing_dask_is_a_clear_error(lag_spec, monkeypatch):

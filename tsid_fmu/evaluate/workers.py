@@ -25,8 +25,10 @@ import contextlib
 import multiprocessing as mp
 import os
 import pickle
+import shutil
 import signal
 import sys
+import tempfile
 import time
 import types
 import warnings
@@ -82,9 +84,14 @@ class _SharedMonitor:
         return (int(s[_EXP]), int(s[_REP])) if s[_STARTED] > 0 else None
 
 
-def _worker_main(conn: Connection, spec: EvaluationSpec, state: Any) -> None:
-    """Entry point of a worker process: build the runner, then run jobs until told to stop."""
+def _worker_main(conn: Connection, spec: EvaluationSpec, state: Any, scratch: str) -> None:
+    """Entry point of a worker process: build the runner, then run jobs until told to stop.
+
+    ``scratch`` is the worker's own temporary folder (its FMU extractions go there); the
+    parent removes it once the process has ended, however it ended.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business
+    tempfile.tempdir = scratch
     monitor = _SharedMonitor(state)
     try:
         runner = SetRunner(spec, monitor)
@@ -184,9 +191,10 @@ class _Worker:
     def __init__(self, ctx: Any, spec: EvaluationSpec, number: int) -> None:
         self.conn, child = ctx.Pipe()
         self.state = ctx.RawArray("d", 5)
+        self.scratch = tempfile.mkdtemp(prefix="tsid-worker-")
         self.process = ctx.Process(
             target=_worker_main,
-            args=(child, spec, self.state),
+            args=(child, spec, self.state, self.scratch),
             name=f"tsid-worker-{number}",
             daemon=True,
         )
@@ -217,10 +225,12 @@ class _Worker:
         return (int(self.state[_EXP]), int(self.state[_REP])) if started else None
 
     def kill(self) -> None:
+        """End the process now (if it still runs) and remove its temporary folder."""
         if self.process.is_alive():
             self.process.kill()
         self.process.join(5)
         self.conn.close()
+        shutil.rmtree(self.scratch, ignore_errors=True)
 
     def stop(self) -> None:
         try:
@@ -273,6 +283,7 @@ class LocalPool:
         self.recycle_after = recycle_after
         self._count = 0
         self._seq = 0
+        self.n_workers = n_workers
         self.workers: list[_Worker] = []
         for _ in range(n_workers):
             self._spawn()
@@ -335,6 +346,8 @@ class LocalPool:
         are replaced, so that no late reply reaches a later call.
         """
         pending: deque[int] = deque(range(len(jobs)))
+        while len(self.workers) < self.n_workers:  # replacements after an interruption
+            self._spawn()
         try:
             while pending or any(w.inflight for w in self.workers):
                 self._dispatch(pending, jobs)
@@ -351,8 +364,12 @@ class LocalPool:
                 for w in busy:
                     self._service(w, ready, pending, jobs, on_result)
         except BaseException:
-            for w in [w for w in self.workers if w.inflight]:
-                self._replace(w)
+            # the workers still busy with this call's jobs stop (after their current
+            # simulation, or are killed after a grace period) so that no late reply
+            # reaches a later call; the next call starts their replacements
+            busy = [w for w in self.workers if w.inflight]
+            self.workers = [w for w in self.workers if not w.inflight]
+            _stop_all(busy)
             raise
 
     def _dispatch(self, pending: deque[int], jobs: list[Job]) -> None:
@@ -454,13 +471,17 @@ class LocalPool:
     def close(self) -> None:
         """Stop the workers (they free their FMU instances and extracted folders)."""
         workers, self.workers = self.workers, []
-        for w in workers:
-            try:
-                w.conn.send(("stop",))
-            except (OSError, EOFError, BrokenPipeError):
-                pass
-        deadline = time.monotonic() + SHUTDOWN_GRACE
-        for w in workers:
-            if w.ready:  # a worker still starting would only read "stop" once ready
-                w.process.join(max(deadline - time.monotonic(), 0.0))
-            w.kill()
+        _stop_all(workers)
+
+
+def _stop_all(workers: list[_Worker]) -> None:
+    """Tell ``workers`` to stop; kill those not gone after ``SHUTDOWN_GRACE`` seconds."""
+    for w in workers:
+        try:
+            w.conn.send(("stop",))
+        except (OSError, EOFError, BrokenPipeError):
+            pass
+    deadline = time.monotonic() + SHUTDOWN_GRACE
+    for w in workers:
+        w.process.join(max(deadline - time.monotonic(), 0.0))
+        w.kill()
