@@ -152,6 +152,7 @@ class FMUSession:
         self._checked: dict[tuple[int, int], tuple[Any, Any, grid.Grid]] = {}
         self._log = LogCapture(logger)
         self._setters: dict[str, tuple[str, int]] = {}
+        self._me: MESolver | None = None
         try:
             self.step_size = grid.check_step_size(self.path.name, step_size)
             self.substeps = grid.check_substeps(self.path.name, substeps)
@@ -423,7 +424,7 @@ class FMUSession:
         return out if g.keep is None else out[g.keep]
 
     def _simulate_me(self, inst: Instance, g: grid.Grid, values: Values) -> np.ndarray:
-        if self.me_solver == "rk45":
+        if self._me is not None:
             return self._me.simulate(inst, g, values, self.variables)
         start_values = {
             name: (bool(v) if kind == "bool" else round(v) if kind == "int" else float(v))
@@ -454,6 +455,11 @@ class FMUSession:
             if self._tempdir is not None:
                 shutil.rmtree(self._tempdir, ignore_errors=True)
                 self._tempdir = None
+
+    @property
+    def me_stats(self) -> dict[str, int] | None:
+        """Counters of the last run of the Model Exchange integrator (None without it)."""
+        return None if self._me is None else self._me.stats
 
     @property
     def closed(self) -> bool:
