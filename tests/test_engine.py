@@ -58,7 +58,14 @@ def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
     for f in ("levels.csv", "runs.csv", "response.csv", "anova.csv", "decision.json",
               "next_levels.toml", "main_effects.png", "fit.png", "record.json"):  # fmt: skip
         assert (first / f).is_file(), f
-    for f in ("result.json", "parameters.csv", "parameters.ssv", "report.md", "fit.png"):
+    for f in (
+        "result.json",
+        "parameters.csv",
+        "parameters.ssv",
+        "model.ssp",
+        "report.md",
+        "fit.png",
+    ):
         assert (out / f).is_file(), f
     summary = json.loads((out / "result.json").read_text())
     assert summary["x"] == res.x

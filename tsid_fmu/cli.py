@@ -201,7 +201,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("fmu")
     p.set_defaults(func=_cmd_info)
 
-    p = sub.add_parser("build", help="build FMUs from models/ (needs tsid-fmu[build])")
+    p = sub.add_parser(
+        "build",
+        help="build FMUs from models/, or with --from-result DIR rebuild a study's FMU with "
+        "its identified values (needs tsid-fmu[build])",
+    )
     p.add_argument("build_args", nargs=argparse.REMAINDER, help="arguments of tsid_fmu.build")
     p.set_defaults(func=_cmd_build)
     return parser
@@ -229,7 +233,12 @@ def _quiet_stdout() -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (see :data:`EXIT_STATUSES`)."""
-    args = make_parser().parse_args(argv)
+    parser = make_parser()
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # options of tsid_fmu.build before its first positional argument
+        if args.command != "build":
+            parser.error(f"unrecognized arguments: {' '.join(extra)}")
+        args.build_args = [*extra, *args.build_args]
     try:
         status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit

@@ -23,6 +23,7 @@ from tsid_fmu.report.console import ConsoleProgress
 from tsid_fmu.report.files import write_result_files
 from tsid_fmu.report.markdown import markdown_report
 from tsid_fmu.report.plots import convergence_plot, fit_plot, main_effects_plot
+from tsid_fmu.report.ssp import write_model_ssp
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.pipeline import Control, run_stages, run_ungrouped
@@ -191,6 +192,7 @@ def _finish(
         result.validation = validate(evaluators.get(study.parameter_names, checks, {}), vspec, x)
     if isinstance(store, Trail):
         write_result_files(result, store.out)
+        write_model_ssp(result, store.out)
         store.write_text("report.md", markdown_report(result))
         if plots:
             fit_plot(

@@ -40,12 +40,14 @@ from pathlib import Path
 from tsid_fmu.errors import BuildError
 
 from .assemble import DEFAULT_STEP_SIZE
+from .identified import build_from_result
 
 __all__ = [
     "DEFAULT_STEP_SIZE",
     "FMI_VERSIONS",
     "build_all",
     "build_fmu",
+    "build_from_result",
     "default_models_dir",
     "find_models",
     "main",
@@ -124,6 +126,7 @@ def build_fmu(
     package_dir: str | Path | None = None,
     step_size: float | None = None,
     fmi_version: int = 2,
+    start_values: dict[str, float] | None = None,
 ) -> Path:
     """Build an FMU (Co-Simulation and Model Exchange) from a Modelica model.
 
@@ -147,6 +150,9 @@ def build_fmu(
         :data:`DEFAULT_STEP_SIZE`.
     fmi_version : int, optional
         2 (default) or 3.
+    start_values : dict of str to float, optional
+        Values that replace the model's parameter values and state start values
+        (e.g. identified ones); they become part of the GUID.
 
     Returns
     -------
@@ -161,7 +167,7 @@ def build_fmu(
     """
     from .assemble import prepare, write_fmu
 
-    prep = prepare(model_file, model_name, package_dir, step_size)
+    prep = prepare(model_file, model_name, package_dir, step_size, start_values)
     ident = prep.model.short_name
     if out_path is None:
         out = output_path(Path.cwd() / "fmus", ident, fmi_version)
@@ -252,6 +258,13 @@ def main(argv: list[str] | None = None) -> int:
         "--out", type=Path, default=None, help="output directory (default: fmus/ next to models/)"
     )
     parser.add_argument(
+        "--from-result",
+        type=Path,
+        metavar="DIR",
+        help="rebuild the FMU of the study whose output folder is DIR with the identified "
+        "values as start values and a new GUID: DIR/<Model>_identified.fmu (or in --out)",
+    )
+    parser.add_argument(
         "--fmi-version",
         choices=["2", "3", "all"],
         default="all",
@@ -261,9 +274,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.all and args.models:
         parser.error("give either --all or model names, not both")
+    if args.from_result and (args.all or args.models or args.fmi_version != "all"):
+        parser.error("--from-result rebuilds the study's own FMU: no models or --fmi-version")
     versions = FMI_VERSIONS if args.fmi_version == "all" else (int(args.fmi_version),)
     try:
-        paths = build_all(args.models_dir, args.out, args.models or None, versions)
+        if args.from_result:
+            paths = [build_from_result(args.from_result, args.out)]
+        else:
+            paths = build_all(args.models_dir, args.out, args.models or None, versions)
     except BuildError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

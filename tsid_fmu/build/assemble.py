@@ -8,11 +8,13 @@ description and the documentation of one FMI version, compiles and packs the FMU
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 import shutil
 import tempfile
 import uuid
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from tsid_fmu.errors import BuildError
@@ -56,6 +58,8 @@ class Prepared:
         Live form (Co-Simulation, model structure).
     causal_me : Causalized or None
         Frozen form (Model Exchange); ``None`` if the model has no relations.
+    overrides : dict of str to float
+        Start values that replace the model's (part of the GUID).
     """
 
     model: FlatModel
@@ -64,6 +68,24 @@ class Prepared:
     step_size: float
     causal: Causalized
     causal_me: Causalized | None
+    overrides: dict[str, float] = field(default_factory=dict)
+
+
+def _override(model: FlatModel, model_file: Path, values: Mapping[str, float]) -> dict[str, float]:
+    """Replace parameter values and state start values of ``model`` in place."""
+    settable = {v.name: v for v in model.parameters + model.states}
+    done = {}
+    for name, value in values.items():
+        if name not in settable:
+            raise BuildError(
+                f"{model_file}: model {model.name} has no parameter or state named {name!r} "
+                f"(start values can be given for: {', '.join(sorted(settable))})"
+            )
+        value = float(value)
+        if not math.isfinite(value):
+            raise BuildError(f"{model_file}: start value of {name!r} must be finite, got {value}")
+        settable[name].start = done[name] = value
+    return done
 
 
 def prepare(
@@ -71,6 +93,7 @@ def prepare(
     model_name: str,
     package_dir: str | Path | None = None,
     step_size: float | None = None,
+    start_values: Mapping[str, float] | None = None,
 ) -> Prepared:
     """Parse, flatten and causalize a model (see :func:`tsid_fmu.build.build_fmu`).
 
@@ -85,6 +108,8 @@ def prepare(
     step_size : float, optional
         Default of ``fixedStepSize``; default from the model's annotation, else
         :data:`DEFAULT_STEP_SIZE`.
+    start_values : mapping of str to float, optional
+        New values of parameters and start values of states (e.g. identified ones).
 
     Returns
     -------
@@ -94,8 +119,8 @@ def prepare(
     Raises
     ------
     BuildError
-        If the model cannot be flattened or causalized, uses a reserved name or its
-        name is no C identifier.
+        If the model cannot be flattened or causalized, uses a reserved name, its
+        name is no C identifier, or a start value names no parameter or state.
     """
     from .causalize import causalize
     from .model_description import FIXED_STEP_NAME
@@ -124,9 +149,10 @@ def prepare(
         step_size = float(m.group(1)) if m else DEFAULT_STEP_SIZE
     if not step_size > 0:
         raise BuildError(f"{model_file}: fixedStepSize must be > 0, got {step_size}")
+    overrides = _override(model, model_file, start_values or {})
     causal = causalize(model)
     causal_me = causalize(model, frozen=True) if model.relations else None
-    return Prepared(model, model_file, text, step_size, causal, causal_me)
+    return Prepared(model, model_file, text, step_size, causal, causal_me, overrides)
 
 
 def _token(prep: Prepared, fmi_version: int) -> str:
@@ -137,6 +163,8 @@ def _token(prep: Prepared, fmi_version: int) -> str:
     parts = [prep.model.name, prep.text, repr(prep.step_size), _version(), wrapper]
     if fmi_version != 2:
         parts.append(f"fmi{fmi_version}")
+    if prep.overrides:  # another parameterisation is another model: a new GUID
+        parts.append(repr(sorted(prep.overrides.items())))
     digest = hashlib.sha256("\0".join(parts).encode()).hexdigest()
     return "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "tsid-fmu:" + digest)) + "}"
 

@@ -11,7 +11,9 @@ Modules, in the order of the data flow: :mod:`~tsid_fmu.fmu.archive` (extraction
 :mod:`~tsid_fmu.fmu.library` (shared library), :mod:`~tsid_fmu.fmu.logs` (FMU log
 messages), :mod:`~tsid_fmu.fmu.grid` (input hold, communication points),
 :mod:`~tsid_fmu.fmu.steploop` and :mod:`~tsid_fmu.fmu.compiled` (the step loop,
-interpreted or compiled), :mod:`~tsid_fmu.fmu.exchange` (Model Exchange),
+interpreted or compiled), :mod:`~tsid_fmu.fmu.meloop` and :mod:`~tsid_fmu.fmu.mesolver`
+(the Model Exchange integrator, likewise), :mod:`~tsid_fmu.fmu.exchange` (Model
+Exchange by FMPy's CVode),
 :mod:`~tsid_fmu.fmu.session` and :mod:`~tsid_fmu.fmu.facade` (:func:`simulate`).
 """
 

@@ -12,7 +12,9 @@ Compiled code is cached on disk (Numba's ``cache=True``), so only the first proc
 a machine pays the compile time (about a second); worker processes load it from the
 cache, ideally in :func:`warm_up` while they start.
 
-Model Exchange FMUs are integrated by FMPy and never use these loops.
+The Model Exchange integrator of :mod:`tsid_fmu.fmu.meloop` is chosen the same way by
+:func:`me_loop` (compiled on its first use only, so Co-Simulation studies never pay for
+it).
 """
 
 from __future__ import annotations
@@ -26,9 +28,10 @@ from typing import Any
 
 import numpy as np
 
+import tsid_fmu.fmu.meloop as meloop
 import tsid_fmu.fmu.steploop as steploop
 
-__all__ = ["LOOP_ENV", "backend", "cs_loop", "numba_available", "warm_up"]
+__all__ = ["LOOP_ENV", "backend", "cs_loop", "me_loop", "numba_available", "warm_up"]
 
 LOOP_ENV = "TSID_FMU_LOOP"
 """Environment variable: ``python`` forces the interpreted loops (default: compiled)."""
@@ -138,11 +141,65 @@ def backend() -> str:
     return "numba" if _loops() is not None and _failed is None else "python"
 
 
+_me: dict[str, Any] = {"loop": None, "failed": None}
+
+
+def me_loop() -> Callable[..., tuple[int, int, int, float]]:
+    """Return the Model Exchange loop: compiled by Numba when available, else Python.
+
+    Returns
+    -------
+    callable
+        ``_me_loop`` of :mod:`tsid_fmu.fmu.meloop`, compiled (built on the first call,
+        or loaded from Numba's cache) or the Python function itself; same arguments
+        and ``(status, index, call, time)`` result.
+    """
+    python = meloop._me_loop
+    if _loops() is None or _me["failed"] is not None:
+        return python
+    if _me["loop"] is None:
+        with _lock:
+            if _me["loop"] is None and _me["failed"] is None:
+                try:
+                    import tsid_fmu.fmu._numba_me as _numba_me
+                except Exception as exc:  # a Numba that cannot build it
+                    _me["failed"] = f"Numba cannot build the Model Exchange loop: {exc}"
+                    _log.warning("tsid_fmu.fmu.compiled: %s; using Python", _me["failed"])
+                    return python
+                _me["loop"] = _wrap_me(_numba_me.me_loop)
+    return _me["loop"] or python
+
+
+def _wrap_me(compiled: Any) -> Callable[..., tuple[int, int, int, float]]:
+    """Call the compiled ME loop; on a Numba typing/compile error use Python for good."""
+
+    def loop(*args: Any) -> tuple[int, int, int, float]:
+        if _me["failed"] is None:
+            try:
+                status, k, call, t = compiled(*args)
+            except Exception as exc:  # numba.core.errors.NumbaError
+                if "numba" not in type(exc).__module__:
+                    raise
+                _me["failed"] = f"compiling the Model Exchange loop failed: {exc}"
+                warnings.warn(
+                    f"tsid_fmu.fmu.compiled: {_me['failed']}; using the slower Python loop",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+            else:
+                return int(status), int(k), int(call), float(t)
+        return meloop._me_loop(*args)
+
+    loop.__name__ = "me_loop_numba"
+    return loop
+
+
 def _reset_for_tests() -> None:
     """Forget the compiled loops and any failure (tests switch backends)."""
     global _compiled, _failed
     _compiled = None
     _failed = None
+    _me.update(loop=None, failed=None)
 
 
 def _fail(*args: Any) -> int:

@@ -1,4 +1,7 @@
-"""Model Exchange runs: FMPy's solver (CVode) on the session's instance.
+"""Model Exchange runs with FMPy's solver (CVode) on the session's instance.
+
+The session's default is the project's own integrator (:mod:`tsid_fmu.fmu.mesolver`);
+this is ``me_solver="cvode"``.
 
 The session's extracted folder, model description and instance are reused; the
 inputs become FMPy input signals (held inputs as events at every sample, linear ones
@@ -46,6 +49,7 @@ def simulate_me(
     outputs: Sequence[str],
     start_values: dict[str, Any],
     step_size: float | None,
+    tolerance: float | None,
     on_error: Callable[[Exception, float], Exception],
 ) -> np.ndarray:
     """Integrate the Model Exchange instance ``fmu`` over ``t``; return the outputs at ``t``.
@@ -66,6 +70,8 @@ def simulate_me(
         Start values and parameters of this run.
     step_size : float, optional
         The solver's step size hint.
+    tolerance : float, optional
+        CVode's relative tolerance (default: FMPy's).
     on_error : callable
         ``on_error(exc, time)`` returns the exception to raise when FMPy fails at
         ``time``.
@@ -85,6 +91,7 @@ def simulate_me(
             start_time=float(t[0]),
             stop_time=float(t[-1]),
             step_size=step_size,
+            relative_tolerance=tolerance,
             output_interval=float(np.min(np.diff(t))),
             record_events=False,
             start_values=start_values,

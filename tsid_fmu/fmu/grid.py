@@ -27,9 +27,12 @@ __all__ = [
     "HOLDS",
     "MAX_SUBSTEPS",
     "Grid",
+    "check_finite",
     "check_step_size",
     "check_substeps",
+    "check_tolerance",
     "frozen",
+    "model_exchange",
     "refine",
     "validate",
 ]
@@ -187,6 +190,47 @@ def refine(
         t, u = t_fine, u_fine
         slopes = np.repeat(slopes, n_sub, axis=0)
     return Grid(_writeable(t), _writeable(u), np.ascontiguousarray(slopes), keep)
+
+
+def model_exchange(t: np.ndarray, u: np.ndarray, linear: np.ndarray) -> Grid:
+    """Return the grid of a Model Exchange run: the samples, the slopes of linear inputs.
+
+    ``slopes`` has one column per input (zero for held inputs), shape ``(n - 1, n_in)``.
+    """
+    slopes = np.zeros((t.size - 1, u.shape[1]))
+    if linear.any():
+        slopes[:, linear] = np.diff(u[:, linear], axis=0) / np.diff(t)[:, None]
+    return Grid(_writeable(t), _writeable(u), slopes, None)
+
+
+def check_tolerance(fmu: str, tolerance: Any) -> float | None:
+    """Return ``tolerance`` as a float in (0, 1) (or None); FMUError otherwise."""
+    if tolerance is None:
+        return None
+    try:
+        value = float(tolerance)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not 0 < value < 1:
+        raise FMUError(
+            f"{fmu}: tolerance must be a relative tolerance in (0, 1), got {tolerance!r}"
+        )
+    return value
+
+
+def check_finite(fmu: str, names: tuple[str, ...], t: np.ndarray, out: np.ndarray) -> None:
+    """Raise SimulationError naming the first output that is not finite (and its time)."""
+    # NaN and inf always make the sum non-finite (one pass, no temporary array);
+    # only then (or for a sum that overflowed) are the elements looked at
+    if math.isfinite(float(out.sum())):
+        return
+    bad = ~np.isfinite(out)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise SimulationError(
+            f"{fmu}: output {names[col]!r} is {out[row, col]} at "
+            f"t={t[row]:g} (step {row}); check the parameters of this run"
+        )
 
 
 def check_substeps(fmu: str, substeps: Any) -> int:

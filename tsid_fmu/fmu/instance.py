@@ -13,17 +13,27 @@ from typing import Any
 
 import numpy as np
 
+import tsid_fmu.fmu.steploop as steploop
 from tsid_fmu.errors import FMUError, SimulationError
 from tsid_fmu.fmu.logs import STATUS_NAMES, LogCapture, fmi2_callbacks
 from tsid_fmu.fmu.variables import VariableInfo
 
-__all__ = ["Instance", "Values"]
+__all__ = ["CallFailed", "Instance", "Values"]
 
 _FMI_DISCARD = 2
 _FMI_FATAL = 4
 
 #: ``(name, kind, value_reference, value)`` of the values set before initialization
 Values = list[tuple[str, str, int, float]]
+
+
+class CallFailed(Exception):
+    """A failing FMI call of a compiled loop, as :meth:`Instance.error` reads it."""
+
+    def __init__(self, function: str, status: int | None = None) -> None:
+        super().__init__(function)
+        self.function = function
+        self.status = status
 
 
 class Instance:
@@ -118,6 +128,21 @@ class Instance:
         return SimulationError(
             f"{self.name}: {function}{label} at step {step}, t={t:g} ({what}).{self.log.text()}"
         )
+
+    def loop_error(self, status: int, k: int, call: int, t: np.ndarray) -> SimulationError:
+        """Return the SimulationError for a failed Co-Simulation step loop at step ``k``."""
+        if status == steploop.STATUS_TERMINATE:
+            return SimulationError(
+                f"{self.name}: the FMU requested termination in fmi3DoStep at step "
+                f"{k}, t={t[k]:g}.{self.log.text()}"
+            )
+        what = (
+            f"step from t={t[k]:g} to t={t[k + 1]:g}"
+            if call in (steploop.CALL_STEP, steploop.CALL_DER)
+            else "communication point"
+        )
+        err = CallFailed(steploop.CALL_NAMES[self.major][call], status)
+        return self.error(err, what, k, t[k])
 
     def _set(self, name: str, kind: str, vr: int, value: float, vtype: str) -> None:
         fmu = self.fmu

@@ -8,7 +8,9 @@ library and instantiate -- and only *resets* the instance between runs.
 Co-Simulation FMUs (FMI 2.0 and 3.0) are stepped by the loops of
 :mod:`tsid_fmu.fmu.steploop` (compiled by Numba when available); inputs are held or
 interpolated between samples as :mod:`tsid_fmu.fmu.grid` describes.  Model Exchange
-FMUs are integrated with FMPy's own solver (:mod:`tsid_fmu.fmu.exchange`), reusing the
+FMUs are integrated by the project's own adaptive Runge-Kutta loop with event location
+(:mod:`tsid_fmu.fmu.meloop`, :mod:`tsid_fmu.fmu.mesolver`; compiled likewise), or with
+FMPy's CVode (``me_solver="cvode"``, :mod:`tsid_fmu.fmu.exchange`), reusing the
 session's instance and extracted folder.
 
 Setup (instantiate, initialization, reset, terminate) goes through FMPy's
@@ -26,7 +28,6 @@ Examples
 
 from __future__ import annotations
 
-import math
 import os
 import shutil
 import tempfile
@@ -39,13 +40,13 @@ import numpy as np
 
 import tsid_fmu.fmu.exchange as exchange
 import tsid_fmu.fmu.grid as grid
-import tsid_fmu.fmu.steploop as steploop
 from tsid_fmu.errors import FMUError, SimulationError
 from tsid_fmu.fmu.archive import safe_extract
 from tsid_fmu.fmu.compiled import cs_loop
 from tsid_fmu.fmu.instance import Instance, Values
 from tsid_fmu.fmu.library import load_fmu, loop_functions
 from tsid_fmu.fmu.logs import LogCapture, Logger
+from tsid_fmu.fmu.mesolver import MESolver, me_functions
 from tsid_fmu.fmu.variables import (
     VariableInfo,
     choose_interface,
@@ -61,15 +62,6 @@ __all__ = ["FMUSession"]
 
 #: read-only (time, inputs) pairs a session remembers as checked
 _MAX_CHECKED = 32
-
-
-class _StatusError(Exception):
-    """Carries a failing status out of the step loop (internal)."""
-
-    def __init__(self, function: str, status: int) -> None:
-        super().__init__(function)
-        self.function = function
-        self.status = status
 
 
 class FMUSession:
@@ -91,7 +83,8 @@ class FMUSession:
         Co-Simulation or Model Exchange; ``"auto"`` prefers Co-Simulation.
     step_size : float, optional
         Co-Simulation: largest communication step; longer sample intervals are split
-        into equal sub-steps.  Model Exchange: the solver's step size hint.
+        into equal sub-steps.  Model Exchange: the largest integration step
+        (``"rk45"``) or the solver's step size hint (``"cvode"``).
     start_values : mapping of str to float, optional
         Values applied on every run before the parameters (e.g. initial states).
     logger : logging.Logger or callable, optional
@@ -106,6 +99,12 @@ class FMUSession:
     substeps : int, optional
         Communication steps per sample interval for linear inputs the FMU does not
         interpolate itself (default 10).
+    me_solver : {"rk45", "cvode"}, optional
+        Model Exchange: the project's compiled Cash-Karp integrator with event location
+        (default; inputs set without an event per sample) or FMPy's CVode.
+    tolerance : float, optional
+        Model Exchange: relative tolerance (``"rk45"``: default
+        :data:`~tsid_fmu.fmu.mesolver.DEFAULT_RTOL`; ``"cvode"``: FMPy's default).
 
     Attributes
     ----------
@@ -139,6 +138,8 @@ class FMUSession:
         logger: Logger | None = None,
         hold: Mapping[str, str] | None = None,
         substeps: int = 10,
+        me_solver: Literal["rk45", "cvode"] = "rk45",
+        tolerance: float | None = None,
     ) -> None:
         self.path = Path(path)
         self.input_names = tuple(inputs)
@@ -151,6 +152,7 @@ class FMUSession:
         self._checked: dict[tuple[int, int], tuple[Any, Any, grid.Grid]] = {}
         self._log = LogCapture(logger)
         self._setters: dict[str, tuple[str, int]] = {}
+        self._me: MESolver | None = None
         try:
             self.step_size = grid.check_step_size(self.path.name, step_size)
             self.substeps = grid.check_substeps(self.path.name, substeps)
@@ -158,6 +160,14 @@ class FMUSession:
                 raise FMUError(
                     f"{self.path.name}: interface must be 'auto', 'cs' or 'me', not {interface!r}"
                 )
+            if me_solver not in ("rk45", "cvode"):
+                raise FMUError(
+                    f"{self.path.name}: me_solver must be 'rk45' or 'cvode', not {me_solver!r}"
+                )
+            self.me_solver, self.tolerance = (
+                me_solver,
+                grid.check_tolerance(self.path.name, tolerance),
+            )
             self._open(interface, dict(start_values or {}), dict(hold or {}))
         except BaseException:
             self.close()
@@ -197,6 +207,18 @@ class FMUSession:
         self._inst = Instance(fmu, self._major, self._log, name)
         if self.interface == "cs":
             self._loop_funcs = loop_functions(fmu.dll, self._major)
+        elif self.me_solver == "rk45":
+            self._me = MESolver(
+                me_functions(fmu.dll, self._major, name),
+                self._major,
+                md.numberOfContinuousStates,
+                md.numberOfEventIndicators,
+                self._vr_in,
+                self._vr_out,
+                self._linear,
+                rtol=self.tolerance,
+                max_step=self.step_size,
+            )
         self._inst.instantiate()
 
     def _set_hold(self, hold: dict[str, str]) -> None:
@@ -338,7 +360,7 @@ class FMUSession:
         else:
             t = g.time
             out = self._simulate_me(inst, g, values)
-        self._check_finite(t, out)
+        grid.check_finite(self.path.name, self.output_names, t, out)
         return out
 
     def _check_arrays(self, time: np.ndarray, inputs: np.ndarray | None) -> grid.Grid:
@@ -364,7 +386,7 @@ class FMUSession:
                 substeps=self.substeps,
             )
         else:
-            g = grid.Grid(t, u, np.zeros((t.size - 1, 0)), None)
+            g = grid.model_exchange(t, u, self._linear)
         if grid.frozen(time) and (inputs is None or grid.frozen(inputs)):
             if len(self._checked) >= _MAX_CHECKED:
                 self._checked.pop(next(iter(self._checked)))
@@ -375,19 +397,6 @@ class FMUSession:
         self, time: np.ndarray, inputs: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray]:
         return grid.validate(self.path.name, self.input_names, time, inputs)
-
-    def _check_finite(self, t: np.ndarray, out: np.ndarray) -> None:
-        # NaN and inf always make the sum non-finite (one pass, no temporary array);
-        # only then (or for a sum that overflowed) are the elements looked at
-        if math.isfinite(float(out.sum())):
-            return
-        bad = ~np.isfinite(out)
-        if bad.any():
-            row, col = np.argwhere(bad)[0]
-            raise SimulationError(
-                f"{self.path.name}: output {self.output_names[col]!r} is {out[row, col]} at "
-                f"t={t[row]:g} (step {row}); check the parameters of this run"
-            )
 
     # -- one run -----------------------------------------------------------------------------
 
@@ -410,27 +419,13 @@ class FMUSession:
             args += (self._flags,)
         status, k, call = cs_loop(self._major)(*args)
         if status:
-            raise self._loop_error(inst, status, k, call, t)
+            raise inst.loop_error(status, k, call, t)
         inst.terminate(t.size - 1, t[-1])
         return out if g.keep is None else out[g.keep]
 
-    def _loop_error(
-        self, inst: Instance, status: int, k: int, call: int, t: np.ndarray
-    ) -> SimulationError:
-        if status == steploop.STATUS_TERMINATE:
-            return SimulationError(
-                f"{self.path.name}: the FMU requested termination in fmi3DoStep at step "
-                f"{k}, t={t[k]:g}.{self._log.text()}"
-            )
-        what = (
-            f"step from t={t[k]:g} to t={t[k + 1]:g}"
-            if call in (steploop.CALL_STEP, steploop.CALL_DER)
-            else "communication point"
-        )
-        err = _StatusError(steploop.CALL_NAMES[self._major][call], status)
-        return inst.error(err, what, k, t[k])
-
     def _simulate_me(self, inst: Instance, g: grid.Grid, values: Values) -> np.ndarray:
+        if self._me is not None:
+            return self._me.simulate(inst, g, values, self.variables)
         start_values = {
             name: (bool(v) if kind == "bool" else round(v) if kind == "int" else float(v))
             for name, kind, _vr, v in values
@@ -443,6 +438,7 @@ class FMUSession:
             self.output_names,
             start_values,
             self.step_size,
+            self.tolerance,
             lambda exc, t: inst.error(exc, f"Model Exchange simulation: {exc}", "?", t),
         )
 
@@ -459,6 +455,11 @@ class FMUSession:
             if self._tempdir is not None:
                 shutil.rmtree(self._tempdir, ignore_errors=True)
                 self._tempdir = None
+
+    @property
+    def me_stats(self) -> dict[str, int] | None:
+        """Counters of the last run of the Model Exchange integrator (None without it)."""
+        return None if self._me is None else self._me.stats
 
     @property
     def closed(self) -> bool:
