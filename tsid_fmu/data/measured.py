@@ -128,7 +128,9 @@ class MeasuredData:
         if not isinstance(df, pd.DataFrame):
             raise DataError(f"{source}: expected a pandas DataFrame, got {type(df).__name__}")
         frame = df.copy()
-        frame.columns = [str(c).strip() for c in frame.columns]
+        # spaces only: a tab or control character keeps the name from looking like a
+        # header, so that a file that is not a data file is never quoted (data.names)
+        frame.columns = [str(c).strip(" ") for c in frame.columns]
         if frame.shape[0] == 0 or frame.shape[1] == 0:
             raise DataError(f"{source}: no data (the table is empty)")
         if time_column not in frame.columns:
