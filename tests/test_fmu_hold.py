@@ -71,35 +71,69 @@ def test_feedthrough_output_has_no_lag(fmus, samples, kind, backend):
 
 
 @pytest.mark.parametrize("kind", ["fmi2", "fmi3"])
+def held_linear(t: np.ndarray, u: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The fine grid and what a linear input is set to on it with ``substeps=m``.
+
+    At the samples the sample itself; at a communication point inside an interval the
+    line's value at the middle of the step that starts there (held over that step).
+    """
+    tf = fine_grid(t, m)
+    values = np.interp(tf, t, u)
+    inner = np.ones(tf.size - 1, dtype=bool)
+    inner[::m] = False
+    mid = tf[:-1][inner] + 0.5 * np.diff(tf)[inner]
+    values[:-1][inner] = np.interp(mid, t, u)
+    return tf, values
+
+
+@pytest.mark.parametrize("kind", ["fmi2", "fmi3"])
 def test_linear_input_is_interpolated_between_samples_held_input_is_a_step(
     fmus, samples, kind, backend
 ):
     """Linear ``a`` with 4 substeps == the explicitly interpolated signal on the fine grid.
 
     The second session reads the outputs at the fine points themselves: ``ya`` there is
-    exactly the linear interpolation of the samples, ``yb`` exactly the step signal; the
-    first session (samples only, ``hold={"a": "linear"}``) gives bit-identical outputs at
-    the samples, so the FMU saw the same values between them.
+    exactly what the first session set (the samples, and the line at the middle of each
+    step between them), ``yb`` exactly the step signal; the first session (samples only,
+    ``hold={"a": "linear"}``) gives bit-identical outputs at the samples, so the FMU saw
+    the same values between them.
     """
     t, u = samples
     m = 4
     with FMUSession(fmus[kind], ["a", "b"], OUT, hold={"a": "linear"}, substeps=m) as s:
         assert s.hold == {"a": "linear", "b": "previous"}
         coarse = s.simulate(t, u, {})
-    tf = fine_grid(t, m)
-    interp = np.interp(tf, t, u[:, 0])
+    tf, interp = held_linear(t, u[:, 0], m)
     step = np.concatenate([np.repeat(u[:-1, 1], m), u[-1:, 1]])
     with FMUSession(fmus[kind], ["a", "b"], OUT) as s:
         fine = s.simulate(tf, np.column_stack([interp, step]), {})
-    np.testing.assert_array_equal(fine[:, 0], interp)  # linear between samples
+    np.testing.assert_array_equal(fine[:, 0], interp)
     np.testing.assert_array_equal(fine[:, 1], step)  # held between samples
     # at a point between samples the linear input is neither neighbour
     k = 10
-    mid = fine[k * m + 2, 0]
-    assert mid == pytest.approx(0.5 * (u[k, 0] + u[k + 1, 0]), rel=1e-12)
+    mid = fine[k * m + 2, 0]  # the step from 2/4 to 3/4 of the interval holds the 5/8 point
+    assert mid == pytest.approx(u[k, 0] + 0.625 * (u[k + 1, 0] - u[k, 0]), rel=1e-12)
     assert mid not in (u[k, 0], u[k + 1, 0])
     np.testing.assert_array_equal(coarse, fine[::m])
     np.testing.assert_array_equal(coarse[:, :2], u)  # still no lag at the samples
+
+
+@pytest.mark.parametrize("m", [4, 10])
+def test_substeps_of_a_linear_input_do_not_lag(fmus, m, backend):
+    """The integral ``za`` of a ramp held on substeps: the staircase of midpoint values
+    misses the exact (trapezoid) integral only in each interval's first step, by 1/m of
+    what a staircase of the steps' start values would miss (half a substep's lag)."""
+    t = np.arange(51) * 0.02
+    u = np.column_stack([3.0 * t + np.sin(2 * t), np.zeros_like(t)])
+    with FMUSession(fmus["fmi2"], ["a", "b"], OUT, hold={"a": "linear"}, substeps=m) as s:
+        za = s.simulate(t, u, {})[:, 2]
+    h = np.diff(t)
+    slope = np.diff(u[:, 0]) / h
+    trapezoid = np.concatenate([[0.0], np.cumsum(h * 0.5 * (u[:-1, 0] + u[1:, 0]))])
+    start_lag = np.concatenate([[0.0], np.cumsum(m * 0.5 * (h / m) ** 2 * slope)])
+    first_step = np.concatenate([[0.0], np.cumsum(0.5 * (h / m) ** 2 * slope)])
+    np.testing.assert_allclose(trapezoid - za, first_step, rtol=1e-9, atol=1e-13)
+    assert np.abs(trapezoid - za)[-1] <= 1.0001 * np.abs(start_lag)[-1] / m
 
 
 def test_fmu_that_interpolates_gets_input_derivatives(fmus, samples, backend):
@@ -156,7 +190,11 @@ def test_refine_grid():
     g = refine("x", t, u, np.array([True, False]), native=False, substeps=3)
     np.testing.assert_array_equal(g.time, fine_grid(t, 3))
     np.testing.assert_array_equal(g.keep, [0, 3, 6, 9])
-    np.testing.assert_array_equal(g.inputs[:, 0], np.interp(g.time, t, u[:, 0]))
+    _, expected = held_linear(t, u[:, 0], 3)
+    np.testing.assert_array_equal(g.inputs[:, 0], expected)
+    # at the samples the samples; between them the line at the middle of each step
+    np.testing.assert_array_equal(g.inputs[g.keep, 0], u[:, 0])
+    assert g.inputs[1, 0] == pytest.approx(1.5, rel=1e-12)  # step [1/3, 2/3] of 1 -> 2
     np.testing.assert_array_equal(g.inputs[:, 1], [5, 5, 5, 6, 6, 6, 7, 7, 7, 8])
     assert g.slopes.shape == (9, 0)
     native = refine("x", t, u, np.array([True, False]), native=True, substeps=3)

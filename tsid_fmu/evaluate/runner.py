@@ -28,6 +28,7 @@ from tsid_fmu.evaluate.protocol import Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.fmu.compiled import warm_up
+from tsid_fmu.fmu.delay import delay_input, delayed_inputs, split_delays
 
 __all__ = [
     "Job",
@@ -125,18 +126,22 @@ class SetRunner:
         self.plans = [e.replicate_plan(self.n_replicates) for e in spec.experiments]
         self.started = 0  # simulations started for the current set
         self.sessions: list[FMUSession] = []
+        self.fixed_delays: list[dict[str, float]] = []  # per experiment, by input name
+        fmu_parameters = [n for n in spec.parameter_names if delay_input(n) is None]
         try:
             for e in spec.experiments:
                 options: dict = {"hold": dict(e.hold)} if e.hold else {}
+                start, delays = split_delays({**spec.start_values, **e.start_values})
+                self.fixed_delays.append(delays)
                 self.sessions.append(
                     FMUSession(
                         spec.fmu,
                         inputs=e.input_names,
                         outputs=e.output_names,
-                        parameters=spec.parameter_names,
+                        parameters=fmu_parameters,
                         interface=spec.interface,  # type: ignore[arg-type]
                         step_size=spec.step_size,
-                        start_values={**spec.start_values, **e.start_values},
+                        start_values=start,
                         **options,
                     )
                 )
@@ -148,10 +153,15 @@ class SetRunner:
         experiment = self.spec.experiments[e]
         self.started += 1
         self.monitor.started(e, r, self.started)
+        values, delays = split_delays(params)
+        inputs = delayed_inputs(
+            experiment.time,
+            experiment.replicate_inputs(r),
+            experiment.input_names,
+            {**self.fixed_delays[e], **delays},
+        )
         try:
-            return self.sessions[e].simulate(
-                experiment.time, experiment.replicate_inputs(r), params
-            )
+            return self.sessions[e].simulate(experiment.time, inputs, values)
         finally:
             self.monitor.finished()
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import Cost
+from tsid_fmu.fmu.delay import check_delays
 
 __all__ = ["EvaluationSpec", "PreparedExperiment", "frozen_array"]
 
@@ -220,7 +221,8 @@ class EvaluationSpec:
     fmu : pathlib.Path
         The ``.fmu`` file.
     parameter_names : tuple of str
-        The parameters every parameter set gives, in the order of the memo keys.
+        The parameters every parameter set gives, in the order of the memo keys: FMU
+        variables, or ``delay(<input>)`` (:mod:`tsid_fmu.fmu.delay`).
     experiments : tuple of PreparedExperiment
         The experiments, in the order their costs are summed and residuals concatenated.
     cost : str, optional
@@ -270,6 +272,9 @@ class EvaluationSpec:
             twice = sorted({n for n in names if list(names).count(n) > 1})
             if twice:
                 raise StudyError(f"{what} names must be unique: {', '.join(twice)} repeated")
+        fixed = [*self.start_values, *self.parameter_names]
+        for e in self.experiments:  # delay(<input>): an input of every experiment
+            check_delays([*fixed, *e.start_values], e.input_names, f"experiment {e.name!r}")
 
     @property
     def n_replicates(self) -> int:

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tsid_fmu.errors import DataError, FMUError
+from tsid_fmu.fmu.delay import check_delays, delayed_inputs, split_delays
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.session import FMUSession
 from tsid_fmu.fmu.variables import REAL_TYPES, read_description, suggest
@@ -202,7 +203,8 @@ def simulate(
     outputs : sequence of str, optional
         Variables to return.  Default: every Real output of the FMU.
     parameters : mapping of str to float, optional
-        Parameter values for this run.
+        Parameter values for this run; ``delay(<input>)`` delays that input by so many
+        seconds (:mod:`tsid_fmu.fmu.delay`).
     start_values : mapping of str to float, optional
         Other values to set before initialization (e.g. initial states).
     hold : mapping of str to {"previous", "linear"}, optional
@@ -224,6 +226,8 @@ def simulate(
         The FMU cannot be opened or lacks a named variable (with suggestions).
     SimulationError
         An FMI call failed or an output is not finite (naming the call and the time).
+    StudyError
+        A ``delay(<input>)`` of an input that is not simulated.
     """
     import pandas as pd
 
@@ -240,10 +244,13 @@ def simulate(
         [_column(frame, col, f"the FMU input {name!r}") for name, col in mapping.items()]
         or [np.zeros((t.size, 0))]
     )
+    values, delays = split_delays(dict(parameters or {}))
+    check_delays(list(parameters or {}), tuple(mapping), "this simulation")
+    u = delayed_inputs(t, u, tuple(mapping), delays) if mapping else u
     session, lock = _session(path, identity, tuple(mapping), names_out, dict(hold or {}))
     with lock:
         session.set_start_values(dict(start_values or {}))
-        y = session.simulate(t, u if mapping else None, dict(parameters or {}))
+        y = session.simulate(t, u if mapping else None, values)
     result = pd.DataFrame(y, columns=list(names_out), index=frame.index)
     result.insert(0, "time", t)
     return result

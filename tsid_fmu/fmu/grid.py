@@ -7,7 +7,9 @@ input reaches the FMU in one of two ways:
 - the FMU interpolates itself (FMI 2.0 ``canInterpolateInputs``): it gets the slope
   ``(u[k+1] - u[k]) / h`` through ``fmi2SetRealInputDerivatives`` before each step;
 - otherwise every sample interval is split into ``substeps`` communication steps and
-  the input is set, linearly interpolated, at each of them.
+  the input is set, linearly interpolated, at each of them: at a sample its value, and
+  for a step inside the interval its value at the step's midpoint (which the FMU holds
+  over the step), so that the held staircase does not lag the line.
 
 A ``step_size`` splits long sample intervals the same way (inputs held or
 interpolated).  :func:`refine` returns the grid the step loop runs on and the rows of it
@@ -185,8 +187,16 @@ def refine(
         fine = np.repeat(t[:-1], n_sub) + j * np.repeat(h / n_sub, n_sub)
         t_fine = np.concatenate([fine, t[-1:]])
         u_fine = np.concatenate([np.repeat(u[:-1], n_sub, axis=0), u[-1:]])
+        # a linear input holds, over each communication step inside a sample interval,
+        # its value at the step's midpoint: a staircase centred on the line, without the
+        # lag of half a step that the value at the step's start would give; at the
+        # samples it is the sample itself, as feed-through outputs are read there
+        inner = np.ones(t_fine.size - 1, dtype=bool)
+        inner[keep[:-1]] = False
+        mid = t_fine[:-1][inner] + 0.5 * np.diff(t_fine)[inner]
         for c in np.flatnonzero(linear):
             u_fine[:, c] = np.interp(t_fine, t, u[:, c])
+            u_fine[:-1, c][inner] = np.interp(mid, t, u[:, c])
         t, u = t_fine, u_fine
         slopes = np.repeat(slopes, n_sub, axis=0)
     return Grid(_writeable(t), _writeable(u), np.ascontiguousarray(slopes), keep)

@@ -26,6 +26,7 @@ __all__ = [
     "check_fmi_version",
     "choose_interface",
     "find_variable",
+    "initial_state",
     "parse_start",
     "read_description",
     "real_reference",
@@ -197,6 +198,20 @@ def real_reference(
     return info.value_reference
 
 
+def initial_state(info: VariableInfo) -> bool:
+    """Whether a variable's start value is an initial state an identification may set.
+
+    A continuous local or output variable with ``initial="exact"`` (a state whose start
+    value the FMU uses as its initial value, e.g. Modelica's ``fixed = true``) can be set
+    before initialization like a parameter, so its initial value can be identified.
+    """
+    return (
+        info.causality in ("local", "output")
+        and info.variability == "continuous"
+        and info.initial == "exact"
+    )
+
+
 def setter_kind(
     variables: Mapping[str, VariableInfo], fmu: str, name: str, role: str
 ) -> tuple[str, int]:
@@ -211,15 +226,16 @@ def setter_kind(
     info = find_variable(variables, fmu, name, role)
     if info.variability == "constant":
         raise FMUError(f"{fmu}: {role} {name!r} is a constant and cannot be set")
-    if role == "parameter" and info.causality != "parameter":
+    if role == "parameter" and info.causality != "parameter" and not initial_state(info):
         hint = (
             " (a calculated parameter is computed by the FMU)"
             if info.causality == "calculatedParameter"
             else ""
         )
         raise FMUError(
-            f"{fmu}: parameter {name!r} has causality {info.causality!r}, not 'parameter'; "
-            f"it cannot be identified{hint}"
+            f"{fmu}: parameter {name!r} has causality {info.causality!r}, not 'parameter', "
+            f"and is no continuous variable with initial 'exact'; it cannot be "
+            f"identified{hint}"
         )
     if info.causality == "independent" or (
         info.causality != "input" and info.initial == "calculated"

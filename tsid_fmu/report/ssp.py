@@ -26,6 +26,7 @@ from typing import Any
 from xml.etree import ElementTree as ET
 
 from tsid_fmu.errors import FMUError
+from tsid_fmu.fmu.delay import delay_input
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.trail.files import atomic_write
@@ -224,8 +225,12 @@ def write_model_ssp(result: IdentificationResult, out: Path) -> Path | None:
     if study is None:
         return None
     units = {p.name: p.unit for p in study.parameters}
-    values = {**dict(result.x), **study.start_values}
-    desc = {k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in result.x}
+    # an input delay is applied to the data by tsid-fmu, not an FMU variable: SSP 1.0
+    # has no place for it, so the report names it instead
+    values = {
+        k: v for k, v in {**dict(result.x), **study.start_values}.items() if not delay_input(k)
+    }
+    desc = {k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in values}
     desc.update(dict.fromkeys(study.start_values, "fixed in the study"))
     return write_ssp(out / "model.ssp", study.fmu, values, name=study.name, descriptions=desc)
 
