@@ -136,6 +136,7 @@ class SetRunner:
                         parameters=spec.parameter_names,
                         interface=spec.interface,  # type: ignore[arg-type]
                         step_size=spec.step_size,
+                        tolerance=spec.tolerance,
                         start_values={**spec.start_values, **e.start_values},
                         **options,
                     )

@@ -12,7 +12,19 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["input_signal", "simulate_me"]
+from tsid_fmu.errors import FMUError
+
+__all__ = ["check_tolerance", "input_signal", "simulate_me"]
+
+
+def check_tolerance(fmu: str, tolerance: Any) -> float | None:
+    """Return a relative tolerance as a float in ``(0, 1)`` (or None); FMUError otherwise."""
+    if tolerance is None:
+        return None
+    ok = not isinstance(tolerance, bool) and isinstance(tolerance, int | float)
+    if not (ok and 0 < tolerance < 1):
+        raise FMUError(f"{fmu}: tolerance must be a number between 0 and 1, got {tolerance!r}")
+    return float(tolerance)
 
 
 def input_signal(
@@ -47,6 +59,7 @@ def simulate_me(
     start_values: dict[str, Any],
     step_size: float | None,
     on_error: Callable[[Exception, float], Exception],
+    tolerance: float | None = None,
 ) -> np.ndarray:
     """Integrate the Model Exchange instance ``fmu`` over ``t``; return the outputs at ``t``.
 
@@ -69,6 +82,9 @@ def simulate_me(
     on_error : callable
         ``on_error(exc, time)`` returns the exception to raise when FMPy fails at
         ``time``.
+    tolerance : float, optional
+        The solver's relative tolerance (default: the model description's default
+        experiment's, else FMPy's 1e-5).
     """
     from fmpy import simulate_fmu
 
@@ -85,6 +101,7 @@ def simulate_me(
             start_time=float(t[0]),
             stop_time=float(t[-1]),
             step_size=step_size,
+            relative_tolerance=tolerance,
             output_interval=float(np.min(np.diff(t))),
             record_events=False,
             start_values=start_values,

@@ -106,6 +106,9 @@ class FMUSession:
     substeps : int, optional
         Communication steps per sample interval for linear inputs the FMU does not
         interpolate itself (default 10).
+    tolerance : float, optional
+        Model Exchange: the solver's relative tolerance (default: the FMU's default
+        experiment's, else the solver's own default). Ignored in Co-Simulation.
 
     Attributes
     ----------
@@ -139,6 +142,7 @@ class FMUSession:
         logger: Logger | None = None,
         hold: Mapping[str, str] | None = None,
         substeps: int = 10,
+        tolerance: float | None = None,
     ) -> None:
         self.path = Path(path)
         self.input_names = tuple(inputs)
@@ -154,6 +158,7 @@ class FMUSession:
         try:
             self.step_size = grid.check_step_size(self.path.name, step_size)
             self.substeps = grid.check_substeps(self.path.name, substeps)
+            self.tolerance = exchange.check_tolerance(self.path.name, tolerance)
             if interface not in ("auto", "cs", "me"):
                 raise FMUError(
                     f"{self.path.name}: interface must be 'auto', 'cs' or 'me', not {interface!r}"
@@ -444,6 +449,7 @@ class FMUSession:
             start_values,
             self.step_size,
             lambda exc, t: inst.error(exc, f"Model Exchange simulation: {exc}", "?", t),
+            tolerance=self.tolerance,
         )
 
     # -- closing ---------------------------------------------------------------------------
