@@ -15,7 +15,7 @@ from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
 from tsid_fmu.uncertainty.intervals import Uncertainty, uncertainty
-from tsid_fmu.uncertainty.sensitivity import sensitivities
+from tsid_fmu.uncertainty.sensitivity import Sensitivities, sensitivities
 
 __all__ = ["MISMATCH", "Assessment", "assess", "standard_errors", "validate"]
 
@@ -35,6 +35,7 @@ class Assessment:
     uncertainty: Uncertainty | None = None
     warnings: list[str] = field(default_factory=list)
     nfev: int = 0
+    sensitivities: Sensitivities | None = None
 
 
 def _fit(spec: EvaluationSpec, sims: list[Simulated]) -> tuple[dict, dict, list[str]]:
@@ -52,9 +53,10 @@ def _fit(spec: EvaluationSpec, sims: list[Simulated]) -> tuple[dict, dict, list[
             rmse = fit[e.name][name]["rmse"]
             if s > 0 and rmse > MISMATCH * s:
                 warnings.append(
-                    f"{e.name} / {name}: residual RMS {rmse:.3g} is {rmse / s:.1f} times the "
-                    f"noise in the data ({s:.3g}): the model (or its solver) does not explain "
-                    "these data; the intervals below assume it does"
+                    f"{e.name} / {name}: model or solver mismatch: residual RMS {rmse:.3g} is "
+                    f"{rmse / s:.1f} times the noise in the data ({s:.3g}; more than "
+                    f"{MISMATCH:g} x): the model or its solver does not explain these data, "
+                    "and the intervals assume it does"
                 )
     return fit, noise, warnings
 
@@ -76,6 +78,7 @@ def assess(
     sens = sensitivities(evaluator, spec, space, varied) if math.isfinite(fun) else None
     if sens is not None:
         out.uncertainty = uncertainty(sens, space, varied)
+        out.sensitivities = sens
     out.nfev = evaluator.nfev - start
     return out
 

@@ -1,0 +1,245 @@
+"""One parameter set simulated by several solvers, and how far apart they lie.
+
+The building blocks of the fidelity check (:mod:`tsid_fmu.uncertainty.fidelity`): a
+:class:`Solver` (interface, step, tolerance), :class:`SolverRuns` that simulates a spec's
+experiments with any of them (each run in a fresh :class:`~tsid_fmu.fmu.FMUSession`,
+remembered), :func:`compare` that measures a solver's RMS difference from a reference
+against each output's noise, and :func:`solver_bias`, the shift of the estimates that such
+a difference causes, in standard errors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.evaluate.cost import noise_level
+from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
+from tsid_fmu.fmu.info import read_fmu_description
+from tsid_fmu.fmu.session import FMUSession
+from tsid_fmu.study.prepare import NOISE_FLOOR
+from tsid_fmu.uncertainty.intervals import _whitened
+from tsid_fmu.uncertainty.sensitivity import Sensitivities
+
+__all__ = [
+    "Deviation",
+    "Solver",
+    "SolverRuns",
+    "available_interfaces",
+    "compare",
+    "output_noise",
+    "solver_bias",
+]
+
+
+@dataclass(frozen=True)
+class Solver:
+    """One way of simulating the FMU.
+
+    Parameters
+    ----------
+    interface : {"cs", "me"}
+        Co-Simulation or Model Exchange.
+    step : float, optional
+        Co-Simulation: largest communication step (None: the sample interval). Model
+        Exchange: the step hint.
+    tolerance : float, optional
+        Model Exchange: relative tolerance (None: the solver's default).
+    """
+
+    interface: str
+    step: float | None = None
+    tolerance: float | None = None
+
+    @property
+    def label(self) -> str:
+        """Describe the solver in words (``Co-Simulation at step 0.01 s``)."""
+        if self.interface == "cs":
+            step = f"step {self.step:g} s" if self.step else "the data's sample interval"
+            return f"Co-Simulation at {step}"
+        tol = f"tolerance {self.tolerance:g}" if self.tolerance else "its default tolerance"
+        return f"Model Exchange at {tol}"
+
+
+@dataclass
+class Deviation:
+    """How far one solver's outputs lie from the reference, relative to the noise.
+
+    Attributes
+    ----------
+    solver : Solver
+        The solver compared.
+    outputs : dict
+        ``{experiment: {output: {"rms": ..., "noise": ..., "ratio": rms / noise}}}``.
+    differences : list of numpy.ndarray
+        ``solver - reference`` per experiment, ``(n, outputs)`` (not serialised).
+    """
+
+    solver: Solver
+    outputs: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    differences: list[np.ndarray] = field(default_factory=list, repr=False)
+
+    @property
+    def worst(self) -> tuple[str, str, dict[str, float]]:
+        """Return the experiment, output and figures with the largest ratio."""
+        rows = [(e, o, v) for e, per in self.outputs.items() for o, v in per.items()]
+        return max(rows, key=lambda r: r[2]["ratio"])
+
+    @property
+    def ratio(self) -> float:
+        """The largest RMS difference over noise of any output."""
+        return self.worst[2]["ratio"] if self.outputs else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return strict-JSON data."""
+        s = self.solver
+        return {
+            "solver": s.label,
+            "interface": s.interface,
+            "step": s.step,
+            "tolerance": s.tolerance,
+            "ratio": self.ratio,
+            "outputs": self.outputs,
+        }
+
+
+def available_interfaces(spec: EvaluationSpec) -> tuple[str, ...]:
+    """Return the interfaces the spec's FMU declares, Co-Simulation first."""
+    md = read_fmu_description(spec.fmu)
+    return tuple(k for k, d in (("cs", md.coSimulation), ("me", md.modelExchange)) if d)
+
+
+def output_noise(
+    experiment: PreparedExperiment, given: Mapping[str, float] | None = None
+) -> np.ndarray:
+    """Return each output's noise: the given sensor noise, else the data's estimate.
+
+    An output that shows no noise gets :data:`~tsid_fmu.study.prepare.NOISE_FLOOR` times
+    its RMS value, as the residual scales of a study do.
+    """
+    y = experiment.measured
+    given = given or {}
+    names, estimate = experiment.output_names, noise_level(y)
+    sigma = np.array([given.get(n, s) for n, s in zip(names, estimate, strict=True)])
+    quiet = ~(sigma > 1e-6 * np.maximum(np.ptp(y, axis=0), 1e-300))
+    rms = np.sqrt(np.mean(y**2, axis=0))
+    return np.where(quiet, np.maximum(NOISE_FLOOR * rms, 1e-300), sigma)
+
+
+def _finer_grid(e: PreparedExperiment, k: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """Split the sample grid ``k`` times: linear inputs interpolated, the others held."""
+    t = e.time
+    j = np.arange(k) / k
+    fine = np.append((t[:-1, None] + np.diff(t)[:, None] * j[None, :]).ravel(), t[-1])
+    if e.inputs is None:
+        return fine, None
+    held = e.inputs[np.minimum(np.searchsorted(t, fine, side="right") - 1, t.size - 1)]
+    for c, name in enumerate(e.input_names):
+        if e.hold.get(name) == "linear":
+            held[:, c] = np.interp(fine, t, e.inputs[:, c])
+    return fine, held
+
+
+class SolverRuns:
+    """Simulate a spec's experiments at one parameter set, by solver; count and remember.
+
+    Parameters
+    ----------
+    spec : EvaluationSpec
+        The FMU, experiments and fixed values.
+    x : mapping of str to float
+        The parameter set.
+    """
+
+    def __init__(self, spec: EvaluationSpec, x: Mapping[str, float]) -> None:
+        self.spec, self.x = spec, dict(x)
+        self.count = 0
+        self.cache: dict[tuple[Solver, int, int], np.ndarray] = {}
+
+    def run(self, solver: Solver, index: int, k: int = 1) -> np.ndarray:
+        """Return experiment ``index``'s outputs, on its sample grid split ``k`` times."""
+        key = (solver, index, k)
+        if key not in self.cache:
+            e = self.spec.experiments[index]
+            t, u = (e.time, e.inputs) if k == 1 else _finer_grid(e, k)
+            with FMUSession(
+                self.spec.fmu,
+                e.input_names,
+                e.output_names,
+                parameters=list(self.x),
+                interface=solver.interface,  # type: ignore[arg-type]
+                step_size=solver.step,
+                start_values={**self.spec.start_values, **e.start_values},
+                hold=dict(e.hold),
+                tolerance=solver.tolerance,
+            ) as session:
+                self.count += 1
+                self.cache[key] = session.simulate(t, u, self.x)[::k]
+        return self.cache[key]
+
+
+def _rms(a: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(a**2, axis=0))
+
+
+def compare(
+    runs: SolverRuns,
+    solver: Solver,
+    reference: Solver,
+    noise: Sequence[np.ndarray],
+    threshold: float,
+) -> Deviation:
+    """Compare ``solver`` with ``reference`` on every experiment of ``runs``.
+
+    FMPy's Model Exchange loop holds inputs constant over each solver call, so a
+    reference in Model Exchange is first order in the sample interval for inputs held
+    linearly. Where that could matter (a difference above ``threshold`` times the noise,
+    or a Model Exchange solver compared) the reference is extrapolated from the sample
+    grid and a twice finer one (Richardson), so that a Co-Simulation that interpolates
+    its inputs exactly is not blamed.
+    """
+    out = Deviation(solver)
+    for i, e in enumerate(runs.spec.experiments):
+        y, ref = runs.run(solver, i), runs.run(reference, i)
+        linear = any(e.hold.get(n) == "linear" for n in e.input_names)
+        suspect = solver.interface == "me" or np.any(_rms(y - ref) > threshold * noise[i])
+        if reference.interface == "me" and linear and suspect:
+            ref = 2.0 * runs.run(reference, i, 2) - ref
+        out.differences.append(y - ref)
+        out.outputs[e.name] = {
+            n: {"rms": float(r), "noise": float(s), "ratio": float(r / s)}
+            for n, r, s in zip(e.output_names, _rms(y - ref), noise[i], strict=True)
+        }
+    return out
+
+
+def solver_bias(deviation: Deviation, sens: Sensitivities) -> dict[str, float]:
+    """Return the shift of each estimate that the solver's difference causes, in SEs.
+
+    The least-squares estimate moves by ``(J^T J)^-1 J^T d`` when the model's outputs are
+    off by ``d``, with ``J`` and ``d`` whitened by each output's residual RMS as the
+    intervals are (:mod:`tsid_fmu.uncertainty.intervals`); divided by the standard
+    errors. Parameters the data do not determine are left out.
+    """
+    jac, noise = _whitened(sens)
+    d = np.concatenate(
+        [
+            (diff / np.asarray(noise[name])[None, :]).ravel()
+            for name, diff in zip(sens.experiments, deviation.differences, strict=True)
+        ]
+    )
+    fisher = jac.T @ jac
+    try:
+        cov = np.linalg.inv(fisher)
+    except np.linalg.LinAlgError:
+        return {}
+    shift = cov @ (jac.T @ d)
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return {
+        n: float(abs(s) / e)
+        for n, s, e in zip(sens.names, shift, se, strict=True)
+        if np.isfinite(e) and e > 0 and np.isfinite(s)
+    }
