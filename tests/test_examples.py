@@ -55,6 +55,9 @@ def test_siso_example_identifies_the_parameters(tmp_path):
     assert res.nfev <= 500
     assert res.fit["measured"]["F_o"]["fit_percent"] > 97
     assert (tmp_path / "out" / "report.md").is_file()
+    # the FMU's Co-Simulation matches an accurate solution: no solver warning (issue 16)
+    assert res.extra["fidelity"]["interface"] == "cs"
+    assert not any(w.startswith("solver fidelity") for w in res.warnings), res.warnings
 
 
 @pytest.mark.slow
@@ -81,3 +84,5 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     assert abs((x["C_1"] / x["K_s"]) / (20.0 / 5000.0) - 1) < 0.02
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## Stages" in report and "contribution" in report
+    assert res.extra["fidelity"]["interface"] == "cs"
+    assert not any(w.startswith("solver fidelity") for w in res.warnings), res.warnings
