@@ -55,6 +55,9 @@ def test_siso_example_identifies_the_parameters(tmp_path):
     assert res.nfev <= 500
     assert res.fit["measured"]["F_o"]["fit_percent"] > 97
     assert (tmp_path / "out" / "report.md").is_file()
+    # the FMU's Co-Simulation matches an accurate solution: no solver warning (issue 16)
+    assert res.extra["fidelity"]["interface"] == "cs"
+    assert not any(w.startswith("solver fidelity") for w in res.warnings), res.warnings
 
 
 @pytest.mark.slow
@@ -86,3 +89,5 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     assert comp["phased"]["nfev"] > 0 and comp["ungrouped"]["nfev"] > 0
     assert np.isfinite(comp["phased"]["cost"]) and np.isfinite(comp["ungrouped"]["cost"])
     assert "Why grouping: the same study without it" in report
+    assert res.extra["fidelity"]["interface"] == "cs"
+    assert not any(w.startswith("solver fidelity") for w in res.warnings), res.warnings

@@ -81,6 +81,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    import dataclasses
     import json
 
     from tsid_fmu.evaluate.cost import metrics
@@ -90,12 +91,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     study = Study.from_toml(args.study)
     values: dict[str, float] = {}
+    interface = None  # the interface the identification chose (solver fidelity check)
     if args.result:
         path = Path(args.result)
         path = path / "result.json" if path.is_dir() else path
         try:
-            values.update(json.loads(path.read_text())["x"])
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+            saved = json.loads(path.read_text())
+            values.update(saved["x"])
+            interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise StudyError(
                 f"{path}: cannot read identified parameters ({type(exc).__name__})"
             ) from None
@@ -109,6 +113,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         raise StudyError(f"--set: {unknown} are not parameters of the study")
     # parameters not given keep the FMU's start values
     spec = prepare(study, None, [n for n in study.parameter_names if n in values])
+    if interface is not None:
+        spec = dataclasses.replace(spec, interface=interface)
     with SerialEvaluator(spec) as ev:
         simulated = ev.simulate([values], count=False)[0]
     print(

@@ -34,6 +34,15 @@ from tsid_fmu.study.definition import Study
 from tsid_fmu.study.prepare import prepare
 from tsid_fmu.trail.folder import NullStore, Trail
 from tsid_fmu.uncertainty.assess import assess, validate
+from tsid_fmu.uncertainty.fidelity import (
+    Fidelity,
+    check_fidelity,
+    fidelity_record,
+    fidelity_warnings,
+    start_point,
+    study_noise,
+)
+from tsid_fmu.uncertainty.sensitivity import Sensitivities
 
 __all__ = ["identify"]
 
@@ -49,6 +58,12 @@ class _Evaluators:
         self.study, self.runner, self.given = study, runner, given
         self.pool: dict[tuple, Evaluator] = {}
         self.specs: dict[tuple, EvaluationSpec] = {}
+        self.interface: str | None = None  # chosen by the fidelity check
+
+    def use(self, interface: str) -> None:
+        """Simulate every sub-problem with ``interface`` from now on."""
+        self.interface = interface
+        self.specs = {k: dataclasses.replace(s, interface=interface) for k, s in self.specs.items()}
 
     def _key(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> tuple:
         return (tuple(params), tuple(exps), tuple(sorted(fixed.items())))
@@ -60,7 +75,9 @@ class _Evaluators:
         if key not in self.specs:
             base = prepare(self.study, exps, params)
             start = {**base.start_values, **{k: v for k, v in fixed.items() if k not in params}}
-            self.specs[key] = dataclasses.replace(base, start_values=start)
+            self.specs[key] = dataclasses.replace(
+                base, start_values=start, interface=self.interface or base.interface
+            )
         return self.specs[key]
 
     def get(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> Evaluator:
@@ -143,12 +160,43 @@ def _compare_ungrouped(
     }
 
 
+def _fidelity(
+    study: Study,
+    evaluators: _Evaluators,
+    x: Mapping[str, float],
+    where: str,
+    callback: ProgressCallback | None,
+    sens: Sensitivities | None = None,
+) -> Fidelity | None:
+    """Check the solver at ``x``; from the start point on, use the interface it chose."""
+    if evaluators.given is not None:
+        return None
+    exps = [e.name for e in study.identify_experiments()]
+    spec = evaluators.spec(study.parameter_names, exps, {})
+    check = check_fidelity(spec, x, where=where, noise=study_noise(study), sensitivities=sens)
+    evaluators.use(check.interface)
+    if callback:
+        callback("fidelity", {"message": check.message, "check": check})
+    return check
+
+
+def _record(
+    result: IdentificationResult, start: Fidelity | None, answer: Fidelity | None
+) -> IdentificationResult:
+    """Put the fidelity checks into the result: ``extra["fidelity"]``, first warnings."""
+    if start is not None:
+        result.extra["fidelity"] = fidelity_record(start, answer)
+        result.warnings[:0] = fidelity_warnings(start, answer)
+    return result
+
+
 def _finish(
     study: Study,
     stages: list[StageResult],
     evaluators: _Evaluators,
     store: Trail | NullStore,
     plots: bool,
+    fidelity: tuple[Fidelity | None, ProgressCallback | None] = (None, None),
 ) -> IdentificationResult:
     status, message = _status(stages)
     x = {n: stages[-1].x.get(n, math.nan) for n in study.parameter_names}
@@ -169,8 +217,9 @@ def _finish(
         n: [float(r.anova.contribution[n]) for r in result.iterations if n in r.names]
         for n in study.parameter_names
     }
+    start, callback = fidelity
     if status == 2 or evaluators.given is not None:
-        return result
+        return _record(result, start, None)
     exps = [e.name for e in study.identify_experiments()]
     spec = evaluators.spec(study.parameter_names, exps, {})
     ev = evaluators.get(study.parameter_names, exps, {})
@@ -183,6 +232,8 @@ def _finish(
     result.uncertainty = found.uncertainty
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
     result.warnings = found.warnings + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
+    answer = _fidelity(study, evaluators, x, "answer", callback, found.sensitivities)
+    _record(result, start, answer)
     result.weak = _weak(result)
     if study.contribution.enabled and study.contribution.compare_ungrouped:
         result.extra["comparison"] = _compare_ungrouped(study, evaluators, store, result)
@@ -276,8 +327,9 @@ def identify(
             draw = _plotter(evaluators, study) if plots else None
             store = Trail(out, study, resume=resume, on_iteration=draw)
         control = Control(pause_after, max_iterations, continue_from_run)
+        start = _fidelity(study, evaluators, start_point(study), "start point", callback)
         stages = run_stages(study, evaluators, store, callback, control)
-        result = _finish(study, stages, evaluators, store, plots)
+        result = _finish(study, stages, evaluators, store, plots, (start, callback))
         result.out_dir = Path(out) if out is not None else None
     finally:
         evaluators.close()

@@ -68,7 +68,10 @@ class IdentificationResult:
     warnings : list of str
         Things a person should know (mismatch, limits, failed runs).
     extra : dict
-        Stage-specific analyses (contribution tables, the ungrouped comparison).
+        Stage-specific analyses (contribution tables, the ungrouped comparison), and
+        ``"fidelity"``: the interface used and the solver checks at the start point
+        and the answer (:func:`tsid_fmu.uncertainty.fidelity.fidelity_record`); only
+        this one is written to ``result.json``.
     study : Study or None
         The study identified.
     out_dir : Path or None
@@ -135,6 +138,7 @@ class IdentificationResult:
                 "weak": self.weak,
                 "warnings": self.warnings,
                 "comparison": self.extra.get("comparison"),
+                "extra": {k: self.extra[k] for k in ("fidelity",) if k in self.extra},
             }
         )
 

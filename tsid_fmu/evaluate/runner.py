@@ -141,6 +141,7 @@ class SetRunner:
                         parameters=fmu_parameters,
                         interface=spec.interface,  # type: ignore[arg-type]
                         step_size=spec.step_size,
+                        tolerance=spec.tolerance,
                         start_values=start,
                         **options,
                     )

@@ -233,6 +233,8 @@ class EvaluationSpec:
         Co-Simulation or Model Exchange (``"auto"`` prefers Co-Simulation).
     step_size : float, optional
         Largest communication step (Co-Simulation) or solver step hint (Model Exchange).
+    tolerance : float, optional
+        Relative tolerance of the Model Exchange solver (default: the solver's own).
 
     Raises
     ------
@@ -247,6 +249,7 @@ class EvaluationSpec:
     start_values: Mapping[str, float] = field(default_factory=dict)
     interface: str = "auto"
     step_size: float | None = None
+    tolerance: float | None = None
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -259,6 +262,8 @@ class EvaluationSpec:
             put(self, "step_size", float(self.step_size))
             if not (math.isfinite(self.step_size) and self.step_size > 0):
                 raise StudyError(f"step_size must be > 0, got {self.step_size}")
+        if self.tolerance is not None and not 0 < self.tolerance < 1:
+            raise StudyError(f"tolerance must be between 0 and 1, got {self.tolerance}")
         if self.interface not in INTERFACES:
             raise StudyError(f"interface must be one of {INTERFACES}, got {self.interface!r}")
         if not self.experiments:

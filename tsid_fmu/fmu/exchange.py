@@ -71,7 +71,8 @@ def simulate_me(
     step_size : float, optional
         The solver's step size hint.
     tolerance : float, optional
-        CVode's relative tolerance (default: FMPy's).
+        CVode's relative tolerance (default: the model description's default
+        experiment's, else FMPy's 1e-5).
     on_error : callable
         ``on_error(exc, time)`` returns the exception to raise when FMPy fails at
         ``time``.

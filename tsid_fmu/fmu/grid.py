@@ -217,10 +217,8 @@ def check_tolerance(fmu: str, tolerance: Any) -> float | None:
     """Return ``tolerance`` as a float in (0, 1) (or None); FMUError otherwise."""
     if tolerance is None:
         return None
-    try:
-        value = float(tolerance)
-    except (TypeError, ValueError):
-        value = math.nan
+    number = not isinstance(tolerance, bool) and isinstance(tolerance, int | float | np.floating)
+    value = float(tolerance) if number else math.nan
     if not 0 < value < 1:
         raise FMUError(
             f"{fmu}: tolerance must be a relative tolerance in (0, 1), got {tolerance!r}"

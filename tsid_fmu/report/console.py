@@ -42,6 +42,8 @@ class ConsoleProgress:
                 f"{rec.best_cost:.6g}; {rec.decision.message} [{rec.nfev_total} simulations, "
                 f"{now - self.t0:.1f} s]"
             )
+        elif event == "fidelity":
+            self._print(info["message"])
         elif event in ("stage", "rerun"):
             self._print(f"== {info['message']}" if event == "stage" else f"  {info['message']}")
         elif event == "refinement":

@@ -95,6 +95,8 @@ def _fit(result: IdentificationResult) -> list[str]:
                 continue
             sigma = result.noise.get(exp, {}).get(output)
             beside = f" (noise in the data: {sigma:.3g})" if sigma is not None else ""
+            if sigma:
+                beside = f"{beside[:-1]}; RMSE {m['rmse'] / sigma:.2g} x it)"
             lines.append(
                 f"- {escape(exp)} / {escape(output)}: fit {m['fit_percent']:.3f} %, RMSE "
                 f"{m['rmse']:.5g}{beside}, IAE {m['iae']:.5g}"
@@ -148,6 +150,30 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
     for name, (low, high) in result.intervals.items():
         if low is None or high is None:
             lines.append(f"- **{name}**: the data do not determine it: its 95 % interval is open")
+    mismatch = [w for w in result.warnings if "model or solver mismatch" in w]
+    if mismatch:
+        lines += ["", "**These intervals assume that the model explains the data; it does not:**"]
+        lines += [f"- {w}" for w in mismatch]
+    return [*lines, ""]
+
+
+def _fidelity(result: IdentificationResult) -> list[str]:
+    record = result.extra.get("fidelity")
+    if not record:
+        return []
+    names = {"cs": "Co-Simulation", "me": "Model Exchange"}
+    lines = [
+        "## Solver fidelity",
+        "",
+        f"The study's solver against a reference solution; a difference above "
+        f"{record['threshold']:g} x an output's noise matters (see docs/troubleshooting.md).",
+        "",
+        f"- Interface: {record['requested']!r} requested, "
+        f"**{names.get(record['interface'], record['interface'])}** used",
+    ]
+    for key in ("start", "answer"):
+        if record.get(key):
+            lines.append(f"- {record[key]['message']}")
     return [*lines, ""]
 
 
@@ -175,7 +201,7 @@ def markdown_report(result: IdentificationResult) -> str:
             *[f"- **{escape(k)}**: {escape(v)}" for k, v in result.weak.items()],
             "",
         ]
-    lines += _uncertainty(result) + _fit(result) + _stages(result)
+    lines += _uncertainty(result) + _fit(result) + _fidelity(result) + _stages(result)
     lines += _failed_runs(result.iterations)
     if result.validation:
         lines += ["## Validation experiments (all inputs together)", ""]

@@ -71,9 +71,10 @@ class Study:
     start_values : mapping of str to float
         FMU values fixed for every run (not identified).
     interface : {"auto", "cs", "me"}
-        FMI interface to simulate with.
+        FMI interface to simulate with (``method.interface``, where given, replaces it).
     step_size : float, optional
-        Communication step; default the data's sample time.
+        Communication step; default the data's sample time (``method.step``, where
+        given, replaces it).
     name : str
         Label for reports.
     source : Path, optional
@@ -175,6 +176,16 @@ class Study:
             self.step_size = check_number(self.step_size, "[study] step_size")
             if self.step_size < 1e-9:
                 raise StudyError(f"[study] step_size must be at least 1e-9 s, got {self.step_size}")
+        for key, mine, theirs in (
+            ("interface", self.interface if self.interface != "auto" else None, "interface"),
+            ("step_size", self.step_size, "step"),
+        ):
+            other = getattr(self.method, theirs)
+            if mine is not None and other is not None and mine != other:
+                raise StudyError(
+                    f"[study] {key} = {mine!r} and [method] {theirs} = {other!r} disagree; "
+                    f"give [method] {theirs} only"
+                )
         clash = sorted(set(names) & set(self.start_values))
         if clash:
             raise StudyError(f"{', '.join(clash)} both identified and fixed in start_values")

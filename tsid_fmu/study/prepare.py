@@ -14,7 +14,14 @@ from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Experiment
 
-__all__ = ["NOISE_FLOOR", "load_experiment", "prepare", "prepare_experiment", "serial_evaluator"]
+__all__ = [
+    "NOISE_FLOOR",
+    "load_experiment",
+    "prepare",
+    "prepare_experiment",
+    "serial_evaluator",
+    "solver_settings",
+]
 
 NOISE_FLOOR = 1e-3
 """An output that shows no noise has its residuals scaled as if its noise were this
@@ -121,6 +128,13 @@ def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
     )
 
 
+def solver_settings(study: Study) -> tuple[str, float | None]:
+    """Return a study's interface and step: ``[method]``'s where given, else ``[study]``'s."""
+    method = study.method
+    interface = method.interface if method.interface is not None else study.interface
+    return interface, method.step if method.step is not None else study.step_size
+
+
 def prepare(
     study: Study,
     experiments: Sequence[str] | None = None,
@@ -150,14 +164,16 @@ def prepare(
     else:
         by_name = {e.name: i for i, e in enumerate(study.experiments)}
         indices = [by_name[n] for n in experiments]
+    interface, step = solver_settings(study)
     return EvaluationSpec(
         fmu=study.fmu,
         parameter_names=tuple(study.parameter_names if parameters is None else parameters),
         experiments=tuple(prepare_experiment(study, i) for i in indices),
         cost=study.method.cost,
         start_values=dict(study.start_values),
-        interface=study.interface,
-        step_size=study.step_size,
+        interface=interface,
+        step_size=step,
+        tolerance=study.method.tolerance,
     )
 
 

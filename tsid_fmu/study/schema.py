@@ -358,6 +358,22 @@ class Method:
     refine_max_nfev : int, optional
         Most simulations of the refinement stage; default ``30 (p + 1)`` times the
         number of identification experiments (about thirty Jacobians).
+    interface : {"auto", "cs", "me"}, optional
+        FMI interface to simulate with (the same as ``[study] interface``, which it
+        replaces; giving both with different values is an error). ``"auto"`` (the
+        default) checks the solver's fidelity at the start point
+        (:mod:`tsid_fmu.uncertainty.fidelity`) and uses Model Exchange where the
+        Co-Simulation's solver error matters and Model Exchange is closer to an accurate
+        solution; else Co-Simulation.
+    step : float, optional
+        Largest communication step in seconds (Co-Simulation) or the solver's step hint
+        (Model Exchange); the same as ``[study] step_size``. Default: the data's sample
+        interval.
+    tolerance : float
+        Relative tolerance of the Model Exchange solver. Default 1e-10: a simulation
+        default such as FMPy's 1e-5 leaves errors near or above the noise of good data
+        (the solver's absolute tolerance is this times each state's nominal value, often
+        1, whatever the state's size), and the parameters absorb them.
     leveling : LevelingOptions
         Re-leveling thresholds and rules.
     """
@@ -375,6 +391,9 @@ class Method:
     max_reruns: int = 2
     refine: str = "none"
     refine_max_nfev: int | None = None
+    interface: str | None = None
+    step: float | None = None
+    tolerance: float = 1e-10
     leveling: LevelingOptions = field(default_factory=LevelingOptions)
 
     def __post_init__(self) -> None:
@@ -406,5 +425,13 @@ class Method:
             )
         if self.refine_max_nfev is not None:
             self.refine_max_nfev = check_whole(self.refine_max_nfev, "refine_max_nfev", 1)
+        if self.interface is not None:
+            self.interface = check_choice(self.interface, "interface", ("auto", "cs", "me"))
+        if self.step is not None:
+            self.step = check_number(self.step, "step")
+            if self.step < 1e-9:
+                raise StudyError(f"step must be at least 1e-9 s, got {self.step}")
+        if not 0 < check_number(self.tolerance, "tolerance") < 1:
+            raise StudyError(f"tolerance must be between 0 and 1, got {self.tolerance}")
         if not isinstance(self.leveling, LevelingOptions):
             raise StudyError("leveling must be a LevelingOptions")

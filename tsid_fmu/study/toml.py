@@ -68,6 +68,9 @@ _METHOD_TYPES: dict[str, type] = {
     "max_reruns": int,
     "refine": str,
     "refine_max_nfev": int,
+    "interface": str,
+    "step": float,
+    "tolerance": float,
 }
 _LEVELING_TYPES: dict[str, type] = {
     "significance_db": float,

@@ -36,6 +36,7 @@ class Assessment:
     uncertainty: Uncertainty | None = None
     warnings: list[str] = field(default_factory=list)
     nfev: int = 0
+    sensitivities: Sensitivities | None = None
 
 
 def _fit(spec: EvaluationSpec, sims: list[Simulated]) -> tuple[dict, dict, list[str]]:
@@ -53,9 +54,10 @@ def _fit(spec: EvaluationSpec, sims: list[Simulated]) -> tuple[dict, dict, list[
             rmse = fit[e.name][name]["rmse"]
             if s > 0 and rmse > MISMATCH * s:
                 warnings.append(
-                    f"{e.name} / {name}: residual RMS {rmse:.3g} is {rmse / s:.1f} times the "
-                    f"noise in the data ({s:.3g}): the model (or its solver) does not explain "
-                    "these data; the intervals below assume it does"
+                    f"{e.name} / {name}: model or solver mismatch: residual RMS {rmse:.3g} is "
+                    f"{rmse / s:.1f} times the noise in the data ({s:.3g}; more than "
+                    f"{MISMATCH:g} x): the model or its solver does not explain these data, "
+                    "and the intervals assume it does"
                 )
     return fit, noise, warnings
 
@@ -77,6 +79,7 @@ def assess(
     sens = sensitivities(evaluator, spec, space, varied) if math.isfinite(fun) else None
     if sens is not None:
         out.uncertainty = uncertainty(sens, space, varied)
+        out.sensitivities = sens
     if out.uncertainty is not None and sens is not None and spec.cost == "sse":
         _widen_by_profile(evaluator, spec, space, varied, fun, sens, out.uncertainty)
     if out.uncertainty is not None:

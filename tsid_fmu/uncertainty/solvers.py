@@ -1,0 +1,272 @@
+"""One parameter set simulated by several solvers, and how far apart they lie.
+
+The building blocks of the fidelity check (:mod:`tsid_fmu.uncertainty.fidelity`): a
+:class:`Solver` (interface, step, tolerance), :class:`SolverRuns` that simulates a spec's
+experiments with any of them (each run in a fresh :class:`~tsid_fmu.fmu.FMUSession`,
+remembered), :func:`compare` that measures a solver's RMS difference from a reference
+against each output's noise, and :func:`solver_bias`, the shift of the estimates that such
+a difference causes, in standard errors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.evaluate.cost import noise_level
+from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
+from tsid_fmu.fmu.delay import delayed_inputs, split_delays
+from tsid_fmu.fmu.info import read_fmu_description
+from tsid_fmu.fmu.session import FMUSession
+from tsid_fmu.study.prepare import NOISE_FLOOR
+from tsid_fmu.uncertainty.intervals import _whitened
+from tsid_fmu.uncertainty.sensitivity import Sensitivities
+
+__all__ = [
+    "Deviation",
+    "Solver",
+    "SolverRuns",
+    "available_interfaces",
+    "compare",
+    "output_noise",
+    "solver_bias",
+]
+
+
+@dataclass(frozen=True)
+class Solver:
+    """One way of simulating the FMU.
+
+    Parameters
+    ----------
+    interface : {"cs", "me"}
+        Co-Simulation or Model Exchange.
+    step : float, optional
+        Co-Simulation: largest communication step (None: the sample interval). Model
+        Exchange: the step hint.
+    tolerance : float, optional
+        Model Exchange: relative tolerance (None: the solver's default).
+    """
+
+    interface: str
+    step: float | None = None
+    tolerance: float | None = None
+
+    @property
+    def label(self) -> str:
+        """Describe the solver in words (``Co-Simulation at step 0.01 s``)."""
+        if self.interface == "cs":
+            step = f"step {self.step:g} s" if self.step else "the data's sample interval"
+            return f"Co-Simulation at {step}"
+        tol = f"tolerance {self.tolerance:g}" if self.tolerance else "its default tolerance"
+        return f"Model Exchange at {tol}"
+
+
+@dataclass
+class Deviation:
+    """How far one solver's outputs lie from the reference, relative to the noise.
+
+    Attributes
+    ----------
+    solver : Solver
+        The solver compared.
+    outputs : dict
+        ``{experiment: {output: {"rms": ..., "noise": ..., "ratio": rms / noise}}}``.
+    differences : list of numpy.ndarray
+        ``solver - reference`` per experiment, ``(n, outputs)`` (not serialised).
+    """
+
+    solver: Solver
+    outputs: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    differences: list[np.ndarray] = field(default_factory=list, repr=False)
+
+    @property
+    def worst(self) -> tuple[str, str, dict[str, float]]:
+        """Return the experiment, output and figures with the largest ratio."""
+        rows = [(e, o, v) for e, per in self.outputs.items() for o, v in per.items()]
+        return max(rows, key=lambda r: r[2]["ratio"])
+
+    @property
+    def ratio(self) -> float:
+        """The largest RMS difference over noise of any output."""
+        return self.worst[2]["ratio"] if self.outputs else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return strict-JSON data."""
+        s = self.solver
+        return {
+            "solver": s.label,
+            "interface": s.interface,
+            "step": s.step,
+            "tolerance": s.tolerance,
+            "ratio": self.ratio,
+            "outputs": self.outputs,
+        }
+
+
+def available_interfaces(spec: EvaluationSpec) -> tuple[str, ...]:
+    """Return the interfaces the spec's FMU declares, Co-Simulation first."""
+    md = read_fmu_description(spec.fmu)
+    return tuple(k for k, d in (("cs", md.coSimulation), ("me", md.modelExchange)) if d)
+
+
+def output_noise(
+    experiment: PreparedExperiment, given: Mapping[str, float] | None = None
+) -> np.ndarray:
+    """Return each output's noise: the given sensor noise, else the data's estimate.
+
+    An output that shows no noise gets :data:`~tsid_fmu.study.prepare.NOISE_FLOOR` times
+    its RMS value, as the residual scales of a study do.
+    """
+    y = experiment.measured
+    given = given or {}
+    names, estimate = experiment.output_names, noise_level(y)
+    sigma = np.array([given.get(n, s) for n, s in zip(names, estimate, strict=True)])
+    quiet = ~(sigma > 1e-6 * np.maximum(np.ptp(y, axis=0), 1e-300))
+    rms = np.sqrt(np.mean(y**2, axis=0))
+    return np.where(quiet, np.maximum(NOISE_FLOOR * rms, 1e-300), sigma)
+
+
+def _finer_grid(
+    e: PreparedExperiment, u: np.ndarray | None, k: int
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Split the sample grid ``k`` times: linear inputs interpolated, the others held."""
+    t = e.time
+    j = np.arange(k) / k
+    fine = np.append((t[:-1, None] + np.diff(t)[:, None] * j[None, :]).ravel(), t[-1])
+    if u is None:
+        return fine, None
+    held = u[np.minimum(np.searchsorted(t, fine, side="right") - 1, t.size - 1)]
+    for c, name in enumerate(e.input_names):
+        if e.hold.get(name) == "linear":
+            held[:, c] = np.interp(fine, t, u[:, c])
+    return fine, held
+
+
+class SolverRuns:
+    """Simulate a spec's experiments at one parameter set, by solver; count and remember.
+
+    Parameters
+    ----------
+    spec : EvaluationSpec
+        The FMU, experiments and fixed values.
+    x : mapping of str to float
+        The parameter set.
+    """
+
+    def __init__(self, spec: EvaluationSpec, x: Mapping[str, float]) -> None:
+        self.spec, self.x = spec, dict(x)
+        self.count = 0
+        self.cache: dict[tuple[Solver, int, int, bool], np.ndarray] = {}
+
+    def run(self, solver: Solver, index: int, k: int = 1, held: bool = False) -> np.ndarray:
+        """Return experiment ``index``'s outputs, on its sample grid split ``k`` times.
+
+        ``held=True`` holds every input between samples, whatever the experiment's
+        ``hold``.
+        """
+        key = (solver, index, k, held)
+        if key not in self.cache:
+            e = self.spec.experiments[index]
+            start, fixed = split_delays({**self.spec.start_values, **e.start_values})
+            values, delays = split_delays(self.x)
+            u = delayed_inputs(e.time, e.inputs, e.input_names, {**fixed, **delays})
+            t, u = (e.time, u) if k == 1 else _finer_grid(e, u, k)
+            with FMUSession(
+                self.spec.fmu,
+                e.input_names,
+                e.output_names,
+                parameters=list(values),
+                interface=solver.interface,  # type: ignore[arg-type]
+                step_size=solver.step,
+                start_values=start,
+                hold={} if held else dict(e.hold),
+                tolerance=solver.tolerance,
+            ) as session:
+                self.count += 1
+                self.cache[key] = session.simulate(t, u, values)[::k]
+        return self.cache[key]
+
+
+def _rms(a: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(a**2, axis=0))
+
+
+def _difference(
+    runs: SolverRuns, solver: Solver, reference: Solver, i: int, limit: np.ndarray
+) -> np.ndarray:
+    """Return ``solver - reference`` on experiment ``i`` (see :func:`compare`)."""
+    e = runs.spec.experiments[i]
+    linear = any(e.hold.get(n) == "linear" for n in e.input_names)
+    if not (reference.interface == "me" and linear):
+        return runs.run(solver, i) - runs.run(reference, i)
+    if solver.interface == "cs":
+        # the integrators compared on the same held inputs: cheap, and exact for both
+        d = runs.run(solver, i, held=True) - runs.run(reference, i, held=True)
+        if not np.any(_rms(d) > limit):
+            return d
+    ref = runs.run(reference, i)
+    ref = 2.0 * runs.run(reference, i, 2) - ref
+    return runs.run(solver, i) - ref
+
+
+def compare(
+    runs: SolverRuns,
+    solver: Solver,
+    reference: Solver,
+    noise: Sequence[np.ndarray],
+    threshold: float,
+) -> Deviation:
+    """Compare ``solver`` with ``reference`` on every experiment of ``runs``.
+
+    FMPy's Model Exchange loop holds inputs constant over each solver call, so a
+    reference in Model Exchange is first order in the sample interval for inputs held
+    linearly between samples. For such an experiment a Co-Simulation is first compared
+    with the reference on held inputs (the same piecewise-constant inputs for both, so
+    the difference is the integrators'); where that difference exceeds ``threshold``
+    times the noise, and for a Model Exchange solver, the solver runs on the study's
+    inputs and the reference is extrapolated from the sample grid and a twice finer one
+    (Richardson, about three times the cost), so that a Co-Simulation that interpolates
+    its inputs exactly is not blamed.
+    """
+    out = Deviation(solver)
+    for i, e in enumerate(runs.spec.experiments):
+        d = _difference(runs, solver, reference, i, threshold * noise[i])
+        out.differences.append(d)
+        out.outputs[e.name] = {
+            n: {"rms": float(r), "noise": float(s), "ratio": float(r / s)}
+            for n, r, s in zip(e.output_names, _rms(d), noise[i], strict=True)
+        }
+    return out
+
+
+def solver_bias(deviation: Deviation, sens: Sensitivities) -> dict[str, float]:
+    """Return the shift of each estimate that the solver's difference causes, in SEs.
+
+    The least-squares estimate moves by ``(J^T J)^-1 J^T d`` when the model's outputs are
+    off by ``d``, with ``J`` and ``d`` whitened by each output's residual RMS as the
+    intervals are (:mod:`tsid_fmu.uncertainty.intervals`); divided by the standard
+    errors. Parameters the data do not determine are left out.
+    """
+    jac, noise = _whitened(sens)
+    d = np.concatenate(
+        [
+            (diff / np.asarray(noise[name])[None, :]).ravel()
+            for name, diff in zip(sens.experiments, deviation.differences, strict=True)
+        ]
+    )
+    fisher = jac.T @ jac
+    try:
+        cov = np.linalg.inv(fisher)
+    except np.linalg.LinAlgError:
+        return {}
+    shift = cov @ (jac.T @ d)
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return {
+        n: float(abs(s) / e)
+        for n, s, e in zip(sens.names, shift, se, strict=True)
+        if np.isfinite(e) and e > 0 and np.isfinite(s)
+    }
