@@ -22,7 +22,6 @@ from tsid_fmu.fmu.delay import delayed_inputs, split_delays
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.session import FMUSession
 from tsid_fmu.study.prepare import NOISE_FLOOR
-from tsid_fmu.uncertainty.intervals import _whitened
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
 
 __all__ = [
@@ -251,13 +250,13 @@ def solver_bias(deviation: Deviation, sens: Sensitivities) -> dict[str, float]:
     intervals are (:mod:`tsid_fmu.uncertainty.intervals`); divided by the standard
     errors. Parameters the data do not determine are left out.
     """
-    jac, noise = _whitened(sens)
-    d = np.concatenate(
-        [
-            (diff / np.asarray(noise[name])[None, :]).ravel()
-            for name, diff in zip(sens.experiments, deviation.differences, strict=True)
-        ]
-    )
+    blocks, rows = [], []
+    for r, jac_e, diff in zip(sens.residuals, sens.jacobian, deviation.differences, strict=True):
+        sigma = _rms(r)
+        sigma = np.where(sigma > 0, sigma, 1.0)
+        blocks.append((jac_e / sigma[None, :, None]).reshape(-1, jac_e.shape[-1]))
+        rows.append((diff / sigma[None, :]).ravel())
+    jac, d = np.vstack(blocks), np.concatenate(rows)
     fisher = jac.T @ jac
     try:
         cov = np.linalg.inv(fisher)
