@@ -51,6 +51,10 @@ class ConsoleProgress:
                 f"refinement: cost {info['cost']:.6g} [{info['nfev']} simulations, "
                 f"{now - self.t0:.1f} s]"
             )
+        elif event == "report done":
+            self._print(
+                f"report: {info['seconds']:.1f} s, of which plots {info['plots_seconds']:.1f} s"
+            )
         elif event == "done":
             res = info["result"]
             self._print(
