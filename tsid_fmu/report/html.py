@@ -16,8 +16,9 @@ from pathlib import Path
 
 from tsid_fmu.report.html_iteration import iteration_section
 from tsid_fmu.report.html_tables import CSS, esc, generic, image, table, table_from_frame
-from tsid_fmu.report.render import Figures, cost_name, iteration_folders
-from tsid_fmu.report.style import fmt
+from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
+from tsid_fmu.report.render import Figures, iteration_folders
+from tsid_fmu.report.style import cost_name, fmt
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.trail.files import atomic_write
@@ -67,8 +68,7 @@ def _headline(result: IdentificationResult, cost: str) -> str:
 
 
 def _parameters(result: IdentificationResult, images: Mapping[str, bytes]) -> str:
-    frame = result.parameters_frame()
-    body = table_from_frame(frame) if len(frame) else "<p>No parameters.</p>"
+    body = table(PARAMETER_COLUMNS, parameter_rows(result))
     note = (
         '<p class="note">95 % interval and standard error: '
         f"{esc(result.uncertainty.method if result.uncertainty else 'not computed')}.</p>"

@@ -21,7 +21,7 @@ from tsid_fmu.evaluate.protocol import Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.report.figures import convergence_figure, trajectory_figure
 from tsid_fmu.report.fitfig import FitFigure
-from tsid_fmu.report.style import png_bytes
+from tsid_fmu.report.style import cost_name, png_bytes
 from tsid_fmu.report.svgfig import fit_svg, main_effects_svg
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
@@ -46,20 +46,6 @@ class Figures:
         now = time.perf_counter()
         self.timings[what] = self.timings.get(what, 0.0) + now - since
         return now
-
-
-def cost_name(study: Any) -> str:
-    """Name the study's cost as a reader needs it: ``SSE, weighted by 1/noise²``."""
-    if study is None:
-        return "cost"
-    method = study.method
-    name = str(method.cost).upper()
-    weighting = getattr(method, "weighting", None)
-    if weighting == "noise":
-        return f"{name}, weighted by 1/noise²"
-    if weighting and weighting != "none":
-        return f"{name}, weighted ({weighting})"
-    return name
 
 
 def iteration_folders(stages: Sequence[StageResult]) -> list[tuple[str, IterationRecord]]:

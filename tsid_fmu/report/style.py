@@ -21,6 +21,7 @@ __all__ = [
     "SCREEN_DPI",
     "SIGNIFICANT",
     "axis_formatter",
+    "cost_name",
     "fmt",
     "fmt_levels",
     "new_figure",
@@ -106,3 +107,17 @@ def png_bytes(fig: Any, dpi: int = PNG_DPI) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, pil_kwargs={"compress_level": 1})
     return buf.getvalue()
+
+
+def cost_name(study: Any) -> str:
+    """Name the study's cost as a reader needs it: ``SSE, weighted by 1/noise²``."""
+    if study is None:
+        return "cost"
+    method = study.method
+    name = str(method.cost).upper()
+    weighting = getattr(method, "weighting", None)
+    if weighting == "noise":
+        return f"{name}, weighted by 1/noise²"
+    if weighting and weighting != "none":
+        return f"{name}, weighted ({weighting})"
+    return name
