@@ -6,6 +6,8 @@ import sys
 import time
 from typing import Any, TextIO
 
+from tsid_fmu.report.style import fmt
+
 __all__ = ["SLOW_ROW", "ConsoleProgress"]
 
 SLOW_ROW = 1.0
@@ -54,16 +56,16 @@ class ConsoleProgress:
             fails = f", {failed} failed runs" if failed else ""
             self._print(
                 f"{rec.stage}, iteration {rec.index} ({rec.array}{fails}): best cost "
-                f"{rec.best_cost:.6g}; {rec.decision.message} [{rec.nfev_total} simulations, "
-                f"{now - self.t0:.1f} s]"
+                f"{fmt(rec.best_cost)}; {rec.decision.message} [{rec.nfev_total} simulations "
+                f"so far, {now - self.t0:.1f} s]"
             )
         elif event in ("stage", "rerun"):
             self._print(f"== {info['message']}" if event == "stage" else f"  {info['message']}")
         elif event == "refinement":
-            self._print(f"== refinement (least squares) from cost {info['cost']:.6g} ...")
+            self._print(f"== refinement (least squares) from cost {fmt(info['cost'])} ...")
         elif event == "refinement done":
             self._print(
-                f"refinement: cost {info['cost']:.6g} [{info['nfev']} simulations, "
+                f"refinement: cost {fmt(info['cost'])} [{info['nfev']} simulations in the stage, "
                 f"{now - self.t0:.1f} s]"
             )
         elif event == "report done":

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
+from tsid_fmu.report.style import cost_name, fmt
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
@@ -15,7 +15,7 @@ __all__ = ["markdown_report", "markdown_table"]
 
 def _cell(v: Any) -> str:
     if isinstance(v, float):
-        return "-" if math.isnan(v) else f"{v:.5g}"
+        return fmt(v)
     return str(v).replace("|", "/").replace("\n", " ")
 
 
@@ -41,7 +41,8 @@ def _stages(result: IdentificationResult) -> list[str]:
         "## Stages",
         "",
         "Each stage's answer and its cost on the measured inputs of its experiments; "
-        "the cost fall is relative to the stage before.",
+        "the cost fall is relative to the stage before (what the stage contributed); "
+        "simulations: run by the stage itself.",
         "",
         markdown_table(result.stages_frame()),
         "",
@@ -55,15 +56,15 @@ def _stages(result: IdentificationResult) -> list[str]:
         lines += [
             f"### {st.name}",
             "",
-            "| iteration | array | factors | case | best cost | "
-            "found at | next centred on | simulations |",
+            "| iteration | array | factors | case | best cost so far | "
+            "found at | next centred on | simulations in the iteration |",
             "|---|---|---|---|---|---|---|---|",
         ]
         for rec in st.records:
             kind = "parameters" if rec.frame.axis_aligned else "rotated"
             lines.append(
                 f"| [{rec.index}]({folder}iteration_{rec.index:02d}/) | {rec.array} | {kind} | "
-                f"{rec.decision.case} | {rec.best_cost:.6g} | {rec.best_source} | "
+                f"{rec.decision.case} | {fmt(rec.best_cost)} | {rec.best_source} | "
                 f"{rec.centre_source} | {rec.nfev} |"
             )
         lines.append("")
@@ -74,7 +75,9 @@ def _fit(result: IdentificationResult) -> list[str]:
     lines = [
         "## Fit at the identified parameters (measured inputs)",
         "",
-        "fit % = 100 (1 - NRMSE), NRMSE = |error| / |measured - its mean|.",
+        "fit % = 100 (1 - NRMSE), NRMSE = |simulated - measured| / |measured - its mean| "
+        "(100 % a perfect fit, 0 % no better than the mean); RMSE and IAE in the output's "
+        "unit (IAE times s).",
         "",
     ]
     for exp, per_output in result.fit.items():
@@ -83,10 +86,10 @@ def _fit(result: IdentificationResult) -> list[str]:
                 lines.append(f"- {exp}: {m}")
                 continue
             sigma = result.noise.get(exp, {}).get(output)
-            beside = f" (noise in the data: {sigma:.3g})" if sigma is not None else ""
+            beside = f" (noise in the data: {fmt(sigma, 4)})" if sigma is not None else ""
             lines.append(
-                f"- {exp} / {output}: fit {m['fit_percent']:.3f} %, RMSE "
-                f"{m['rmse']:.5g}{beside}, IAE {m['iae']:.5g}"
+                f"- {exp} / {output}: fit {fmt(m['fit_percent'])} %, RMSE "
+                f"{fmt(m['rmse'])}{beside}, IAE {fmt(m['iae'])}"
             )
     return [*lines, ""]
 
@@ -129,18 +132,40 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
     return [*lines, ""]
 
 
+def _contribution(result: IdentificationResult) -> list[str]:
+    lines = []
+    for st in result.stages:
+        percent = st.extra.get("percent", {}) if st.kind == "contribution" else {}
+        for exp, values in percent.items():
+            if not lines:
+                lines = [
+                    "## Parameter contribution (MISO paper, eq. 7)",
+                    "",
+                    "% of error variation = (largest - smallest cost of the parameter's "
+                    "one-at-a-time runs) / (mean cost of all its runs) x 100. Each "
+                    "parameter is varied alone: the values are not shares of a whole and "
+                    "may add up to more than 100 %.",
+                    "",
+                ]
+            row = ", ".join(f"{k} {fmt(v, 4)} %" for k, v in values.items())
+            lines.append(f"- {exp}: {row}")
+    return [*lines, ""] if lines else []
+
+
 def markdown_report(result: IdentificationResult) -> str:
     """Return the text of ``report.md``."""
     study = result.study
     name = study.name if study else "study"
-    cost = study.method.cost if study else "cost"
+    cost = cost_name(study)
     lines = [
         f"# Identification report: {name}",
         "",
         f"- FMU: `{study.fmu if study else '-'}`",
         f"- Result: **{result.message}** (status {result.status}: {STATUS[result.status]}; "
         f"{result.nit} Taguchi iterations, {result.nfev} simulations)",
-        f"- Cost ({cost}, measured inputs of the identification experiments): {result.fun:.6g}",
+        f"- Cost ({cost}) on the measured inputs of the identification experiments: "
+        f"{fmt(result.fun)}",
+        "- The whole report with tables and plots: [report.html](report.html)",
         "",
     ]
     if result.warnings:
@@ -163,9 +188,11 @@ def markdown_report(result: IdentificationResult) -> str:
                 + (
                     f"simulation failed: {v['error']}"
                     if "error" in v
-                    else f"{cost} cost {v['cost']:.6g}"
+                    else f"cost ({cost}) {fmt(v['cost'])}"
                 )
             )
         lines.append("")
+    lines += _contribution(result)
     lines += ["![fit](fit.png)", "", "![convergence](convergence.png)", ""]
+    lines += ["![parameters per iteration](parameters.png)", ""]
     return "\n".join(lines)
