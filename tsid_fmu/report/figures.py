@@ -145,6 +145,22 @@ def _measure(stage: StageResult) -> tuple[str, ...]:
     return tuple(stage.experiments) or ("the study's experiments",)
 
 
+def _costs(stage: StageResult) -> list[float]:
+    return [r.best_cost for r in stage.records] if stage.records else [stage.cost]
+
+
+def _cost_axis(ax: Any, costs: Sequence[float]) -> None:
+    """Log scale where the costs span more than a decade, else linear; plain tick labels."""
+    from matplotlib.ticker import NullFormatter
+
+    finite = [c for c in costs if math.isfinite(c) and c > 0]
+    if finite and max(finite) / min(finite) > 10:
+        ax.set_yscale("log")
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    else:
+        ax.yaxis.set_major_formatter(axis_formatter())
+
+
 def convergence_figure(stages: Sequence[StageResult], cost_name: str = "cost") -> Any:
     """Best cost after each iteration: one panel per measure (set of experiments).
 
@@ -167,9 +183,10 @@ def convergence_figure(stages: Sequence[StageResult], cost_name: str = "cost") -
             if st.records:
                 x = np.cumsum([r.nfev for r in st.records]) + before
                 y = [r.best_cost for r in st.records]
-                ax.semilogy(x, y, "o-", ms=3, color=color, label=st.name)
+                ax.plot(x, y, "o-", ms=3, color=color, label=st.name)
             else:
-                ax.semilogy([before + st.nfev], [st.cost], "*", ms=11, color=color, label=st.name)
+                ax.plot([before + st.nfev], [st.cost], "*", ms=11, color=color, label=st.name)
+        _cost_axis(ax, [c for st, _ in entries for c in _costs(st)])
         ax.set_ylabel(f"best {cost_name}", fontsize=8)
         label = "experiment" if len(exps) == 1 else "experiments"
         ax.set_title(
@@ -236,6 +253,7 @@ def trajectory_figure(
         ax.tick_params(labelsize=7)
         ax.grid(True, which="major", alpha=0.3)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_xlim(0.5, len(records) + 0.5)
         ax.set_xlabel("iteration (all stages in order)", fontsize=7)
     for j in range(n, rows * cols):
         axes[j // cols][j % cols].set_visible(False)

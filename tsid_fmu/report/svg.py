@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from xml.sax.saxutils import escape
 
+import numpy as np
+
 from tsid_fmu.report.style import fmt
 
 __all__ = ["Canvas", "Panel", "nice_ticks"]
@@ -113,19 +115,23 @@ class Panel:
         dash: str = "",
     ) -> None:
         """Draw a polyline through the finite points (gaps where a value is not finite)."""
-        runs: list[list[str]] = [[]]
-        for a, b in zip(xs, ys, strict=True):
-            if math.isfinite(a) and math.isfinite(b):
-                runs[-1].append(f"{_num(self.sx(a))},{_num(self.sy(b))}")
-            elif runs[-1]:
-                runs.append([])
+        x = np.asarray(xs, dtype=float)
+        y = np.asarray(ys, dtype=float)
+        (xlo, xhi), (ylo, yhi) = self.xlim, self.ylim
+        px = self.x + (x - xlo) / ((xhi - xlo) or 1.0) * self.w
+        py = self.y + self.h - (y - ylo) / ((yhi - ylo) or 1.0) * self.h
+        ok = np.isfinite(px) & np.isfinite(py)
         style = f' stroke-dasharray="{dash}"' if dash else ""
-        for pts in runs:
-            if pts:
-                self.parts.append(
-                    f'<polyline points="{" ".join(pts)}" fill="none" stroke="{color}" '
-                    f'stroke-width="{width}"{style}/>'
-                )
+        edges = np.flatnonzero(np.diff(np.concatenate([[False], ok, [False]]).astype(int)))
+        for start, stop in zip(edges[::2], edges[1::2], strict=True):
+            pts = " ".join(
+                f"{a:.1f},{b:.1f}"
+                for a, b in zip(px[start:stop].tolist(), py[start:stop].tolist(), strict=True)
+            )
+            self.parts.append(
+                f'<polyline points="{pts}" fill="none" stroke="{color}" '
+                f'stroke-width="{width}"{style}/>'
+            )
 
     def markers(
         self, xs: Sequence[float], ys: Sequence[float], color: str, shape: str = "circle"

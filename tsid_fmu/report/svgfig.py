@@ -126,7 +126,7 @@ def _fit_panels(
     rms = float(np.sqrt(np.nanmean(r**2)))
     main.label(f"residual RMS {fmt(rms, 4)} {unit or ''}".rstrip())
     res.ylim = _limits([float(np.nanmin(r)), float(np.nanmax(r))])
-    res.frame(nice_ticks(*res.ylim, 3))
+    res.frame(nice_ticks(*res.ylim, 4))
     tr, yr = envelope(e.time, r, 500)
     res.line(tr, yr, COLORS[1], 0.8)
     xt = nice_ticks(t0, t1, 8)
@@ -148,16 +148,14 @@ def fit_svg(
         for e, sim in zip(experiments, simulated, strict=True)
         for j in range(len(e.output_names))
     ]
-    block = 300.0
-    canvas = Canvas(860, 60 + block * len(pairs) + 30)
+    block, n = 300.0, len(pairs)
+    bottom = 52 + block * (n - 1) + 282
+    canvas = Canvas(860, bottom + 34)
     canvas.text(430, 18, title, 13)
     panels: list[Panel] = []
     for k, (e, j, sim) in enumerate(pairs):
         panels += _fit_panels(canvas, e, j, sim, 52 + k * block, units)
-    canvas.text(460, 60 + block * len(pairs) + 4, "time [s]", 11)
-    canvas.legend(
-        80,
-        60 + block * len(pairs) + 24,
-        [("line", "#777", "measured"), ("line", COLORS[1], "simulated")],
-    )
+    canvas.text(460, bottom, "time [s]", 11)
+    legend = [("line", "#777", "measured"), ("line", COLORS[1], "simulated")]
+    canvas.legend(80, bottom + 24, legend)
     return canvas.svg(panels)
