@@ -118,3 +118,27 @@ def test_numbers_are_rounded_alike():
     assert fmt_levels([1.0, 1.0001, 1.0002]) == ["1", "1.0001", "1.0002"]
     assert nice_ticks(0, 1, 5) == [0, 0.25, 0.5, 0.75, 1.0]
     assert nice_ticks(-85.45, -85.41, 4)[0] >= -85.45
+
+
+def test_report_html_lists_failed_runs_and_diagnostics(tmp_path):
+    d = tmp_path
+    fmu = build_c_fmu(d)
+    t = np.arange(0, 3.0 + 1e-9, 0.01)
+    u = np.where((t % 2.0) < 1.0, 1.0, -0.5)
+    y = lag_response(t, u, 0.37, 0.8) + np.random.default_rng(2).normal(0, 0.005, t.shape)
+    pd.DataFrame({"time": t, "u": u, "y_meas": y}).to_csv(d / "lag.csv", index=False)
+    study = Study(
+        fmu=fmu,
+        parameters=[Parameter("tau", [0.0, 0.4, 1.0], min=0.0), Parameter("x0", [-1.0, 0.0, 2.0])],
+        experiments=[Experiment(data=d / "lag.csv", inputs={"u": "u"}, outputs={"y": "y_meas"})],
+    )
+    res = identify(study, d / "out", plots=False)
+    html = (d / "out" / "report.html").read_text()
+    failed = html.split('id="failed"')[1].split("<h2")[0]
+    rows = _Rows()
+    rows.feed(failed)
+    failures = sum(e is not None for rec in res.iterations for e in rec.errors)
+    assert failures >= 3 and len([r for r in rows.rows[1:] if r]) == failures
+    assert "condition" in html.split('id="diagnostics"')[1]  # a scalar of result.uncertainty
+    assert "<img" not in html  # no plots asked for: tables only
+    assert "Response table for S/N ratios" in html and "ANOVA of S/N" in html

@@ -140,9 +140,27 @@ def _contribution(result: IdentificationResult) -> str:
             continue
         percent = st.extra.get("percent", {})
         if percent:
-            parts.append(generic({"% of error variation": percent}))
-        if "input" in st.extra:
-            parts.append(generic({"input contribution": st.extra["input"]}))
+            names = list(dict.fromkeys(n for v in percent.values() for n in v))
+            rows = [[n, *[percent[e].get(n, math.nan) for e in percent]] for n in names]
+            parts.append(
+                "<h3>Parameter contribution: % of error variation, eq. (7)</h3>"
+                + table(["parameter", *[f"{e} [%]" for e in percent]], rows)
+            )
+        inputs = st.extra.get("input", {})
+        if inputs.get("experiments"):
+            rows = [
+                [
+                    e,
+                    ", ".join(inputs["inputs"].get(e, [])),
+                    inputs["rms"].get(e, math.nan),
+                    inputs["range"].get(e, math.nan),
+                ]
+                for e in inputs["experiments"]
+            ]
+            parts.append(
+                "<h3>Input contribution (main contributor first)</h3>"
+                + table(["experiment", "inputs acting", "output RMS", "output range"], rows)
+            )
         parts.append(f'<p class="note">{esc(CONTRIBUTION_NOTE)} {esc(st.message)}</p>')
     return "\n".join(parts)
 

@@ -117,35 +117,42 @@ def _scalar(v: Any) -> bool:
     return v is None or isinstance(v, int | float | str | bool)
 
 
-def generic(data: Mapping[str, Any], title: str = "") -> str:
-    """Render any JSON-like mapping as tables: scalars, per-name values, matrices, lists.
+def _nested(key: str, value: Mapping[str, Mapping[str, Any]]) -> str:
+    """Render a mapping of mappings: rows the outer keys, columns the inner ones."""
+    cols = list(dict.fromkeys(c for inner in value.values() for c in inner))
+    rows = [[r, *[_flat(value[r].get(c)) for c in cols]] for r in value]
+    return f"<h4>{esc(key)}</h4>" + table(["", *cols], rows)
 
-    Used for diagnostics whose keys this module does not know in advance.
+
+def generic(data: Mapping[str, Any], title: str = "") -> str:
+    """Render any JSON-like mapping as tables: scalars, per-name values, nested mappings.
+
+    Used for diagnostics whose keys this module does not know in advance. Mappings of
+    scalars that share their keys become the columns of one table.
     """
-    parts, scalars, columns = [], [], {}
+    parts, scalars = [], []
+    groups: dict[tuple[str, ...], dict[str, Mapping[str, Any]]] = {}
     for key, value in data.items():
         if _scalar(value):
             scalars.append([str(key), value if not isinstance(value, bool) else str(value)])
         elif isinstance(value, Mapping) and all(_scalar(v) or _short(v) for v in value.values()):
-            columns[str(key)] = value
+            groups.setdefault(tuple(value), {})[str(key)] = value
         elif isinstance(value, Mapping) and all(isinstance(v, Mapping) for v in value.values()):
-            names = list(value)
-            rows = [[r, *[value[r].get(c) for c in names]] for r in names]
-            parts.append(f"<h4>{esc(key)}</h4>" + table(["", *names], rows))
+            parts.append(_nested(str(key), value))
         elif isinstance(value, list) and value and all(isinstance(v, Mapping) for v in value):
             keys = list(dict.fromkeys(k for v in value for k in v))
             rows = [[i + 1, *[_flat(v.get(k)) for k in keys]] for i, v in enumerate(value)]
             parts.append(f"<h4>{esc(key)}</h4>" + table(["#", *keys], rows))
         else:
             scalars.append([str(key), _flat(value)])
-    if columns:
-        names = list(dict.fromkeys(n for col in columns.values() for n in col))
+    tables = []
+    for names, columns in groups.items():
         rows = [[n, *[_flat(col.get(n)) for col in columns.values()]] for n in names]
-        parts.insert(0, table(["", *columns], rows))
+        tables.append(table(["", *columns], rows))
     if scalars:
-        parts.insert(0, table(["quantity", "value"], scalars))
+        tables.insert(0, table(["quantity", "value"], scalars))
     head = f"<h3>{esc(title)}</h3>" if title else ""
-    return head + "".join(parts)
+    return head + "".join(tables + parts)
 
 
 def _short(v: Any) -> bool:
