@@ -142,3 +142,18 @@ def test_report_html_lists_failed_runs_and_diagnostics(tmp_path):
     assert "condition" in html.split('id="diagnostics"')[1]  # a scalar of result.uncertainty
     assert "<img" not in html  # no plots asked for: tables only
     assert "Response table for S/N ratios" in html and "ANOVA of S/N" in html
+
+
+def test_a_paused_study_is_drawn_for_review_and_resume_reuses_the_figures(result, tmp_path):
+    study = result.study
+    out = tmp_path / "paused"
+    part = identify(study, out, pause_after=1, plots=True)
+    assert part.status == 2
+    first = out / "iteration_01" / "main_effects.svg"
+    assert first.is_file() and (out / "report.html").is_file()
+    assert not (out / "result.json").exists()
+    stamp = first.stat().st_mtime_ns
+    done = identify(study, out, resume=True, plots=True)
+    assert done.nit > 1 and (out / f"iteration_{done.nit:02d}" / "main_effects.svg").is_file()
+    assert first.stat().st_mtime_ns == stamp  # read back, not drawn again
+    assert (out / "result.json").is_file()
