@@ -55,17 +55,12 @@ def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
     runs = res.to_pandas()
     assert len(runs) == 9 * res.nit and {"tau", "x0", "S/N [dB]", "mean cost"} <= set(runs)
     first = out / "iteration_01"
+    # per-iteration figures are SVG (drawn at the end; issue 14: plots' time budget)
     for f in ("levels.csv", "runs.csv", "response.csv", "anova.csv", "decision.json",
-              "next_levels.toml", "main_effects.png", "fit.png", "record.json"):  # fmt: skip
+              "next_levels.toml", "main_effects.svg", "fit.svg", "record.json"):  # fmt: skip
         assert (first / f).is_file(), f
-    for f in (
-        "result.json",
-        "parameters.csv",
-        "parameters.ssv",
-        "model.ssp",
-        "report.md",
-        "fit.png",
-    ):
+    for f in ("result.json", "parameters.csv", "parameters.ssv", "model.ssp", "report.md",
+              "fit.png", "report.html", "convergence.png", "parameters.png"):  # fmt: skip
         assert (out / f).is_file(), f
     summary = json.loads((out / "result.json").read_text())
     assert summary["x"] == res.x

@@ -1,4 +1,4 @@
-"""Command line: ``tsid identify | simulate | info | build``.
+"""Command line: ``tsid identify | simulate | info | init | build``.
 
 Every ending is one exit status (:data:`EXIT_STATUSES`) and, for an error, one line on
 stderr, never a traceback: errors of the package (:class:`~tsid_fmu.errors.TsidError`,
@@ -16,6 +16,7 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from tsid_fmu.errors import StudyError, TsidError
 
@@ -63,21 +64,36 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         timeout=args.timeout,
         scheduler=args.scheduler,
     )
-    print(result.parameters_frame().to_string())
+    code = {0: 0, 1: 1, 2: 3}[result.status]
+    _print_result(result, out, code)
+    return code
+
+
+def _print_result(result: Any, out: Path, code: int) -> None:
+    """Print the answer rounded to 5 significant figures, under a headline with the exit code."""
+    from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
+    from tsid_fmu.report.style import cost_name, fmt
+    from tsid_fmu.result import STATUS
+
+    rows = [[fmt(v) if not isinstance(v, str) else v for v in r] for r in parameter_rows(result)]
+    widths = [max(len(str(x)) for x in col) for col in zip(PARAMETER_COLUMNS, *rows, strict=True)]
+    for r in [PARAMETER_COLUMNS, *rows]:
+        print("  ".join(str(x).ljust(w) for x, w in zip(r, widths, strict=True)).rstrip())
     print()
-    print(result.stages_frame()[["kind", "cost", "simulations"]].to_string())
+    for st in result.stages:
+        print(f"stage {st.name} ({st.kind}): cost {fmt(st.cost)}, {st.nfev} simulations")
     print()
-    print(result.message)
-    print(f"cost {result.fun:.6g} on the measured inputs; {result.nfev} simulations")
+    print(f"{STATUS[result.status]} (exit status {code}): {result.message}")
+    cost = cost_name(result.study)
+    print(f"cost ({cost}) {fmt(result.fun)} on the measured inputs; {result.nfev} simulations")
     for warning in result.warnings:
         print(f"warning: {warning}")
     for name, reason in result.weak.items():
         print(f"weakly determined: {name}: {reason}")
     for name, v in result.validation.items():
         if "cost" in v:
-            print(f"validation {name}: cost {v['cost']:.6g}")
-    print(f"report, tables and plots: {out}/report.md")
-    return {0: 0, 1: 1, 2: 3}[result.status]
+            print(f"validation {name}: cost ({cost}) {fmt(v['cost'])}")
+    print(f"report: {out}/report.html (text: {out}/report.md)")
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -87,6 +103,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from tsid_fmu.evaluate.cost import metrics
     from tsid_fmu.evaluate.serial import SerialEvaluator
     from tsid_fmu.report.plots import fit_plot
+    from tsid_fmu.report.units import study_units
     from tsid_fmu.study import Study, prepare
 
     study = Study.from_toml(args.study)
@@ -131,15 +148,69 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
                 f"SSE {m['sse']:.6g}, RMSE {m['rmse']:.6g}"
             )
     plot = Path(args.plot)
-    fit_plot(spec, simulated, plot, title="tsid simulate")
+    fit_plot(spec, simulated, plot, title="tsid simulate", units=study_units(study))
     print(f"plot: {plot}")
-    return 0 if all(sim.error is None for sim in simulated) else 1
+    if args.csv:
+        for path in _write_csv(Path(args.csv), spec, simulated):
+            print(f"simulated outputs: {path}")
+    failed = [sim.experiment for sim in simulated if sim.error is not None]
+    print(f"simulation failed: {', '.join(failed)}" if failed else "simulated every experiment")
+    return 1 if failed else 0
+
+
+def _write_csv(path: Path, spec: Any, simulated: Sequence[Any]) -> list[Path]:
+    """Write time and simulated outputs, one CSV per experiment (suffixed if several)."""
+    import pandas as pd
+
+    written = []
+    for e, sim in zip(spec.experiments, simulated, strict=True):
+        if sim.outputs is None:
+            continue
+        target = path
+        if len(spec.experiments) > 1:
+            slug = "".join(c if c.isalnum() else "_" for c in e.name)
+            target = path.with_name(f"{path.stem}_{slug}{path.suffix or '.csv'}")
+        frame = pd.DataFrame(sim.outputs, columns=list(e.output_names))
+        frame.insert(0, "time", e.time)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        frame.to_csv(target, index=False)
+        written.append(target)
+    return written
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
     from tsid_fmu.fmu import fmu_info
 
     print(fmu_info(args.fmu))
+    if args.all:
+        print(_all_variables(Path(args.fmu)))
+    return 0
+
+
+def _all_variables(path: Path) -> str:
+    """Every variable of an FMU with its causality (locals included), for ``info --all``."""
+    from tsid_fmu.fmu.info import read_fmu_description
+    from tsid_fmu.fmu.variables import variable_info
+
+    infos = [variable_info(v) for v in read_fmu_description(path).modelVariables]
+    width = max((len(v.name) for v in infos), default=4)
+    lines = ["", f"All variables ({len(infos)})"]
+    lines.append(f"  {'name':<{width}}  {'causality':<20} {'variability':<11} type     unit")
+    for v in infos:
+        lines.append(
+            f"  {v.name:<{width}}  {v.causality or '-':<20} {v.variability or '-':<11} "
+            f"{v.type:<8} {v.unit or ''}".rstrip()
+        )
+    return "\n".join(lines)
+
+
+def _cmd_init(args: argparse.Namespace) -> int:
+    from tsid_fmu.scaffold import init_study
+
+    derived = _parse_assignments(args.derived, "--derived")
+    init_study(args.fmu, args.data, args.output, derived=derived)
+    print(f"study written: {args.output}")
+    print(f"run it: tsid identify {args.output} --out DIR")
     return 0
 
 
@@ -148,24 +219,24 @@ def _cmd_build(args: argparse.Namespace) -> int:
         from tsid_fmu.build import main as build_main
     except ImportError as exc:  # pragma: no cover - depends on the install
         raise StudyError(f"the FMU build is not available ({exc})") from None
-    return int(build_main(list(args.build_args)) or 0)
+    argv = list(args.models)
+    if args.out:
+        argv += ["--out", args.out]
+    if args.models_dir:
+        argv += ["--models-dir", args.models_dir]
+    if args.from_result:
+        argv += ["--from-result", args.from_result]
+    else:
+        argv += ["--fmi-version", args.fmi_version]
+    return int(build_main(argv) or 0)
 
 
-def make_parser() -> argparse.ArgumentParser:
-    """Return the argument parser of ``tsid``."""
-    parser = argparse.ArgumentParser(
-        prog="tsid",
-        description="Taguchi-method identification of FMU parameters.",
-        epilog=EXIT_STATUSES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
-
+def _identify_parser(sub: Any) -> None:
     p = sub.add_parser("identify", help="run a study file")
     p.add_argument("study", help="study file (TOML)")
     p.add_argument("--out", help="output folder (default: results/ beside the study)")
     p.add_argument("--resume", action="store_true", help="continue the study in --out")
-    p.add_argument("--max-iterations", type=int, help="override the study's limit")
+    p.add_argument("--max-iterations", type=int, metavar="N", help="override the study's limit")
     p.add_argument(
         "--pause-after",
         type=int,
@@ -192,28 +263,98 @@ def make_parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         help="run simulations on this dask.distributed scheduler (needs tsid-fmu[dask])",
     )
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument(
+        "--no-plots", action="store_true", help="skip the figures (report.html has tables only)"
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=_cmd_identify)
 
-    p = sub.add_parser("simulate", help="simulate one parameter set against a study's data")
+
+def _other_parsers(sub: Any) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="simulate one parameter set against a study's data",
+        description="Simulate the study's FMU on the measured inputs of its identification "
+        "experiments. Parameters keep the FMU's start values (or the study's start_values) "
+        "unless --result or --set gives them.",
+    )
     p.add_argument("study", help="study file (TOML)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="value of one study parameter (repeatable); applied after --result",
+    )
     p.add_argument("--result", help="use the parameters of a result folder or result.json")
     p.add_argument("--plot", default="simulate.png", help="PNG to write (default simulate.png)")
+    p.add_argument(
+        "--csv",
+        metavar="FILE",
+        help="write time and the simulated outputs to FILE (FILE_<experiment>.csv if several)",
+    )
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser("info", help="describe an FMU")
-    p.add_argument("fmu")
+    p.add_argument("fmu", help="the .fmu file")
+    p.add_argument(
+        "--all", action="store_true", help="also list every variable (locals too) with causality"
+    )
     p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser(
+        "init",
+        help="write a commented study file from an FMU and a data file",
+        description="Write a study that runs as written: the FMU's inputs and outputs "
+        "matched to the data's columns by name (case-insensitively), every real parameter "
+        "with five log-spaced levels over one decade around its start value.",
+    )
+    p.add_argument("fmu", help="the .fmu file")
+    p.add_argument("data", help="measured data (CSV; a column 'time' or the first column)")
+    p.add_argument("-o", "--output", default="study.toml", help="study file to write")
+    p.add_argument(
+        "--derived",
+        action="append",
+        default=[],
+        metavar="NAME=EXPRESSION",
+        help="a channel computed from the columns, e.g. 'F_o=F_of - F_or' (repeatable)",
+    )
+    p.set_defaults(func=_cmd_init)
 
     p = sub.add_parser(
         "build",
         help="build FMUs from models/, or with --from-result DIR rebuild a study's FMU with "
         "its identified values (needs tsid-fmu[build])",
     )
-    p.add_argument("build_args", nargs=argparse.REMAINDER, help="arguments of tsid_fmu.build")
+    p.add_argument("models", nargs="*", metavar="MODEL", help="models to build (default: all)")
+    p.add_argument("--out", help="output folder (default: fmus/ beside models/)")
+    p.add_argument("--models-dir", help="Modelica folder (default: ./models)")
+    p.add_argument(
+        "--fmi-version", choices=["2", "3", "all"], default="all", help="FMI version(s) to write"
+    )
+    p.add_argument(
+        "--from-result",
+        metavar="DIR",
+        help="rebuild the FMU of the study whose output folder is DIR (its model.ssp) with the "
+        "identified values as start values: DIR/<Model>_identified.fmu (or in --out)",
+    )
     p.set_defaults(func=_cmd_build)
+
+
+def make_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``tsid``."""
+    from tsid_fmu import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="tsid",
+        description="Taguchi-method identification of FMU parameters.",
+        epilog=EXIT_STATUSES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"tsid {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _identify_parser(sub)
+    _other_parsers(sub)
     return parser
 
 
@@ -239,12 +380,7 @@ def _quiet_stdout() -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (see :data:`EXIT_STATUSES`)."""
-    parser = make_parser()
-    args, extra = parser.parse_known_args(argv)
-    if extra:  # options of tsid_fmu.build before its first positional argument
-        if args.command != "build":
-            parser.error(f"unrecognized arguments: {' '.join(extra)}")
-        args.build_args = [*extra, *args.build_args]
+    args = make_parser().parse_args(argv)
     try:
         status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit

@@ -11,19 +11,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.factory import make_evaluator
-from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.report.console import ConsoleProgress
 from tsid_fmu.report.files import write_result_files
+from tsid_fmu.report.html import write_html
 from tsid_fmu.report.markdown import markdown_report
-from tsid_fmu.report.plots import convergence_plot, fit_plot, main_effects_plot
+from tsid_fmu.report.render import draw_study
 from tsid_fmu.report.ssp import write_model_ssp
+from tsid_fmu.report.units import study_units
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.pipeline import Control, run_stages, run_ungrouped
@@ -94,32 +97,13 @@ class _Evaluators:
         self.pool.clear()
 
 
-def _plotter(
-    evaluators: _Evaluators, study: Study
-) -> Callable[[Path, IterationRecord, Space], None]:
-    def draw(folder: Path, record: IterationRecord, space: Space) -> None:
-        describe = {
-            f.name: record.frame.describe(space, f)
-            for f in record.frame.factors
-            if f.values is None
-        }
-        main_effects_plot(record, folder / "main_effects.png", describe)
-        if evaluators.given is not None:
-            return
-        exps = [e.name for e in study.identify_experiments()]
-        spec = evaluators.spec(study.parameter_names, exps, {})
-        x = {**{p.name: record.best_x.get(p.name, math.nan) for p in study.parameters}}
-        if any(math.isnan(v) for v in x.values()):
-            return  # a phase: the other parameters are not part of its record
-        sims = evaluators.get(study.parameter_names, exps, {}).simulate([x], count=False)[0]
-        fit_plot(
-            spec,
-            sims,
-            folder / "fit.png",
-            title=f"{record.stage}, iteration {record.index}: best so far",
-        )
-
-    return draw
+def _annotate(folder: Path, record: IterationRecord, space: Space) -> None:
+    """Keep what each rotated factor moves in its record (the plots are drawn at the end)."""
+    describe = {
+        f.name: record.frame.describe(space, f) for f in record.frame.factors if f.values is None
+    }
+    if describe:
+        record.extra["describe"] = describe
 
 
 def _status(stages: list[StageResult]) -> tuple[int, str]:
@@ -190,6 +174,48 @@ def _record(
     return result
 
 
+def _report(
+    result: IdentificationResult,
+    store: Trail,
+    evaluators: _Evaluators,
+    plots: bool,
+    simulated: list[Simulated] | None,
+    callback: ProgressCallback | None,
+) -> None:
+    """Write the report files; draw the figures (at the end, off the arrays' path)."""
+    study = result.study
+    if study is None:  # pragma: no cover - _finish always attaches the study
+        return
+    t0 = time.perf_counter()
+    if result.status != 2:
+        write_result_files(result, store.out)
+        write_model_ssp(result, store.out)
+        store.write_text("report.md", markdown_report(result))
+    figures = None
+    if plots and evaluators.given is None:
+        exps = [e.name for e in study.identify_experiments()]
+        spec = evaluators.spec(study.parameter_names, exps, {})
+        ev = evaluators.get(study.parameter_names, exps, {})
+        figures = draw_study(
+            result,
+            store.out,
+            spec=spec,
+            simulated=simulated,
+            simulate=lambda sets: ev.simulate(sets, count=False),
+            units=study_units(study),
+        )
+    write_html(result, store.out, figures)
+    if callback:
+        callback(
+            "report done",
+            {
+                "plots_seconds": figures.seconds if figures else 0.0,
+                "plots_timings": dict(figures.timings) if figures else {},
+                "seconds": time.perf_counter() - t0,
+            },
+        )
+
+
 def _finish(
     study: Study,
     stages: list[StageResult],
@@ -219,6 +245,8 @@ def _finish(
     }
     start, callback = fidelity
     if status == 2 or evaluators.given is not None:
+        if isinstance(store, Trail) and status == 2 and evaluators.given is None:
+            _report(result, store, evaluators, plots, None, callback)  # for the review
         return _record(result, start, None)
     exps = [e.name for e in study.identify_experiments()]
     spec = evaluators.spec(study.parameter_names, exps, {})
@@ -242,17 +270,7 @@ def _finish(
         vspec = evaluators.spec(study.parameter_names, checks, {})
         result.validation = validate(evaluators.get(study.parameter_names, checks, {}), vspec, x)
     if isinstance(store, Trail):
-        write_result_files(result, store.out)
-        write_model_ssp(result, store.out)
-        store.write_text("report.md", markdown_report(result))
-        if plots:
-            fit_plot(
-                spec,
-                found.simulated,
-                store.out / "fit.png",
-                title="Identified model vs measured data",
-            )
-            convergence_plot(stages, store.out / "convergence.png")
+        _report(result, store, evaluators, plots, found.simulated, callback)
     return result
 
 
@@ -292,7 +310,9 @@ def identify(
     progress : bool or callable
         True prints progress to stderr; a callable receives ``(event, info)``.
     plots : bool
-        Draw the plots (main effects and fit per iteration, fit and convergence).
+        Draw the plots (main effects and fit per iteration, fit, convergence and
+        parameter trajectories), at the end of the study, into ``out`` and
+        ``report.html``.
     max_iterations : int, optional
         Override the Taguchi iteration limit of each stage.
     pause_after : int, optional
@@ -324,8 +344,7 @@ def identify(
     store: Trail | NullStore = NullStore()
     try:
         if out is not None:
-            draw = _plotter(evaluators, study) if plots else None
-            store = Trail(out, study, resume=resume, on_iteration=draw)
+            store = Trail(out, study, resume=resume, on_iteration=_annotate)
         control = Control(pause_after, max_iterations, continue_from_run)
         start = _fidelity(study, evaluators, start_point(study), "start point", callback)
         stages = run_stages(study, evaluators, store, callback, control)

@@ -108,6 +108,45 @@ class IdentificationResult:
         width = max(map(len, keys))
         return "\n".join(f"{k.rjust(width)}: {getattr(self, k)!r}" for k in keys)
 
+    def _repr_html_(self) -> str:
+        """Return the notebook view: headline, parameters with intervals, stages."""
+        from tsid_fmu.report.notebook import result_html
+
+        return result_html(self)
+
+    def plot_fit(self) -> Any:
+        """Return a matplotlib figure of measured vs simulated outputs and residuals.
+
+        Simulates the study's FMU once at ``x`` (the study must be attached).
+        """
+        from tsid_fmu.report.notebook import plot_fit
+
+        return plot_fit(self)
+
+    def plot_convergence(self) -> Any:
+        """Return a matplotlib figure of the best cost per iteration (one axis per measure)."""
+        from tsid_fmu.report.notebook import plot_convergence
+
+        return plot_convergence(self)
+
+    def plot_main_effects(self, iteration: int | IterationRecord = -1) -> Any:
+        """Return a matplotlib figure of one iteration's S/N and mean-cost main effects.
+
+        Parameters
+        ----------
+        iteration : int or IterationRecord
+            Position in :attr:`iterations` (1-based; negative from the end), or a record.
+        """
+        from tsid_fmu.report.notebook import plot_main_effects
+
+        return plot_main_effects(self, iteration)
+
+    def plot_parameters(self) -> Any:
+        """Return a matplotlib figure of each parameter's best value per iteration."""
+        from tsid_fmu.report.notebook import plot_parameters
+
+        return plot_parameters(self)
+
     def to_dict(self) -> dict[str, Any]:
         """Return the result as strict-JSON data (the content of ``result.json``)."""
 

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
+from tsid_fmu.report.style import cost_name, fmt
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
@@ -26,8 +26,8 @@ def escape(text: Any) -> str:
 
 def _cell(v: Any) -> str:
     if isinstance(v, float):
-        return "-" if math.isnan(v) else f"{v:.5g}"
-    return escape(v).replace("|", "/")
+        return fmt(v)
+    return escape(v).replace("|", "/").replace("\n", " ")
 
 
 def markdown_table(frame: Any) -> str:
@@ -52,7 +52,8 @@ def _stages(result: IdentificationResult) -> list[str]:
         "## Stages",
         "",
         "Each stage's answer and its cost on the measured inputs of its experiments; "
-        "the cost fall is relative to the stage before.",
+        "the cost fall is relative to the stage before (what the stage contributed); "
+        "simulations: run by the stage itself.",
         "",
         markdown_table(result.stages_frame()),
         "",
@@ -66,15 +67,15 @@ def _stages(result: IdentificationResult) -> list[str]:
         lines += [
             f"### {escape(st.name)}",
             "",
-            "| iteration | array | factors | case | best cost | "
-            "found at | next centred on | simulations |",
+            "| iteration | array | factors | case | best cost so far | "
+            "found at | next centred on | simulations in the iteration |",
             "|---|---|---|---|---|---|---|---|",
         ]
         for rec in st.records:
             kind = "parameters" if rec.frame.axis_aligned else "rotated"
             lines.append(
                 f"| [{rec.index}]({folder}iteration_{rec.index:02d}/) | {rec.array} | {kind} | "
-                f"{rec.decision.case} | {rec.best_cost:.6g} | {rec.best_source} | "
+                f"{rec.decision.case} | {fmt(rec.best_cost)} | {rec.best_source} | "
                 f"{rec.centre_source} | {rec.nfev} |"
             )
         lines.append("")
@@ -85,7 +86,9 @@ def _fit(result: IdentificationResult) -> list[str]:
     lines = [
         "## Fit at the identified parameters (measured inputs)",
         "",
-        "fit % = 100 (1 - NRMSE), NRMSE = |error| / |measured - its mean|.",
+        "fit % = 100 (1 - NRMSE), NRMSE = |simulated - measured| / |measured - its mean| "
+        "(100 % a perfect fit, 0 % no better than the mean); RMSE and IAE in the output's "
+        "unit (IAE times s).",
         "",
     ]
     for exp, per_output in result.fit.items():
@@ -94,12 +97,12 @@ def _fit(result: IdentificationResult) -> list[str]:
                 lines.append(f"- {escape(exp)}: {escape(m)}")
                 continue
             sigma = result.noise.get(exp, {}).get(output)
-            beside = f" (noise in the data: {sigma:.3g})" if sigma is not None else ""
+            beside = f" (noise in the data: {fmt(sigma, 4)})" if sigma is not None else ""
             if sigma:
-                beside = f"{beside[:-1]}; RMSE {m['rmse'] / sigma:.2g} x it)"
+                beside = f"{beside[:-1]}; RMSE {fmt(m['rmse'] / sigma, 2)} x it)"
             lines.append(
-                f"- {escape(exp)} / {escape(output)}: fit {m['fit_percent']:.3f} %, RMSE "
-                f"{m['rmse']:.5g}{beside}, IAE {m['iae']:.5g}"
+                f"- {escape(exp)} / {escape(output)}: fit {fmt(m['fit_percent'])} %, RMSE "
+                f"{fmt(m['rmse'])}{beside}, IAE {fmt(m['iae'])}"
             )
     return [*lines, ""]
 
@@ -177,18 +180,40 @@ def _fidelity(result: IdentificationResult) -> list[str]:
     return [*lines, ""]
 
 
+def _contribution(result: IdentificationResult) -> list[str]:
+    lines = []
+    for st in result.stages:
+        percent = st.extra.get("percent", {}) if st.kind == "contribution" else {}
+        for exp, values in percent.items():
+            if not lines:
+                lines = [
+                    "## Parameter contribution (MISO paper, eq. 7)",
+                    "",
+                    "% of error variation = (largest - smallest cost of the parameter's "
+                    "one-at-a-time runs) / (mean cost of all its runs) x 100. Each "
+                    "parameter is varied alone: the values are not shares of a whole and "
+                    "may add up to more than 100 %.",
+                    "",
+                ]
+            row = ", ".join(f"{k} {fmt(v, 4)} %" for k, v in values.items())
+            lines.append(f"- {exp}: {row}")
+    return [*lines, ""] if lines else []
+
+
 def markdown_report(result: IdentificationResult) -> str:
     """Return the text of ``report.md``."""
     study = result.study
     name = escape(study.name) if study else "study"
-    cost = study.method.cost if study else "cost"
+    cost = cost_name(study)
     lines = [
         f"# Identification report: {name}",
         "",
         f"- FMU: `{escape(study.fmu) if study else '-'}`",
         f"- Result: **{escape(result.message)}** (status {result.status}: {STATUS[result.status]}; "
         f"{result.nit} Taguchi iterations, {result.nfev} simulations)",
-        f"- Cost ({cost}, measured inputs of the identification experiments): {result.fun:.6g}",
+        f"- Cost ({cost}) on the measured inputs of the identification experiments: "
+        f"{fmt(result.fun)}",
+        "- The whole report with tables and plots: [report.html](report.html)",
         "",
     ]
     if result.warnings:
@@ -211,7 +236,7 @@ def markdown_report(result: IdentificationResult) -> str:
                 + (
                     f"simulation failed: {escape(v['error'])}"
                     if "error" in v
-                    else f"{cost} cost {v['cost']:.6g}"
+                    else f"cost ({cost}) {fmt(v['cost'])}"
                 )
             )
         lines.append("")
@@ -223,9 +248,11 @@ def markdown_report(result: IdentificationResult) -> str:
             "",
             "| | cost (identification experiments) | simulations |",
             "|---|---|---|",
-            f"| grouped, in phases | {ph['cost']:.6g} | {ph['nfev']} |",
-            f"| all parameters in one array | {un['cost']:.6g} | {un['nfev']} |",
+            f"| grouped, in phases | {fmt(ph['cost'])} | {ph['nfev']} |",
+            f"| all parameters in one array | {fmt(un['cost'])} | {un['nfev']} |",
             "",
         ]
+    lines += _contribution(result)
     lines += ["![fit](fit.png)", "", "![convergence](convergence.png)", ""]
+    lines += ["![parameters per iteration](parameters.png)", ""]
     return "\n".join(lines)

@@ -1,0 +1,105 @@
+"""report.html of both bundled examples, loaded in headless Chromium (issue 14).
+
+The page must render with no console error and no request other than the file itself
+and its embedded ``data:`` images, and show per iteration the response tables for S/N
+and means with Delta and Rank, the ANOVA table and at least one embedded image that the
+browser decoded. Chromium comes from the system's packages (``.ci/run`` installs it);
+the test is skipped only where no Chromium can be found.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import chromium
+import pytest
+
+from tsid_fmu import identify
+from tsid_fmu.study import load_study
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+PROBE = """
+(() => {
+  const heads = t => [...t.querySelectorAll('thead th')].map(h => h.textContent.trim());
+  const iterations = [...document.querySelectorAll('details')].map(d => {
+    const tables = [...d.querySelectorAll('table')].map(heads);
+    const imgs = [...d.querySelectorAll('img')];
+    return {
+      summary: d.querySelector('summary').textContent,
+      response: tables.filter(h => h.includes('Delta') && h.includes('Rank')).length,
+      anova: tables.filter(h => ['DOF', 'SS', 'V', 'F', 'S′', 'P %'].every(c => h.includes(c)))
+        .length,
+      images: imgs.filter(i => i.src.startsWith('data:image/') && i.complete
+        && i.naturalWidth > 0).length,
+    };
+  });
+  const top = [...document.querySelectorAll('body > img, body > div > img, h2 ~ img')]
+    .filter(i => i.complete && i.naturalWidth > 0).length;
+  const params = [...document.querySelectorAll('#parameters + div table tbody th')]
+    .map(t => t.textContent);
+  return JSON.stringify({iterations, top, params,
+    h2: [...document.querySelectorAll('h2')].map(h => h.textContent)});
+})()
+"""
+
+
+@pytest.fixture(scope="module")
+def browser():
+    binary = chromium.find()
+    if binary is None:
+        pytest.skip("no Chromium on this machine (.ci/run installs it from the system packages)")
+    return binary
+
+
+def _check(report: Path, binary: str, parameters: list[str]) -> dict:
+    page = chromium.load(report, PROBE, binary)
+    assert not page.exceptions, page.exceptions
+    errors = [c for c in page.console if c.get("type") in ("error", "warning", "assert")]
+    assert not errors, errors
+    assert not [e for e in page.log if e.get("level") in ("error", "warning")], page.log
+    assert page.requests and page.requests[0] == report.resolve().as_uri()
+    external = [u for u in page.requests if not u.startswith(("file:", "data:"))]
+    assert not external, external
+    assert not [u for u in page.requests[1:] if u.startswith("file:")]  # self-contained
+    info = json.loads(page.value)
+    assert info["iterations"], "no iteration in the report"
+    for it in info["iterations"]:
+        assert it["response"] == 2, it  # S/N and means, each with Delta and Rank
+        assert it["anova"] == 1, it
+        assert it["images"] >= 1, it
+    assert info["top"] >= 3  # parameters, convergence, fit
+    assert info["params"] == parameters
+    for h in ("Identified parameters", "Stages", "Fit and residuals", "Residual diagnostics",
+              "Failed runs", "Iterations"):  # fmt: skip
+        assert h in info["h2"]
+    return info
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("example", ["lsea_siso", "lsea_miso"])
+def test_example_report_html_renders_offline_with_the_taguchi_tables(example, browser, tmp_path):
+    study = load_study(EXAMPLES / example / "study.toml")
+    res = identify(study, tmp_path / "out", plots=True)
+    report = tmp_path / "out" / "report.html"
+    info = _check(report, browser, [p.name for p in study.parameters])
+    assert len(info["iterations"]) == res.nit
+    text = report.read_text()
+    assert "http://" not in text.replace("http://www.w3.org/2000/svg", "")
+    assert "https://" not in text
+    if example == "lsea_miso":
+        assert "Validation experiments" in info["h2"] and "Contribution analyses" in info["h2"]
+
+
+def test_the_browser_probe_sees_errors_and_external_requests(browser, tmp_path):
+    page = tmp_path / "bad.html"
+    page.write_text(
+        "<!DOCTYPE html><html><body><img src='https://example.invalid/x.png'>"
+        "<script>console.error('boom'); undefined_function();</script></body></html>"
+    )
+    seen = chromium.load(page, "document.images.length", browser)
+    assert seen.value == 1
+    assert any(u.startswith("https://example.invalid") for u in seen.requests)
+    assert [c["type"] for c in seen.console] == ["error"]
+    assert len(seen.exceptions) == 1

@@ -1,0 +1,240 @@
+"""``report.html``: the whole study in one self-contained page (no script, no network).
+
+From top to bottom: the headline and warnings; the identified parameters with their
+intervals; the stages and what each contributed; the fit and residual plots per
+experiment and output; the residual diagnostics; the validation experiments; the MISO
+contribution analyses; the failed runs; then every Taguchi iteration with its levels,
+array, response tables, ANOVA, prediction and confirmation, re-leveling decisions and
+main-effects plots. Images are PNG at 2x, embedded as ``data:`` URIs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+from tsid_fmu.report.html_iteration import iteration_section
+from tsid_fmu.report.html_tables import CSS, esc, generic, image, table, table_from_frame
+from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
+from tsid_fmu.report.render import Figures, iteration_folders
+from tsid_fmu.report.style import cost_name, fmt
+from tsid_fmu.report.units import study_units
+from tsid_fmu.result import STATUS, IdentificationResult
+from tsid_fmu.trail.files import atomic_write
+
+__all__ = ["FIT_NOTE", "STAGES_NOTE", "html_report", "write_html"]
+
+FIT_NOTE = (
+    "fit % = 100 (1 − NRMSE) with NRMSE = ‖simulated − measured‖ / ‖measured − its mean‖ "
+    "(100 % is a perfect fit, 0 % no better than the mean). RMSE and IAE in the output's "
+    "unit (IAE: integral of |error| over time, unit × s); the noise is estimated from the "
+    "data's second differences."
+)
+STAGES_NOTE = (
+    "Cost: the study's cost on the measured inputs of the stage's experiments. "
+    "Cost fall: the share by which the stage lowered the cost of the stage before it "
+    "(what the stage contributed). Simulations: run by the stage itself."
+)
+CONTRIBUTION_NOTE = (
+    "Parameter contribution, the MISO paper's eq. (7): % of error variation = (largest − "
+    "smallest cost of the parameter's one-at-a-time runs) / (mean cost of all runs) × 100. "
+    "Each parameter is varied alone, so the percentages are not shares of a whole and may "
+    "add up to more than 100 %."
+)
+
+
+def _section(title: str, body: str, anchor: str) -> str:
+    return f'<h2 id="{esc(anchor)}">{esc(title)}</h2>\n{body}'
+
+
+def _headline(result: IdentificationResult, cost: str) -> str:
+    study = result.study
+    exit_status = {0: 0, 1: 1, 2: 3}.get(result.status, result.status)
+    lines = [
+        f'<p class="headline status-{result.status}"><b>{esc(STATUS[result.status])}</b> '
+        f"(exit status {exit_status} of <code>tsid identify</code>)</p>",
+        f'<p class="note">{esc(result.message)}</p>',
+        "<ul>",
+        f"<li>FMU: <code>{esc(study.fmu if study else '-')}</code></li>",
+        f"<li>Cost ({esc(cost)}) on the measured inputs of the identification experiments: "
+        f"<b>{fmt(result.fun)}</b></li>",
+        f"<li>{result.nit} Taguchi iterations; {result.nfev} simulations by the stages "
+        "(the fit, interval and plot simulations not counted)</li>",
+        "</ul>",
+    ]
+    lines += [f'<div class="warn">{esc(w)}</div>' for w in result.warnings]
+    return "\n".join(lines)
+
+
+def _parameters(result: IdentificationResult, images: Mapping[str, bytes]) -> str:
+    body = table(PARAMETER_COLUMNS, parameter_rows(result))
+    note = (
+        '<p class="note">95 % interval and standard error: '
+        f"{esc(result.uncertainty.method if result.uncertainty else 'not computed')}.</p>"
+    )
+    if "parameters.png" in images:
+        note += image(images["parameters.png"], "parameter values per iteration")
+        note += (
+            '<p class="note">Best value of each parameter after each iteration (over all '
+            "stages, in order); grey bars: the level window of iterations whose factors are "
+            "the parameters; dotted: the identified value.</p>"
+        )
+    return body + note
+
+
+def _fit(result: IdentificationResult, units: Mapping[str, str], images: Mapping) -> str:
+    rows = []
+    for exp, outputs in result.fit.items():
+        for name, m in outputs.items():
+            if not isinstance(m, dict):
+                rows.append([f"{exp} / {name}", str(m), "", "", "", "", ""])
+                continue
+            sigma = result.noise.get(exp, {}).get(name, math.nan)
+            rows.append(
+                [
+                    f"{exp} / {name}",
+                    units.get(name, ""),
+                    m["fit_percent"],
+                    m["rmse"],
+                    sigma,
+                    m["rmse"] / sigma if sigma else math.nan,
+                    m["iae"],
+                ]
+            )
+    cols = ["experiment / output", "unit", "fit %", "RMSE", "noise", "RMSE / noise", "IAE"]
+    body = table(cols, rows) + f'<p class="note">{esc(FIT_NOTE)}</p>'
+    if "fit.png" in images:
+        body += image(images["fit.png"], "identified model against the measured data")
+    return body
+
+
+def _diagnostics(result: IdentificationResult) -> str:
+    parts = []
+    if result.uncertainty is not None:
+        parts.append(generic(result.uncertainty.to_dict(), "Uncertainty at the answer"))
+    if result.weak:
+        rows = [[k, v] for k, v in result.weak.items()]
+        parts.append("<h3>Weakly determined parameters</h3>" + table(["parameter", "why"], rows))
+    return "\n".join(parts) or "<p>No diagnostics (the study was not assessed).</p>"
+
+
+def _validation(result: IdentificationResult, cost: str) -> str:
+    rows = []
+    for exp, v in result.validation.items():
+        if "error" in v:
+            rows.append([exp, f"simulation failed: {v['error']}", ""])
+            continue
+        fits = "; ".join(f"{o} {fmt(m['fit_percent'], 4)} %" for o, m in v["fit"].items())
+        rows.append([exp, v["cost"], fits])
+    return table(["experiment", f"cost ({cost})", "fit %"], rows) + (
+        '<p class="note">All inputs together, at the identified parameters (the MISO '
+        "paper's superposition check); not used by any stage.</p>"
+    )
+
+
+def _contribution(result: IdentificationResult) -> str:
+    parts = []
+    for st in result.stages:
+        if st.kind != "contribution":
+            continue
+        percent = st.extra.get("percent", {})
+        if percent:
+            names = list(dict.fromkeys(n for v in percent.values() for n in v))
+            rows = [[n, *[percent[e].get(n, math.nan) for e in percent]] for n in names]
+            parts.append(
+                "<h3>Parameter contribution: % of error variation, eq. (7)</h3>"
+                + table(["parameter", *[f"{e} [%]" for e in percent]], rows)
+            )
+        inputs = st.extra.get("input", {})
+        if inputs.get("experiments"):
+            rows = [
+                [
+                    e,
+                    ", ".join(inputs["inputs"].get(e, [])),
+                    inputs["rms"].get(e, math.nan),
+                    inputs["range"].get(e, math.nan),
+                ]
+                for e in inputs["experiments"]
+            ]
+            parts.append(
+                "<h3>Input contribution (main contributor first)</h3>"
+                + table(["experiment", "inputs acting", "output RMS", "output range"], rows)
+            )
+        parts.append(f'<p class="note">{esc(CONTRIBUTION_NOTE)} {esc(st.message)}</p>')
+    return "\n".join(parts)
+
+
+def _failed(result: IdentificationResult) -> str:
+    rows = [
+        [rec.stage, rec.index, run + 1, err]
+        for rec in result.iterations
+        for run, err in enumerate(rec.errors)
+        if err
+    ]
+    if not rows:
+        return "<p>No run failed.</p>"
+    return table(["stage", "iteration", "run", "reason"], rows) + (
+        '<p class="note">Each failed run is scored worst; the study went on.</p>'
+    )
+
+
+def _iterations(result: IdentificationResult, images: Mapping, units: Mapping, cost: str) -> str:
+    parts, last = [], {}
+    items = iteration_folders(result.stages)
+    for folder, rec in items:
+        last[rec.stage] = folder
+    for folder, rec in items:
+        parts.append(iteration_section(rec, folder, images, units, cost, last[rec.stage] == folder))
+    return "\n".join(parts) or "<p>No Taguchi iteration.</p>"
+
+
+def html_report(result: IdentificationResult, figures: Figures | None = None) -> str:
+    """Return the text of ``report.html``."""
+    study = result.study
+    images = figures.images if figures else {}
+    units = study_units(study)
+    cost = cost_name(study)
+    stages = result.stages_frame()
+    if len(stages):
+        stages = stages.rename(columns={"cost": f"cost ({cost})"})
+    body = [
+        f"<h1>Identification report: {esc(study.name if study else 'study')}</h1>",
+        _headline(result, cost),
+        _section("Identified parameters", _parameters(result, images), "parameters"),
+        _section(
+            "Stages",
+            (table_from_frame(stages) if len(stages) else "")
+            + f'<p class="note">{esc(STAGES_NOTE)}</p>'
+            + (
+                image(images["convergence.png"], "convergence")
+                if "convergence.png" in images
+                else ""
+            ),
+            "stages",
+        ),
+        _section("Fit and residuals", _fit(result, units, images), "fit"),
+        _section("Residual diagnostics", _diagnostics(result), "diagnostics"),
+    ]
+    if result.validation:
+        body.append(_section("Validation experiments", _validation(result, cost), "validation"))
+    contribution = _contribution(result)
+    if contribution:
+        body.append(_section("Contribution analyses", contribution, "contribution"))
+    body.append(_section("Failed runs", _failed(result), "failed"))
+    body.append(_section("Iterations", _iterations(result, images, units, cost), "iterations"))
+    title = esc(f"tsid report: {study.name if study else 'study'}")
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f'<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f"<title>{title}</title><style>{CSS}</style></head>\n<body>\n"
+        + "\n".join(body)
+        + "\n</body></html>\n"
+    )
+
+
+def write_html(result: IdentificationResult, out: Path, figures: Figures | None = None) -> Path:
+    """Write ``report.html`` into ``out``; return its path."""
+    path = Path(out) / "report.html"
+    atomic_write(path, html_report(result, figures))
+    return path

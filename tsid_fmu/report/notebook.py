@@ -1,0 +1,153 @@
+"""Notebook display of a result and its ``plot_*`` figures.
+
+:class:`~tsid_fmu.result.IdentificationResult` delegates here (``_repr_html_``,
+``plot_fit``, ...); nothing in this module imports the result class, so the result
+module stays below the reports.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from tsid_fmu.errors import StudyError
+from tsid_fmu.report.html_tables import esc, table
+from tsid_fmu.report.style import fmt, fmt_levels
+
+__all__ = [
+    "parameter_rows",
+    "plot_convergence",
+    "plot_fit",
+    "plot_main_effects",
+    "plot_parameters",
+    "result_html",
+]
+
+PARAMETER_COLUMNS = [
+    "parameter",
+    "value",
+    "unit",
+    "95 % interval",
+    "std error [%]",
+    "first levels",
+    "weakly determined",
+]
+
+
+def _interval(low: float | None, value: float, high: float | None) -> str:
+    if low is None or high is None or not (math.isfinite(low) and math.isfinite(high)):
+        return "not determined"
+    lo, _, hi = fmt_levels([low, value, high]) if low < high else [fmt(low), "", fmt(high)]
+    return f"{lo} .. {hi}"
+
+
+def parameter_rows(result: Any) -> list[list[Any]]:
+    """Rows of the parameter table: value, unit, 95 % interval, standard error, flags."""
+    rows = []
+    params = result.study.parameters if result.study else []
+    names = [p.name for p in params] or list(result.x)
+    units = {p.name: p.unit for p in params}
+    first = {p.name: f"{fmt(min(p.levels))} .. {fmt(max(p.levels))}" for p in params}
+    for name in names:
+        value = result.x.get(name, math.nan)
+        low, high = result.intervals.get(name, [None, None])
+        se = result.uncertainty.relative.get(name, math.nan) if result.uncertainty else math.nan
+        rows.append(
+            [
+                name,
+                value,
+                units.get(name, ""),
+                _interval(low, value, high),
+                se,
+                first.get(name, ""),
+                result.weak.get(name, ""),
+            ]
+        )
+    return rows
+
+
+def result_html(result: Any) -> str:
+    """Return the notebook view of a result: headline, parameters, stages."""
+    status = {0: "converged", 1: "stopped at a limit", 2: "paused for review"}.get(
+        result.status, str(result.status)
+    )
+    parts = [
+        f"<div><p><b>{esc(status)}</b>: {esc(result.message)}</p>",
+        f"<p>cost {esc(fmt(result.fun))} on the measured inputs; {result.nit} Taguchi "
+        f"iterations; {result.nfev} simulations</p>",
+        table(PARAMETER_COLUMNS, parameter_rows(result)),
+    ]
+    stages = result.stages_frame()
+    if len(stages):
+        rows = [
+            [name, row["kind"], row["cost"], int(row["simulations"]), row["cost fall [%]"]]
+            for name, row in stages.iterrows()
+        ]
+        parts.append(table(["stage", "kind", "cost", "simulations", "cost fall [%]"], rows))
+    parts += [f"<p>warning: {esc(w)}</p>" for w in result.warnings]
+    if result.out_dir is not None:
+        parts.append(f"<p>report: <code>{esc(result.out_dir)}/report.html</code></p>")
+    return "\n".join([*parts, "</div>"])
+
+
+def _study(result: Any) -> Any:
+    if result.study is None:
+        raise StudyError("this result has no study: the plot needs its FMU and data")
+    return result.study
+
+
+def plot_fit(result: Any) -> Any:
+    """Simulate the identified parameters once; return the fit and residual figure."""
+    from tsid_fmu.evaluate.serial import SerialEvaluator
+    from tsid_fmu.report.fitfig import FitFigure
+    from tsid_fmu.report.style import cost_name
+    from tsid_fmu.report.units import study_units
+    from tsid_fmu.study.prepare import prepare
+
+    study = _study(result)
+    exps = [e.name for e in study.identify_experiments()]
+    spec = prepare(study, exps, study.parameter_names)
+    with SerialEvaluator(spec) as ev:
+        sims = ev.simulate([dict(result.x)], count=False)[0]
+    title = f"Identified model against the measured data ({cost_name(study)})"
+    return FitFigure(spec.experiments, study_units(study)).draw(sims, title)
+
+
+def plot_convergence(result: Any) -> Any:
+    """Return the best cost per iteration, one axis per set of experiments."""
+    from tsid_fmu.report.figures import convergence_figure
+    from tsid_fmu.report.style import cost_name
+
+    return convergence_figure(result.stages, cost_name(result.study))
+
+
+def plot_main_effects(result: Any, iteration: Any = -1) -> Any:
+    """Return the S/N and mean-cost main effects of one iteration.
+
+    ``iteration`` is an :class:`~tsid_fmu.search.record.IterationRecord`, or its position
+    in ``result.iterations`` (1-based; negative counts from the end).
+    """
+    from tsid_fmu.report.figures import MainEffects
+    from tsid_fmu.report.style import cost_name
+    from tsid_fmu.report.units import study_units
+
+    records = result.iterations
+    if isinstance(iteration, int):
+        if not records or iteration == 0 or abs(iteration) > len(records):
+            raise StudyError(
+                f"iteration {iteration}: the result has {len(records)} iterations "
+                "(1-based, or negative from the end)"
+            )
+        rec = records[iteration - 1 if iteration > 0 else iteration]
+    else:
+        rec = iteration
+    units = study_units(result.study)
+    return MainEffects(cost_name(result.study)).draw(rec, rec.extra.get("describe"), units)
+
+
+def plot_parameters(result: Any) -> Any:
+    """Return each parameter's best value per iteration with its level window."""
+    from tsid_fmu.report.figures import trajectory_figure
+    from tsid_fmu.report.units import study_units
+
+    return trajectory_figure(result.iterations, list(result.x), study_units(result.study), result.x)

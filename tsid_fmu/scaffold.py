@@ -1,0 +1,217 @@
+"""``tsid init``: write a commented study file from an FMU and a data file.
+
+The FMU's model description gives the parameters (with start values and units), the
+inputs and the outputs; the data file gives the columns. The study written:
+
+- maps each FMU input and output to the data column of the same name, compared
+  case-insensitively (also local variables, which a study may compare as outputs, and
+  the derived channels given with ``--derived``); what is left unmatched is listed in
+  comments;
+- identifies every real parameter with five log-spaced levels over one decade around
+  its start value (``start / sqrt(10)`` to ``start * sqrt(10)``), with its unit; a
+  parameter that looks like a solver setting (``step`` or ``tolerance`` in its name) is
+  written commented out;
+- uses ``cost = "sse"``, ``weighting = "noise"``, ``replicates = 1`` and the smallest
+  orthogonal array that fits.
+
+The file runs as written: ``tsid identify study.toml``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from tsid_fmu.data.measured import load_data
+from tsid_fmu.doe.arrays import select_array
+from tsid_fmu.errors import StudyError
+from tsid_fmu.fmu.info import read_fmu_description
+from tsid_fmu.fmu.variables import REAL_TYPES, VariableInfo, parse_start, variable_info
+
+__all__ = ["decade_levels", "init_study"]
+
+SOLVER_SETTING = re.compile(r"step|tolerance", re.IGNORECASE)
+"""Parameter names that look like solver settings, not plant parameters."""
+
+
+def decade_levels(start: float, n: int = 5) -> list[float]:
+    """Return ``n`` levels log-spaced over one decade around ``start`` (4 figures).
+
+    A start value of zero gives ``n`` levels from -1 to 1.
+    """
+    if start == 0 or not math.isfinite(start):
+        return [round(-1 + 2 * k / (n - 1), 6) for k in range(n)]
+    mag = abs(start)
+    values = [float(f"{mag * 10 ** (-0.5 + k / (n - 1)):.4g}") for k in range(n)]
+    return values if start > 0 else sorted(-v for v in values)
+
+
+def _key(name: str) -> str:
+    return name if re.fullmatch(r"[A-Za-z0-9_-]+", name) else json.dumps(name)
+
+
+def _inline(mapping: Mapping[str, str]) -> str:
+    return "{ " + ", ".join(f"{_key(k)} = {json.dumps(v)}" for k, v in mapping.items()) + " }"
+
+
+@dataclass
+class _Match:
+    inputs: dict[str, str]
+    outputs: dict[str, str]
+    locals: list[str]
+    missing_inputs: list[str]
+    missing_outputs: list[str]
+    unused: list[str]
+
+
+def _match(variables: Sequence[VariableInfo], columns: Sequence[str]) -> _Match:
+    by_lower: dict[str, str] = {}
+    for c in columns:
+        by_lower.setdefault(c.lower(), c)
+    used: set[str] = set()
+
+    def pick(names: Sequence[str]) -> tuple[dict[str, str], list[str]]:
+        found, missing = {}, []
+        for n in names:
+            col = by_lower.get(n.lower())
+            if col is not None and col not in used:
+                found[n] = col
+                used.add(col)
+            else:
+                missing.append(n)
+        return found, missing
+
+    inputs, missing_in = pick([v.name for v in variables if v.causality == "input"])
+    outputs, missing_out = pick([v.name for v in variables if v.causality == "output"])
+    local_names = [v.name for v in variables if v.causality == "local" and v.type in REAL_TYPES]
+    local_found, _ = pick(local_names)
+    outputs.update(local_found)
+    unused = [c for c in columns if c not in used]
+    return _Match(inputs, outputs, list(local_found), missing_in, missing_out, unused)
+
+
+def _parameter_lines(variables: Sequence[VariableInfo]) -> tuple[list[str], int]:
+    lines, count = [], 0
+    for v in variables:
+        if v.causality != "parameter" or v.variability not in ("fixed", "tunable"):
+            continue
+        if v.type not in REAL_TYPES:
+            lines.append(f"# {v.name}: {v.type} parameter, not identified (levels are real)")
+            continue
+        start = parse_start(v)
+        levels = decade_levels(start if start is not None else 0.0)
+        bound = ", min = 0" if (start or 0) > 0 else (", max = 0" if (start or 0) < 0 else "")
+        unit = f", unit = {json.dumps(v.unit)}" if v.unit else ""
+        text = ", ".join(repr(x) for x in levels)
+        entry = f"{_key(v.name)} = {{ levels = [{text}]{bound}{unit} }}"
+        note = f"  # start {v.start}" + (f": {v.description}" if v.description else "")
+        if SOLVER_SETTING.search(v.name):
+            lines.append(f"# {entry}  # looks like a solver setting; uncomment to identify it")
+            continue
+        lines.append(entry + note)
+        count += 1
+    return lines, count
+
+
+def _header(fmu: Path, data: Path, m: _Match, time: str, derived: Mapping[str, str]) -> list[str]:
+    lines = [
+        f"# Study written by `tsid init` from {fmu.name} and {data.name}.",
+        "# Check the levels and mappings, then run: tsid identify THIS_FILE --out DIR",
+        "",
+        "[study]",
+        f"name = {json.dumps(f'{fmu.stem} from {data.name}')}",
+        f"fmu = {json.dumps(fmu.as_posix())}",
+        "",
+        "[data]",
+        f"file = {json.dumps(data.as_posix())}",
+        f"time = {json.dumps(time)}",
+    ]
+    if derived:
+        lines.append(f"derived = {_inline(derived)}")
+    lines.append("# FMU variable = data column (matched by name, case-insensitively)")
+    lines.append(f"inputs = {_inline(m.inputs)}")
+    if m.missing_inputs:
+        lines.append(f"# FMU inputs without a column (they keep their start value): "
+                     f"{', '.join(m.missing_inputs)}")  # fmt: skip
+    lines.append(f"outputs = {_inline(m.outputs)}")
+    if m.locals:
+        lines.append(f"# compared as outputs although local in the FMU: {', '.join(m.locals)}")
+    if m.missing_outputs:
+        lines.append(f"# FMU outputs without a column: {', '.join(m.missing_outputs)}")
+    if m.unused:
+        lines.append(f"# data columns not used: {', '.join(m.unused)}")
+    return lines
+
+
+def init_study(
+    fmu: str | os.PathLike[str],
+    data: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    derived: Mapping[str, str] | None = None,
+) -> str:
+    """Write a commented study file for ``fmu`` and ``data`` to ``out``; return its text.
+
+    Raises
+    ------
+    StudyError
+        No FMU output (or local variable) matches a data column, or no parameter is
+        left to identify.
+    FMUError, DataError
+        The FMU or the data file cannot be read.
+    """
+    fmu, data, out = Path(fmu), Path(data), Path(out)
+    md = read_fmu_description(fmu)
+    variables = [variable_info(v) for v in md.modelVariables]
+    time = _time_column(data)
+    probe = load_data(data, time_column=time, derived=derived)
+    columns = [c for c in probe.names if c != time]
+    match = _match(variables, columns)
+    if not match.outputs:
+        outs = [v.name for v in variables if v.causality == "output"]
+        raise StudyError(
+            f"{data}: no column matches an output of {fmu.name} ({', '.join(outs) or 'none'}); "
+            f"columns: {', '.join(columns)}; add one, or give it with --derived NAME=EXPRESSION"
+        )
+    params, count = _parameter_lines(variables)
+    if count == 0:
+        raise StudyError(f"{fmu}: no real parameter to identify")
+    array, _ = select_array([5] * count)
+    base = out.resolve().parent
+    rel = {p: Path(os.path.relpath(p.resolve(), base)) for p in (fmu, data)}
+    lines = _header(rel[fmu], rel[data], match, time, derived or {})
+    lines += [
+        "",
+        "[method]",
+        f'array = "{array.name}"      # the smallest standard array for {count} five-level factors',
+        'cost = "sse"         # sum of squared errors ...',
+        'weighting = "noise"  # ... each output weighted by 1/noise², noise from the data',
+        "replicates = 1       # no input-noise replicates",
+        "",
+        "[parameters]",
+        "# five log-spaced levels over one decade around the FMU's start value",
+        *params,
+    ]
+    text = "\n".join(lines) + "\n"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text, encoding="utf-8")
+    return text
+
+
+def _time_column(data: Path) -> str:
+    """Return the column named ``time`` (any case), else the first column of a text file."""
+    if data.suffix.lower() not in (".csv", ".tsv", ".txt", ""):
+        return "time"
+    import pandas as pd
+
+    try:
+        cols = [str(c) for c in pd.read_csv(data, nrows=0, sep=None, engine="python").columns]
+    except (OSError, ValueError) as exc:
+        raise StudyError(f"{data}: cannot read the column names ({type(exc).__name__})") from None
+    if not cols:
+        raise StudyError(f"{data}: no columns")
+    return next((c for c in cols if c.strip().lower() == "time"), cols[0])
