@@ -208,7 +208,7 @@ def run_tsid(study: Study, truth, workers: int | None):
 def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
     prob = PROBLEMS[name]()
     study = study_of(prob, METHOD)
-    rows, _ = run_tsid(study, prob.truth, workers)
+    rows, res = run_tsid(study, prob.truth, workers)
     scorer = Scorer(dataclasses.replace(study, method=dataclasses.replace(METHOD)), workers)
     try:
         truth_cost = scorer.cost(scorer.space.to_s(prob.truth))
@@ -231,7 +231,22 @@ def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
             f"{r['method']:<44} {r['nfev']:>6d} {r['time']:>9.1f} {r['cost'] / best:>12.6f} "
             f"{r['error']:>11.3g}%  {r['note']}"
         )
+    print(intervals_line(res, prob.truth))
     return rows
+
+
+def intervals_line(res, truth: dict[str, float]) -> str:
+    """tsid's error and 95 % interval per parameter, and how many intervals hold the truth."""
+    parts, inside = [], 0
+    for n, v in truth.items():
+        low, high = res.intervals.get(n, [None, None])
+        ok = (low is None or low <= v) and (high is None or v <= high)
+        inside += ok
+        show = "..".join("open" if b is None else f"{b:.4g}" for b in (low, high))
+        parts.append(f"{n} {100 * (res.x[n] / v - 1):+.2f} % [{show}]{'' if ok else ' MISSES'}")
+    return f"tsid errors and 95 % intervals ({inside}/{len(truth)} hold the truth): " + "; ".join(
+        parts
+    )
 
 
 def main() -> None:

@@ -88,7 +88,10 @@ class Parameter:
     Parameters
     ----------
     name : str
-        Name of the FMU variable (causality ``parameter``).
+        Name of the FMU variable: a parameter (causality ``parameter``), or a continuous
+        state whose start value is its initial value (``initial="exact"``), to identify
+        that initial value. ``"delay(<input>)"`` is no FMU variable: it delays that input
+        by so many seconds before each simulation (:mod:`tsid_fmu.fmu.delay`).
     levels : sequence of float
         Levels of the first iteration; any explicit, distinct values (the SISO paper's
         Table I uses uneven ones such as 10, 50, 80, 100, 110).

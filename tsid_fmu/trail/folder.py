@@ -13,14 +13,15 @@ Layout of the output folder::
         anova.csv              ANOVA of the S/N with percent contribution
         decision.json          re-leveling case and reason per factor
         next_levels.toml       proposed levels of the next iteration (a person may edit)
-        main_effects.png, fit.png
+        main_effects.svg, fit.svg  drawn at the end of the study (report/render.py)
         record.json            written last: marks the iteration complete; lists the
                                hashes of the files above and carries its own digest
     stage.json                 the finished Taguchi stage of a one-group study
     contribution/stage.json    the contribution analyses of a phased study
     phase_01/ ...              each phase: iteration_NN/ and stage.json
     refinement/stage.json      the refinement stage
-    result.json, parameters.csv, parameters.ssv, report.md, fit.png, convergence.png
+    result.json, parameters.csv, parameters.ssv, model.ssp
+    report.html, report.md, fit.png, convergence.png, parameters.png
 
 Every file is written to a temporary name and renamed into place, so an interrupted
 study leaves either the old file or the new one, never half of one. ``--resume`` reads
