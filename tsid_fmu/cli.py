@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import StudyError, TsidError
+from tsid_fmu.interrupt import interrupts_outside_imports
 
 __all__ = ["EXIT_STATUSES", "main"]
 
@@ -382,7 +383,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (see :data:`EXIT_STATUSES`)."""
     args = make_parser().parse_args(argv)
     try:
-        status = int(args.func(args))
+        with interrupts_outside_imports():  # Ctrl-C inside an import is not safe to catch
+            status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit
         return status
     except TsidError as exc:
