@@ -70,7 +70,6 @@ def test_feedthrough_output_has_no_lag(fmus, samples, kind, backend):
     assert y[-1, 4] == 0  # no input derivatives for held inputs
 
 
-@pytest.mark.parametrize("kind", ["fmi2", "fmi3"])
 def held_linear(t: np.ndarray, u: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     """The fine grid and what a linear input is set to on it with ``substeps=m``.
 

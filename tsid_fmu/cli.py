@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import StudyError, TsidError
-from tsid_fmu.interrupt import interrupts_outside_imports
+from tsid_fmu.interrupt import delivered_interrupts
 
 __all__ = ["EXIT_STATUSES", "main"]
 
@@ -383,7 +383,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (see :data:`EXIT_STATUSES`)."""
     args = make_parser().parse_args(argv)
     try:
-        with interrupts_outside_imports():  # Ctrl-C inside an import is not safe to catch
+        with delivered_interrupts():  # Ctrl-C neither lost nor raised inside an import
             status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit
         return status

@@ -1,19 +1,23 @@
-"""Ctrl-C that never lands inside an import.
+"""Ctrl-C that is neither lost nor raised inside an import.
 
-In CPython a :class:`KeyboardInterrupt` raised while a module is being imported, or while
-code compiled from a string runs (``exec``/``eval``, which ``collections.namedtuple`` and
-Numba use at import time), is not safe to catch:
+Python raises :class:`KeyboardInterrupt` wherever the main thread happens to be, and in a
+few places that is not safe:
 
-- a bare ``except:`` in the library being imported can swallow it, and the study then
-  runs on and ignores Ctrl-C;
-- one that leaves an ``exec`` of a string marks the interpreter, which then ends killed
-  by SIGINT (exit status -2) even after the command line caught the interrupt, kept the
-  finished iterations and returned 130.
+- **inside a ctypes callback** (Numba's llvmlite calls one while it loads its cache, an
+  FMU calls its logger): CPython prints "Exception ignored on calling ctypes callback
+  function" and drops the interrupt, so the study runs on and ignores Ctrl-C;
+- **inside an import**, where a bare ``except:`` of the library can swallow it;
+- **inside code compiled from text** (``exec``/``eval``, which ``namedtuple`` and Numba
+  use at import time): an interrupt that leaves it marks the interpreter, which then
+  ends killed by SIGINT (exit status -2) even after the command line caught the
+  interrupt, kept the finished iterations and returned 130.
 
-Both were seen when Ctrl-C came during the first simulation, which imports Numba. The
-command line therefore runs under :func:`interrupts_outside_imports`: an interrupt that
-arrives inside an import is postponed by a few milliseconds, until the main thread is out
-of it, and then raised as usual.
+All three were seen when Ctrl-C came during the first simulation, which imports Numba.
+The command line therefore runs under :func:`delivered_interrupts`. Once Ctrl-C has come,
+SIGINT is sent again to the main thread every :data:`RETRY_S` seconds until the block is
+left; each time, the interrupt is raised unless the main thread is inside an import or
+``exec``'d text (it waits for the next time) or is already unwinding a
+:class:`KeyboardInterrupt` (the cleanup of ``finally`` blocks is left alone).
 """
 
 from __future__ import annotations
@@ -25,10 +29,10 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-__all__ = ["interrupts_outside_imports"]
+__all__ = ["RETRY_S", "delivered_interrupts"]
 
-RETRY_S = 0.02
-"""Seconds after which a postponed interrupt is tried again."""
+RETRY_S = 0.05
+"""Seconds between the repeats of SIGINT after Ctrl-C, until the interrupt is out."""
 
 
 def _inside_import(frame: FrameType | None) -> bool:
@@ -44,12 +48,14 @@ def _inside_import(frame: FrameType | None) -> bool:
 
 
 @contextmanager
-def interrupts_outside_imports() -> Iterator[None]:
-    """Within the block, raise Ctrl-C's :class:`KeyboardInterrupt` only outside imports.
+def delivered_interrupts() -> Iterator[None]:
+    """Within the block, Ctrl-C raises :class:`KeyboardInterrupt` where it can be caught.
 
     Does nothing outside the main thread or when SIGINT already has a handler other than
-    Python's default one (a caller that handles Ctrl-C itself keeps doing so). The
-    previous handler is restored on exit.
+    Python's default one (a caller that handles Ctrl-C itself keeps doing so). If Ctrl-C
+    came but the block ended without an exception (the interrupt was swallowed at its
+    very end), :class:`KeyboardInterrupt` is raised on leaving it. The previous handler
+    is restored.
     """
     if (
         threading.current_thread() is not threading.main_thread()
@@ -59,19 +65,22 @@ def interrupts_outside_imports() -> Iterator[None]:
         return
     main = threading.main_thread().ident
     assert main is not None
-    postponed: list[threading.Timer] = []
-    resent: list[bool] = []
+    stop = threading.Event()
+    repeater: list[threading.Thread] = []
 
-    def resend() -> None:
-        resent.append(True)
-        signal.pthread_kill(main, signal.SIGINT)
+    def repeat() -> None:
+        while not stop.wait(RETRY_S):
+            signal.pthread_kill(main, signal.SIGINT)
 
     def handler(signum: int, frame: FrameType | None) -> None:
-        if _inside_import(frame):
-            retry = threading.Timer(RETRY_S, resend)
-            retry.daemon = True
-            postponed.append(retry)
-            retry.start()
+        if not repeater:
+            repeater.append(threading.Thread(target=repeat, name="tsid-ctrl-c", daemon=True))
+            repeater[0].start()
+        if (
+            stop.is_set()
+            or isinstance(sys.exc_info()[1], KeyboardInterrupt)  # on its way out already
+            or _inside_import(frame)  # not safe here: the next repeat will do
+        ):
             return
         raise KeyboardInterrupt
 
@@ -79,8 +88,9 @@ def interrupts_outside_imports() -> Iterator[None]:
     try:
         yield
     finally:
+        stop.set()  # the handler now lets a repeat still on its way pass
+        for thread in repeater:
+            thread.join()
         signal.signal(signal.SIGINT, signal.default_int_handler)
-        for retry in postponed:
-            retry.cancel()
-        if len(resent) < len(postponed) and sys.exc_info()[0] is None:
-            raise KeyboardInterrupt  # the block ended before a postponed Ctrl-C came back
+    if repeater:
+        raise KeyboardInterrupt  # Ctrl-C came, and the block ended before it got out

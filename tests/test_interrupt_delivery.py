@@ -1,12 +1,14 @@
-"""Ctrl-C during an import is postponed until the import is over (tsid_fmu.interrupt).
+"""Ctrl-C is neither lost nor raised inside an import (tsid_fmu.interrupt).
 
-Seen before the fix: Ctrl-C during the first simulation (which imports Numba) was either
-swallowed by the library being imported (the study ran on) or left CPython marked so
-that the process ended killed by SIGINT (-2) instead of with 130.
+Seen before the fix, when Ctrl-C came during the first simulation (which imports Numba):
+the interrupt was raised inside llvmlite's ctypes callback and dropped by CPython (the
+study ran on), or it left CPython marked by an interrupted ``exec`` so that the process
+ended killed by SIGINT (-2) instead of with 130.
 """
 
 from __future__ import annotations
 
+import ctypes
 import importlib
 import signal
 import subprocess
@@ -16,7 +18,7 @@ import time
 
 import pytest
 
-from tsid_fmu.interrupt import interrupts_outside_imports
+from tsid_fmu.interrupt import delivered_interrupts
 
 SWALLOWER = """
 import signal, time
@@ -35,7 +37,7 @@ def test_an_interrupt_inside_an_import_comes_after_it(tmp_path, monkeypatch):
     sys.modules.pop("tsid_test_swallower", None)
     reached = []
     with pytest.raises(KeyboardInterrupt):
-        with interrupts_outside_imports():
+        with delivered_interrupts():
             module = importlib.import_module("tsid_test_swallower")
             reached.append(module.done)
             time.sleep(2.0)  # the postponed Ctrl-C arrives here
@@ -44,9 +46,35 @@ def test_an_interrupt_inside_an_import_comes_after_it(tmp_path, monkeypatch):
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the drop
+def test_an_interrupt_dropped_in_a_ctypes_callback_comes_again():
+    """qsort calls back into Python from C; an exception there is printed and dropped."""
+    compare_type = ctypes.CFUNCTYPE(
+        ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int)
+    )
+    calls = []
+
+    def compare(a, b):
+        calls.append(1)
+        if len(calls) == 1:
+            signal.raise_signal(signal.SIGINT)  # the handler runs here, inside the callback
+        return a[0] - b[0]
+
+    values = (ctypes.c_int * 5)(5, 1, 4, 2, 3)
+    reached = []
+    with pytest.raises(KeyboardInterrupt):
+        with delivered_interrupts():
+            ctypes.CDLL(None).qsort(values, 5, ctypes.sizeof(ctypes.c_int), compare_type(compare))
+            reached.append("sorted")
+            time.sleep(2.0)  # the repeated Ctrl-C arrives here
+            reached.append("slept")
+    assert reached == ["sorted"] and len(calls) > 1
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_the_handler_is_restored_and_a_plain_interrupt_still_raises():
     with pytest.raises(KeyboardInterrupt):
-        with interrupts_outside_imports():
+        with delivered_interrupts():
             assert signal.getsignal(signal.SIGINT) is not signal.default_int_handler
             signal.raise_signal(signal.SIGINT)
             time.sleep(2.0)
@@ -55,9 +83,9 @@ def test_the_handler_is_restored_and_a_plain_interrupt_still_raises():
 
 SCRIPT = """
 import sys, time
-from tsid_fmu.interrupt import interrupts_outside_imports
+from tsid_fmu.interrupt import delivered_interrupts
 try:
-    with interrupts_outside_imports():
+    with delivered_interrupts():
         exec("import signal, time\\nsignal.raise_signal(signal.SIGINT)\\ntime.sleep(0.2)\\n")
         time.sleep(2.0)
 except KeyboardInterrupt:
