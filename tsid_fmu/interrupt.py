@@ -4,8 +4,9 @@ Python raises :class:`KeyboardInterrupt` wherever the main thread happens to be,
 few places that is not safe:
 
 - **inside a ctypes callback** (Numba's llvmlite calls one while it loads its cache, an
-  FMU calls its logger): CPython prints "Exception ignored on calling ctypes callback
-  function" and drops the interrupt, so the study runs on and ignores Ctrl-C;
+  FMU calls its logger) **or a finalizer** (``__del__``, a generator closed by the
+  garbage collector): CPython prints "Exception ignored ..." with a traceback and drops
+  the interrupt, so the study runs on and ignores Ctrl-C;
 - **inside an import**, where a bare ``except:`` of the library can swallow it;
 - **inside code compiled from text** (``exec``/``eval``, which ``namedtuple`` and Numba
   use at import time): an interrupt that leaves it marks the interpreter, which then
@@ -17,7 +18,9 @@ The command line therefore runs under :func:`delivered_interrupts`. Once Ctrl-C 
 SIGINT is sent again to the main thread every :data:`RETRY_S` seconds until the block is
 left; each time, the interrupt is raised unless the main thread is inside an import or
 ``exec``'d text (it waits for the next time) or is already unwinding a
-:class:`KeyboardInterrupt` (the cleanup of ``finally`` blocks is left alone).
+:class:`KeyboardInterrupt` (the cleanup of ``finally`` blocks is left alone). An interrupt
+that CPython drops is dropped silently (:data:`sys.unraisablehook`): the next repeat
+brings it again.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
+from typing import Any
 
 __all__ = ["RETRY_S", "delivered_interrupts"]
 
@@ -84,7 +88,14 @@ def delivered_interrupts() -> Iterator[None]:
             return
         raise KeyboardInterrupt
 
+    previous_hook = sys.unraisablehook
+
+    def unraisable(info: Any) -> None:
+        if not (repeater and isinstance(info.exc_value, KeyboardInterrupt)):
+            previous_hook(info)  # else one that CPython dropped: a repeat brings it again
+
     signal.signal(signal.SIGINT, handler)
+    sys.unraisablehook = unraisable
     try:
         yield
     finally:
@@ -92,5 +103,6 @@ def delivered_interrupts() -> Iterator[None]:
         for thread in repeater:
             thread.join()
         signal.signal(signal.SIGINT, signal.default_int_handler)
+        sys.unraisablehook = previous_hook
     if repeater:
         raise KeyboardInterrupt  # Ctrl-C came, and the block ended before it got out
