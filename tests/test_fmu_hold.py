@@ -17,6 +17,7 @@ from fmu_factory import build_c_fmu, lag_response
 from tsid_fmu.errors import FMUError
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.fmu import compiled as fastloop
+from tsid_fmu.fmu import grid as grid_module
 from tsid_fmu.fmu.exchange import input_signal
 from tsid_fmu.fmu.grid import refine
 
@@ -71,10 +72,11 @@ def test_feedthrough_output_has_no_lag(fmus, samples, kind, backend):
 
 
 def held_linear(t: np.ndarray, u: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """The fine grid and what a linear input is set to on it with ``substeps=m``.
+    """The fine grid and what a linear input holds over each step with ``substeps=m``.
 
-    At the samples the sample itself; at a communication point inside an interval the
-    line's value at the middle of the step that starts there (held over that step).
+    From a sample the sample itself; from a communication point inside an interval the
+    line's value at the middle of the step that starts there. (The last entry, the last
+    sample, starts no step.)
     """
     tf = fine_grid(t, m)
     values = np.interp(tf, t, u)
@@ -87,34 +89,38 @@ def held_linear(t: np.ndarray, u: np.ndarray, m: int) -> tuple[np.ndarray, np.nd
 
 @pytest.mark.parametrize("kind", ["fmi2", "fmi3"])
 def test_linear_input_is_interpolated_between_samples_held_input_is_a_step(
-    fmus, samples, kind, backend
+    fmus, samples, kind, backend, monkeypatch
 ):
-    """Linear ``a`` with 4 substeps == the explicitly interpolated signal on the fine grid.
-
-    The second session reads the outputs at the fine points themselves: ``ya`` there is
-    exactly what the first session set (the samples, and the line at the middle of each
-    step between them), ``yb`` exactly the step signal; the first session (samples only,
-    ``hold={"a": "linear"}``) gives bit-identical outputs at the samples, so the FMU saw
-    the same values between them.
+    """Linear ``a`` with 4 substeps: at every communication point, samples or between
+    them, the FMU sees exactly the linearly interpolated signal (its feed-through ``ya``),
+    and ``b`` the step signal (``yb``); over each step it holds the line's value at the
+    step's middle (its integral ``za`` is that of a session given that staircase).
     """
     t, u = samples
     m = 4
-    with FMUSession(fmus[kind], ["a", "b"], OUT, hold={"a": "linear"}, substeps=m) as s:
+    session = {"hold": {"a": "linear"}, "substeps": m}
+    with FMUSession(fmus[kind], ["a", "b"], OUT, **session) as s:
         assert s.hold == {"a": "linear", "b": "previous"}
         coarse = s.simulate(t, u, {})
-    tf, interp = held_linear(t, u[:, 0], m)
+    refine_real = grid_module.refine  # the same run, keeping every communication point
+    monkeypatch.setattr(
+        grid_module, "refine", lambda *a, **k: refine_real(*a, **k)._replace(keep=None)
+    )
+    with FMUSession(fmus[kind], ["a", "b"], OUT, **session) as s:
+        every = s.simulate(t, u, {})
+    tf = fine_grid(t, m)
     step = np.concatenate([np.repeat(u[:-1, 1], m), u[-1:, 1]])
-    with FMUSession(fmus[kind], ["a", "b"], OUT) as s:
-        fine = s.simulate(tf, np.column_stack([interp, step]), {})
-    np.testing.assert_array_equal(fine[:, 0], interp)
-    np.testing.assert_array_equal(fine[:, 1], step)  # held between samples
-    # at a point between samples the linear input is neither neighbour
-    k = 10
-    mid = fine[k * m + 2, 0]  # the step from 2/4 to 3/4 of the interval holds the 5/8 point
-    assert mid == pytest.approx(u[k, 0] + 0.625 * (u[k + 1, 0] - u[k, 0]), rel=1e-12)
-    assert mid not in (u[k, 0], u[k + 1, 0])
-    np.testing.assert_array_equal(coarse, fine[::m])
+    np.testing.assert_array_equal(every[:, 0], np.interp(tf, t, u[:, 0]))  # the line itself
+    np.testing.assert_array_equal(every[:, 1], step)  # held between samples
+    k = 10  # at a point between samples the linear input is neither neighbour
+    assert every[k * m + 1, 0] == pytest.approx(u[k, 0] + 0.25 * (u[k + 1, 0] - u[k, 0]))
+    assert every[k * m + 1, 0] not in (u[k, 0], u[k + 1, 0])
+    np.testing.assert_array_equal(every[::m], coarse)
     np.testing.assert_array_equal(coarse[:, :2], u)  # still no lag at the samples
+    _, held = held_linear(t, u[:, 0], m)
+    with FMUSession(fmus[kind], ["a", "b"], OUT) as s:
+        explicit = s.simulate(tf, np.column_stack([held, step]), {})
+    np.testing.assert_array_equal(explicit[::m, 2:4], coarse[:, 2:4])  # za, zb
 
 
 @pytest.mark.parametrize("m", [4, 10])
@@ -189,15 +195,24 @@ def test_refine_grid():
     g = refine("x", t, u, np.array([True, False]), native=False, substeps=3)
     np.testing.assert_array_equal(g.time, fine_grid(t, 3))
     np.testing.assert_array_equal(g.keep, [0, 3, 6, 9])
-    _, expected = held_linear(t, u[:, 0], 3)
-    np.testing.assert_array_equal(g.inputs[:, 0], expected)
-    # at the samples the samples; between them the line at the middle of each step
+    # set at every point: the line there (at the samples the samples)
+    np.testing.assert_array_equal(g.inputs[:, 0], np.interp(g.time, t, u[:, 0]))
     np.testing.assert_array_equal(g.inputs[g.keep, 0], u[:, 0])
-    assert g.inputs[1, 0] == pytest.approx(1.5, rel=1e-12)  # step [1/3, 2/3] of 1 -> 2
     np.testing.assert_array_equal(g.inputs[:, 1], [5, 5, 5, 6, 6, 6, 7, 7, 7, 8])
+    # held over each step: from a sample the sample, else the line at the step's middle
+    _, expected = held_linear(t, u[:, 0], 3)
+    np.testing.assert_array_equal(g.held[:, 0], expected[:-1])
+    assert g.held[1, 0] == pytest.approx(1.5, rel=1e-12)  # step [1/3, 2/3] of 1 -> 2
+    np.testing.assert_array_equal(g.held[:, 1], [5, 5, 5, 6, 6, 6, 7, 7, 7])
     assert g.slopes.shape == (9, 0)
     native = refine("x", t, u, np.array([True, False]), native=True, substeps=3)
-    assert native.keep is None
+    assert native.keep is None and native.held.shape == (0, 2)
+    # an FMU that interpolates itself gets the line at the points and the slopes
+    split = refine("x", t, u, np.array([True, False]), native=True, step_size=0.05)
+    np.testing.assert_array_equal(split.inputs[:, 0], np.interp(split.time, t, u[:, 0]))
+    assert split.held.shape == (0, 2) and split.slopes.shape == (split.time.size - 1, 1)
+    held_only = refine("x", t, u, np.array([False, False]), native=False, step_size=0.05)
+    assert held_only.held.shape == (0, 2)
     np.testing.assert_allclose(native.slopes[:, 0], np.diff(u[:, 0]) / np.diff(t))
     held = refine("x", t, u, np.array([False, False]), native=False, substeps=3)
     assert held.keep is None and held.slopes.shape == (3, 0)

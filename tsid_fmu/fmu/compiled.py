@@ -227,7 +227,7 @@ def warm_up() -> str:
     fmi3 = (sl.FMI3_SETGET(_fail), sl.FMI3_DOSTEP(_fail), sl.FMI3_SETGET(_fail))
     vr = np.zeros(1, dtype=np.uint32)
     time = np.array([0.0, 1.0])
-    u, out = np.zeros((2, 1)), np.zeros((2, 1))
+    u, held, out = np.zeros((2, 1)), np.zeros((0, 1)), np.zeros((2, 1))
     cs_loop(2)(
         (*fmi2, sl.FMI2_SETDER(_fail)),
         0,
@@ -235,10 +235,11 @@ def warm_up() -> str:
         vr,
         time,
         u,
+        held,
         out,
         vr,
         np.ones(1, dtype=np.int32),
         np.zeros((1, 1)),
     )
-    cs_loop(3)(fmi3, 0, vr, vr, time, u, out, np.zeros(16, dtype=np.uint8))
+    cs_loop(3)(fmi3, 0, vr, vr, time, u, held, out, np.zeros(16, dtype=np.uint8))
     return backend()

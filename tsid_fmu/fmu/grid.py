@@ -6,10 +6,12 @@ input reaches the FMU in one of two ways:
 
 - the FMU interpolates itself (FMI 2.0 ``canInterpolateInputs``): it gets the slope
   ``(u[k+1] - u[k]) / h`` through ``fmi2SetRealInputDerivatives`` before each step;
-- otherwise every sample interval is split into ``substeps`` communication steps and
-  the input is set, linearly interpolated, at each of them: at a sample its value, and
-  for a step inside the interval its value at the step's midpoint (which the FMU holds
-  over the step), so that the held staircase does not lag the line.
+- otherwise every sample interval is split into ``substeps`` communication steps. At
+  each communication point the input is set to the line's value there (so an output
+  with direct feed-through reads exactly the interpolated signal); then, before a step
+  that starts inside the interval, it is set to the line's value at the step's
+  midpoint, which the FMU holds over the step, so that the held staircase does not lag
+  the line by half a step.
 
 A ``step_size`` splits long sample intervals the same way (inputs held or
 interpolated).  :func:`refine` returns the grid the step loop runs on and the rows of it
@@ -61,12 +63,17 @@ class Grid(NamedTuple):
     keep : numpy.ndarray or None
         Rows of the communication points that are the original samples; None when
         the grid is the samples themselves.
+    held : numpy.ndarray
+        Input values set again just before each step and held over it, shape
+        ``(m - 1, n_inputs)``; no rows (shape ``(0, n_inputs)``) when every step holds
+        the values of its starting point.
     """
 
     time: np.ndarray
     inputs: np.ndarray
     slopes: np.ndarray
     keep: np.ndarray | None
+    held: np.ndarray
 
 
 def frozen(a: Any) -> bool:
@@ -179,6 +186,7 @@ def refine(
         slopes = np.zeros((t.size - 1, 0))
     n_sub = _splits(fmu, h, step_size, substeps if interpolate and not native else 1)
     keep = None
+    held = np.empty((0, u.shape[1]))
     if n_sub is not None:
         keep = np.concatenate([[0], np.cumsum(n_sub)])
         # t[k] + j * (h[k] / n[k]), the same floating-point operations as
@@ -187,19 +195,22 @@ def refine(
         fine = np.repeat(t[:-1], n_sub) + j * np.repeat(h / n_sub, n_sub)
         t_fine = np.concatenate([fine, t[-1:]])
         u_fine = np.concatenate([np.repeat(u[:-1], n_sub, axis=0), u[-1:]])
-        # a linear input holds, over each communication step inside a sample interval,
-        # its value at the step's midpoint: a staircase centred on the line, without the
-        # lag of half a step that the value at the step's start would give; at the
-        # samples it is the sample itself, as feed-through outputs are read there
-        inner = np.ones(t_fine.size - 1, dtype=bool)
-        inner[keep[:-1]] = False
-        mid = t_fine[:-1][inner] + 0.5 * np.diff(t_fine)[inner]
         for c in np.flatnonzero(linear):
             u_fine[:, c] = np.interp(t_fine, t, u[:, c])
-            u_fine[:-1, c][inner] = np.interp(mid, t, u[:, c])
+        if interpolate and not native:  # (an FMU that interpolates gets the slopes)
+            # over each communication step inside a sample interval a linear input holds
+            # its value at the step's midpoint: a staircase centred on the line, without
+            # the lag of half a step that the value at the step's start would give (a
+            # step from a sample holds the sample, as before the substeps existed)
+            inner = np.ones(t_fine.size - 1, dtype=bool)
+            inner[keep[:-1]] = False
+            mid = t_fine[:-1][inner] + 0.5 * np.diff(t_fine)[inner]
+            held = u_fine[:-1].copy()
+            for c in np.flatnonzero(linear):
+                held[inner, c] = np.interp(mid, t, u[:, c])
         t, u = t_fine, u_fine
         slopes = np.repeat(slopes, n_sub, axis=0)
-    return Grid(_writeable(t), _writeable(u), np.ascontiguousarray(slopes), keep)
+    return Grid(_writeable(t), _writeable(u), np.ascontiguousarray(slopes), keep, held)
 
 
 def model_exchange(t: np.ndarray, u: np.ndarray, linear: np.ndarray) -> Grid:
@@ -210,7 +221,7 @@ def model_exchange(t: np.ndarray, u: np.ndarray, linear: np.ndarray) -> Grid:
     slopes = np.zeros((t.size - 1, u.shape[1]))
     if linear.any():
         slopes[:, linear] = np.diff(u[:, linear], axis=0) / np.diff(t)[:, None]
-    return Grid(_writeable(t), _writeable(u), slopes, None)
+    return Grid(_writeable(t), _writeable(u), slopes, None, np.empty((0, u.shape[1])))
 
 
 def check_tolerance(fmu: str, tolerance: Any) -> float | None:

@@ -411,6 +411,7 @@ class FMUSession:
             self._vr_out,
             t,
             u,
+            g.held,
             out,
         )
         if self._major == 2:

@@ -19,9 +19,10 @@ feed-through sees the input of its own time):
 
 - before the loop the inputs of ``t_0`` are set (during initialization, by the session)
   and the outputs of ``t_0`` are read into row 0;
-- step ``k``: [FMI 2.0, inputs interpolated by the FMU: set the input derivatives for
-  ``t_k -> t_{k+1}``], ``doStep(t_k, t_{k+1} - t_k)``, set the inputs of ``t_{k+1}``,
-  get the outputs of ``t_{k+1}`` into row ``k + 1``.
+- step ``k``: [inputs held over the step given apart: set them], [FMI 2.0, inputs
+  interpolated by the FMU: set the input derivatives for ``t_k -> t_{k+1}``],
+  ``doStep(t_k, t_{k+1} - t_k)``, set the inputs of ``t_{k+1}``, get the outputs of
+  ``t_{k+1}`` into row ``k + 1``.
 
 Every status is checked: a status >= Discard ends the loop and is returned with the
 step index at which the failing call was made and the call's index into
@@ -105,6 +106,7 @@ def _cs_loop_fmi2(
     vr_out: np.ndarray,
     time: np.ndarray,
     inputs: np.ndarray,
+    held: np.ndarray,
     out: np.ndarray,
     vr_der: np.ndarray,
     order: np.ndarray,
@@ -126,6 +128,10 @@ def _cs_loop_fmi2(
     inputs : numpy.ndarray
         C-contiguous ``float64``, shape ``(n, len(vr_in))``; row ``k + 1`` is set after
         the step to ``time[k + 1]`` (row 0 is set by the caller during initialization).
+    held : numpy.ndarray
+        C-contiguous ``float64``, shape ``(n - 1, len(vr_in))``: row ``k`` is set just
+        before step ``k`` and held over it (after the outputs of ``time[k]`` were read
+        with ``inputs[k]``); or no rows, when each step holds ``inputs[k]``.
     out : numpy.ndarray
         C-contiguous ``float64``, shape ``(n, len(vr_out))``, filled in place: row 0
         right away, row ``k + 1`` after step ``k`` and the inputs of ``time[k + 1]``.
@@ -155,12 +161,18 @@ def _cs_loop_fmi2(
     p_vder = ptr(vr_der.ctypes.data)
     p_order = ptr(order.ctypes.data)
     a_in, s_in = inputs.ctypes.data, inputs.strides[0]
+    n_held = held.shape[0] * n_in
+    a_held, s_held = held.ctypes.data, held.strides[0]
     a_out, s_out = out.ctypes.data, out.strides[0]
     a_der, s_der = slopes.ctypes.data, slopes.strides[0]
     status = get_real(comp, p_vout, n_out, ptr(a_out))
     if status >= DISCARD:
         return status, 0, CALL_GET
     for k in range(n - 1):
+        if n_held:
+            status = set_real(comp, p_vin, n_in, ptr(a_held + k * s_held))
+            if status >= DISCARD:
+                return status, k, CALL_SET
         if n_der:
             status = set_der(comp, p_vder, n_der, p_order, ptr(a_der + k * s_der))
             if status >= DISCARD:
@@ -185,6 +197,7 @@ def _cs_loop_fmi3(
     vr_out: np.ndarray,
     time: np.ndarray,
     inputs: np.ndarray,
+    held: np.ndarray,
     out: np.ndarray,
     flags: np.ndarray,
 ) -> tuple[int, int, int]:
@@ -206,6 +219,8 @@ def _cs_loop_fmi3(
     p_vin = ptr(vr_in.ctypes.data)
     p_vout = ptr(vr_out.ctypes.data)
     a_in, s_in = inputs.ctypes.data, inputs.strides[0]
+    n_held = held.shape[0] * n_in
+    a_held, s_held = held.ctypes.data, held.strides[0]
     a_out, s_out = out.ctypes.data, out.strides[0]
     a_flags = flags.ctypes.data
     p_event = ptr(a_flags)
@@ -216,6 +231,10 @@ def _cs_loop_fmi3(
     if status >= DISCARD:
         return status, 0, CALL_GET
     for k in range(n - 1):
+        if n_held:
+            status = set_real(comp, p_vin, n_in, ptr(a_held + k * s_held), n_in)
+            if status >= DISCARD:
+                return status, k, CALL_SET
         status = do_step(comp, t[k], t[k + 1] - t[k], True, p_event, p_term, p_early, p_last)
         if status >= DISCARD:
             return status, k, CALL_STEP
