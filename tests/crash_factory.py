@@ -21,13 +21,9 @@ looks up is a stub returning ``fmi2Error``.
 
 from __future__ import annotations
 
-import shutil
-import subprocess
-import uuid
-import zipfile
 from pathlib import Path
 
-import fmpy
+from fmu_factory import new_guid, pack_c_fmu
 
 # name, vr, causality, variability, initial, start
 VARIABLES = [
@@ -132,26 +128,6 @@ def _model_description(name: str, guid: str) -> str:
 
 def build_crash_fmu(tmp_dir: Path, name: str = "Crashy") -> Path:
     """Build ``<tmp_dir>/<name>.fmu`` (see the module docstring) and return its path."""
-    tmp_dir = Path(tmp_dir)
-    work = tmp_dir / f"{name}_build"
-    if work.exists():
-        shutil.rmtree(work)
-    guid = "{" + str(uuid.uuid4()) + "}"
-    bindir = work / "binaries" / fmpy.platform
-    bindir.mkdir(parents=True)
-    (work / "sources").mkdir()
-    src = work / "sources" / f"{name}.c"
-    src.write_text(_SOURCE + "".join(f"int {s}(void) {{ return 3; }}\n" for s in _STUBS))
-    (work / "modelDescription.xml").write_text(_model_description(name, guid))
-    cmd = ["gcc", "-shared", "-fPIC", "-O2", f'-DGUID="{guid}"', "-o",
-           str(bindir / f"{name}.so"), str(src)]  # fmt: skip
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise RuntimeError(f"gcc failed:\n{' '.join(cmd)}\n{proc.stderr}")
-    fmu = tmp_dir / f"{name}.fmu"
-    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
-        for file in sorted(work.rglob("*")):
-            if file.is_file():
-                zf.write(file, file.relative_to(work).as_posix())
-    shutil.rmtree(work)
-    return fmu
+    guid = new_guid()
+    source = _SOURCE + "".join(f"int {s}(void) {{ return 3; }}\n" for s in _STUBS)
+    return pack_c_fmu(tmp_dir, name, source, _model_description(name, guid), guid, hidden=False)

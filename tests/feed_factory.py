@@ -20,14 +20,10 @@ gives the trapezoidal rule, and any lag of the feed-through shows in ``ya``.
 
 from __future__ import annotations
 
-import shutil
-import subprocess
-import uuid
-import zipfile
 from pathlib import Path
 
 import fmpy
-from fmu_factory import _FMI3_STUBS
+from fmu_factory import _FMI3_STUBS, new_guid, pack_c_fmu
 
 CALCULATED = ' initial="calculated"'
 
@@ -206,36 +202,14 @@ def build_feed_fmu(
     tmp_dir: Path, name: str = "Feed", *, fmi_version: str = "2.0", can_interpolate: bool = False
 ) -> Path:
     """Build ``<tmp_dir>/<name>.fmu`` (see the module docstring) and return its path."""
-    tmp_dir = Path(tmp_dir)
-    work = tmp_dir / f"{name}_build"
-    if work.exists():
-        shutil.rmtree(work)
-    guid = "{" + str(uuid.uuid4()) + "}"
+    guid = new_guid()
     if fmi_version == "2.0":
         platform_dir = fmpy.platform
         source = _FMI2 + "".join(f"int {s}(void) {{ return 3; }}\n" for s in _FMI2_STUBS)
-        flags = []
     else:
         platform_dir = fmpy.platform_tuple
         source = _FMI3
-        flags = ["-fvisibility=hidden"]
-    bindir = work / "binaries" / platform_dir
-    bindir.mkdir(parents=True)
-    (work / "sources").mkdir()
-    src = work / "sources" / f"{name}.c"
-    src.write_text(source)
-    (work / "modelDescription.xml").write_text(
-        _model_description(name, guid, fmi_version, can_interpolate)
+    xml = _model_description(name, guid, fmi_version, can_interpolate)
+    return pack_c_fmu(
+        tmp_dir, name, source, xml, guid, platform_dir=platform_dir, hidden=fmi_version != "2.0"
     )
-    cmd = ["gcc", "-shared", "-fPIC", "-O2", *flags, f'-DGUID="{guid}"', "-o",
-           str(bindir / f"{name}.so"), str(src)]  # fmt: skip
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise RuntimeError(f"gcc failed:\n{' '.join(cmd)}\n{proc.stderr}")
-    fmu = tmp_dir / f"{name}.fmu"
-    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
-        for file in sorted(work.rglob("*")):
-            if file.is_file():
-                zf.write(file, file.relative_to(work).as_posix())
-    shutil.rmtree(work)
-    return fmu

@@ -427,24 +427,59 @@ def _model_description_fmi3(name: str, guid: str) -> str:
     )
 
 
-def _compile(source: Path, output: Path, defines: Sequence[str], libs: Sequence[str]) -> None:
-    cmd = [
-        "gcc",
-        "-shared",
-        "-fPIC",
-        "-O2",
-        "-fvisibility=hidden",
-        f"-I{HEADERS}",
-        "-o",
-        str(output),
-        str(source),
-        *defines,
-        *libs,
-        "-lm",
-    ]
+def _compile(
+    source: Path, output: Path, defines: Sequence[str], libs: Sequence[str], *, hidden: bool = True
+) -> None:
+    """gcc ``source`` into the shared library ``output`` (symbols hidden unless exported)."""
+    visibility = ["-fvisibility=hidden"] if hidden else []
+    cmd = ["gcc", "-shared", "-fPIC", "-O2", *visibility, f"-I{HEADERS}", "-o", str(output),
+           str(source), *defines, *libs, "-lm"]  # fmt: skip
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
-        raise RuntimeError(f"gcc failed:\n{' '.join(cmd)}\n{proc.stderr}")
+        raise RuntimeError(f"gcc failed:\n{' '.join(cmd)}\n{proc.stderr[:2000]}")
+
+
+def new_guid() -> str:
+    """A fresh ``{...}`` GUID for a model description."""
+    return "{" + str(uuid.uuid4()) + "}"
+
+
+def pack_c_fmu(
+    tmp_dir: Path,
+    name: str,
+    source: str,
+    model_description: str,
+    guid: str,
+    *,
+    platform_dir: str | None = None,
+    defines: Sequence[str] = (),
+    libs: Sequence[str] = (),
+    hidden: bool = True,
+) -> Path:
+    """Compile ``source`` and zip it with ``model_description`` into ``<tmp_dir>/<name>.fmu``.
+
+    The library goes to ``binaries/<platform_dir>/<name>.so`` (FMPy's FMI 2 platform
+    folder by default), compiled with ``-DGUID="<guid>"`` and ``defines``; the source is
+    kept under ``sources/``. Returns the FMU's path.
+    """
+    tmp_dir = Path(tmp_dir)
+    work = tmp_dir / f"{name}_build"
+    if work.exists():
+        shutil.rmtree(work)
+    bindir = work / "binaries" / (platform_dir or fmpy.platform)
+    bindir.mkdir(parents=True)
+    (work / "sources").mkdir()
+    src = work / "sources" / f"{name}.c"
+    src.write_text(source)
+    (work / "modelDescription.xml").write_text(model_description)
+    _compile(src, bindir / f"{name}.so", [f'-DGUID="{guid}"', *defines], libs, hidden=hidden)
+    fmu = tmp_dir / f"{name}.fmu"
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
+        for file in sorted(work.rglob("*")):
+            if file.is_file():
+                zf.write(file, file.relative_to(work).as_posix())
+    shutil.rmtree(work)
+    return fmu
 
 
 def build_stub_library(tmp_dir: Path, name: str = "tsiddep") -> Path:
@@ -475,11 +510,7 @@ def build_c_fmu(
     makes the FMU's shared library depend on it, so deleting it afterwards gives an FMU
     whose binary cannot be loaded.
     """
-    tmp_dir = Path(tmp_dir)
-    work = tmp_dir / f"{name}_build"
-    if work.exists():
-        shutil.rmtree(work)
-    guid = "{" + str(uuid.uuid4()) + "}"
+    guid = new_guid()
     if fmi_version == "2.0":
         platform_dir = fmpy.platform
         source, xml = _C_FMI2, _model_description_fmi2(name, guid, interfaces)
@@ -488,25 +519,15 @@ def build_c_fmu(
         source, xml = _C_FMI3, _model_description_fmi3(name, guid)
     else:
         raise ValueError(f"unsupported FMI version {fmi_version}")
-    (work / "sources").mkdir(parents=True)
-    (work / "binaries" / platform_dir).mkdir(parents=True)
-    src = work / "sources" / f"{name}.c"
-    src.write_text(source)
-    (work / "modelDescription.xml").write_text(xml)
-    defines = [f'-DGUID="{guid}"']
+    defines: list[str] = []
     libs: list[str] = []
     if link_library is not None:
         link_library = Path(link_library)
         defines.append("-DLINK_DEP")
         libs = [f"-L{link_library.parent}", f"-l{link_library.stem.removeprefix('lib')}"]
-    _compile(src, work / "binaries" / platform_dir / f"{name}.so", defines, libs)
-    fmu = tmp_dir / f"{name}.fmu"
-    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
-        for file in sorted(work.rglob("*")):
-            if file.is_file():
-                zf.write(file, file.relative_to(work).as_posix())
-    shutil.rmtree(work)
-    return fmu
+    return pack_c_fmu(
+        tmp_dir, name, source, xml, guid, platform_dir=platform_dir, defines=defines, libs=libs
+    )
 
 
 def copy_without(fmu: Path, dest: Path, prefix: str) -> Path:

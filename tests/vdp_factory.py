@@ -18,15 +18,11 @@ cheap fixed-step solver many vendor FMUs ship.
 
 from __future__ import annotations
 
-import shutil
-import subprocess
-import uuid
-import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
-import fmpy
 import numpy as np
+from fmu_factory import new_guid, pack_c_fmu
 
 _C = r"""
 #include <math.h>
@@ -175,30 +171,17 @@ def build_vdp_fmu(
     fixed_step: float = 0.01,
 ) -> Path:
     """Build ``<tmp_dir>/<name>.fmu`` (see the module docstring) and return its path."""
-    tmp_dir = Path(tmp_dir)
-    work = tmp_dir / f"{name}_build"
-    if work.exists():
-        shutil.rmtree(work)
-    guid = "{" + str(uuid.uuid4()) + "}"
-    bindir = work / "binaries" / fmpy.platform
-    bindir.mkdir(parents=True)
-    (work / "sources").mkdir()
-    src = work / "sources" / f"{name}.c"
-    src.write_text(_C + "".join(f"int {s}(void) {{ return 3; }}\n" for s in _STUBS))
-    (work / "modelDescription.xml").write_text(_model_description(name, guid, interfaces))
-    cmd = ["gcc", "-shared", "-fPIC", "-O2", f'-DGUID="{guid}"',
-           f"-DFIXED_STEP={float(fixed_step)!r}", "-o", str(bindir / f"{name}.so"), str(src),
-           "-lm"]  # fmt: skip
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise RuntimeError(f"gcc failed:\n{' '.join(cmd)}\n{proc.stderr[:2000]}")
-    fmu = tmp_dir / f"{name}.fmu"
-    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
-        for file in sorted(work.rglob("*")):
-            if file.is_file():
-                zf.write(file, file.relative_to(work).as_posix())
-    shutil.rmtree(work)
-    return fmu
+    guid = new_guid()
+    source = _C + "".join(f"int {s}(void) {{ return 3; }}\n" for s in _STUBS)
+    return pack_c_fmu(
+        tmp_dir,
+        name,
+        source,
+        _model_description(name, guid, interfaces),
+        guid,
+        defines=[f"-DFIXED_STEP={float(fixed_step)!r}"],
+        hidden=False,
+    )
 
 
 def vdp_solution(time: np.ndarray, mu: float) -> np.ndarray:
