@@ -38,6 +38,7 @@ from pathlib import Path
 
 import fmpy
 import numpy as np
+import pandas as pd
 
 HEADERS = Path(fmpy.__file__).parent / "c-code"
 
@@ -554,6 +555,20 @@ def lag_response(
         h = time[k + 1] - time[k]
         x[k + 1] = u[k] + (x[k] - u[k]) * np.exp(-h / tau)
     return gain * x + offset
+
+
+def lag_case(tmp_dir: Path, dt: float = 0.01) -> Path:
+    """Build a Co-Simulation lag ``Lag.fmu`` and its exact step response ``good.csv``.
+
+    One second at ``dt``, input 1 until 0.5 s, then 0, tau 0.3 s. Returns the FMU's path.
+    """
+    fmu = build_c_fmu(tmp_dir, "Lag", interfaces=("cs",))
+    t = np.arange(0, 1.0 + 1e-9, dt)
+    u = np.where(t < 0.5, 1.0, 0.0)
+    pd.DataFrame({"time": t, "u": u, "y": lag_response(t, u, 0.3)}).to_csv(
+        Path(tmp_dir) / "good.csv", index=False
+    )
+    return fmu
 
 
 _PYTHONFMU_SLAVE = '''

@@ -18,9 +18,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import pytest
-from fmu_factory import build_c_fmu, lag_response
+from fmu_factory import lag_case
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -37,14 +36,7 @@ PARAMS = "[parameters]\ntau = { levels = [0.1, 0.3, 0.6], min = 0 }\n"
 
 @pytest.fixture(scope="module")
 def lag(tmp_path_factory) -> Path:
-    d = tmp_path_factory.mktemp("lag")
-    fmu = build_c_fmu(d, "Lag", interfaces=("cs",))
-    t = np.arange(0, 1.0 + 1e-9, DT)
-    u = np.where(t < 0.5, 1.0, 0.0)
-    pd.DataFrame({"time": t, "u": u, "y": lag_response(t, u, 0.3)}).to_csv(
-        d / "good.csv", index=False
-    )
-    return fmu
+    return lag_case(tmp_path_factory.mktemp("lag"), DT)
 
 
 def study_text(fmu: Path, data: str | None = None, *, study: str = "", data_extra: str = "",
