@@ -13,7 +13,15 @@ from typing import Any
 
 import numpy as np
 
-from tsid_fmu.report.style import COLORS, axis_formatter, fmt, fmt_levels, new_figure, with_unit
+from tsid_fmu.report.style import (
+    COLORS,
+    axis_formatter,
+    fmt,
+    fmt_levels,
+    margins,
+    new_figure,
+    with_unit,
+)
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 
@@ -196,13 +204,7 @@ def convergence_figure(stages: Sequence[StageResult], cost_name: str = "cost") -
         ax.grid(True, which="major", alpha=0.3)
         ax.tick_params(labelsize=7)
     axes[-1][0].set_xlabel("simulations of the study so far", fontsize=8)
-    fig.subplots_adjust(
-        left=0.1,
-        right=0.98,
-        top=1 - 0.45 / fig.get_figheight(),
-        bottom=0.5 / fig.get_figheight(),
-        hspace=0.45,
-    )
+    margins(fig, 0.45, 0.5, left=0.1, right=0.98, hspace=0.45)
     return fig
 
 
@@ -259,12 +261,5 @@ def trajectory_figure(
         axes[j // cols][j % cols].set_visible(False)
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False)
-    fig.subplots_adjust(
-        left=0.07,
-        right=0.98,
-        top=1 - 0.35 / fig.get_figheight(),
-        bottom=0.9 / fig.get_figheight(),
-        hspace=0.6,
-        wspace=0.25,
-    )
+    margins(fig, 0.35, 0.9, left=0.07, right=0.98, hspace=0.6, wspace=0.25)
     return fig

@@ -13,7 +13,7 @@ import numpy as np
 
 from tsid_fmu.evaluate.protocol import Simulated
 from tsid_fmu.evaluate.spec import PreparedExperiment
-from tsid_fmu.report.style import COLORS, axis_formatter, fmt, new_figure, with_unit
+from tsid_fmu.report.style import COLORS, axis_formatter, fmt, margins, new_figure, with_unit
 
 __all__ = ["BINS", "FitFigure", "envelope"]
 
@@ -87,10 +87,7 @@ class FitFigure:
                 a.set_xlim(float(e.time[0]), float(e.time[-1]))
             self.lines.append((ax, ax_r, sim, res, note))
         self.title = self.fig.suptitle("", fontsize=9)
-        h = self.fig.get_figheight()
-        self.fig.subplots_adjust(
-            left=0.1, right=0.98, top=1 - 0.55 / h, bottom=0.45 / h, hspace=0.5
-        )
+        margins(self.fig, 0.55, 0.45, left=0.1, right=0.98, hspace=0.5)
 
     def draw(self, simulated: Sequence[Simulated], title: str = "") -> Any:
         """Return the figure with ``simulated`` (one per experiment) drawn in."""

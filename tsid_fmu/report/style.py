@@ -24,6 +24,7 @@ __all__ = [
     "cost_name",
     "fmt",
     "fmt_levels",
+    "margins",
     "new_figure",
     "png_bytes",
     "with_unit",
@@ -100,6 +101,16 @@ def new_figure(width: float, height: float) -> Any:
     fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     return fig
+
+
+def margins(fig: Any, top: float, bottom: float, **spacing: float) -> None:
+    """Lay out ``fig``'s subplots with ``top`` and ``bottom`` margins in inches.
+
+    Titles and axis labels keep the same room whatever the figure's height; ``spacing``
+    passes ``left``, ``right``, ``hspace`` and ``wspace`` (fractions) on.
+    """
+    height = fig.get_figheight()
+    fig.subplots_adjust(top=1 - top / height, bottom=bottom / height, **spacing)
 
 
 def png_bytes(fig: Any, dpi: int = PNG_DPI) -> bytes:
