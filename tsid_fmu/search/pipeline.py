@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from tsid_fmu.errors import StudyError
+from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.phases import Evaluators, centre_values, joint_levels, plan_phases
@@ -135,18 +136,36 @@ def _simulated_sets(records: list[IterationRecord]) -> list[dict[str, float]]:
     return sets
 
 
+def _polish(
+    name: str,
+    study: Study,
+    start: Mapping[str, float],
+    evaluator: Evaluator,
+    progress: ProgressCallback | None,
+) -> StageResult:
+    """Run the refinement from ``start`` (its cost and residuals come from the memo)."""
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    scored = evaluator.evaluate([dict(start)])
+    return refine_stage(
+        name,
+        space,
+        start,
+        float(scored.costs[0, 0]),
+        evaluator,
+        study.method,
+        progress=progress,
+        start_residuals=scored.residuals[0] if scored.residuals else None,
+    )
+
+
 def _refinement(ctx: _Context, last: StageResult, exps: list[str]) -> StageResult:
     study = ctx.study
     start = {n: last.x[n] for n in study.parameter_names}
     done = ctx.store.stage("refinement")
     if done is not None and done.extra.get("start") == start:
         return done
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
-    cost = float(evaluator.evaluate([start]).costs[0, 0])
-    result = refine_stage(
-        "refinement", space, start, cost, evaluator, study.method, progress=ctx.progress
-    )
+    result = _polish("refinement", study, start, evaluator, ctx.progress)
     result.experiments = list(exps)
     result.extra["start"] = start
     ctx.store.write_stage("refinement", result)
@@ -306,10 +325,8 @@ def run_ungrouped(
     if study.method.refine == "none" or stage.status == 2:
         return stage
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    polished = refine_stage(
-        "ungrouped refinement", space, stage.x, stage.cost, evaluator, study.method
-    )
+    start = {n: stage.x[n] for n in study.parameter_names}
+    polished = _polish("ungrouped refinement", study, start, evaluator, None)
     polished.nfev += stage.nfev
     polished.records = stage.records
     return polished

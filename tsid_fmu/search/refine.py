@@ -8,6 +8,13 @@ stage's answer, within the parameters' bounds, in the same search coordinates
 simulations go to the evaluator as one batch, so they run in parallel. It stops at
 SciPy's tolerances or at ``refine_max_nfev`` simulations, and its answer is the best set
 it evaluated, so it never ends worse than it started.
+
+Two simulations SciPy would spend are not: the start's residuals come from the caller,
+which has just scored it; and SciPy's own ``ftol``/``xtol`` tests on an accepted step are
+checked before the Jacobian at the new point is paid for (``p`` simulations SciPy
+computes and then discards when those tests stop it). Unlike SciPy's ``ftol`` test,
+this one does not also ask that the step's actual reduction be at least a quarter of the
+predicted one: a step that lowers the cost by less than ``ftol`` of itself ends the stage.
 """
 
 from __future__ import annotations
@@ -33,8 +40,16 @@ _FAILED = 1e10
 """Residual value given to every sample of a failed simulation (its cost is then huge)."""
 
 
+_FTOL = _XTOL = _GTOL = 1e-8
+"""SciPy's termination tolerances, as :func:`scipy.optimize.least_squares` names them."""
+
+
 class _Budget(Exception):
     """The refinement ran out of simulations."""
+
+
+class _Converged(Exception):
+    """An accepted step met SciPy's ``ftol`` or ``xtol`` test (see the module docstring)."""
 
 
 class _Problem:
@@ -46,6 +61,8 @@ class _Problem:
         self.start = evaluator.nfev
         self.best: tuple[float, dict[str, float]] = (math.inf, {})
         self.last: tuple[np.ndarray, np.ndarray] | None = None
+        self.known: tuple[np.ndarray, np.ndarray] | None = None
+        self.linearised: tuple[np.ndarray, float] | None = None
         self.calls = 0
         self.size = 0
 
@@ -67,15 +84,32 @@ class _Problem:
 
     def fun(self, s: np.ndarray) -> np.ndarray:
         self.calls += 1
-        r = self._residuals([self.space.to_x(s)])[0]
+        if self.known is not None and np.array_equal(self.known[0], s):
+            r = self.known[1]
+        else:
+            r = self._residuals([self.space.to_x(s)])[0]
         self.last = (s.copy(), r)
         return r
+
+    def _check_step(self, s: np.ndarray, r: np.ndarray) -> None:
+        """Raise :class:`_Converged` if the step to ``s`` meets SciPy's ftol or xtol test."""
+        if self.linearised is None:
+            return
+        s_old, cost_old = self.linearised
+        reduction = cost_old - 0.5 * float(np.dot(r, r))
+        step = float(np.linalg.norm(s - s_old))
+        if reduction < _FTOL * cost_old:
+            raise _Converged(f"the last step lowered the cost by less than ftol={_FTOL:g}")
+        if step < _XTOL * (_XTOL + float(np.linalg.norm(s_old))):
+            raise _Converged(f"the last step was shorter than xtol={_XTOL:g}")
 
     def jac(self, s: np.ndarray) -> np.ndarray:
         if self.last is None or not np.array_equal(self.last[0], s):
             self.fun(s)
         assert self.last is not None
         r0 = self.last[1]
+        self._check_step(s, r0)
+        self.linearised = (s.copy(), 0.5 * float(np.dot(r0, r0)))
         steps = np.where(s + FD_STEP <= self.space.s_upper, FD_STEP, -FD_STEP)
         trial = [s + steps[j] * np.eye(len(s))[j] for j in range(len(s))]
         cols = self._residuals([self.space.to_x(t) for t in trial])
@@ -91,6 +125,7 @@ def refine_stage(
     method: Method,
     fixed: Mapping[str, float] | None = None,
     progress: ProgressCallback | None = None,
+    start_residuals: np.ndarray | None = None,
 ) -> StageResult:
     """Polish ``start`` by trust-region least squares on the same cost (``sse``).
 
@@ -112,6 +147,9 @@ def refine_stage(
         Parameters not varied, merged into the answer.
     progress : callable, optional
         Receives ``("refinement", {...})`` when the stage starts and ends.
+    start_residuals : numpy.ndarray, optional
+        The evaluator's residuals of ``start``, if the caller has them: the stage then
+        does not simulate ``start`` again.
 
     Returns
     -------
@@ -122,13 +160,15 @@ def refine_stage(
     limit = method.refine_max_nfev or 30 * (space.dim + 1) * len(evaluator.spec.experiments)
     problem = _Problem(space, evaluator, limit, fixed or {})
     problem.best = (float(start_cost), {n: float(start[n]) for n in space.names})
-    s0 = space.to_s(start)
     width = space.s_upper - space.s_lower
     s0 = np.clip(
-        s0,
+        space.to_s(start),
         space.s_lower + 1e-9 * np.minimum(width, 1.0),
         space.s_upper - 1e-9 * np.minimum(width, 1.0),
     )
+    if start_residuals is not None and np.array_equal(s0, space.to_s(start)):
+        problem.known = (s0.copy(), start_residuals)
+        problem.size = start_residuals.size
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
     extra: dict[str, Any] = {"method": "scipy.optimize.least_squares(method='trf')"}
@@ -139,13 +179,15 @@ def refine_stage(
             jac=problem.jac,
             bounds=(space.s_lower, space.s_upper),
             method="trf",
-            ftol=1e-8,
-            xtol=1e-8,
-            gtol=1e-8,
+            ftol=_FTOL,
+            xtol=_XTOL,
+            gtol=_GTOL,
             max_nfev=10_000,
         )
         status, message = 0, f"least squares: {out.message}"
         extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
+    except _Converged as stop:
+        status, message = 0, f"least squares: {stop}; stopped before another Jacobian"
     except _Budget:
         status = 1
         message = f"simulation limit ({limit}) of the refinement reached"
