@@ -379,6 +379,12 @@ def _quiet_stdout() -> None:
         pass
 
 
+def _error(message: str, status: int) -> int:
+    """Print ``tsid: error: <message>`` on stderr; return the exit status ``status``."""
+    print(f"tsid: error: {message}", file=sys.stderr)
+    return status
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (see :data:`EXIT_STATUSES`)."""
     args = make_parser().parse_args(argv)
@@ -388,20 +394,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout.flush()  # a closed pipe shows here, not at exit
         return status
     except TsidError as exc:
-        print(f"tsid: error: {exc}", file=sys.stderr)
-        return 2
+        return _error(str(exc), 2)
     except RecursionError:
-        print("tsid: error: an input file is nested too deeply to read", file=sys.stderr)
-        return 2
+        return _error("an input file is nested too deeply to read", 2)
     except BrokenPipeError:
         _quiet_stdout()
         return 141
     except OSError as exc:
-        print(f"tsid: error: {_environment(exc)}", file=sys.stderr)
-        return 4
+        return _error(_environment(exc), 4)
     except MemoryError:
-        print("tsid: error: out of memory", file=sys.stderr)
-        return 4
+        return _error("out of memory", 4)
     except KeyboardInterrupt:
         print(
             "\ntsid: interrupted; finished iterations are kept - continue with --resume",

@@ -14,9 +14,12 @@ __all__ = [
     "add_unit_definitions",
     "dependency_vrs",
     "der_unit",
+    "description_root",
     "fmt",
+    "initial_unknowns",
     "model_description_xml",
     "unit_base",
+    "xml_document",
 ]
 
 FIXED_STEP_NAME = "fixedStepSize"
@@ -108,6 +111,64 @@ def fmt(v: float) -> str:
         ``repr(float(v))``.
     """
     return repr(float(v))
+
+
+def description_root(
+    model: FlatModel,
+    fmi_version: str,
+    token_attribute: str,
+    token: str,
+    generation_tool: str,
+    **extra: str,
+) -> ET.Element:
+    """Return the ``fmiModelDescription`` element with the attributes of FMI 2.0 and 3.0.
+
+    Parameters
+    ----------
+    model : FlatModel
+        The model (name and description).
+    fmi_version : str
+        ``"2.0"`` or ``"3.0"``.
+    token_attribute : str
+        Name of the token attribute: ``"guid"`` (FMI 2.0) or ``"instantiationToken"``.
+    token : str
+        Its value.
+    generation_tool : str
+        Value of the ``generationTool`` attribute.
+    **extra : str
+        Attributes of the version, after the common ones.
+
+    Returns
+    -------
+    xml.etree.ElementTree.Element
+        The root element.
+    """
+    attrs = {
+        "fmiVersion": fmi_version,
+        "modelName": model.name,
+        token_attribute: token,
+        "description": model.description,
+        "generationTool": generation_tool,
+        "variableNamingConvention": "structured",
+    }
+    return ET.Element("fmiModelDescription", {**attrs, **extra})
+
+
+def xml_document(root: ET.Element) -> str:
+    """Return the text of an XML document (indented, with the UTF-8 declaration).
+
+    Parameters
+    ----------
+    root : xml.etree.ElementTree.Element
+        The root element (indented in place).
+
+    Returns
+    -------
+    str
+        The document.
+    """
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
 def add_unit_definitions(root: ET.Element, lay: Layout) -> None:
@@ -204,7 +265,7 @@ FIXED_STEP_DESCRIPTION = (
 )
 
 
-def variable_rows(lay: Layout, step_size: float) -> list[tuple[str, dict[str, str], str, dict]]:
+def variable_rows(lay: Layout, step_size: float) -> list[tuple[dict[str, str], dict[str, str]]]:
     """Return the real variables in value-reference order, with their FMI attributes.
 
     Parameters
@@ -217,9 +278,11 @@ def variable_rows(lay: Layout, step_size: float) -> list[tuple[str, dict[str, st
     Returns
     -------
     list of tuple
-        ``(name, attributes, description, type attributes)`` per value reference; the
-        type attributes hold ``unit``, ``start`` and, for derivatives, ``derivative`` as
-        the value reference of the state.
+        ``(attributes, type attributes)`` per value reference: ``name``,
+        ``valueReference``, ``description`` (where there is one), ``causality``,
+        ``variability`` and ``initial`` (where given) of the variable; ``unit``,
+        ``start`` and, for derivatives, ``derivative`` as the value reference of the
+        state.
     """
 
     def unit_of(v: Any, der: bool = False) -> dict[str, str]:
@@ -256,7 +319,13 @@ def variable_rows(lay: Layout, step_size: float) -> list[tuple[str, dict[str, st
     rows.append(
         (FIXED_STEP_NAME, fixed, FIXED_STEP_DESCRIPTION, {"unit": "s", "start": fmt(step_size)})
     )
-    return rows
+    variables: list[tuple[dict[str, str], dict[str, str]]] = []
+    for vr, (name, attrs, desc, real) in enumerate(rows):
+        head = {"name": name, "valueReference": str(vr)}
+        if desc:
+            head["description"] = desc
+        variables.append(({**head, **attrs}, real))
+    return variables
 
 
 def model_description_xml(
@@ -295,17 +364,8 @@ def model_description_xml(
     """
     lay = causal.layout
     ident = model.short_name
-    root = ET.Element(
-        "fmiModelDescription",
-        {
-            "fmiVersion": "2.0",
-            "modelName": model.name,
-            "guid": guid,
-            "description": model.description,
-            "generationTool": generation_tool,
-            "variableNamingConvention": "structured",
-            "numberOfEventIndicators": str(n_event_indicators),
-        },
+    root = description_root(
+        model, "2.0", "guid", guid, generation_tool, numberOfEventIndicators=str(n_event_indicators)
     )
     caps = {
         "modelIdentifier": ident,
@@ -327,18 +387,13 @@ def model_description_xml(
     default_experiment(root, model)
 
     mv = ET.SubElement(root, "ModelVariables")
-    for vr, (name, attrs, desc, real) in enumerate(variable_rows(lay, step_size)):
-        a = {"name": name, "valueReference": str(vr)}
-        if desc:
-            a["description"] = desc
-        a.update(attrs)
+    for attrs, real in variable_rows(lay, step_size):
         if "derivative" in real:  # FMI 2.0 refers to the state by its 1-based index
             real = {**real, "derivative": str(int(real["derivative"]) + 1)}
-        sv = ET.SubElement(mv, "ScalarVariable", a)
+        sv = ET.SubElement(mv, "ScalarVariable", attrs)
         ET.SubElement(sv, "Real", real)
     _model_structure(root, causal)
-    ET.indent(root, space="  ")
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return xml_document(root)
 
 
 def _model_structure(root: ET.Element, causal: Causalized) -> None:
@@ -361,7 +416,23 @@ def _model_structure(root: ET.Element, causal: Causalized) -> None:
             ders, "Unknown", {"index": str(lay.dx_off + k + 1), "dependencies": idx(dep_dx[k])}
         )
     init = ET.SubElement(ms, "InitialUnknowns")
+    for vr in initial_unknowns(lay):
+        ET.SubElement(init, "Unknown", {"index": str(vr + 1)})
+
+
+def initial_unknowns(lay: Layout) -> list[int]:
+    """Return the value references of the initial unknowns: outputs and derivatives.
+
+    Parameters
+    ----------
+    lay : Layout
+        The variables.
+
+    Returns
+    -------
+    list of int
+        Sorted (FMI 2.0 and 3.0 list the initial unknowns in this order).
+    """
     unknowns = [lay.y_off + k for k in range(len(lay.outputs))]
     unknowns += [lay.dx_off + k for k in range(lay.nx)]
-    for vr in sorted(unknowns):  # InitialUnknowns must be sorted by index
-        ET.SubElement(init, "Unknown", {"index": str(vr + 1)})
+    return sorted(unknowns)

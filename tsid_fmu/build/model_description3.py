@@ -22,7 +22,10 @@ from .model_description import (
     add_unit_definitions,
     default_experiment,
     dependency_vrs,
+    description_root,
+    initial_unknowns,
     variable_rows,
+    xml_document,
 )
 from .modelica import FlatModel
 
@@ -30,11 +33,6 @@ __all__ = ["EVENT_INDICATOR_PREFIX", "build_description_xml", "model_description
 
 #: Names of the FMI 3.0 event-indicator variables: ``_eventIndicator_1``, ...
 EVENT_INDICATOR_PREFIX = "_eventIndicator_"
-
-
-def _xml(root: ET.Element) -> str:
-    ET.indent(root, space="  ")
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
 def model_description3_xml(
@@ -70,17 +68,7 @@ def model_description3_xml(
     """
     lay = causal.layout
     ident = model.short_name
-    root = ET.Element(
-        "fmiModelDescription",
-        {
-            "fmiVersion": "3.0",
-            "modelName": model.name,
-            "instantiationToken": token,
-            "description": model.description,
-            "generationTool": generation_tool,
-            "variableNamingConvention": "structured",
-        },
-    )
+    root = description_root(model, "3.0", "instantiationToken", token, generation_tool)
     caps = {"modelIdentifier": ident, "canGetAndSetFMUState": "true"}
     me_caps = {**caps, "needsCompletedIntegratorStep": "true"}
     ET.SubElement(root, "ModelExchange", me_caps)
@@ -98,7 +86,7 @@ def model_description3_xml(
 
     _model_variables(root, lay, step_size, relations)
     _model_structure(root, causal, len(relations))
-    return _xml(root)
+    return xml_document(root)
 
 
 def _model_variables(
@@ -106,12 +94,8 @@ def _model_variables(
 ) -> None:
     """FMI 3.0 ``<ModelVariables>``: the real array, ``time``, the event indicators."""
     mv = ET.SubElement(root, "ModelVariables")
-    for vr, (name, attrs, desc, real) in enumerate(variable_rows(lay, step_size)):
-        a = {"name": name, "valueReference": str(vr)}
-        if desc:
-            a["description"] = desc
-        a.update(attrs)
-        a.update(real)
+    for attrs, real in variable_rows(lay, step_size):
+        a = {**attrs, **real}
         if attrs["causality"] == "input":
             a["intermediateUpdate"] = "true"
         ET.SubElement(mv, "Float64", a)
@@ -161,9 +145,7 @@ def _model_structure(root: ET.Element, causal: Causalized, n_rel: int) -> None:
             "ContinuousStateDerivative",
             {"valueReference": str(lay.dx_off + k), "dependencies": deps(dep_dx[k])},
         )
-    unknowns = [lay.y_off + k for k in range(len(lay.outputs))]
-    unknowns += [lay.dx_off + k for k in range(lay.nx)]
-    for vr in sorted(unknowns):
+    for vr in initial_unknowns(lay):
         ET.SubElement(ms, "InitialUnknown", {"valueReference": str(vr)})
     for k in range(n_rel):
         ET.SubElement(ms, "EventIndicator", {"valueReference": str(lay.n_real + 1 + k)})
@@ -189,4 +171,4 @@ def build_description_xml(ident: str, source_files: list[str]) -> str:
     sfs = ET.SubElement(bc, "SourceFileSet", {"language": "C99"})
     for f in source_files:
         ET.SubElement(sfs, "SourceFile", {"name": f})
-    return _xml(root)
+    return xml_document(root)

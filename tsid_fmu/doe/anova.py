@@ -126,20 +126,16 @@ class AnovaTable:
         return "\n".join(lines)
 
 
-def _auto_pool(
-    names: tuple[str, ...],
-    ss: np.ndarray,
-    dof: np.ndarray,
-    residual_dof: int,
-    dof_total: int,
-    pool_fraction: float,
-) -> list[int]:
-    """Pick the factors the "auto" rule pools (see :func:`anova`); return their indices."""
-    target = pool_fraction * dof_total
+def _auto_pool(ss: np.ndarray, dof: np.ndarray, residual_dof: int, target: float) -> list[int]:
+    """Pick the factors the "auto" rule pools (see :func:`anova`); return their indices.
+
+    Factors join the error term in order of increasing SS while its degrees of freedom
+    (the residual's and theirs) are below ``target``; one factor always stays.
+    """
     chosen: list[int] = []
     error_dof = residual_dof
     for i in np.argsort(ss, kind="stable"):
-        if error_dof >= target or len(chosen) == len(names) - 1:
+        if error_dof >= target or len(chosen) == len(ss) - 1:
             break
         chosen.append(int(i))
         error_dof += int(dof[i])
@@ -217,7 +213,10 @@ def anova(
     if residual_ss < 1e-10 * max(ss_total, np.finfo(float).tiny):
         residual_ss = 0.0
 
-    pooled_idx = _pooled(pool, names, ss, dof, residual_dof, dof_total, pool_fraction)
+    if isinstance(pool, str) and pool == "auto":
+        pooled_idx = _auto_pool(ss, dof, residual_dof, pool_fraction * dof_total)
+    else:
+        pooled_idx = _pooled(pool, names)
     is_pooled = np.zeros(len(names), dtype=bool)
     is_pooled[pooled_idx] = True
 
@@ -264,20 +263,10 @@ def anova(
     )
 
 
-def _pooled(
-    pool: str | Sequence[str] | None,
-    names: tuple[str, ...],
-    ss: np.ndarray,
-    dof: np.ndarray,
-    residual_dof: int,
-    dof_total: int,
-    pool_fraction: float,
-) -> list[int]:
-    """Return the indices of the factors pooled into the error term (see :func:`anova`)."""
+def _pooled(pool: str | Sequence[str] | None, names: tuple[str, ...]) -> list[int]:
+    """Return the indices of the factors ``pool`` names (see :func:`anova`; not "auto")."""
     if pool is None:
         return []
-    if isinstance(pool, str) and pool == "auto":
-        return _auto_pool(names, ss, dof, residual_dof, dof_total, pool_fraction)
     wanted = [pool] if isinstance(pool, str) else list(pool)
     unknown = [n for n in wanted if n not in names]
     if unknown:
