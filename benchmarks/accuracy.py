@@ -232,7 +232,18 @@ def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
             f"{r['error']:>11.3g}%  {r['note']}"
         )
     print(intervals_line(res, prob.truth))
+    print(peer_line(res, rows))
     return rows
+
+
+def peer_line(res, rows: list[dict]) -> str:
+    """tsid's answer against the lowest-cost least_squares answer, parameter by parameter."""
+    ls = min((r for r in rows if r["method"].startswith("least_squares")), key=lambda r: r["cost"])
+    diffs = "; ".join(f"{n} {100 * (res.x[n] / v - 1):+.3f} %" for n, v in ls["x"].items())
+    return (
+        f"tsid (whole study) against {ls['method']} (its lowest-cost start): cost "
+        f"{100 * (res.fun / ls['cost'] - 1):+.4f} %; {diffs}"
+    )
 
 
 def intervals_line(res, truth: dict[str, float]) -> str:
