@@ -148,21 +148,30 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     return (fmi2Status)coreSetReals((Core *)c, vr, nvr, value, "fmi2SetReal");
 }
 
-#define NO_VARIABLES(F, T, CONST, KIND)                                                 \
-    fmi2Status F(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,          \
-                 CONST T value[]) {                                                    \
+/* The get and set functions of a type the model has no variables of: nothing to do for
+ * no value references, an error otherwise. */
+static fmi2Status noVariables(fmi2Component c, size_t nvr, const char *f, const char *message) {
+    if (nvr == 0) return fmi2OK;
+    return fail(c, f, message);
+}
+
+#define NO_VARIABLES(T)                                                                 \
+    fmi2Status fmi2Get##T(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,    \
+                          fmi2##T value[]) {                                           \
         (void)vr;                                                                      \
         (void)value;                                                                   \
-        if (nvr == 0) return fmi2OK;                                                   \
-        return fail(c, #F, "the model has no " KIND " variables");                 \
+        return noVariables(c, nvr, "fmi2Get" #T, "the model has no " #T " variables"); \
+    }                                                                                  \
+    fmi2Status fmi2Set##T(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,    \
+                          const fmi2##T value[]) {                                     \
+        (void)vr;                                                                      \
+        (void)value;                                                                   \
+        return noVariables(c, nvr, "fmi2Set" #T, "the model has no " #T " variables"); \
     }
 
-NO_VARIABLES(fmi2GetInteger, fmi2Integer, , "Integer")
-NO_VARIABLES(fmi2GetBoolean, fmi2Boolean, , "Boolean")
-NO_VARIABLES(fmi2GetString, fmi2String, , "String")
-NO_VARIABLES(fmi2SetInteger, fmi2Integer, const, "Integer")
-NO_VARIABLES(fmi2SetBoolean, fmi2Boolean, const, "Boolean")
-NO_VARIABLES(fmi2SetString, fmi2String, const, "String")
+NO_VARIABLES(Integer)
+NO_VARIABLES(Boolean)
+NO_VARIABLES(String)
 
 /* ------------------------------------------------------------------- FMU state */
 
@@ -342,12 +351,6 @@ fmi2Status fmi2CancelStep(fmi2Component c) {
     return fail(c, "fmi2CancelStep", "not supported (doStep is synchronous)");
 }
 
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
-    (void)s;
-    (void)value;
-    return fail(c, "fmi2GetStatus", "not supported");
-}
-
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
     if (s == fmi2LastSuccessfulTime && c && value) {
         *value = ((Core *)c)->d.time;
@@ -356,20 +359,15 @@ fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *
     return fail(c, "fmi2GetRealStatus", "not supported");
 }
 
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
-    (void)s;
-    (void)value;
-    return fail(c, "fmi2GetIntegerStatus", "not supported");
-}
+/* Status queries other than the last successful time: not supported. */
+#define NO_STATUS(F, T)                                                   \
+    fmi2Status F(fmi2Component c, const fmi2StatusKind s, T *value) {    \
+        (void)s;                                                          \
+        (void)value;                                                      \
+        return fail(c, #F, "not supported");                              \
+    }
 
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
-    (void)s;
-    (void)value;
-    return fail(c, "fmi2GetBooleanStatus", "not supported");
-}
-
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
-    (void)s;
-    (void)value;
-    return fail(c, "fmi2GetStringStatus", "not supported");
-}
+NO_STATUS(fmi2GetStatus, fmi2Status)
+NO_STATUS(fmi2GetIntegerStatus, fmi2Integer)
+NO_STATUS(fmi2GetBooleanStatus, fmi2Boolean)
+NO_STATUS(fmi2GetStringStatus, fmi2String)

@@ -243,75 +243,61 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                                     f);
 }
 
-#define NO_VARIABLES(F, T, CONST, KIND)                                                \
-    fmi3Status F(fmi3Instance instance, const fmi3ValueReference valueReferences[],  \
-                 size_t nValueReferences, CONST T values[], size_t nValues) {         \
-        (void)valueReferences;                                                        \
-        (void)values;                                                                 \
-        (void)nValues;                                                                \
-        if (nValueReferences == 0) return fmi3OK;                                     \
-        return fail(instance, #F, "the model has no " KIND " variables");             \
+/* The functions of variables the model does not have (of other types than Float64, and
+ * Clocks): nothing to do for no value references, an error otherwise. */
+static fmi3Status noVariables(fmi3Instance instance, size_t nValueReferences, const char *f,
+                              const char *message) {
+    if (nValueReferences == 0) return fmi3OK;
+    return fail(instance, f, message);
+}
+
+/* Marks the arrays of such a function as unused. */
+static void unused(const void *array, ...) { (void)array; }
+
+#define NO_VARIABLES(T)                                                                     \
+    fmi3Status fmi3Get##T(fmi3Instance instance, const fmi3ValueReference valueReferences[], \
+                          size_t nValueReferences, fmi3##T values[], size_t nValues) {       \
+        (void)nValues;                                                                      \
+        unused(valueReferences, values);                                                    \
+        return noVariables(instance, nValueReferences, "fmi3Get" #T,                        \
+                           "the model has no " #T " variables");                            \
+    }                                                                                       \
+    fmi3Status fmi3Set##T(fmi3Instance instance, const fmi3ValueReference valueReferences[], \
+                          size_t nValueReferences, const fmi3##T values[], size_t nValues) { \
+        (void)nValues;                                                                      \
+        unused(valueReferences, values);                                                    \
+        return noVariables(instance, nValueReferences, "fmi3Set" #T,                        \
+                           "the model has no " #T " variables");                            \
     }
 
-NO_VARIABLES(fmi3GetFloat32, fmi3Float32, , "Float32")
-NO_VARIABLES(fmi3GetInt8, fmi3Int8, , "Int8")
-NO_VARIABLES(fmi3GetUInt8, fmi3UInt8, , "UInt8")
-NO_VARIABLES(fmi3GetInt16, fmi3Int16, , "Int16")
-NO_VARIABLES(fmi3GetUInt16, fmi3UInt16, , "UInt16")
-NO_VARIABLES(fmi3GetInt32, fmi3Int32, , "Int32")
-NO_VARIABLES(fmi3GetUInt32, fmi3UInt32, , "UInt32")
-NO_VARIABLES(fmi3GetInt64, fmi3Int64, , "Int64")
-NO_VARIABLES(fmi3GetUInt64, fmi3UInt64, , "UInt64")
-NO_VARIABLES(fmi3GetBoolean, fmi3Boolean, , "Boolean")
-NO_VARIABLES(fmi3GetString, fmi3String, , "String")
-NO_VARIABLES(fmi3SetFloat32, fmi3Float32, const, "Float32")
-NO_VARIABLES(fmi3SetInt8, fmi3Int8, const, "Int8")
-NO_VARIABLES(fmi3SetUInt8, fmi3UInt8, const, "UInt8")
-NO_VARIABLES(fmi3SetInt16, fmi3Int16, const, "Int16")
-NO_VARIABLES(fmi3SetUInt16, fmi3UInt16, const, "UInt16")
-NO_VARIABLES(fmi3SetInt32, fmi3Int32, const, "Int32")
-NO_VARIABLES(fmi3SetUInt32, fmi3UInt32, const, "UInt32")
-NO_VARIABLES(fmi3SetInt64, fmi3Int64, const, "Int64")
-NO_VARIABLES(fmi3SetUInt64, fmi3UInt64, const, "UInt64")
-NO_VARIABLES(fmi3SetBoolean, fmi3Boolean, const, "Boolean")
-NO_VARIABLES(fmi3SetString, fmi3String, const, "String")
+NO_VARIABLES(Float32)
+NO_VARIABLES(Int8)
+NO_VARIABLES(UInt8)
+NO_VARIABLES(Int16)
+NO_VARIABLES(UInt16)
+NO_VARIABLES(Int32)
+NO_VARIABLES(UInt32)
+NO_VARIABLES(Int64)
+NO_VARIABLES(UInt64)
+NO_VARIABLES(Boolean)
+NO_VARIABLES(String)
 
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                          size_t nValueReferences, size_t valueSizes[], fmi3Binary values[],
                          size_t nValues) {
-    (void)valueReferences;
-    (void)valueSizes;
-    (void)values;
     (void)nValues;
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3GetBinary", "the model has no Binary variables");
+    unused(valueReferences, valueSizes, values);
+    return noVariables(instance, nValueReferences, "fmi3GetBinary",
+                       "the model has no Binary variables");
 }
 
 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                          size_t nValueReferences, const size_t valueSizes[],
                          const fmi3Binary values[], size_t nValues) {
-    (void)valueReferences;
-    (void)valueSizes;
-    (void)values;
     (void)nValues;
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3SetBinary", "the model has no Binary variables");
-}
-
-fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, fmi3Clock values[]) {
-    (void)valueReferences;
-    (void)values;
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3GetClock", "the model has no Clocks");
-}
-
-fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, const fmi3Clock values[]) {
-    (void)valueReferences;
-    (void)values;
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3SetClock", "the model has no Clocks");
+    unused(valueReferences, valueSizes, values);
+    return noVariables(instance, nValueReferences, "fmi3SetBinary",
+                       "the model has no Binary variables");
 }
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance,
@@ -408,85 +394,78 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
 
 /* ------------------------------------------------------------------- Clocks */
 
-static void unused(const void *p) { (void)p; }
+/* The model has no Clocks. */
+static fmi3Status noClocks(fmi3Instance instance, size_t nValueReferences, const char *f) {
+    return noVariables(instance, nValueReferences, f, "the model has no Clocks");
+}
+
+fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, fmi3Clock values[]) {
+    unused(valueReferences, values);
+    return noClocks(instance, nValueReferences, "fmi3GetClock");
+}
+
+fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, const fmi3Clock values[]) {
+    unused(valueReferences, values);
+    return noClocks(instance, nValueReferences, "fmi3SetClock");
+}
 
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
                                   const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[]) {
-    unused(valueReferences);
-    unused(intervals);
-    unused(qualifiers);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3GetIntervalDecimal", "the model has no Clocks");
+    unused(valueReferences, intervals, qualifiers);
+    return noClocks(instance, nValueReferences, "fmi3GetIntervalDecimal");
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance,
                                    const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, fmi3UInt64 counters[],
                                    fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[]) {
-    unused(valueReferences);
-    unused(counters);
-    unused(resolutions);
-    unused(qualifiers);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3GetIntervalFraction", "the model has no Clocks");
+    unused(valueReferences, counters, resolutions, qualifiers);
+    return noClocks(instance, nValueReferences, "fmi3GetIntervalFraction");
 }
 
 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, fmi3Float64 shifts[]) {
-    unused(valueReferences);
-    unused(shifts);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3GetShiftDecimal", "the model has no Clocks");
+    unused(valueReferences, shifts);
+    return noClocks(instance, nValueReferences, "fmi3GetShiftDecimal");
 }
 
 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, fmi3UInt64 counters[],
                                 fmi3UInt64 resolutions[]) {
-    unused(valueReferences);
-    unused(counters);
-    unused(resolutions);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3GetShiftFraction", "the model has no Clocks");
+    unused(valueReferences, counters, resolutions);
+    return noClocks(instance, nValueReferences, "fmi3GetShiftFraction");
 }
 
 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance,
                                   const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, const fmi3Float64 intervals[]) {
-    unused(valueReferences);
-    unused(intervals);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3SetIntervalDecimal", "the model has no Clocks");
+    unused(valueReferences, intervals);
+    return noClocks(instance, nValueReferences, "fmi3SetIntervalDecimal");
 }
 
 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
                                    const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, const fmi3UInt64 counters[],
                                    const fmi3UInt64 resolutions[]) {
-    unused(valueReferences);
-    unused(counters);
-    unused(resolutions);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3SetIntervalFraction", "the model has no Clocks");
+    unused(valueReferences, counters, resolutions);
+    return noClocks(instance, nValueReferences, "fmi3SetIntervalFraction");
 }
 
 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, const fmi3Float64 shifts[]) {
-    unused(valueReferences);
-    unused(shifts);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3SetShiftDecimal", "the model has no Clocks");
+    unused(valueReferences, shifts);
+    return noClocks(instance, nValueReferences, "fmi3SetShiftDecimal");
 }
 
 fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, const fmi3UInt64 counters[],
                                 const fmi3UInt64 resolutions[]) {
-    unused(valueReferences);
-    unused(counters);
-    unused(resolutions);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail(instance, "fmi3SetShiftFraction", "the model has no Clocks");
+    unused(valueReferences, counters, resolutions);
+    return noClocks(instance, nValueReferences, "fmi3SetShiftFraction");
 }
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
