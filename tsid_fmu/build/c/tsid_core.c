@@ -506,37 +506,40 @@ static const double *inputsAt(Core *core, double tc, double t, double *buf) {
  * relations, the live indicators model_zc (relations inside noEvent) are used with the
  * live equations. */
 
-/* Right-hand side of the Co-Simulation integrator at a stage. */
-static int csRhs(Core *core, double t, const double *x, const double *u, double *dx) {
 #if NREL > 0
+/* Right-hand side of the Co-Simulation integrator at a stage: the frozen equations. */
+static int csRhs(Core *core, double t, const double *x, const double *u, double *dx) {
     double w[NW + 1];
     return model_eval_me(t, x, u, P(&core->d), core->d.c, dx, w);
-#else
-    return model_ode(t, x, u, P(&core->d), dx);
-#endif
 }
 
-#if NZ_CS > 0
 /* Indicators of the Co-Simulation integrator at (t, x, u), with the modes d->c. */
 static int csIndicators(Core *core, double t, const double *x, const double *u, double *z) {
-#if NREL > 0
     double s[NREL + 1];
     return model_rel(t, x, u, P(&core->d), core->d.c, z, s);
-#else
-    return model_zc(t, x, u, P(&core->d), z);
-#endif
 }
 
 /* Sign class of indicator k: the value of its relation. */
-static int csClass(int k, double z) {
-#if NREL > 0
-    return model_rel_strict[k] ? z > 0.0 : z >= 0.0;
+static int csClass(int k, double z) { return model_rel_strict[k] ? z > 0.0 : z >= 0.0; }
 #else
-    (void)k;
-    return z >= 0.0;
-#endif
+/* Without relations: the live equations and, if any, the live indicators. */
+static int csRhs(Core *core, double t, const double *x, const double *u, double *dx) {
+    return model_ode(t, x, u, P(&core->d), dx);
 }
 
+#if NZ_CS > 0
+static int csIndicators(Core *core, double t, const double *x, const double *u, double *z) {
+    return model_zc(t, x, u, P(&core->d), z);
+}
+
+static int csClass(int k, double z) {
+    (void)k;
+    return z >= 0.0;
+}
+#endif
+#endif
+
+#if NZ_CS > 0
 /* Index of the first indicator whose sign class differs, or -1. */
 static int crossed(const double *z0, const double *z1) {
     int i;
@@ -545,9 +548,7 @@ static int crossed(const double *z0, const double *z1) {
     }
     return -1;
 }
-#endif
 
-#if NZ_CS > 0
 /* Time over which the slopes of the indicators are taken as finite differences along
  * the flow (the inputs are taken as constant over it). */
 static double slopeDelta(const Core *core) {
