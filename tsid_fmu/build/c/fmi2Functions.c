@@ -28,31 +28,14 @@
  * SPDX-License-Identifier: BSD-3-Clause
  */
 
-#include <math.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "fmi2Functions.h"
 #include "tsid_core.h"
 
-typedef enum {
-    StateInstantiated = 1 << 0,
-    StateInitializationMode = 1 << 1,
-    StateEventMode = 1 << 2,
-    StateContinuousTimeMode = 1 << 3,
-    StateStepComplete = 1 << 4,
-    StateTerminated = 1 << 5,
-    StateError = 1 << 6
-} ModelState;
-
-#define ANY_STATE 0x7f
-#define INIT_PHASE (StateInstantiated | StateInitializationMode)
-
 typedef struct {
     Core core; /* first member: a Core * is an Instance * */
     fmi2Type type;
-    ModelState state;
-    char *instanceName;
     fmi2CallbackFunctions cb;
 } Instance;
 
@@ -61,26 +44,15 @@ typedef struct {
 static void logToFmi2(Core *core, CoreStatus status, const char *category, const char *msg) {
     Instance *comp = (Instance *)core;
     if (!comp->cb.logger) return;
-    comp->cb.logger(comp->cb.componentEnvironment, comp->instanceName, (fmi2Status)status,
+    comp->cb.logger(comp->cb.componentEnvironment, core->instanceName, (fmi2Status)status,
                     category, "%s", msg);
 }
 
-static fmi2Status fail(Instance *comp, const char *fmt, const char *arg) {
-    if (comp) coreLog(&comp->core, CoreError, "logStatusError", fmt, arg);
-    return fmi2Error;
+static fmi2Status fail(fmi2Component c, const char *f, const char *message) {
+    return (fmi2Status)coreFail((Core *)c, f, message);
 }
 
-static int allowed(Instance *comp, const char *f, int mask) {
-    if (!comp) return 0;
-    if (comp->state & mask) return 1;
-    coreLog(&comp->core, CoreError, "logStatusError", "%s: illegal call sequence", f);
-    return 0;
-}
-
-#define CHECK(f, mask)                                 \
-    do {                                               \
-        if (!allowed(comp, f, mask)) return fmi2Error; \
-    } while (0)
+#define CHECK(f, mask) CORE_CHECK(c, mask, f, fmi2Error)
 
 /* ------------------------------------------------------------- common functions */
 
@@ -90,12 +62,9 @@ const char *fmi2GetVersion(void) { return fmi2Version; }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[]) {
-    Instance *comp = (Instance *)c;
     (void)nCategories;
     (void)categories;
-    if (!comp) return fmi2Error;
-    comp->core.loggingOn = loggingOn;
-    return fmi2OK;
+    return (fmi2Status)coreSetDebugLogging((Core *)c, loggingOn);
 }
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
@@ -103,7 +72,6 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               const fmi2CallbackFunctions *functions, fmi2Boolean visible,
                               fmi2Boolean loggingOn) {
     Instance *comp;
-    size_t n;
     (void)fmuResourceLocation;
     (void)visible;
     if (!functions || !functions->logger) return NULL;
@@ -118,184 +86,113 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                           fmuGUID ? fmuGUID : "(null)", INSTANTIATION_TOKEN);
         return NULL;
     }
-    comp = (Instance *)calloc(1, sizeof(Instance));
+    comp = (Instance *)coreNew(sizeof(Instance), instanceName, fmuType == fmi2ModelExchange,
+                               loggingOn, logToFmi2);
     if (!comp) return NULL;
-    n = strlen(instanceName) + 1;
-    comp->instanceName = (char *)malloc(n);
-    if (!comp->instanceName) {
-        free(comp);
-        return NULL;
-    }
-    memcpy(comp->instanceName, instanceName, n);
     comp->cb = *functions;
     comp->type = fmuType;
-    comp->state = StateInstantiated;
-    coreInit(&comp->core, fmuType == fmi2ModelExchange);
-    comp->core.loggingOn = loggingOn;
-    comp->core.log = logToFmi2;
     return comp;
 }
 
-void fmi2FreeInstance(fmi2Component c) {
-    Instance *comp = (Instance *)c;
-    if (!comp) return;
-    free(comp->instanceName);
-    free(comp);
-}
+void fmi2FreeInstance(fmi2Component c) { coreFree((Core *)c); }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
                                fmi2Real tolerance, fmi2Real startTime,
                                fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
-    Instance *comp = (Instance *)c;
-    (void)toleranceDefined;
-    (void)tolerance;
-    (void)stopTimeDefined;
-    (void)stopTime;
     CHECK("fmi2SetupExperiment", StateInstantiated);
-    comp->core.d.time = startTime;
-    comp->core.d.startTime = startTime;
-    comp->core.d.nSteps = 0;
-    coreInvalidate(&comp->core, 1);
+    coreSetupExperiment((Core *)c, toleranceDefined, tolerance, startTime, stopTimeDefined,
+                        stopTime);
     return fmi2OK;
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
-    Instance *comp = (Instance *)c;
     CHECK("fmi2EnterInitializationMode", StateInstantiated);
-    comp->state = StateInitializationMode;
-    coreInvalidate(&comp->core, 1);
+    coreEnterInitializationMode((Core *)c);
     return fmi2OK;
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-    Instance *comp = (Instance *)c;
-    const char *f = "fmi2ExitInitializationMode";
-    double h;
-    CHECK(f, StateInitializationMode);
-    h = comp->core.d.r[VR_FIXED_STEP];
-    if (!(h > 0.0) || !isfinite(h)) {
-        coreLog(&comp->core, CoreError, "logStatusError", "%s: fixedStepSize = %g must be > 0",
-                f, h);
-        comp->state = StateError;
-        return fmi2Error;
-    }
-    coreInvalidate(&comp->core, 1);
-    if ((comp->core.isModelExchange && coreInitModes(&comp->core, f) != CoreOK) ||
-        coreEvaluate(&comp->core, f) != CoreOK) {
-        comp->state = StateError;
-        return fmi2Error;
-    }
-    comp->state = comp->type == fmi2ModelExchange ? StateEventMode : StateStepComplete;
-    return fmi2OK;
+    CHECK("fmi2ExitInitializationMode", StateInitializationMode);
+    return (fmi2Status)coreExitInitializationMode((Core *)c, "fmi2ExitInitializationMode");
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
-    Instance *comp = (Instance *)c;
-    CHECK("fmi2Terminate", StateEventMode | StateContinuousTimeMode | StateStepComplete);
-    comp->state = StateTerminated;
+    CHECK("fmi2Terminate", StateEventMode | StateContinuousTimeMode | StateStepMode);
+    ((Core *)c)->state = StateTerminated;
     return fmi2OK;
 }
 
-fmi2Status fmi2Reset(fmi2Component c) {
-    Instance *comp = (Instance *)c;
-    if (!comp) return fmi2Error;
-    coreResetData(&comp->core);
-    comp->state = StateInstantiated;
-    return fmi2OK;
-}
+fmi2Status fmi2Reset(fmi2Component c) { return (fmi2Status)coreReset((Core *)c); }
 
 /* ----------------------------------------------------------------- get and set */
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        fmi2Real value[]) {
-    Instance *comp = (Instance *)c;
+    Core *core = (Core *)c;
     size_t i;
-    fmi2Status s = fmi2OK;
+    fmi2Status s;
     CHECK("fmi2GetReal", ANY_STATE);
-    if (nvr > 0 && (!vr || !value)) return fail(comp, "fmi2GetReal: %s", "NULL argument");
+    if (nvr > 0 && (!vr || !value)) return fail(c, "fmi2GetReal", "NULL argument");
     for (i = 0; i < nvr; i++) {
-        if (vr[i] >= N_REAL) return fail(comp, "fmi2GetReal: %s", "unknown value reference");
+        if (vr[i] >= N_REAL) return fail(c, "fmi2GetReal", "unknown value reference");
     }
-    if (comp->core.d.dirty && !(comp->state & (StateInstantiated | StateError))) {
-        s = (fmi2Status)coreEvaluate(&comp->core, "fmi2GetReal");
-        /* report once; values are returned as they are */
-        if (s != fmi2OK) comp->core.d.dirty = 0;
-    }
-    for (i = 0; i < nvr; i++) value[i] = comp->core.d.r[vr[i]];
+    s = (fmi2Status)coreRefresh(core, "fmi2GetReal");
+    for (i = 0; i < nvr; i++) value[i] = core->d.r[vr[i]];
     return s;
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        const fmi2Real value[]) {
-    Instance *comp = (Instance *)c;
-    size_t i;
-    int initPhase;
-    CHECK("fmi2SetReal", StateInstantiated | StateInitializationMode | StateEventMode |
-                             StateContinuousTimeMode | StateStepComplete);
-    if (nvr > 0 && (!vr || !value)) return fail(comp, "fmi2SetReal: %s", "NULL argument");
-    initPhase = (comp->state & INIT_PHASE) != 0;
-    for (i = 0; i < nvr; i++) {
-        if (coreCheckSet(&comp->core, vr[i], initPhase, "fmi2SetReal") != CoreOK) {
-            return fmi2Error;
-        }
-    }
-    for (i = 0; i < nvr; i++) comp->core.d.r[vr[i]] = value[i];
-    coreInvalidate(&comp->core, initPhase);
-    return fmi2OK;
+    CHECK("fmi2SetReal", INIT_PHASE | StateEventMode | StateContinuousTimeMode | StateStepMode);
+    if (nvr > 0 && (!vr || !value)) return fail(c, "fmi2SetReal", "NULL argument");
+    return (fmi2Status)coreSetReals((Core *)c, vr, nvr, value, "fmi2SetReal");
 }
 
-#define NO_VARIABLES(F, T, CONST, KIND)                                                 \
-    fmi2Status F(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,          \
-                 CONST T value[]) {                                                    \
+/* The get and set functions of a type the model has no variables of: nothing to do for
+ * no value references, an error otherwise. */
+static fmi2Status noVariables(fmi2Component c, size_t nvr, const char *f, const char *message) {
+    if (nvr == 0) return fmi2OK;
+    return fail(c, f, message);
+}
+
+#define NO_VARIABLES(T)                                                                 \
+    fmi2Status fmi2Get##T(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,    \
+                          fmi2##T value[]) {                                           \
         (void)vr;                                                                      \
         (void)value;                                                                   \
-        if (nvr == 0) return fmi2OK;                                                   \
-        return fail((Instance *)c, #F ": %s", "the model has no " KIND " variables"); \
+        return noVariables(c, nvr, "fmi2Get" #T, "the model has no " #T " variables"); \
+    }                                                                                  \
+    fmi2Status fmi2Set##T(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,    \
+                          const fmi2##T value[]) {                                     \
+        (void)vr;                                                                      \
+        (void)value;                                                                   \
+        return noVariables(c, nvr, "fmi2Set" #T, "the model has no " #T " variables"); \
     }
 
-NO_VARIABLES(fmi2GetInteger, fmi2Integer, , "Integer")
-NO_VARIABLES(fmi2GetBoolean, fmi2Boolean, , "Boolean")
-NO_VARIABLES(fmi2GetString, fmi2String, , "String")
-NO_VARIABLES(fmi2SetInteger, fmi2Integer, const, "Integer")
-NO_VARIABLES(fmi2SetBoolean, fmi2Boolean, const, "Boolean")
-NO_VARIABLES(fmi2SetString, fmi2String, const, "String")
+NO_VARIABLES(Integer)
+NO_VARIABLES(Boolean)
+NO_VARIABLES(String)
 
 /* ------------------------------------------------------------------- FMU state */
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    Instance *comp = (Instance *)c;
-    CoreData *copy;
     CHECK("fmi2GetFMUstate", ANY_STATE);
-    if (!FMUstate) return fail(comp, "fmi2GetFMUstate: %s", "NULL argument");
-    copy = *FMUstate ? (CoreData *)*FMUstate : (CoreData *)malloc(sizeof(CoreData));
-    if (!copy) return fail(comp, "fmi2GetFMUstate: %s", "out of memory");
-    *copy = comp->core.d;
-    *FMUstate = copy;
-    return fmi2OK;
+    return (fmi2Status)coreGetFMUState((Core *)c, FMUstate, "fmi2GetFMUstate");
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
-    Instance *comp = (Instance *)c;
     CHECK("fmi2SetFMUstate", ANY_STATE);
-    if (!FMUstate) return fail(comp, "fmi2SetFMUstate: %s", "NULL state");
-    comp->core.d = *(CoreData *)FMUstate;
-    comp->core.d.dirty = 1;
-    return fmi2OK;
+    return (fmi2Status)coreSetFMUState((Core *)c, FMUstate, "fmi2SetFMUstate");
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    (void)c;
-    if (FMUstate && *FMUstate) {
-        free(*FMUstate);
-        *FMUstate = NULL;
-    }
-    return fmi2OK;
+    return (fmi2Status)coreFreeFMUState((Core *)c, FMUstate);
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
     (void)FMUstate;
     (void)size;
-    return fail((Instance *)c, "fmi2SerializedFMUstateSize: %s", "not supported");
+    return fail(c, "fmi2SerializedFMUstateSize", "not supported");
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte bytes[],
@@ -303,7 +200,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
     (void)FMUstate;
     (void)bytes;
     (void)size;
-    return fail((Instance *)c, "fmi2SerializeFMUstate: %s", "not supported");
+    return fail(c, "fmi2SerializeFMUstate", "not supported");
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[],
@@ -311,7 +208,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     (void)serializedState;
     (void)size;
     (void)FMUstate;
-    return fail((Instance *)c, "fmi2DeSerializeFMUstate: %s", "not supported");
+    return fail(c, "fmi2DeSerializeFMUstate", "not supported");
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown[],
@@ -324,32 +221,28 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
     (void)nKnown;
     (void)dvKnown;
     (void)dvUnknown;
-    return fail((Instance *)c, "fmi2GetDirectionalDerivative: %s", "not supported");
+    return fail(c, "fmi2GetDirectionalDerivative", "not supported");
 }
 
 /* ---------------------------------------------------------------- Model Exchange */
 
 fmi2Status fmi2EnterEventMode(fmi2Component c) {
-    Instance *comp = (Instance *)c;
     CHECK("fmi2EnterEventMode", StateEventMode | StateContinuousTimeMode);
-    comp->state = StateEventMode;
-    comp->core.eventIterations = 0;
+    coreEnterEventMode((Core *)c);
     return fmi2OK;
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
-    Instance *comp = (Instance *)c;
     int changed = 0;
     CHECK("fmi2NewDiscreteStates", StateEventMode);
-    if (!info) return fail(comp, "fmi2NewDiscreteStates: %s", "NULL argument");
+    if (!info) return fail(c, "fmi2NewDiscreteStates", "NULL argument");
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
     info->nominalsOfContinuousStatesChanged = fmi2False;
     info->valuesOfContinuousStatesChanged = fmi2False;
     info->nextEventTimeDefined = fmi2False;
     info->nextEventTime = 0.0;
-    if (coreUpdateModes(&comp->core, &changed, "fmi2NewDiscreteStates") != CoreOK) {
-        comp->state = StateError;
+    if (coreUpdateModes((Core *)c, &changed, "fmi2NewDiscreteStates") != CoreOK) {
         return fmi2Error;
     }
     info->newDiscreteStatesNeeded = changed ? fmi2True : fmi2False;
@@ -357,24 +250,22 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
 }
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) {
-    Instance *comp = (Instance *)c;
     CHECK("fmi2EnterContinuousTimeMode", StateEventMode);
-    comp->state = StateContinuousTimeMode;
+    ((Core *)c)->state = StateContinuousTimeMode;
     return fmi2OK;
 }
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode,
                                        fmi2Boolean *terminateSimulation) {
-    Instance *comp = (Instance *)c;
     int pending = 0;
     (void)noSetFMUStatePriorToCurrentPoint;
     CHECK("fmi2CompletedIntegratorStep", StateContinuousTimeMode);
     if (!enterEventMode || !terminateSimulation) {
-        return fail(comp, "fmi2CompletedIntegratorStep: %s", "NULL argument");
+        return fail(c, "fmi2CompletedIntegratorStep", "NULL argument");
     }
     /* a relation whose indicator changed sign without the solver stopping there */
-    if (coreModeChangePending(&comp->core, &pending, "fmi2CompletedIntegratorStep") != CoreOK) {
+    if (coreModeChangePending((Core *)c, &pending, "fmi2CompletedIntegratorStep") != CoreOK) {
         return fmi2Error;
     }
     *enterEventMode = pending ? fmi2True : fmi2False;
@@ -383,84 +274,38 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
 }
 
 fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) {
-    Instance *comp = (Instance *)c;
-    CHECK("fmi2SetTime", StateInstantiated | StateInitializationMode | StateEventMode |
-                             StateContinuousTimeMode);
-    comp->core.d.time = time;
-    coreInvalidate(&comp->core, (comp->state & INIT_PHASE) != 0);
+    CHECK("fmi2SetTime", INIT_PHASE | StateEventMode | StateContinuousTimeMode);
+    coreSetTime((Core *)c, time);
     return fmi2OK;
 }
 
 fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx) {
-    Instance *comp = (Instance *)c;
-    size_t i;
     CHECK("fmi2SetContinuousStates", StateEventMode | StateContinuousTimeMode);
-    if (nx != NX) return fail(comp, "fmi2SetContinuousStates: %s", "wrong number of states");
-    if (nx > 0 && !x) return fail(comp, "fmi2SetContinuousStates: %s", "NULL argument");
-    for (i = 0; i < nx; i++) {
-        if (!isfinite(x[i])) {
-            return fail(comp, "fmi2SetContinuousStates: non-finite value of state %s",
-                        model_names[X_OFF + i]);
-        }
-        comp->core.d.r[X_OFF + i] = x[i];
-    }
-    coreInvalidate(&comp->core, 0);
-    return fmi2OK;
+    return (fmi2Status)coreSetContinuousStates((Core *)c, x, nx, "fmi2SetContinuousStates");
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx) {
-    Instance *comp = (Instance *)c;
-    size_t i;
-    fmi2Status s;
     CHECK("fmi2GetDerivatives", StateInitializationMode | StateEventMode |
                                     StateContinuousTimeMode | StateTerminated | StateError);
-    if (nx != NX) return fail(comp, "fmi2GetDerivatives: %s", "wrong number of states");
-    if (nx > 0 && !derivatives) return fail(comp, "fmi2GetDerivatives: %s", "NULL argument");
-    s = (fmi2Status)coreEvaluate(&comp->core, "fmi2GetDerivatives");
-    for (i = 0; i < nx; i++) derivatives[i] = comp->core.d.r[DX_OFF + i];
-    return s;
+    return (fmi2Status)coreGetDerivatives((Core *)c, derivatives, nx, "fmi2GetDerivatives");
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
-    Instance *comp = (Instance *)c;
-    double e[NREL + 1];
-    size_t i;
     CHECK("fmi2GetEventIndicators", StateInitializationMode | StateEventMode |
                                         StateContinuousTimeMode | StateTerminated | StateError);
-    if (ni != NREL) {
-        return fail(comp, "fmi2GetEventIndicators: %s", "wrong number of event indicators");
-    }
-    if (ni == 0) return fmi2OK;
-    if (!eventIndicators) return fail(comp, "fmi2GetEventIndicators: %s", "NULL argument");
-    if (coreEventIndicators(&comp->core, e, "fmi2GetEventIndicators") != CoreOK) {
-        return fmi2Error;
-    }
-    for (i = 0; i < ni; i++) eventIndicators[i] = e[i];
-    return fmi2OK;
+    return (fmi2Status)coreGetEventIndicators((Core *)c, eventIndicators, ni,
+                                              "fmi2GetEventIndicators");
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
-    Instance *comp = (Instance *)c;
-    size_t i;
     CHECK("fmi2GetContinuousStates", ANY_STATE);
-    if (nx != NX) return fail(comp, "fmi2GetContinuousStates: %s", "wrong number of states");
-    if (nx > 0 && !x) return fail(comp, "fmi2GetContinuousStates: %s", "NULL argument");
-    for (i = 0; i < nx; i++) x[i] = comp->core.d.r[X_OFF + i];
-    return fmi2OK;
+    return (fmi2Status)coreGetContinuousStates((Core *)c, x, nx, "fmi2GetContinuousStates");
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx) {
-    Instance *comp = (Instance *)c;
-    size_t i;
     CHECK("fmi2GetNominalsOfContinuousStates", ANY_STATE);
-    if (nx != NX) {
-        return fail(comp, "fmi2GetNominalsOfContinuousStates: %s", "wrong number of states");
-    }
-    if (nx > 0 && !x_nominal) {
-        return fail(comp, "fmi2GetNominalsOfContinuousStates: %s", "NULL argument");
-    }
-    for (i = 0; i < nx; i++) x_nominal[i] = 1.0;
-    return fmi2OK;
+    return (fmi2Status)coreGetNominals((Core *)c, x_nominal, nx,
+                                       "fmi2GetNominalsOfContinuousStates");
 }
 
 /* ------------------------------------------------------------------ Co-Simulation */
@@ -472,9 +317,9 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
     const char *f = "fmi2SetRealInputDerivatives";
     CoreStatus s = CoreOK;
     size_t i;
-    CHECK(f, StateInstantiated | StateInitializationMode | StateStepComplete);
-    if (comp->type != fmi2CoSimulation) return fail(comp, "%s: only in Co-Simulation", f);
-    if (nvr > 0 && (!vr || !order || !value)) return fail(comp, "%s: NULL argument", f);
+    CHECK(f, INIT_PHASE | StateStepMode);
+    if (comp->type != fmi2CoSimulation) return fail(c, f, "only in Co-Simulation");
+    if (nvr > 0 && (!vr || !order || !value)) return fail(c, f, "NULL argument");
     for (i = 0; i < nvr; i++) {
         CoreStatus si = coreSetInputDerivative(&comp->core, vr[i], order[i], value[i], f);
         if (si == CoreError) return fmi2Error;
@@ -490,59 +335,39 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     (void)nvr;
     (void)order;
     (void)value;
-    return fail((Instance *)c, "fmi2GetRealOutputDerivatives: %s",
-                "not supported (maxOutputDerivativeOrder = 0)");
+    return fail(c, "fmi2GetRealOutputDerivatives", "not supported (maxOutputDerivativeOrder = 0)");
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentCommunicationPoint) {
-    Instance *comp = (Instance *)c;
-    CoreStatus s;
     (void)noSetFMUStatePriorToCurrentCommunicationPoint;
-    CHECK("fmi2DoStep", StateStepComplete);
-    if (coreCheckStep(&comp->core, currentCommunicationPoint, communicationStepSize,
-                      "fmi2DoStep") != CoreOK) {
-        return fmi2Error; /* bad arguments: the instance stays usable */
-    }
-    s = coreDoStep(&comp->core, currentCommunicationPoint, communicationStepSize, "fmi2DoStep");
-    if (s != CoreOK) comp->state = StateError;
-    return (fmi2Status)s;
+    CHECK("fmi2DoStep", StateStepMode);
+    return (fmi2Status)coreDoStep((Core *)c, currentCommunicationPoint, communicationStepSize,
+                                  "fmi2DoStep");
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c) {
-    return fail((Instance *)c, "fmi2CancelStep: %s", "not supported (doStep is synchronous)");
-}
-
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
-    (void)s;
-    (void)value;
-    return fail((Instance *)c, "fmi2GetStatus: %s", "not supported");
+    return fail(c, "fmi2CancelStep", "not supported (doStep is synchronous)");
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
-    Instance *comp = (Instance *)c;
-    if (s == fmi2LastSuccessfulTime && comp && value) {
-        *value = comp->core.d.time;
+    if (s == fmi2LastSuccessfulTime && c && value) {
+        *value = ((Core *)c)->d.time;
         return fmi2OK;
     }
-    return fail(comp, "fmi2GetRealStatus: %s", "not supported");
+    return fail(c, "fmi2GetRealStatus", "not supported");
 }
 
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
-    (void)s;
-    (void)value;
-    return fail((Instance *)c, "fmi2GetIntegerStatus: %s", "not supported");
-}
+/* Status queries other than the last successful time: not supported. */
+#define NO_STATUS(F, T)                                                   \
+    fmi2Status F(fmi2Component c, const fmi2StatusKind s, T *value) {    \
+        (void)s;                                                          \
+        (void)value;                                                      \
+        return fail(c, #F, "not supported");                              \
+    }
 
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
-    (void)s;
-    (void)value;
-    return fail((Instance *)c, "fmi2GetBooleanStatus: %s", "not supported");
-}
-
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
-    (void)s;
-    (void)value;
-    return fail((Instance *)c, "fmi2GetStringStatus: %s", "not supported");
-}
+NO_STATUS(fmi2GetStatus, fmi2Status)
+NO_STATUS(fmi2GetIntegerStatus, fmi2Integer)
+NO_STATUS(fmi2GetBooleanStatus, fmi2Boolean)
+NO_STATUS(fmi2GetStringStatus, fmi2String)

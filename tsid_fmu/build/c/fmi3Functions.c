@@ -26,33 +26,15 @@
  * SPDX-License-Identifier: BSD-3-Clause
  */
 
-#include <math.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "fmi3Functions.h"
 #include "tsid_core.h"
 
-typedef enum {
-    StateInstantiated = 1 << 0,
-    StateInitializationMode = 1 << 1,
-    StateEventMode = 1 << 2,
-    StateContinuousTimeMode = 1 << 3,
-    StateStepMode = 1 << 4,
-    StateIntermediateUpdateMode = 1 << 5,
-    StateTerminated = 1 << 6,
-    StateError = 1 << 7
-} ModelState;
-
-#define ANY_STATE 0xff
-#define INIT_PHASE (StateInstantiated | StateInitializationMode)
 #define RUNNING (StateEventMode | StateContinuousTimeMode | StateStepMode)
 
 typedef struct {
     Core core; /* first member: a Core * is an Instance * */
-    int isModelExchange;
-    ModelState state;
-    char *instanceName;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback logMessage;
     fmi3IntermediateUpdateCallback intermediateUpdate;
@@ -66,22 +48,11 @@ static void logToFmi3(Core *core, CoreStatus status, const char *category, const
     comp->logMessage(comp->env, (fmi3Status)status, category, msg);
 }
 
-static fmi3Status fail(Instance *comp, const char *fmt, const char *arg) {
-    if (comp) coreLog(&comp->core, CoreError, "logStatusError", fmt, arg);
-    return fmi3Error;
+static fmi3Status fail(fmi3Instance instance, const char *f, const char *message) {
+    return (fmi3Status)coreFail((Core *)instance, f, message);
 }
 
-static int allowed(Instance *comp, const char *f, int mask) {
-    if (!comp) return 0;
-    if (comp->state & mask) return 1;
-    coreLog(&comp->core, CoreError, "logStatusError", "%s: illegal call sequence", f);
-    return 0;
-}
-
-#define CHECK(f, mask)                                 \
-    do {                                               \
-        if (!allowed(comp, f, mask)) return fmi3Error; \
-    } while (0)
+#define CHECK(f, mask) CORE_CHECK(instance, mask, f, fmi3Error)
 
 /* ---------------------------------------------------------------- instantiation */
 
@@ -89,7 +60,6 @@ static Instance *newInstance(fmi3String instanceName, fmi3String token, int isMo
                              fmi3Boolean loggingOn, fmi3InstanceEnvironment env,
                              fmi3LogMessageCallback logMessage) {
     Instance *comp;
-    size_t n;
     if (!instanceName || !instanceName[0]) {
         if (logMessage) logMessage(env, fmi3Error, "logStatusError", "missing instance name");
         return NULL;
@@ -101,22 +71,11 @@ static Instance *newInstance(fmi3String instanceName, fmi3String token, int isMo
         }
         return NULL;
     }
-    comp = (Instance *)calloc(1, sizeof(Instance));
+    comp = (Instance *)coreNew(sizeof(Instance), instanceName, isModelExchange, loggingOn,
+                               logToFmi3);
     if (!comp) return NULL;
-    n = strlen(instanceName) + 1;
-    comp->instanceName = (char *)malloc(n);
-    if (!comp->instanceName) {
-        free(comp);
-        return NULL;
-    }
-    memcpy(comp->instanceName, instanceName, n);
-    comp->isModelExchange = isModelExchange;
-    comp->state = StateInstantiated;
     comp->env = env;
     comp->logMessage = logMessage;
-    coreInit(&comp->core, isModelExchange);
-    comp->core.loggingOn = loggingOn;
-    comp->core.log = logToFmi3;
     return comp;
 }
 
@@ -125,10 +84,10 @@ static int requestInputs(Core *core, double t) {
     Instance *comp = (Instance *)core;
     fmi3Boolean earlyReturnRequested = fmi3False;
     fmi3Float64 earlyReturnTime = t;
-    comp->state = StateIntermediateUpdateMode;
+    core->state = StateIntermediateUpdateMode;
     comp->intermediateUpdate(comp->env, t, fmi3True, fmi3False, fmi3False, fmi3False,
                              &earlyReturnRequested, &earlyReturnTime);
-    comp->state = StateStepMode;
+    core->state = StateStepMode;
     return 0;
 }
 
@@ -136,12 +95,9 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn,
                                size_t nCategories, const fmi3String categories[]) {
-    Instance *comp = (Instance *)instance;
     (void)nCategories;
     (void)categories;
-    if (!comp) return fmi3Error;
-    comp->core.loggingOn = loggingOn;
-    return fmi3OK;
+    return (fmi3Status)coreSetDebugLogging((Core *)instance, loggingOn);
 }
 
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName,
@@ -215,103 +171,62 @@ fmi3Instance fmi3InstantiateScheduledExecution(
     return NULL;
 }
 
-void fmi3FreeInstance(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    if (!comp) return;
-    free(comp->instanceName);
-    free(comp);
-}
+void fmi3FreeInstance(fmi3Instance instance) { coreFree((Core *)instance); }
 
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined,
                                        fmi3Float64 tolerance, fmi3Float64 startTime,
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
-    Instance *comp = (Instance *)instance;
-    (void)toleranceDefined;
-    (void)tolerance;
-    (void)stopTimeDefined;
-    (void)stopTime;
     CHECK("fmi3EnterInitializationMode", StateInstantiated);
-    comp->core.d.time = startTime;
-    comp->core.d.startTime = startTime;
-    comp->core.d.nSteps = 0;
-    comp->state = StateInitializationMode;
-    coreInvalidate(&comp->core, 1);
+    coreSetupExperiment((Core *)instance, toleranceDefined, tolerance, startTime,
+                        stopTimeDefined, stopTime);
+    coreEnterInitializationMode((Core *)instance);
     return fmi3OK;
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    const char *f = "fmi3ExitInitializationMode";
-    double h;
-    CHECK(f, StateInitializationMode);
-    h = comp->core.d.r[VR_FIXED_STEP];
-    if (!(h > 0.0) || !isfinite(h)) {
-        coreLog(&comp->core, CoreError, "logStatusError", "%s: fixedStepSize = %g must be > 0",
-                f, h);
-        comp->state = StateError;
-        return fmi3Error;
-    }
-    coreInvalidate(&comp->core, 1);
-    if ((comp->isModelExchange && coreInitModes(&comp->core, f) != CoreOK) ||
-        coreEvaluate(&comp->core, f) != CoreOK) {
-        comp->state = StateError;
-        return fmi3Error;
-    }
-    comp->state = comp->isModelExchange ? StateEventMode : StateStepMode;
-    return fmi3OK;
+    CHECK("fmi3ExitInitializationMode", StateInitializationMode);
+    return (fmi3Status)coreExitInitializationMode((Core *)instance, "fmi3ExitInitializationMode");
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
     CHECK("fmi3EnterEventMode", StateContinuousTimeMode);
-    comp->state = StateEventMode;
-    comp->core.eventIterations = 0;
+    coreEnterEventMode((Core *)instance);
     return fmi3OK;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
     CHECK("fmi3Terminate", RUNNING);
-    comp->state = StateTerminated;
+    ((Core *)instance)->state = StateTerminated;
     return fmi3OK;
 }
 
-fmi3Status fmi3Reset(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
-    if (!comp) return fmi3Error;
-    coreResetData(&comp->core);
-    comp->state = StateInstantiated;
-    return fmi3OK;
-}
+fmi3Status fmi3Reset(fmi3Instance instance) { return (fmi3Status)coreReset((Core *)instance); }
 
 /* ----------------------------------------------------------------- get and set */
 
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, fmi3Float64 values[], size_t nValues) {
-    Instance *comp = (Instance *)instance;
+    Core *core = (Core *)instance;
     const char *f = "fmi3GetFloat64";
     double e[NREL + 1] = {0.0};
     size_t i;
     int needE = 0;
-    fmi3Status s = fmi3OK;
+    fmi3Status s;
     CHECK(f, ANY_STATE);
     if (nValueReferences == 0) return fmi3OK;
-    if (!valueReferences || !values) return fail(comp, "%s: NULL argument", f);
-    if (nValues != nValueReferences) return fail(comp, "%s: expected one value per reference", f);
+    if (!valueReferences || !values) return fail(instance, f, "NULL argument");
+    if (nValues != nValueReferences) return fail(instance, f, "expected one value per reference");
     for (i = 0; i < nValueReferences; i++) {
         fmi3ValueReference vr = valueReferences[i];
-        if (vr >= VR_EVENT_INDICATOR_OFF + NREL) return fail(comp, "%s: unknown value reference", f);
+        if (vr >= VR_EVENT_INDICATOR_OFF + NREL) return fail(instance, f, "unknown value reference");
         if (vr >= VR_EVENT_INDICATOR_OFF) needE = 1;
     }
-    if (comp->core.d.dirty && !(comp->state & (StateInstantiated | StateError))) {
-        s = (fmi3Status)coreEvaluate(&comp->core, f);
-        if (s != fmi3OK) comp->core.d.dirty = 0; /* report once; values returned as they are */
-    }
-    if (needE && coreEventIndicators(&comp->core, e, f) != CoreOK) return fmi3Error;
+    s = (fmi3Status)coreRefresh(core, f);
+    if (needE && coreEventIndicators(core, e, f) != CoreOK) return fmi3Error;
     for (i = 0; i < nValueReferences; i++) {
         fmi3ValueReference vr = valueReferences[i];
-        if (vr < N_REAL) values[i] = comp->core.d.r[vr];
-        else if (vr == VR_TIME) values[i] = comp->core.d.time;
+        if (vr < N_REAL) values[i] = core->d.r[vr];
+        else if (vr == VR_TIME) values[i] = core->d.time;
         else values[i] = e[vr - VR_EVENT_INDICATOR_OFF];
     }
     return s;
@@ -319,96 +234,70 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
 
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, const fmi3Float64 values[], size_t nValues) {
-    Instance *comp = (Instance *)instance;
     const char *f = "fmi3SetFloat64";
-    size_t i;
-    int initPhase;
     CHECK(f, INIT_PHASE | RUNNING | StateIntermediateUpdateMode | StateTerminated);
     if (nValueReferences == 0) return fmi3OK;
-    if (!valueReferences || !values) return fail(comp, "%s: NULL argument", f);
-    if (nValues != nValueReferences) return fail(comp, "%s: expected one value per reference", f);
-    initPhase = (comp->state & INIT_PHASE) != 0;
-    for (i = 0; i < nValueReferences; i++) {
-        unsigned int vr = (unsigned int)valueReferences[i];
-        if (comp->state == StateIntermediateUpdateMode && !coreIsInput(vr)) {
-            return fail(comp, "%s: only inputs can be set in Intermediate Update Mode", f);
-        }
-        if (coreCheckSet(&comp->core, vr, initPhase, f) != CoreOK) return fmi3Error;
-    }
-    for (i = 0; i < nValueReferences; i++) comp->core.d.r[valueReferences[i]] = values[i];
-    coreInvalidate(&comp->core, initPhase);
-    return fmi3OK;
+    if (!valueReferences || !values) return fail(instance, f, "NULL argument");
+    if (nValues != nValueReferences) return fail(instance, f, "expected one value per reference");
+    return (fmi3Status)coreSetReals((Core *)instance, valueReferences, nValueReferences, values,
+                                    f);
 }
 
-#define NO_VARIABLES(F, T, CONST, KIND)                                                \
-    fmi3Status F(fmi3Instance instance, const fmi3ValueReference valueReferences[],  \
-                 size_t nValueReferences, CONST T values[], size_t nValues) {         \
-        (void)valueReferences;                                                        \
-        (void)values;                                                                 \
-        (void)nValues;                                                                \
-        if (nValueReferences == 0) return fmi3OK;                                     \
-        return fail((Instance *)instance, #F ": %s", "the model has no " KIND " variables"); \
+/* The functions of variables the model does not have (of other types than Float64, and
+ * Clocks): nothing to do for no value references, an error otherwise. */
+static fmi3Status noVariables(fmi3Instance instance, size_t nValueReferences, const char *f,
+                              const char *message) {
+    if (nValueReferences == 0) return fmi3OK;
+    return fail(instance, f, message);
+}
+
+/* Marks the arrays of such a function as unused. */
+static void unused(const void *array, ...) { (void)array; }
+
+#define NO_VARIABLES(T)                                                                     \
+    fmi3Status fmi3Get##T(fmi3Instance instance, const fmi3ValueReference valueReferences[], \
+                          size_t nValueReferences, fmi3##T values[], size_t nValues) {       \
+        (void)nValues;                                                                      \
+        unused(valueReferences, values);                                                    \
+        return noVariables(instance, nValueReferences, "fmi3Get" #T,                        \
+                           "the model has no " #T " variables");                            \
+    }                                                                                       \
+    fmi3Status fmi3Set##T(fmi3Instance instance, const fmi3ValueReference valueReferences[], \
+                          size_t nValueReferences, const fmi3##T values[], size_t nValues) { \
+        (void)nValues;                                                                      \
+        unused(valueReferences, values);                                                    \
+        return noVariables(instance, nValueReferences, "fmi3Set" #T,                        \
+                           "the model has no " #T " variables");                            \
     }
 
-NO_VARIABLES(fmi3GetFloat32, fmi3Float32, , "Float32")
-NO_VARIABLES(fmi3GetInt8, fmi3Int8, , "Int8")
-NO_VARIABLES(fmi3GetUInt8, fmi3UInt8, , "UInt8")
-NO_VARIABLES(fmi3GetInt16, fmi3Int16, , "Int16")
-NO_VARIABLES(fmi3GetUInt16, fmi3UInt16, , "UInt16")
-NO_VARIABLES(fmi3GetInt32, fmi3Int32, , "Int32")
-NO_VARIABLES(fmi3GetUInt32, fmi3UInt32, , "UInt32")
-NO_VARIABLES(fmi3GetInt64, fmi3Int64, , "Int64")
-NO_VARIABLES(fmi3GetUInt64, fmi3UInt64, , "UInt64")
-NO_VARIABLES(fmi3GetBoolean, fmi3Boolean, , "Boolean")
-NO_VARIABLES(fmi3GetString, fmi3String, , "String")
-NO_VARIABLES(fmi3SetFloat32, fmi3Float32, const, "Float32")
-NO_VARIABLES(fmi3SetInt8, fmi3Int8, const, "Int8")
-NO_VARIABLES(fmi3SetUInt8, fmi3UInt8, const, "UInt8")
-NO_VARIABLES(fmi3SetInt16, fmi3Int16, const, "Int16")
-NO_VARIABLES(fmi3SetUInt16, fmi3UInt16, const, "UInt16")
-NO_VARIABLES(fmi3SetInt32, fmi3Int32, const, "Int32")
-NO_VARIABLES(fmi3SetUInt32, fmi3UInt32, const, "UInt32")
-NO_VARIABLES(fmi3SetInt64, fmi3Int64, const, "Int64")
-NO_VARIABLES(fmi3SetUInt64, fmi3UInt64, const, "UInt64")
-NO_VARIABLES(fmi3SetBoolean, fmi3Boolean, const, "Boolean")
-NO_VARIABLES(fmi3SetString, fmi3String, const, "String")
+NO_VARIABLES(Float32)
+NO_VARIABLES(Int8)
+NO_VARIABLES(UInt8)
+NO_VARIABLES(Int16)
+NO_VARIABLES(UInt16)
+NO_VARIABLES(Int32)
+NO_VARIABLES(UInt32)
+NO_VARIABLES(Int64)
+NO_VARIABLES(UInt64)
+NO_VARIABLES(Boolean)
+NO_VARIABLES(String)
 
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                          size_t nValueReferences, size_t valueSizes[], fmi3Binary values[],
                          size_t nValues) {
-    (void)valueReferences;
-    (void)valueSizes;
-    (void)values;
     (void)nValues;
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3GetBinary: %s", "the model has no Binary variables");
+    unused(valueReferences, valueSizes, values);
+    return noVariables(instance, nValueReferences, "fmi3GetBinary",
+                       "the model has no Binary variables");
 }
 
 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                          size_t nValueReferences, const size_t valueSizes[],
                          const fmi3Binary values[], size_t nValues) {
-    (void)valueReferences;
-    (void)valueSizes;
-    (void)values;
     (void)nValues;
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3SetBinary: %s", "the model has no Binary variables");
-}
-
-fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, fmi3Clock values[]) {
-    (void)valueReferences;
-    (void)values;
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3GetClock: %s", "the model has no Clocks");
-}
-
-fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, const fmi3Clock values[]) {
-    (void)valueReferences;
-    (void)values;
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3SetClock: %s", "the model has no Clocks");
+    unused(valueReferences, valueSizes, values);
+    return noVariables(instance, nValueReferences, "fmi3SetBinary",
+                       "the model has no Binary variables");
 }
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance,
@@ -416,7 +305,7 @@ fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance,
                                                size_t *nDependencies) {
     (void)valueReference;
     (void)nDependencies;
-    return fail((Instance *)instance, "fmi3GetNumberOfVariableDependencies: %s",
+    return fail(instance, "fmi3GetNumberOfVariableDependencies",
                 "not supported (see ModelStructure)");
 }
 
@@ -432,47 +321,31 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
     (void)elementIndicesOfIndependents;
     (void)dependencyKinds;
     (void)nDependencies;
-    return fail((Instance *)instance, "fmi3GetVariableDependencies: %s",
+    return fail(instance, "fmi3GetVariableDependencies",
                 "not supported (see ModelStructure)");
 }
 
 /* ------------------------------------------------------------------- FMU state */
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    Instance *comp = (Instance *)instance;
-    CoreData *copy;
     CHECK("fmi3GetFMUState", ANY_STATE);
-    if (!FMUState) return fail(comp, "fmi3GetFMUState: %s", "NULL argument");
-    copy = *FMUState ? (CoreData *)*FMUState : (CoreData *)malloc(sizeof(CoreData));
-    if (!copy) return fail(comp, "fmi3GetFMUState: %s", "out of memory");
-    *copy = comp->core.d;
-    *FMUState = copy;
-    return fmi3OK;
+    return (fmi3Status)coreGetFMUState((Core *)instance, FMUState, "fmi3GetFMUState");
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
-    Instance *comp = (Instance *)instance;
     CHECK("fmi3SetFMUState", ANY_STATE);
-    if (!FMUState) return fail(comp, "fmi3SetFMUState: %s", "NULL state");
-    comp->core.d = *(CoreData *)FMUState;
-    comp->core.d.dirty = 1;
-    return fmi3OK;
+    return (fmi3Status)coreSetFMUState((Core *)instance, FMUState, "fmi3SetFMUState");
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    (void)instance;
-    if (FMUState && *FMUState) {
-        free(*FMUState);
-        *FMUState = NULL;
-    }
-    return fmi3OK;
+    return (fmi3Status)coreFreeFMUState((Core *)instance, FMUState);
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState,
                                       size_t *size) {
     (void)FMUState;
     (void)size;
-    return fail((Instance *)instance, "fmi3SerializedFMUStateSize: %s", "not supported");
+    return fail(instance, "fmi3SerializedFMUStateSize", "not supported");
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
@@ -480,7 +353,7 @@ fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
     (void)FMUState;
     (void)serializedState;
     (void)size;
-    return fail((Instance *)instance, "fmi3SerializeFMUState: %s", "not supported");
+    return fail(instance, "fmi3SerializeFMUState", "not supported");
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
@@ -488,7 +361,7 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
     (void)serializedState;
     (void)size;
     (void)FMUState;
-    return fail((Instance *)instance, "fmi3DeserializeFMUState: %s", "not supported");
+    return fail(instance, "fmi3DeserializeFMUState", "not supported");
 }
 
 #define NO_DERIVATIVES(F)                                                                   \
@@ -503,107 +376,100 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
         (void)nSeed;                                                                        \
         (void)sensitivity;                                                                  \
         (void)nSensitivity;                                                                 \
-        return fail((Instance *)instance, #F ": %s", "not supported");                      \
+        return fail(instance, #F, "not supported");                      \
     }
 
 NO_DERIVATIVES(fmi3GetDirectionalDerivative)
 NO_DERIVATIVES(fmi3GetAdjointDerivative)
 
 fmi3Status fmi3EnterConfigurationMode(fmi3Instance instance) {
-    return fail((Instance *)instance, "fmi3EnterConfigurationMode: %s",
+    return fail(instance, "fmi3EnterConfigurationMode",
                 "the model has no structural parameters");
 }
 
 fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
-    return fail((Instance *)instance, "fmi3ExitConfigurationMode: %s",
+    return fail(instance, "fmi3ExitConfigurationMode",
                 "the model has no structural parameters");
 }
 
 /* ------------------------------------------------------------------- Clocks */
 
-static void unused(const void *p) { (void)p; }
+/* The model has no Clocks. */
+static fmi3Status noClocks(fmi3Instance instance, size_t nValueReferences, const char *f) {
+    return noVariables(instance, nValueReferences, f, "the model has no Clocks");
+}
+
+fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, fmi3Clock values[]) {
+    unused(valueReferences, values);
+    return noClocks(instance, nValueReferences, "fmi3GetClock");
+}
+
+fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, const fmi3Clock values[]) {
+    unused(valueReferences, values);
+    return noClocks(instance, nValueReferences, "fmi3SetClock");
+}
 
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
                                   const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[]) {
-    unused(valueReferences);
-    unused(intervals);
-    unused(qualifiers);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3GetIntervalDecimal: %s", "the model has no Clocks");
+    unused(valueReferences, intervals, qualifiers);
+    return noClocks(instance, nValueReferences, "fmi3GetIntervalDecimal");
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance,
                                    const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, fmi3UInt64 counters[],
                                    fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[]) {
-    unused(valueReferences);
-    unused(counters);
-    unused(resolutions);
-    unused(qualifiers);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3GetIntervalFraction: %s", "the model has no Clocks");
+    unused(valueReferences, counters, resolutions, qualifiers);
+    return noClocks(instance, nValueReferences, "fmi3GetIntervalFraction");
 }
 
 fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, fmi3Float64 shifts[]) {
-    unused(valueReferences);
-    unused(shifts);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3GetShiftDecimal: %s", "the model has no Clocks");
+    unused(valueReferences, shifts);
+    return noClocks(instance, nValueReferences, "fmi3GetShiftDecimal");
 }
 
 fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, fmi3UInt64 counters[],
                                 fmi3UInt64 resolutions[]) {
-    unused(valueReferences);
-    unused(counters);
-    unused(resolutions);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3GetShiftFraction: %s", "the model has no Clocks");
+    unused(valueReferences, counters, resolutions);
+    return noClocks(instance, nValueReferences, "fmi3GetShiftFraction");
 }
 
 fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance,
                                   const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, const fmi3Float64 intervals[]) {
-    unused(valueReferences);
-    unused(intervals);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3SetIntervalDecimal: %s", "the model has no Clocks");
+    unused(valueReferences, intervals);
+    return noClocks(instance, nValueReferences, "fmi3SetIntervalDecimal");
 }
 
 fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
                                    const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, const fmi3UInt64 counters[],
                                    const fmi3UInt64 resolutions[]) {
-    unused(valueReferences);
-    unused(counters);
-    unused(resolutions);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3SetIntervalFraction: %s", "the model has no Clocks");
+    unused(valueReferences, counters, resolutions);
+    return noClocks(instance, nValueReferences, "fmi3SetIntervalFraction");
 }
 
 fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, const fmi3Float64 shifts[]) {
-    unused(valueReferences);
-    unused(shifts);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3SetShiftDecimal: %s", "the model has no Clocks");
+    unused(valueReferences, shifts);
+    return noClocks(instance, nValueReferences, "fmi3SetShiftDecimal");
 }
 
 fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, const fmi3UInt64 counters[],
                                 const fmi3UInt64 resolutions[]) {
-    unused(valueReferences);
-    unused(counters);
-    unused(resolutions);
-    if (nValueReferences == 0) return fmi3OK;
-    return fail((Instance *)instance, "fmi3SetShiftFraction: %s", "the model has no Clocks");
+    unused(valueReferences, counters, resolutions);
+    return noClocks(instance, nValueReferences, "fmi3SetShiftFraction");
 }
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
-    return fail((Instance *)instance, "fmi3EvaluateDiscreteStates: %s",
+    return fail(instance, "fmi3EvaluateDiscreteStates",
                 "not supported (providesEvaluateDiscreteStates = false)");
 }
 
@@ -613,24 +479,20 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
                                     fmi3Boolean *valuesOfContinuousStatesChanged,
                                     fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime) {
-    Instance *comp = (Instance *)instance;
     const char *f = "fmi3UpdateDiscreteStates";
     int changed = 0;
     CHECK(f, StateEventMode);
     if (!discreteStatesNeedUpdate || !terminateSimulation ||
         !nominalsOfContinuousStatesChanged || !valuesOfContinuousStatesChanged ||
         !nextEventTimeDefined || !nextEventTime) {
-        return fail(comp, "%s: NULL argument", f);
+        return fail(instance, f, "NULL argument");
     }
     *terminateSimulation = fmi3False;
     *nominalsOfContinuousStatesChanged = fmi3False;
     *valuesOfContinuousStatesChanged = fmi3False;
     *nextEventTimeDefined = fmi3False;
     *nextEventTime = 0.0;
-    if (coreUpdateModes(&comp->core, &changed, f) != CoreOK) {
-        comp->state = StateError;
-        return fmi3Error;
-    }
+    if (coreUpdateModes((Core *)instance, &changed, f) != CoreOK) return fmi3Error;
     *discreteStatesNeedUpdate = changed ? fmi3True : fmi3False;
     return fmi3OK;
 }
@@ -638,9 +500,8 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
 /* ---------------------------------------------------------------- Model Exchange */
 
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
-    Instance *comp = (Instance *)instance;
     CHECK("fmi3EnterContinuousTimeMode", StateEventMode);
-    comp->state = StateContinuousTimeMode;
+    ((Core *)instance)->state = StateContinuousTimeMode;
     return fmi3OK;
 }
 
@@ -648,113 +509,74 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance,
                                        fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode,
                                        fmi3Boolean *terminateSimulation) {
-    Instance *comp = (Instance *)instance;
     const char *f = "fmi3CompletedIntegratorStep";
     int pending = 0;
     (void)noSetFMUStatePriorToCurrentPoint;
     CHECK(f, StateContinuousTimeMode);
-    if (!enterEventMode || !terminateSimulation) return fail(comp, "%s: NULL argument", f);
-    if (coreModeChangePending(&comp->core, &pending, f) != CoreOK) return fmi3Error;
+    if (!enterEventMode || !terminateSimulation) return fail(instance, f, "NULL argument");
+    if (coreModeChangePending((Core *)instance, &pending, f) != CoreOK) return fmi3Error;
     *enterEventMode = pending ? fmi3True : fmi3False;
     *terminateSimulation = fmi3False;
     return fmi3OK;
 }
 
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
-    Instance *comp = (Instance *)instance;
     CHECK("fmi3SetTime", StateEventMode | StateContinuousTimeMode);
-    comp->core.d.time = time;
-    coreInvalidate(&comp->core, 0);
+    coreSetTime((Core *)instance, time);
     return fmi3OK;
 }
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
                                    size_t nContinuousStates) {
-    Instance *comp = (Instance *)instance;
     const char *f = "fmi3SetContinuousStates";
-    size_t i;
     CHECK(f, StateEventMode | StateContinuousTimeMode);
-    if (nContinuousStates != NX) return fail(comp, "%s: wrong number of states", f);
-    if (NX > 0 && !continuousStates) return fail(comp, "%s: NULL argument", f);
-    for (i = 0; i < nContinuousStates; i++) {
-        if (!isfinite(continuousStates[i])) {
-            return fail(comp, "fmi3SetContinuousStates: non-finite value of state %s",
-                        model_names[X_OFF + i]);
-        }
-        comp->core.d.r[X_OFF + i] = continuousStates[i];
-    }
-    coreInvalidate(&comp->core, 0);
-    return fmi3OK;
+    return (fmi3Status)coreSetContinuousStates((Core *)instance, continuousStates,
+                                               nContinuousStates, f);
 }
 
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
                                              size_t nContinuousStates) {
-    Instance *comp = (Instance *)instance;
     const char *f = "fmi3GetContinuousStateDerivatives";
-    size_t i;
-    fmi3Status s;
     CHECK(f, StateInitializationMode | StateEventMode | StateContinuousTimeMode |
                  StateTerminated);
-    if (nContinuousStates != NX) return fail(comp, "%s: wrong number of states", f);
-    if (NX > 0 && !derivatives) return fail(comp, "%s: NULL argument", f);
-    s = (fmi3Status)coreEvaluate(&comp->core, f);
-    for (i = 0; i < nContinuousStates; i++) derivatives[i] = comp->core.d.r[DX_OFF + i];
-    return s;
+    return (fmi3Status)coreGetDerivatives((Core *)instance, derivatives, nContinuousStates, f);
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[],
                                   size_t nEventIndicators) {
-    Instance *comp = (Instance *)instance;
     const char *f = "fmi3GetEventIndicators";
-    double e[NREL + 1];
-    size_t i;
     CHECK(f, StateInitializationMode | StateEventMode | StateContinuousTimeMode |
                  StateTerminated);
-    if (nEventIndicators != NREL) return fail(comp, "%s: wrong number of event indicators", f);
-    if (nEventIndicators == 0) return fmi3OK;
-    if (!eventIndicators) return fail(comp, "%s: NULL argument", f);
-    if (coreEventIndicators(&comp->core, e, f) != CoreOK) return fmi3Error;
-    for (i = 0; i < nEventIndicators; i++) eventIndicators[i] = e[i];
-    return fmi3OK;
+    return (fmi3Status)coreGetEventIndicators((Core *)instance, eventIndicators,
+                                              nEventIndicators, f);
 }
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
                                    size_t nContinuousStates) {
-    Instance *comp = (Instance *)instance;
     const char *f = "fmi3GetContinuousStates";
-    size_t i;
     CHECK(f, ANY_STATE);
-    if (nContinuousStates != NX) return fail(comp, "%s: wrong number of states", f);
-    if (NX > 0 && !continuousStates) return fail(comp, "%s: NULL argument", f);
-    for (i = 0; i < nContinuousStates; i++) continuousStates[i] = comp->core.d.r[X_OFF + i];
-    return fmi3OK;
+    return (fmi3Status)coreGetContinuousStates((Core *)instance, continuousStates,
+                                               nContinuousStates, f);
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
                                              size_t nContinuousStates) {
-    Instance *comp = (Instance *)instance;
     const char *f = "fmi3GetNominalsOfContinuousStates";
-    size_t i;
     CHECK(f, ANY_STATE);
-    if (nContinuousStates != NX) return fail(comp, "%s: wrong number of states", f);
-    if (NX > 0 && !nominals) return fail(comp, "%s: NULL argument", f);
-    for (i = 0; i < nContinuousStates; i++) nominals[i] = 1.0;
-    return fmi3OK;
+    return (fmi3Status)coreGetNominals((Core *)instance, nominals, nContinuousStates, f);
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
-    Instance *comp = (Instance *)instance;
     CHECK("fmi3GetNumberOfEventIndicators", ANY_STATE);
-    if (!nEventIndicators) return fail(comp, "%s: NULL argument", "fmi3GetNumberOfEventIndicators");
+    if (!nEventIndicators) return fail(instance, "fmi3GetNumberOfEventIndicators", "NULL argument");
     *nEventIndicators = NREL;
     return fmi3OK;
 }
 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
-    Instance *comp = (Instance *)instance;
     CHECK("fmi3GetNumberOfContinuousStates", ANY_STATE);
     if (!nContinuousStates) {
-        return fail(comp, "%s: NULL argument", "fmi3GetNumberOfContinuousStates");
+        return fail(instance, "fmi3GetNumberOfContinuousStates", "NULL argument");
     }
     *nContinuousStates = NX;
     return fmi3OK;
@@ -763,7 +585,7 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nConti
 /* ------------------------------------------------------------------ Co-Simulation */
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
-    return fail((Instance *)instance, "fmi3EnterStepMode: %s",
+    return fail(instance, "fmi3EnterStepMode",
                 "the FMU has no Event Mode in Co-Simulation (hasEventMode = false)");
 }
 
@@ -776,7 +598,7 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance,
     (void)orders;
     (void)values;
     (void)nValues;
-    return fail((Instance *)instance, "fmi3GetOutputDerivatives: %s",
+    return fail(instance, "fmi3GetOutputDerivatives",
                 "not supported (maxOutputDerivativeOrder = 0)");
 }
 
@@ -785,28 +607,21 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                       fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation,
                       fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
-    Instance *comp = (Instance *)instance;
+    Core *core = (Core *)instance;
     const char *f = "fmi3DoStep";
-    CoreStatus s;
     (void)noSetFMUStatePriorToCurrentPoint;
     CHECK(f, StateStepMode);
     if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime) {
-        return fail(comp, "%s: NULL argument", f);
+        return fail(instance, f, "NULL argument");
     }
     *eventHandlingNeeded = fmi3False;
     *terminateSimulation = fmi3False;
     *earlyReturn = fmi3False;
-    *lastSuccessfulTime = comp->core.d.time;
-    if (coreCheckStep(&comp->core, currentCommunicationPoint, communicationStepSize, f) !=
-        CoreOK) {
-        return fmi3Error; /* bad arguments: the instance stays usable */
+    *lastSuccessfulTime = core->d.time;
+    if (coreDoStep(core, currentCommunicationPoint, communicationStepSize, f) != CoreOK) {
+        return fmi3Error;
     }
-    s = coreDoStep(&comp->core, currentCommunicationPoint, communicationStepSize, f);
-    if (s != CoreOK) {
-        comp->state = StateError;
-        return (fmi3Status)s;
-    }
-    *lastSuccessfulTime = comp->core.d.time;
+    *lastSuccessfulTime = core->d.time;
     return fmi3OK;
 }
 
@@ -816,6 +631,6 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
                                       fmi3Float64 activationTime) {
     (void)clockReference;
     (void)activationTime;
-    return fail((Instance *)instance, "fmi3ActivateModelPartition: %s",
+    return fail(instance, "fmi3ActivateModelPartition",
                 "Scheduled Execution is not supported");
 }

@@ -8,6 +8,7 @@
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "tsid_core.h"
@@ -37,21 +38,48 @@
 
 /* ----------------------------------------------------------------- housekeeping */
 
-void coreResetData(Core *core) {
-    CoreData *d = &core->d;
+CoreStatus coreReset(Core *core) {
+    CoreData *d;
+    if (!core) return CoreError;
+    d = &core->d;
     memset(d, 0, sizeof(*d));
     memcpy(d->r, model_start, sizeof(d->r));
     d->dirty = 1;
+    core->state = StateInstantiated;
     core->eventIterations = 0;
     core->tRequested = -HUGE_VAL;
+    return CoreOK;
 }
 
-void coreInit(Core *core, int isModelExchange) {
+Core *coreNew(size_t size, const char *instanceName, int isModelExchange, int loggingOn,
+              CoreLogger log) {
+    Core *core = (Core *)calloc(1, size);
+    size_t n = strlen(instanceName) + 1;
+    if (!core) return NULL;
+    core->instanceName = (char *)malloc(n);
+    if (!core->instanceName) {
+        free(core);
+        return NULL;
+    }
+    memcpy(core->instanceName, instanceName, n);
     core->isModelExchange = isModelExchange;
-    core->loggingOn = 0;
-    core->log = NULL;
+    core->loggingOn = loggingOn;
+    core->log = log;
     core->requestInputs = NULL;
-    coreResetData(core);
+    coreReset(core);
+    return core;
+}
+
+CoreStatus coreSetDebugLogging(Core *core, int loggingOn) {
+    if (!core) return CoreError;
+    core->loggingOn = loggingOn;
+    return CoreOK;
+}
+
+void coreFree(Core *core) {
+    if (!core) return;
+    free(core->instanceName);
+    free(core);
 }
 
 void coreLog(Core *core, CoreStatus status, const char *category, const char *fmt, ...) {
@@ -65,29 +93,48 @@ void coreLog(Core *core, CoreStatus status, const char *category, const char *fm
     core->log(core, status, category, buf);
 }
 
+CoreStatus coreFail(Core *core, const char *caller, const char *message) {
+    coreLog(core, CoreError, "logStatusError", "%s: %s", caller, message);
+    return CoreError;
+}
+
+int coreAllowed(Core *core, int mask, const char *caller) {
+    if (!core) return 0;
+    if (core->state & mask) return 1;
+    coreLog(core, CoreError, "logStatusError", "%s: illegal call sequence", caller);
+    return 0;
+}
+
 int coreIsInput(unsigned int vr) { return vr >= U_OFF && vr < U_OFF + NU; }
 
-int coreIsState(unsigned int vr) { return vr < X_OFF + NX; }
+static int isState(unsigned int vr) { return vr < X_OFF + NX; }
 
-int coreIsParameter(unsigned int vr) { return vr >= P_OFF && vr <= VR_FIXED_STEP; }
+static int isParameter(unsigned int vr) { return vr >= P_OFF && vr <= VR_FIXED_STEP; }
 
-CoreStatus coreCheckSet(Core *core, unsigned int vr, int initPhase, const char *caller) {
+static int inInitPhase(const Core *core) { return (core->state & INIT_PHASE) != 0; }
+
+/* Checks that vr may be set now. */
+static CoreStatus checkSet(Core *core, unsigned int vr, const char *caller) {
+    int init = inInitPhase(core);
+    if (core->state == StateIntermediateUpdateMode && !coreIsInput(vr)) {
+        return coreFail(core, caller, "only inputs can be set in Intermediate Update Mode");
+    }
     if (vr >= N_REAL) {
         coreLog(core, CoreError, "logStatusError", "%s: unknown value reference %u", caller, vr);
         return CoreError;
     }
-    if (coreIsParameter(vr) && !initPhase) {
+    if (isParameter(vr) && !init) {
         coreLog(core, CoreError, "logStatusError",
                 "%s: parameter %s is fixed after initialization", caller, model_names[vr]);
         return CoreError;
     }
-    if (coreIsState(vr) && !initPhase) {
+    if (isState(vr) && !init) {
         coreLog(core, CoreError, "logStatusError",
                 "%s: %s can only be set before or during initialization", caller,
                 model_names[vr]);
         return CoreError;
     }
-    if (!coreIsInput(vr) && !coreIsParameter(vr) && !coreIsState(vr)) {
+    if (!coreIsInput(vr) && !isParameter(vr) && !isState(vr)) {
         coreLog(core, CoreError, "logStatusError",
                 "%s: %s is not an input, state or parameter", caller, model_names[vr]);
         return CoreError;
@@ -138,6 +185,90 @@ CoreStatus coreEvaluate(Core *core, const char *caller) {
         coreLog(core, CoreError, "logStatusError", "%s: non-finite value of %s at t = %g",
                 caller, model_names[W_OFF + bad], d->time);
         return CoreError;
+    }
+    return CoreOK;
+}
+
+CoreStatus coreRefresh(Core *core, const char *caller) {
+    CoreStatus s = CoreOK;
+    if (core->d.dirty && !(core->state & (StateInstantiated | StateError))) {
+        s = coreEvaluate(core, caller);
+        /* report once; values are returned as they are */
+        if (s != CoreOK) core->d.dirty = 0;
+    }
+    return s;
+}
+
+CoreStatus coreSetReals(Core *core, const unsigned int vr[], size_t nvr, const double value[],
+                        const char *caller) {
+    size_t i;
+    for (i = 0; i < nvr; i++) {
+        if (checkSet(core, vr[i], caller) != CoreOK) return CoreError;
+    }
+    for (i = 0; i < nvr; i++) core->d.r[vr[i]] = value[i];
+    coreInvalidate(core, inInitPhase(core));
+    return CoreOK;
+}
+
+/* ------------------------------------------------------- initialization, FMU state */
+
+void coreSetupExperiment(Core *core, int toleranceDefined, double tolerance, double startTime,
+                         int stopTimeDefined, double stopTime) {
+    (void)toleranceDefined;
+    (void)tolerance;
+    (void)stopTimeDefined;
+    (void)stopTime;
+    core->d.time = startTime;
+    core->d.startTime = startTime;
+    core->d.nSteps = 0;
+    coreInvalidate(core, 1);
+}
+
+void coreEnterInitializationMode(Core *core) {
+    core->state = StateInitializationMode;
+    coreInvalidate(core, 1);
+}
+
+CoreStatus coreExitInitializationMode(Core *core, const char *caller) {
+    double h = core->d.r[VR_FIXED_STEP];
+    if (!(h > 0.0) || !isfinite(h)) {
+        coreLog(core, CoreError, "logStatusError", "%s: fixedStepSize = %g must be > 0",
+                caller, h);
+        core->state = StateError;
+        return CoreError;
+    }
+    coreInvalidate(core, 1);
+    if ((core->isModelExchange && coreInitModes(core, caller) != CoreOK) ||
+        coreEvaluate(core, caller) != CoreOK) {
+        core->state = StateError;
+        return CoreError;
+    }
+    core->state = core->isModelExchange ? StateEventMode : StateStepMode;
+    return CoreOK;
+}
+
+CoreStatus coreGetFMUState(Core *core, void **state, const char *caller) {
+    CoreData *copy;
+    if (!state) return coreFail(core, caller, "NULL argument");
+    copy = *state ? (CoreData *)*state : (CoreData *)malloc(sizeof(CoreData));
+    if (!copy) return coreFail(core, caller, "out of memory");
+    *copy = core->d;
+    *state = copy;
+    return CoreOK;
+}
+
+CoreStatus coreSetFMUState(Core *core, const void *state, const char *caller) {
+    if (!state) return coreFail(core, caller, "NULL state");
+    core->d = *(const CoreData *)state;
+    core->d.dirty = 1;
+    return CoreOK;
+}
+
+CoreStatus coreFreeFMUState(Core *core, void **state) {
+    (void)core;
+    if (state && *state) {
+        free(*state);
+        *state = NULL;
     }
     return CoreOK;
 }
@@ -206,7 +337,7 @@ CoreStatus coreEventIndicators(Core *core, double e[], const char *caller) {
     return indicators(core, e, caller);
 }
 
-CoreStatus coreUpdateModes(Core *core, int *changed, const char *caller) {
+static CoreStatus updateModes(Core *core, int *changed, const char *caller) {
     CoreData *d = &core->d;
     double e[NREL + 1];
     int k;
@@ -236,6 +367,17 @@ CoreStatus coreUpdateModes(Core *core, int *changed, const char *caller) {
     return CoreOK;
 }
 
+void coreEnterEventMode(Core *core) {
+    core->state = StateEventMode;
+    core->eventIterations = 0;
+}
+
+CoreStatus coreUpdateModes(Core *core, int *changed, const char *caller) {
+    if (updateModes(core, changed, caller) == CoreOK) return CoreOK;
+    core->state = StateError;
+    return CoreError;
+}
+
 CoreStatus coreModeChangePending(Core *core, int *pending, const char *caller) {
     double e[NREL + 1];
     int k;
@@ -246,6 +388,63 @@ CoreStatus coreModeChangePending(Core *core, int *pending, const char *caller) {
         if ((e[k] > 0.0) != (core->d.c[k] != 0.0)) *pending = 1;
     }
     return CoreOK;
+}
+
+void coreSetTime(Core *core, double time) {
+    core->d.time = time;
+    coreInvalidate(core, inInitPhase(core));
+}
+
+/* Checks an array of the continuous states passed to caller: its size n and pointer p. */
+static CoreStatus checkStates(Core *core, const void *p, size_t n, const char *caller) {
+    if (n != NX) return coreFail(core, caller, "wrong number of states");
+    if (n > 0 && !p) return coreFail(core, caller, "NULL argument");
+    return CoreOK;
+}
+
+CoreStatus coreSetContinuousStates(Core *core, const double x[], size_t n, const char *caller) {
+    size_t i;
+    if (checkStates(core, x, n, caller) != CoreOK) return CoreError;
+    for (i = 0; i < n; i++) {
+        if (!isfinite(x[i])) {
+            coreLog(core, CoreError, "logStatusError", "%s: non-finite value of state %s",
+                    caller, model_names[X_OFF + i]);
+            return CoreError;
+        }
+        core->d.r[X_OFF + i] = x[i];
+    }
+    coreInvalidate(core, 0);
+    return CoreOK;
+}
+
+CoreStatus coreGetContinuousStates(Core *core, double x[], size_t n, const char *caller) {
+    size_t i;
+    if (checkStates(core, x, n, caller) != CoreOK) return CoreError;
+    for (i = 0; i < n; i++) x[i] = core->d.r[X_OFF + i];
+    return CoreOK;
+}
+
+CoreStatus coreGetNominals(Core *core, double nominals[], size_t n, const char *caller) {
+    size_t i;
+    if (checkStates(core, nominals, n, caller) != CoreOK) return CoreError;
+    for (i = 0; i < n; i++) nominals[i] = 1.0;
+    return CoreOK;
+}
+
+CoreStatus coreGetDerivatives(Core *core, double dx[], size_t n, const char *caller) {
+    CoreStatus s;
+    size_t i;
+    if (checkStates(core, dx, n, caller) != CoreOK) return CoreError;
+    s = coreEvaluate(core, caller);
+    for (i = 0; i < n; i++) dx[i] = core->d.r[DX_OFF + i];
+    return s;
+}
+
+CoreStatus coreGetEventIndicators(Core *core, double e[], size_t ni, const char *caller) {
+    if (ni != NREL) return coreFail(core, caller, "wrong number of event indicators");
+    if (ni == 0) return CoreOK;
+    if (!e) return coreFail(core, caller, "NULL argument");
+    return indicators(core, e, caller);
 }
 
 /* --------------------------------------------------------------- Co-Simulation */
@@ -307,37 +506,40 @@ static const double *inputsAt(Core *core, double tc, double t, double *buf) {
  * relations, the live indicators model_zc (relations inside noEvent) are used with the
  * live equations. */
 
-/* Right-hand side of the Co-Simulation integrator at a stage. */
-static int csRhs(Core *core, double t, const double *x, const double *u, double *dx) {
 #if NREL > 0
+/* Right-hand side of the Co-Simulation integrator at a stage: the frozen equations. */
+static int csRhs(Core *core, double t, const double *x, const double *u, double *dx) {
     double w[NW + 1];
     return model_eval_me(t, x, u, P(&core->d), core->d.c, dx, w);
-#else
-    return model_ode(t, x, u, P(&core->d), dx);
-#endif
 }
 
-#if NZ_CS > 0
 /* Indicators of the Co-Simulation integrator at (t, x, u), with the modes d->c. */
 static int csIndicators(Core *core, double t, const double *x, const double *u, double *z) {
-#if NREL > 0
     double s[NREL + 1];
     return model_rel(t, x, u, P(&core->d), core->d.c, z, s);
-#else
-    return model_zc(t, x, u, P(&core->d), z);
-#endif
 }
 
 /* Sign class of indicator k: the value of its relation. */
-static int csClass(int k, double z) {
-#if NREL > 0
-    return model_rel_strict[k] ? z > 0.0 : z >= 0.0;
+static int csClass(int k, double z) { return model_rel_strict[k] ? z > 0.0 : z >= 0.0; }
 #else
-    (void)k;
-    return z >= 0.0;
-#endif
+/* Without relations: the live equations and, if any, the live indicators. */
+static int csRhs(Core *core, double t, const double *x, const double *u, double *dx) {
+    return model_ode(t, x, u, P(&core->d), dx);
 }
 
+#if NZ_CS > 0
+static int csIndicators(Core *core, double t, const double *x, const double *u, double *z) {
+    return model_zc(t, x, u, P(&core->d), z);
+}
+
+static int csClass(int k, double z) {
+    (void)k;
+    return z >= 0.0;
+}
+#endif
+#endif
+
+#if NZ_CS > 0
 /* Index of the first indicator whose sign class differs, or -1. */
 static int crossed(const double *z0, const double *z1) {
     int i;
@@ -346,9 +548,7 @@ static int crossed(const double *z0, const double *z1) {
     }
     return -1;
 }
-#endif
 
-#if NZ_CS > 0
 /* Time over which the slopes of the indicators are taken as finite differences along
  * the flow (the inputs are taken as constant over it). */
 static double slopeDelta(const Core *core) {
@@ -601,7 +801,8 @@ static CoreStatus stepFailed(Core *core, double tc, double tEnd, int bad, const 
     return CoreError;
 }
 
-CoreStatus coreCheckStep(Core *core, double tc, double hc, const char *caller) {
+/* Checks the arguments of a communication step. */
+static CoreStatus checkStep(Core *core, double tc, double hc, const char *caller) {
     CoreData *d = &core->d;
     if (!(hc > 0.0)) {
         coreLog(core, CoreError, "logStatusError",
@@ -617,12 +818,12 @@ CoreStatus coreCheckStep(Core *core, double tc, double hc, const char *caller) {
     return CoreOK;
 }
 
-CoreStatus coreDoStep(Core *core, double tc, double hc, const char *caller) {
+/* Integrates from tc to tc + hc and evaluates the outputs there. */
+static CoreStatus integrate(Core *core, double tc, double hc, const char *caller) {
     CoreData *d = &core->d;
     double h = d->r[VR_FIXED_STEP], tEnd = tc + hc, nReal, hSub;
     long long n, k;
     int bad = -1, i, rc;
-    if (coreCheckStep(core, tc, hc, caller) != CoreOK) return CoreError;
     core->tRequested = -HUGE_VAL;
 #if NZ_CS > 0
     /* inputs may have changed since the last step: modes and indicators at this point */
@@ -666,4 +867,13 @@ CoreStatus coreDoStep(Core *core, double tc, double hc, const char *caller) {
     }
     d->dirty = 1;
     return coreEvaluate(core, caller);
+}
+
+CoreStatus coreDoStep(Core *core, double tc, double hc, const char *caller) {
+    CoreStatus s;
+    /* bad arguments: the instance stays usable */
+    if (checkStep(core, tc, hc, caller) != CoreOK) return CoreError;
+    s = integrate(core, tc, hc, caller);
+    if (s != CoreOK) core->state = StateError;
+    return s;
 }

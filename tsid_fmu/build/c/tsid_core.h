@@ -1,7 +1,11 @@
 /*
  * Model-independent core of the tsid-fmu FMUs, shared by the FMI 2.0 and FMI 3.0
- * wrappers (fmi2Functions.c, fmi3Functions.c). It knows the model only through the
- * generated model.h / model.c:
+ * wrappers (fmi2Functions.c, fmi3Functions.c): the instance (its mode, name and
+ * logger) and all that both FMI versions do alike, from the checks of arguments and
+ * log messages to initialization, FMU states, event handling and the Co-Simulation
+ * step. A wrapper keeps what is version-specific: the signatures, the modes in which
+ * each function may be called, and the importer's callbacks. The core knows the model
+ * only through the generated model.h / model.c:
  *   - the real array r[] (value reference = index): states, derivatives, inputs,
  *     outputs + locals, parameters, fixedStepSize;
  *   - live equations: model_ode, model_eval, model_zc;
@@ -50,6 +54,23 @@
 /* Same values as fmi2Status / fmi3Status. */
 typedef enum { CoreOK = 0, CoreWarning = 1, CoreDiscard = 2, CoreError = 3 } CoreStatus;
 
+/* Modes of an instance, one bit each, so that the modes in which a function may be
+ * called form a mask. FMI 2.0 calls StateStepMode stepComplete and has no Intermediate
+ * Update Mode. */
+typedef enum {
+    StateInstantiated = 1 << 0,
+    StateInitializationMode = 1 << 1,
+    StateEventMode = 1 << 2,
+    StateContinuousTimeMode = 1 << 3,
+    StateStepMode = 1 << 4,
+    StateIntermediateUpdateMode = 1 << 5,
+    StateTerminated = 1 << 6,
+    StateError = 1 << 7
+} CoreState;
+
+#define ANY_STATE 0xff
+#define INIT_PHASE (StateInstantiated | StateInitializationMode)
+
 /* Everything an FMU state (fmi2GetFMUstate / fmi3GetFMUState) saves. */
 typedef struct {
     double r[N_REAL];  /* all real variables, index = value reference */
@@ -66,51 +87,100 @@ typedef struct {
 
 typedef struct Core Core;
 
+/* Writes a message through the FMI logger of the wrapper. */
+typedef void (*CoreLogger)(Core *core, CoreStatus status, const char *category,
+                           const char *message);
+
+/* The first member of a wrapper's instance, so that a Core * is an instance pointer. */
 struct Core {
     CoreData d;
+    CoreState state;
+    char *instanceName;
     int isModelExchange;
     int eventIterations;
     int loggingOn;
-    /* Writes a message through the FMI logger of the wrapper. */
-    void (*log)(Core *core, CoreStatus status, const char *category, const char *message);
+    CoreLogger log;
     /* FMI 3.0 intermediate update: lets the importer set the inputs for time t.
      * NULL: inputs are held (or interpolated with du). Returns 0 on success. */
     int (*requestInputs)(Core *core, double t);
     double tRequested; /* time of the last requestInputs call */
 };
 
-void coreInit(Core *core, int isModelExchange);
-void coreResetData(Core *core);
+/* Allocates a zeroed instance of `size` bytes (its first member a Core) in
+ * StateInstantiated, with a copy of instanceName. NULL if out of memory. */
+Core *coreNew(size_t size, const char *instanceName, int isModelExchange, int loggingOn,
+              CoreLogger log);
+void coreFree(Core *core);
+/* Start values, time 0, StateInstantiated (CoreError if core is NULL). */
+CoreStatus coreReset(Core *core);
+CoreStatus coreSetDebugLogging(Core *core, int loggingOn);
 void coreLog(Core *core, CoreStatus status, const char *category, const char *fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 4, 5)))
 #endif
     ;
+/* Logs "caller: message" as an error (if core is not NULL); returns CoreError. */
+CoreStatus coreFail(Core *core, const char *caller, const char *message);
+/* 1 if the instance exists and is in one of the modes of mask, else 0 (logged). */
+int coreAllowed(Core *core, int mask, const char *caller);
+/* In an FMI function: returns `error` unless `instance` is in one of the modes of mask. */
+#define CORE_CHECK(instance, mask, caller, error)                           \
+    do {                                                                    \
+        if (!coreAllowed((Core *)(instance), mask, caller)) return error;   \
+    } while (0)
 
 /* Value-reference classes. */
 int coreIsInput(unsigned int vr);
-int coreIsState(unsigned int vr);
-int coreIsParameter(unsigned int vr);
-/* Checks that vr may be set now; initPhase: instantiated or initialization mode. */
-CoreStatus coreCheckSet(Core *core, unsigned int vr, int initPhase, const char *caller);
 /* Marks derived values stale (and, in initPhase, the relation values). */
 void coreInvalidate(Core *core, int initPhase);
 
+/* Initialization: the experiment (only its start time matters: the Co-Simulation
+ * integrator has a fixed step and no stop time), then the end of Initialization Mode:
+ * checks fixedStepSize, sets the modes and evaluates the model, then StateEventMode
+ * (Model Exchange) or StateStepMode. */
+void coreSetupExperiment(Core *core, int toleranceDefined, double tolerance, double startTime,
+                         int stopTimeDefined, double stopTime);
+void coreEnterInitializationMode(Core *core);
+CoreStatus coreExitInitializationMode(Core *core, const char *caller);
+
 /* Derivatives and algebraic variables of the current state. */
 CoreStatus coreEvaluate(Core *core, const char *caller);
+/* Brings the derived values up to date before they are read (not before initialization
+ * nor after an error); an error is reported once, the values are then returned as they
+ * are. */
+CoreStatus coreRefresh(Core *core, const char *caller);
+/* Sets the real variables vr[i] = value[i] after checking that each may be set now
+ * (value references are unsigned int, as fmi2ValueReference and, where the FMUs are
+ * built, fmi3ValueReference = uint32_t). */
+CoreStatus coreSetReals(Core *core, const unsigned int vr[], size_t nvr, const double value[],
+                        const char *caller);
+
+/* FMU state: a copy of the CoreData, in *state (allocated if *state is NULL). */
+CoreStatus coreGetFMUState(Core *core, void **state, const char *caller);
+CoreStatus coreSetFMUState(Core *core, const void *state, const char *caller);
+CoreStatus coreFreeFMUState(Core *core, void **state);
 
 /* Model Exchange. */
 CoreStatus coreInitModes(Core *core, const char *caller);
 CoreStatus coreEventIndicators(Core *core, double e[], const char *caller);
+/* Event Mode: the event iteration (coreUpdateModes) starts anew; an error in it puts the
+ * instance into StateError. */
+void coreEnterEventMode(Core *core);
 CoreStatus coreUpdateModes(Core *core, int *changed, const char *caller);
 CoreStatus coreModeChangePending(Core *core, int *pending, const char *caller);
+void coreSetTime(Core *core, double time);
+/* Arrays of the continuous states: n must be NX (ni: NREL). */
+CoreStatus coreSetContinuousStates(Core *core, const double x[], size_t n, const char *caller);
+CoreStatus coreGetContinuousStates(Core *core, double x[], size_t n, const char *caller);
+CoreStatus coreGetNominals(Core *core, double nominals[], size_t n, const char *caller);
+CoreStatus coreGetDerivatives(Core *core, double dx[], size_t n, const char *caller);
+CoreStatus coreGetEventIndicators(Core *core, double e[], size_t ni, const char *caller);
 
 /* Co-Simulation. */
 CoreStatus coreSetInputDerivative(Core *core, unsigned int vr, int order, double value,
                                   const char *caller);
-/* Checks the arguments of a communication step (the instance stays usable). */
-CoreStatus coreCheckStep(Core *core, double tc, double hc, const char *caller);
-/* Integrates from tc to tc + hc and evaluates the outputs there. */
+/* Integrates from tc to tc + hc and evaluates the outputs there. Bad arguments leave
+ * the instance usable; a failed step puts it into StateError. */
 CoreStatus coreDoStep(Core *core, double tc, double hc, const char *caller);
 
 #endif
