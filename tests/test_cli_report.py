@@ -174,3 +174,30 @@ def test_progress_shows_each_slow_run_with_the_time_left():
     now[0] += 0.05
     progress("row", {"stage": "taguchi", "iteration": 2, "done": 1, "total": 4})
     assert len(fast.getvalue().splitlines()) == 1  # fast runs: no line per run
+
+
+def test_info_escapes_control_characters_from_the_model_description(tmp_path, capsys):
+    import zipfile
+
+    src = REPO / "fmus" / "LSEA_SISO.fmu"
+    fmu = tmp_path / "odd.fmu"
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(fmu, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item)
+            if item.filename == "modelDescription.xml":
+                text = data.decode()
+                name = text.index('modelName="') + len('modelName="')
+                text = text[:name] + "A&#10;B&#x9b;2J" + text[text.index('"', name) :]
+                text = text.replace(
+                    'description="Stiffness of the series spring"',
+                    'description="stiff&#x202e;ness"',
+                )
+                data = text.encode()
+            zout.writestr(item, data)
+    assert main(["info", str(fmu)]) == 0
+    out = capsys.readouterr().out
+    assert "\x9b" not in out and "\u202e" not in out
+    assert "Model name       A\\nB\\x9b2J" in out.splitlines()
+    assert any(
+        line.startswith("  K_s") and line.endswith("stiff\\u202eness") for line in out.splitlines()
+    )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import unicodedata
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -10,10 +11,25 @@ from typing import Any
 from tsid_fmu.errors import FMUError
 from tsid_fmu.fmu.variables import check_fmi_version, variable_info
 
-__all__ = ["fmu_info", "read_fmu_description"]
+__all__ = ["fmu_info", "printable", "read_fmu_description"]
 
 MAX_DESCRIPTION_BYTES = 256 * 1024**2
 """Largest modelDescription.xml that :func:`fmu_info` reads into memory."""
+
+
+def printable(line: str) -> str:
+    r"""Return ``line`` with control and format characters written as escapes.
+
+    Names, units and descriptions come from a vendor's ``modelDescription.xml``; printed
+    as they are, a newline would break a table and an escape sequence would drive the
+    terminal. ``"a\x1b[2Jb"`` reads ``a\x1b[2Jb``; every other character is kept.
+    """
+    if line.isprintable():
+        return line
+    return "".join(
+        c if not unicodedata.category(c).startswith("C") else c.encode("unicode_escape").decode()
+        for c in line
+    )
 
 
 def read_fmu_description(path: Path) -> Any:
@@ -118,4 +134,4 @@ def fmu_info(path: str | os.PathLike[str]) -> str:
             f"Experiment       start={exp.startTime} stop={exp.stopTime} "
             f"step={exp.stepSize} tolerance={exp.tolerance}"
         )
-    return "\n".join(lines + _variable_table(md))
+    return "\n".join(printable(line) for line in lines + _variable_table(md))
