@@ -116,6 +116,20 @@ def test_auto_switches_to_model_exchange_and_finds_mu(vdp, tmp_path):
     assert code == 0 and plot.is_file()
 
 
+def test_fidelity_false_skips_both_checks_and_says_so(vdp, tmp_path):
+    events = []
+    study = vdp_study(vdp, fidelity=False)  # interface "auto": Co-Simulation, unchecked
+    res = identify(study, plots=False, progress=lambda event, info: events.append(event))
+    assert "fidelity" not in events
+    assert res.extra["fidelity"] == {"checked": False, "reason": "[method] fidelity = false"}
+    assert not any("solver fidelity" in w for w in res.warnings)
+    assert res.x["mu"] == pytest.approx(1.6288, rel=2e-3)  # the Euler-biased answer
+    again = Study.from_toml(study.to_toml(tmp_path / "study.toml"))
+    assert again.method.fidelity is False
+    with pytest.raises(StudyError, match="fidelity must be true or false"):
+        vdp_study(vdp, fidelity="no")
+
+
 def test_method_interface_replaces_the_study_key(vdp):
     spec = prepare(vdp_study(vdp, interface="me"))
     assert (spec.interface, spec.step_size, spec.tolerance) == ("me", None, 1e-10)

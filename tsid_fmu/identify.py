@@ -153,7 +153,7 @@ def _fidelity(
     sens: Sensitivities | None = None,
 ) -> Fidelity | None:
     """Check the solver at ``x``; from the start point on, use the interface it chose."""
-    if evaluators.given is not None:
+    if evaluators.given is not None or not study.method.fidelity:
         return None
     exps = [e.name for e in study.identify_experiments()]
     spec = evaluators.spec(study.parameter_names, exps, {})
@@ -171,6 +171,8 @@ def _record(
     if start is not None:
         result.extra["fidelity"] = fidelity_record(start, answer)
         result.warnings[:0] = fidelity_warnings(start, answer)
+    elif result.study is not None and not result.study.method.fidelity:
+        result.extra["fidelity"] = {"checked": False, "reason": "[method] fidelity = false"}
     return result
 
 

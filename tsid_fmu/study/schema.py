@@ -377,6 +377,11 @@ class Method:
         default such as FMPy's 1e-5 leaves errors near or above the noise of good data
         (the solver's absolute tolerance is this times each state's nominal value, often
         1, whatever the state's size), and the parameters absorb them.
+    fidelity : bool
+        Check the solver's fidelity at the start point and at the answer (a few
+        simulations with a reference solver each; see ``interface``). Default true.
+        ``false`` skips both checks: ``"auto"`` then simulates with Co-Simulation where
+        the FMU has it, and ``result.extra["fidelity"]`` says that nothing was checked.
     leveling : LevelingOptions
         Re-leveling thresholds and rules.
     """
@@ -397,6 +402,7 @@ class Method:
     interface: str | None = None
     step: float | None = None
     tolerance: float = 1e-10
+    fidelity: bool = True
     leveling: LevelingOptions = field(default_factory=LevelingOptions)
 
     def __post_init__(self) -> None:
@@ -418,8 +424,9 @@ class Method:
         self.selection = check_choice(
             self.selection, "selection", ("auto", "main_effects", "best_run")
         )
-        if not isinstance(self.rotate, bool):
-            raise StudyError(f"rotate must be true or false, got {self.rotate!r}")
+        for flag in ("rotate", "fidelity"):
+            if not isinstance(getattr(self, flag), bool):
+                raise StudyError(f"{flag} must be true or false, got {getattr(self, flag)!r}")
         self.max_reruns = check_whole(self.max_reruns, "max_reruns", 0)
         self.refine = check_choice(self.refine, "refine", ("none", "least_squares"))
         if self.refine == "least_squares" and self.cost != "sse":

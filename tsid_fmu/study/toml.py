@@ -71,6 +71,7 @@ _METHOD_TYPES: dict[str, type] = {
     "interface": str,
     "step": float,
     "tolerance": float,
+    "fidelity": bool,
 }
 _LEVELING_TYPES: dict[str, type] = {
     "significance_db": float,
