@@ -246,3 +246,16 @@ def test_noise_weighting_refuses_a_noise_free_output(lag, tmp_path):
     study = dataclasses.replace(make_study(lag), experiments=[exp], weighting="noise")
     with pytest.raises(StudyError, match=r"experiment 'clean'.*but y shows no noise"):
         Evaluator(study)
+
+
+def test_pause_after_counts_the_iterations_of_this_call(tmp_path):
+    study = synthetic_study(tmp_path, selection="best_run", max_iterations=6, max_reruns=0)
+    out = tmp_path / "stepped"
+    done = []
+    for call in range(3):  # review after every iteration: pause_after=1 on each resume
+        res = identify(
+            study, out, resume=call > 0, pause_after=1, evaluator=FakeEvaluator(two_basins),
+            plots=False,
+        )  # fmt: skip
+        done.append((res.status, res.nit))
+    assert done == [(2, 1), (2, 2), (2, 3)]

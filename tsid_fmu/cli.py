@@ -242,7 +242,8 @@ def _identify_parser(sub: Any) -> None:
         "--pause-after",
         type=int,
         metavar="N",
-        help="stop after N iterations to review/edit next_levels.toml, then --resume",
+        help="stop after N iterations of this run (with --resume: N more) to review/edit "
+        "next_levels.toml, then --resume",
     )
     p.add_argument(
         "--continue-from-run",

@@ -318,8 +318,9 @@ def identify(
     max_iterations : int, optional
         Override the Taguchi iteration limit of each stage.
     pause_after : int, optional
-        Pause after this iteration of the current stage (review, edit
-        ``next_levels.toml``, then ``resume``).
+        Pause after this many iterations run by this call (review, edit
+        ``next_levels.toml``, then ``resume``); counted from where the call starts, so
+        ``resume=True, pause_after=1`` steps one iteration at a time.
     continue_from_run : int, optional
         With ``resume``: centre the next levels on this (1-based) run of the last
         iteration, as the MISO paper continued from its runs 7 and 4.
