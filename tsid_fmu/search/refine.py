@@ -111,7 +111,7 @@ class _Problem:
         self._check_step(s, r0)
         self.linearised = (s.copy(), 0.5 * float(np.dot(r0, r0)))
         steps = np.where(s + FD_STEP <= self.space.s_upper, FD_STEP, -FD_STEP)
-        trial = [s + steps[j] * np.eye(len(s))[j] for j in range(len(s))]
+        trial = list(s + np.diag(steps))  # row j: s with coordinate j stepped
         cols = self._residuals([self.space.to_x(t) for t in trial])
         return np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
 
@@ -161,12 +161,13 @@ def refine_stage(
     problem = _Problem(space, evaluator, limit, fixed or {})
     problem.best = (float(start_cost), {n: float(start[n]) for n in space.names})
     width = space.s_upper - space.s_lower
+    s_start = space.to_s(start)
     s0 = np.clip(
-        space.to_s(start),
+        s_start,
         space.s_lower + 1e-9 * np.minimum(width, 1.0),
         space.s_upper - 1e-9 * np.minimum(width, 1.0),
     )
-    if start_residuals is not None and np.array_equal(s0, space.to_s(start)):
+    if start_residuals is not None and np.array_equal(s0, s_start):
         problem.known = (s0.copy(), start_residuals)
         problem.size = start_residuals.size
     if progress:
