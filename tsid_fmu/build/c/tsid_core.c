@@ -591,19 +591,28 @@ static int rk4Step(Core *core, double tc, double t, double h, double *slope0, do
 }
 
 #if NZ_CS > 0
-/* Indicators z at the state after a step that ended at time t; with slope != NULL
- * also their slope there: backward difference along k4, the last stage of that step. */
-static int zcAt(Core *core, double tc, double t, double *z, const double *k4,
-                double *slope) {
+/* Slope of the indicators z at the state after a step that ended at time t: backward
+ * difference along k4, the last stage of that step. */
+static int endSlope(Core *core, double tc, double t, const double *z, const double *k4,
+                    double *slope) {
     double ub[NU + 1], xb[NX + 1], zb[NZ_CS + 1], delta = slopeDelta(core);
     const double *x = X(&core->d), *u = inputsAt(core, tc, t, ub);
     int i;
-    if (!u || csIndicators(core, t, x, u, z)) return 1;
-    if (!slope) return 0;
+    if (!u) return 1;
     for (i = 0; i < NX; i++) xb[i] = x[i] - delta * k4[i];
     if (csIndicators(core, t - delta, xb, u, zb)) return 1;
     for (i = 0; i < NZ_CS; i++) slope[i] = (z[i] - zb[i]) / delta;
     return 0;
+}
+
+/* Indicators z at the state after a step that ended at time t; with slope != NULL
+ * also their slope there (endSlope). */
+static int zcAt(Core *core, double tc, double t, double *z, const double *k4,
+                double *slope) {
+    double ub[NU + 1];
+    const double *u = inputsAt(core, tc, t, ub);
+    if (!u || csIndicators(core, t, X(&core->d), u, z)) return 1;
+    return slope ? endSlope(core, tc, t, z, k4, slope) : 0;
 }
 
 /* Modes (relations as written at the current state, time t) and the indicators d->z
@@ -747,11 +756,20 @@ static int stepWithEvents(Core *core, double tc, double t, double h) {
         int probe = rest > MIN_PROBED_STEP;
         memcpy(x0, X(d), sizeof(double) * (NX + 1));
         if (rk4Step(core, tc, t + tau, rest, probe ? s0 : NULL, k4)) return 1;
-        if (zcAt(core, tc, t + h, z1, k4, probe ? s1 : NULL)) return 1;
+        if (zcAt(core, tc, t + h, z1, NULL, NULL)) return 1;
         if (events >= MAX_EVENTS_PER_STEP) {
             /* the rest of the step is taken as is; modes from where it ends */
             return csModes(core, tc, t + h);
         }
+        /* the probes of firstChange can only find a change if an indicator, at its
+         * slope, reaches zero within the step; the slope at the end costs an evaluation
+         * of the indicators, so it is taken only then (the margin of 2 keeps the
+         * rounding of the probes' own tests out of this one) */
+        if (probe) {
+            double tz = timeToZero(d->z, d->z, s0);
+            probe = !(tz == -1.0 || tz >= 2.0 * rest);
+        }
+        if (probe && endSlope(core, tc, t + h, z1, k4, s1)) return 1;
         if (firstChange(core, tc, t + tau, rest, x0, z1, probe ? s0 : NULL, s1, &hi)) {
             return 1;
         }
