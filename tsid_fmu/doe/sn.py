@@ -97,7 +97,7 @@ def sn_smaller_the_better(y: ArrayLike, *, failed_penalty: float = 20.0) -> np.n
 
 
 def sn_larger_the_better(y: ArrayLike, *, failed_penalty: float = 20.0) -> np.ndarray:
-    """Larger-the-better S/N ratio of each run, ``-10 log10(mean(1 / y**2))``.
+    """Larger-the-better S/N ratio of each run.
 
     Parameters
     ----------
@@ -110,7 +110,8 @@ def sn_larger_the_better(y: ArrayLike, *, failed_penalty: float = 20.0) -> np.nd
     Returns
     -------
     numpy.ndarray
-        S/N per run in dB, shape ``(runs,)``.
+        ``-10 log10(mean(1 / y**2))`` per run, shape ``(runs,)``, in dB, clipped to
+        ``±SN_CAP``.
 
     Raises
     ------
@@ -125,7 +126,7 @@ def sn_larger_the_better(y: ArrayLike, *, failed_penalty: float = 20.0) -> np.nd
 
 
 def sn_nominal_the_best(y: ArrayLike, *, ddof: int = 1, failed_penalty: float = 20.0) -> np.ndarray:
-    """Nominal-the-best S/N ratio of each run, ``10 log10(mean(y)**2 / var(y))``.
+    """Nominal-the-best S/N ratio of each run.
 
     Parameters
     ----------
@@ -140,7 +141,8 @@ def sn_nominal_the_best(y: ArrayLike, *, ddof: int = 1, failed_penalty: float = 
     Returns
     -------
     numpy.ndarray
-        S/N per run in dB, shape ``(runs,)``.
+        ``10 log10(mean(y)**2 / var(y))`` per run (``var`` with ``ddof``), shape
+        ``(runs,)``, in dB, clipped to ``±SN_CAP``.
 
     Raises
     ------

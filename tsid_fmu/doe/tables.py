@@ -1,14 +1,15 @@
 """How the standard orthogonal arrays are constructed (see :mod:`tsid_fmu.doe.arrays`).
 
-Pure arrays come from the Rao-Hamming construction over GF(q); L12 and L18 are literal
-copies of Taguchi's tables; L36 and L50 are expanded from difference schemes. Each
-builder returns a 0-based ``(runs, columns)`` integer table.
+Pure arrays come from the Rao-Hamming construction over GF(q); L12 and L18 are Taguchi's
+published tables, kept as text in ``published/``; L36 and L50 are expanded from
+difference schemes. Each builder returns a 0-based ``(runs, columns)`` integer table.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from functools import cache
+from importlib import resources
 
 import numpy as np
 
@@ -70,61 +71,7 @@ def _from_difference_scheme(row_part: np.ndarray, scheme: np.ndarray, s: int) ->
     return np.hstack([left, right])
 
 
-# ----------------------------------------------------------------- literal tables
-
-# Taguchi's L12 (Plackett–Burman, 2^11), 1-based as published.
-_L12 = """
-1 1 1 1 1 1 1 1 1 1 1
-1 1 1 1 1 2 2 2 2 2 2
-1 1 2 2 2 1 1 1 2 2 2
-1 2 1 2 2 1 2 2 1 1 2
-1 2 2 1 2 2 1 2 1 2 1
-1 2 2 2 1 2 2 1 2 1 1
-2 1 2 2 1 1 2 2 1 2 1
-2 1 2 1 2 2 2 1 1 1 2
-2 1 1 2 2 2 1 2 2 1 1
-2 2 2 1 1 1 1 2 2 1 2
-2 2 1 2 1 2 1 1 1 2 2
-2 2 1 1 2 1 2 1 2 2 1
-"""
-
-# Taguchi's L18 (2^1 3^7), 1-based as published.
-_L18 = """
-1 1 1 1 1 1 1 1
-1 1 2 2 2 2 2 2
-1 1 3 3 3 3 3 3
-1 2 1 1 2 2 3 3
-1 2 2 2 3 3 1 1
-1 2 3 3 1 1 2 2
-1 3 1 2 1 3 2 3
-1 3 2 3 2 1 3 1
-1 3 3 1 3 2 1 2
-2 1 1 3 3 2 2 1
-2 1 2 1 1 3 3 2
-2 1 3 2 2 1 1 3
-2 2 1 2 3 1 3 2
-2 2 2 3 1 2 1 3
-2 2 3 1 2 3 2 1
-2 3 1 3 2 3 1 2
-2 3 2 1 3 1 2 3
-2 3 3 2 1 2 3 1
-"""
-
-# A 12 x 12 difference scheme D(12, 12, 3) over GF(3), 0-based (used by L36).
-_D12_3 = """
-0 0 0 0 0 0 0 0 0 0 0 0
-0 0 0 0 1 1 1 1 2 2 2 2
-0 0 0 1 0 2 2 2 1 1 1 2
-0 0 1 2 2 0 1 2 0 1 2 1
-0 1 0 2 2 1 2 0 2 0 1 1
-0 1 2 0 1 2 0 2 0 2 1 1
-0 1 2 1 2 0 0 1 2 1 0 2
-0 1 2 2 0 2 1 1 1 0 2 0
-0 2 1 0 2 0 2 1 1 2 1 0
-0 2 1 1 0 2 1 0 2 2 0 1
-0 2 1 2 1 1 0 2 1 0 0 2
-0 2 2 1 1 1 2 0 0 1 2 0
-"""
+# --------------------------------------------------------------- published tables
 
 # Coefficients of the quadratic D(10, 10, 5) used by L50: entry [h][g].
 _D10_A = ((0, 1), (0, 2))
@@ -132,20 +79,27 @@ _D10_B = ((1, 1), (1, 2))
 _D10_C = ((0, 0), (2, 4))
 
 
-def _parse(text: str) -> np.ndarray:
-    return np.array([[int(v) for v in line.split()] for line in text.strip().splitlines()])
+def _published(name: str) -> np.ndarray:
+    """Read the table ``published/<name>.txt`` (``#`` lines are comments)."""
+    text = (
+        resources.files(__package__)
+        .joinpath("published", f"{name}.txt")
+        .read_text(encoding="utf-8")
+    )
+    rows = [line.split() for line in text.splitlines() if line.strip() and line[0] != "#"]
+    return np.array(rows, dtype=int)
 
 
 def _l12() -> np.ndarray:
-    return _parse(_L12) - 1
+    return _published("L12") - 1
 
 
 def _l18() -> np.ndarray:
-    return _parse(_L18) - 1
+    return _published("L18") - 1
 
 
 def _l36() -> np.ndarray:
-    return _from_difference_scheme(_l12(), _parse(_D12_3), 3)
+    return _from_difference_scheme(_l12(), _published("D12_3"), 3)
 
 
 def _l50() -> np.ndarray:

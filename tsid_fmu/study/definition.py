@@ -31,15 +31,13 @@ from typing import Any
 
 from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.errors import ArrayError, StudyError
+from tsid_fmu.study.checks import check_choice, check_number, check_text
 from tsid_fmu.study.schema import (
     ContributionOptions,
     Experiment,
     Method,
     Parameter,
     Phase,
-    check_choice,
-    check_number,
-    check_text,
 )
 from tsid_fmu.study.toml import read_study_file, write_study_file
 
