@@ -15,6 +15,7 @@ import tempfile
 import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 from tsid_fmu.errors import BuildError
@@ -95,21 +96,12 @@ def prepare(
     step_size: float | None = None,
     start_values: Mapping[str, float] | None = None,
 ) -> Prepared:
-    """Parse, flatten and causalize a model (see :func:`tsid_fmu.build.build_fmu`).
+    """Parse, flatten and causalize a model: the first half of :func:`~tsid_fmu.build.build_fmu`.
 
     Parameters
     ----------
-    model_file : str or Path
-        The ``.mo`` file holding the model.
-    model_name : str
-        Qualified or short name of the model.
-    package_dir : str or Path, optional
-        Directory whose other ``.mo`` files are parsed too.
-    step_size : float, optional
-        Default of ``fixedStepSize``; default from the model's annotation, else
-        :data:`DEFAULT_STEP_SIZE`.
-    start_values : mapping of str to float, optional
-        New values of parameters and start values of states (e.g. identified ones).
+    model_file, model_name, package_dir, step_size, start_values
+        As for :func:`~tsid_fmu.build.build_fmu`.
 
     Returns
     -------
@@ -179,25 +171,13 @@ def _model_description(prep: Prepared, token: str, fmi_version: int, sources: li
     from .model_description3 import model_description3_xml
 
     relations = prep.causal_me.relations if prep.causal_me is not None else []
-    tool = f"tsid-fmu {_version()}"
     if fmi_version == 3:
-        return model_description3_xml(
-            prep.model,
-            prep.causal,
-            token=token,
-            step_size=prep.step_size,
-            generation_tool=tool,
-            relations=relations,
-        )
-    return model_description_xml(
-        prep.model,
-        prep.causal,
-        guid=token,
-        step_size=prep.step_size,
-        source_files=sources,
-        generation_tool=tool,
-        n_event_indicators=len(relations),
-    )
+        xml = partial(model_description3_xml, token=token, relations=relations)
+    else:
+        n = len(relations)
+        xml = partial(model_description_xml, guid=token, source_files=sources, n_event_indicators=n)
+    tool = f"tsid-fmu {_version()}"
+    return xml(prep.model, prep.causal, step_size=prep.step_size, generation_tool=tool)
 
 
 def write_fmu(prep: Prepared, out: Path, fmi_version: int = 2) -> Path:

@@ -242,14 +242,10 @@ def dependency_vrs(
 
 
 def default_experiment(root: ET.Element, model: FlatModel) -> None:
-    """Add ``<DefaultExperiment>`` from the model's ``experiment`` annotation.
+    """Add ``<DefaultExperiment>`` to ``root`` from the ``experiment`` annotation of ``model``.
 
-    Parameters
-    ----------
-    root : xml.etree.ElementTree.Element
-        The ``fmiModelDescription`` element.
-    model : FlatModel
-        The model.
+    ``root`` is the ``fmiModelDescription`` element (FMI 2.0 or 3.0); without the
+    annotation the experiment runs from 0 to 1 s.
     """
     exp = model.experiment
     de = {"startTime": fmt(exp.get("StartTime", 0.0)), "stopTime": fmt(exp.get("StopTime", 1.0))}
@@ -363,12 +359,11 @@ def model_description_xml(
         The XML document.
     """
     lay = causal.layout
-    ident = model.short_name
     root = description_root(
         model, "2.0", "guid", guid, generation_tool, numberOfEventIndicators=str(n_event_indicators)
     )
     caps = {
-        "modelIdentifier": ident,
+        "modelIdentifier": model.short_name,
         "canGetAndSetFMUstate": "true",
         "canNotUseMemoryManagementFunctions": "true",
     }

@@ -48,16 +48,12 @@ def model_description3_xml(
 
     Parameters
     ----------
-    model : FlatModel
-        Flattened model (names, units, descriptions, start values).
+    model, step_size, generation_tool
+        As for :func:`~tsid_fmu.build.model_description.model_description_xml`.
     causal : Causalized
         Live form (layout and dependency structure).
     token : str
         The instantiation token.
-    step_size : float
-        Default of ``fixedStepSize``.
-    generation_tool : str
-        Value of the ``generationTool`` attribute.
     relations : list of Relation
         The relations whose indicators are the Model Exchange event indicators.
 
@@ -67,9 +63,8 @@ def model_description3_xml(
         The XML document.
     """
     lay = causal.layout
-    ident = model.short_name
     root = description_root(model, "3.0", "instantiationToken", token, generation_tool)
-    caps = {"modelIdentifier": ident, "canGetAndSetFMUState": "true"}
+    caps = {"modelIdentifier": model.short_name, "canGetAndSetFMUState": "true"}
     me_caps = {**caps, "needsCompletedIntegratorStep": "true"}
     ET.SubElement(root, "ModelExchange", me_caps)
     cs_caps = {

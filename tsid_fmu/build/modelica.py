@@ -381,13 +381,9 @@ def flatten_model(
 
     Parameters
     ----------
-    model_file : str or Path
-        The ``.mo`` file holding the model.
-    model_name : str
-        Qualified (``"TSID.LSEA_SISO"``) or short (``"LSEA_SISO"``) model name.
-    package_dir : str or Path, optional
-        A package directory whose other ``.mo`` files are parsed as well (for models that
-        refer to other classes of their package). By default only ``model_file`` is read.
+    model_file, model_name, package_dir
+        As for :func:`~tsid_fmu.build.build_fmu`; without ``package_dir`` only
+        ``model_file`` is read.
 
     Returns
     -------

@@ -117,11 +117,12 @@ class MeasuredData:
         Returns
         -------
         MeasuredData
+            A checked copy of ``df`` with the derived channels added.
 
         Raises
         ------
         DataError
-            See :func:`load_data`.
+            As :func:`load_data` for the frame's content; the message names ``source``.
         """
         import pandas as pd
 
@@ -351,6 +352,7 @@ def load_data(
     Returns
     -------
     MeasuredData
+        The checked channels of the file, with the derived ones.
 
     Raises
     ------

@@ -23,10 +23,9 @@ class SerialEvaluator(MemoEvaluator):
 
     Parameters
     ----------
-    spec : EvaluationSpec
-        What to simulate and how to score it.
-    residual_cache : int, optional
-        Parameter sets whose residuals are kept (default 256).
+    spec, residual_cache
+        As for :class:`~tsid_fmu.evaluate.memo.MemoEvaluator` (``residual_cache``
+        defaults to 256).
 
     Raises
     ------
