@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tsid_fmu.search.record import IterationRecord, json_float
+from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
+from tsid_fmu.trail.files import strict
 from tsid_fmu.uncertainty.intervals import Uncertainty
 
 if TYPE_CHECKING:
@@ -149,17 +150,7 @@ class IdentificationResult:
 
     def to_dict(self) -> dict[str, Any]:
         """Return the result as strict-JSON data (the content of ``result.json``)."""
-
-        def clean(v: Any) -> Any:
-            if isinstance(v, float):
-                return json_float(v)
-            if isinstance(v, dict):
-                return {str(k): clean(w) for k, w in v.items()}
-            if isinstance(v, list | tuple):
-                return [clean(w) for w in v]
-            return v
-
-        return clean(
+        return strict(
             {
                 "x": self.x,
                 "fun": self.fun,

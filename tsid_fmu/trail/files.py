@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -64,22 +65,26 @@ def _write_replace(path: Path, write: Callable[[Path], None] | str | bytes) -> N
             tmp_path.unlink()
 
 
-def strict(data: Any) -> Any:
+def strict(data: Any, nonfinite: Callable[[float], Any] = lambda x: None) -> Any:
     """Return ``data`` for strict JSON.
 
-    Non-finite floats become ``None``, numpy scalars and arrays plain numbers and lists,
-    tuples lists, other objects their ``str``.
+    Non-finite floats become ``nonfinite(x)`` (default ``None``), numpy scalars and
+    arrays plain numbers and lists, tuples lists, dataclass instances dicts of their
+    fields, other objects their ``str``.
     """
     if isinstance(data, dict):
-        return {str(k): strict(v) for k, v in data.items()}
+        return {str(k): strict(v, nonfinite) for k, v in data.items()}
     if isinstance(data, list | tuple):
-        return [strict(v) for v in data]
+        return [strict(v, nonfinite) for v in data]
     if hasattr(data, "tolist"):
-        return strict(data.tolist())
+        return strict(data.tolist(), nonfinite)
+    if dataclasses.is_dataclass(data) and not isinstance(data, type):
+        fields = dataclasses.fields(data)
+        return {f.name: strict(getattr(data, f.name), nonfinite) for f in fields}
     if isinstance(data, bool) or data is None or isinstance(data, int | str):
         return data
     if isinstance(data, float):
-        return data if math.isfinite(data) else None
+        return data if math.isfinite(data) else nonfinite(data)
     return str(data)
 
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import math
 import os
 import zipfile
 from pathlib import Path
@@ -32,7 +31,7 @@ from xml.etree import ElementTree
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.study.definition import Study
-from tsid_fmu.trail.files import read_json, write_json
+from tsid_fmu.trail.files import read_json, strict, write_json
 from tsid_fmu.trail.integrity import seal, sha256_file, unseal
 
 try:
@@ -50,19 +49,8 @@ _MISSING = "missing"
 
 
 def _plain(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return repr(value)
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if value is None or isinstance(value, bool | int | float | str):
-        return value
-    return str(value)
+    """``value`` as JSON data, with non-finite floats as ``'inf'``, ``'nan'``."""
+    return strict(value, nonfinite=repr)
 
 
 def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
