@@ -29,7 +29,7 @@ from tsid_fmu.report.ssp import write_model_ssp
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.search.iteration import ProgressCallback
-from tsid_fmu.search.pipeline import Control, run_stages, run_ungrouped
+from tsid_fmu.search.pipeline import Control, run_stages
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
@@ -132,7 +132,7 @@ def _compare_ungrouped(
     study: Study, evaluators: _Evaluators, store: Trail | NullStore, result: IdentificationResult
 ) -> dict[str, Any]:
     """Run the same study without grouping, to set beside the phased one."""
-    alone = run_ungrouped(study, evaluators, store)
+    alone = run_stages(study, evaluators, store, ungrouped=True)[0]
     return {
         "phased": {"cost": result.fun, "nfev": result.nfev, "x": dict(result.x)},
         "ungrouped": {

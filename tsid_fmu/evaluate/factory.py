@@ -20,12 +20,12 @@ def make_evaluator(
     timeout: float | None = None,
     scheduler: Any = None,
 ) -> Evaluator:
-    """Return the evaluator for a spec.
+    """Return the evaluator for a spec: in this process, on local workers or on Dask.
 
     Parameters
     ----------
     spec : EvaluationSpec
-        What to simulate and how to score it.
+        What to simulate and how to score it; every evaluator takes it as it is.
     workers : int, optional
         Local worker processes; default the number of available cores
         (:func:`available_cores`). Ignored with ``scheduler``.

@@ -18,7 +18,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -45,8 +45,6 @@ Job = tuple[str, dict[str, float], bool]
 """``(kind, parameters, full)``: kind ``"run"`` scores a set (:meth:`SetRunner.run`;
 ``full=False``: the measured inputs only), ``"sim"`` simulates it on the measured inputs
 (:meth:`SetRunner.simulate`)."""
-OnResult = Callable[[int, Any], None]
-"""``on_result(job index, SetResult or SimResult)``."""
 
 
 @dataclass
@@ -82,6 +80,10 @@ class SimResult:
     simulated: list[Simulated]
     nfev: int
     durations: list[float] = field(default_factory=list)
+
+
+OnResult = Callable[[int, SetResult | SimResult], None]
+"""``on_result(job index, result)``: called as each job of a batch finishes."""
 
 
 class Monitor(Protocol):

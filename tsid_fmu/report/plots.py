@@ -33,7 +33,7 @@ def main_effects_plot(
     Parameters
     ----------
     rec : IterationRecord
-        The iteration.
+        The iteration: its arrays, S/N ratios and response tables.
     path : Path
         PNG file to write.
     describe : dict, optional

@@ -29,7 +29,7 @@ from tsid_fmu.search.taguchi import TaguchiRun, frame_from_run, taguchi_stage
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Parameter, Phase
 
-__all__ = ["Control", "Evaluators", "StageStore", "run_stages", "run_ungrouped"]
+__all__ = ["Control", "Evaluators", "StageStore", "run_stages"]
 
 
 class StageStore(Protocol):
@@ -261,14 +261,21 @@ def run_stages(
     store: StageStore,
     progress: ProgressCallback | None = None,
     control: Control | None = None,
+    *,
+    ungrouped: bool = False,
 ) -> list[StageResult]:
     """Run every stage of a study in order; return their results.
 
     Stages the store already holds as finished are read back, not run again; an
     interrupted Taguchi stage continues from its last complete iteration. A paused
     stage (status 2) ends the list.
+
+    With ``ungrouped=True``, instead, the one stage of :func:`_run_ungrouped`: the
+    study's parameters all at once, for comparison with its phases.
     """
     ctx = _Context(study, evaluators, store, progress, control or Control())
+    if ungrouped:
+        return [_run_ungrouped(ctx)]
     if study.phases or study.contribution.enabled:
         stages = _run_phased(ctx)
     else:
@@ -294,12 +301,7 @@ def run_stages(
     return stages
 
 
-def run_ungrouped(
-    study: Study,
-    evaluators: Evaluators,
-    store: StageStore,
-    progress: ProgressCallback | None = None,
-) -> StageResult:
+def _run_ungrouped(ctx: _Context) -> StageResult:
     """Identify every parameter in one Taguchi stage on every identification experiment.
 
     The MISO paper groups parameters and identifies them in phases; this runs the same
@@ -307,7 +309,7 @@ def run_ungrouped(
     the trail as ``ungrouped/``, so the report can show what grouping gained or cost.
     The simulations are not part of the study's ``nfev``.
     """
-    ctx = _Context(study, evaluators, store, progress, Control())
+    study, progress = ctx.study, ctx.progress
     exps = [e.name for e in study.identify_experiments()]
     if progress:
         progress("stage", {"name": "ungrouped", "message": "comparison: all parameters at once"})

@@ -147,7 +147,7 @@ def prepare(
     Parameters
     ----------
     study : Study
-        The study.
+        The study: its FMU, experiments and parameters.
     experiments : sequence of str, optional
         Names of the experiments to use; default every experiment with ``role``.
     parameters : sequence of str, optional
@@ -158,6 +158,7 @@ def prepare(
     Returns
     -------
     EvaluationSpec
+        What an evaluator simulates for each parameter set, and how it scores it.
     """
     if experiments is None:
         indices = [i for i, e in enumerate(study.experiments) if e.role == role]
