@@ -22,6 +22,9 @@ def make_evaluator(
 ) -> Evaluator:
     """Return the evaluator for a spec: in this process, on local workers or on Dask.
 
+    Which one is said under Returns. All of them give the same costs and count the
+    same simulations for the same parameter sets, whatever the number of workers.
+
     Parameters
     ----------
     spec : EvaluationSpec

@@ -103,6 +103,7 @@ def _half_widths(frame: Frame, space: Space, decision: LevelingDecision) -> list
 def _rotated_frame(
     frame: Frame,
     space: Space,
+    *,
     decision: LevelingDecision,
     centre_x: dict[str, float],
     axes: tuple[np.ndarray, np.ndarray] | None,
@@ -268,4 +269,6 @@ def next_frame(
             frame, space, sn_means, centre_s, centre[1], options, contribution
         )
     centre_x = centre[0] if centre is not None else frame.coords(space).to_x(frame.centre)
-    return decision, _rotated_frame(frame, space, decision, centre_x, axes, options)
+    return decision, _rotated_frame(
+        frame, space, decision=decision, centre_x=centre_x, axes=axes, options=options
+    )

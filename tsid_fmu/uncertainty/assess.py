@@ -81,7 +81,7 @@ def assess(
         out.uncertainty = uncertainty(sens, space, varied)
         out.sensitivities = sens
     if out.uncertainty is not None and sens is not None and spec.cost == "sse":
-        _widen_by_profile(evaluator, spec, space, varied, fun, sens, out.uncertainty)
+        _widen_by_profile(evaluator, spec, space, sens, out.uncertainty, x=varied, cost=fun)
     if out.uncertainty is not None:
         out.uncertainty.scale_groups = scale_groups(out.uncertainty, space)
     if out.uncertainty is not None and out.uncertainty.coloured:
@@ -99,12 +99,16 @@ def _widen_by_profile(
     evaluator: Evaluator,
     spec: EvaluationSpec,
     space: Space,
-    x: dict[str, float],
-    cost: float,
     sens: Sensitivities,
     u: Uncertainty,
+    *,
+    x: dict[str, float],
+    cost: float,
 ) -> None:
-    """Make every interval at least as wide as the parameter's profile-likelihood one."""
+    """Make every interval of ``u`` at least as wide as the parameter's profile one.
+
+    ``sens`` holds the Jacobian at the answer ``x``, whose cost is ``cost``.
+    """
     blocks = [
         jac / e.scale[None, :, None] for e, jac in zip(spec.experiments, sens.jacobian, strict=True)
     ]
