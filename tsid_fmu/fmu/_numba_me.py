@@ -21,6 +21,7 @@ __all__ = ["me_loop"]
 HELPERS = (
     "_flag",
     "_set_inputs",
+    "_time_and_states",
     "_point",
     "_indicators",
     "_crossed",
@@ -37,7 +38,9 @@ HELPERS = (
 )
 
 #: small helpers called in every stage: inlined into their callers
-INLINE = frozenset({"_flag", "_set_inputs", "_point", "_indicators", "_crossed", "_copy"})
+INLINE = frozenset(
+    {"_flag", "_set_inputs", "_time_and_states", "_point", "_indicators", "_crossed", "_copy"}
+)
 
 for _name in HELPERS:
     register_jitable(inline="always" if _name in INLINE else "never")(getattr(meloop, _name))

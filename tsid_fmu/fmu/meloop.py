@@ -121,9 +121,8 @@ def _set_inputs(funcs: Any, ctx: Any, ub: Any) -> int:
     return funcs[F_SET3](comp, vr, nin, p_u, nin)
 
 
-def _point(funcs: Any, ctx: Any, arr: Any, row: int, t: float) -> tuple[int, int]:
-    """Set the time ``t``, the states of row ``row`` of w and the linear inputs at ``t``."""
-    u, slopes, ub, opts = arr[A_U], arr[A_SLOPES], arr[A_UB], arr[A_OPTS]
+def _time_and_states(funcs: Any, ctx: Any, row: int, t: float) -> tuple[int, int]:
+    """Set the time ``t`` and the states of row ``row`` of w; return (status, call)."""
     comp = ptr(ctx[C_COMP])
     status = funcs[F_TIME](comp, t)
     if status >= DISCARD:
@@ -132,6 +131,15 @@ def _point(funcs: Any, ctx: Any, arr: Any, row: int, t: float) -> tuple[int, int
         status = funcs[F_SETX](comp, ptr(ctx[C_W] + row * ctx[C_WS]), ctx[C_NX])
         if status >= DISCARD:
             return status, CALL_SETX
+    return 0, 0
+
+
+def _point(funcs: Any, ctx: Any, arr: Any, row: int, t: float) -> tuple[int, int]:
+    """Set the time ``t``, the states of row ``row`` of w and the linear inputs at ``t``."""
+    u, slopes, ub, opts = arr[A_U], arr[A_SLOPES], arr[A_UB], arr[A_OPTS]
+    status, call = _time_and_states(funcs, ctx, row, t)
+    if status >= DISCARD:
+        return status, call
     if ctx[C_LIN]:
         k, tk = ctx[C_K], opts[O_TK]
         for j in range(ctx[C_NIN]):
@@ -376,14 +384,9 @@ def _step(funcs: Any, ctx: Any, arr: Any, t: float, t_end: float) -> tuple[int, 
 def _boundary(funcs: Any, ctx: Any, arr: Any, out: Any, k: int, t: float) -> tuple[int, int]:
     """At sample ``k`` (time ``t``): set its inputs, handle a switch they cause, record."""
     z, u, ub, stats = arr[A_Z], arr[A_U], arr[A_UB], arr[A_STATS]
-    comp = ptr(ctx[C_COMP])
-    status = funcs[F_TIME](comp, t)
+    status, call = _time_and_states(funcs, ctx, X, t)
     if status >= DISCARD:
-        return status, CALL_TIME
-    if ctx[C_NX]:
-        status = funcs[F_SETX](comp, ptr(ctx[C_W] + X * ctx[C_WS]), ctx[C_NX])
-        if status >= DISCARD:
-            return status, CALL_SETX
+        return status, call
     for j in range(ctx[C_NIN]):
         ub[j] = u[k, j]
     status = _set_inputs(funcs, ctx, ub)
@@ -397,7 +400,7 @@ def _boundary(funcs: Any, ctx: Any, arr: Any, out: Any, k: int, t: float) -> tup
         status, call = _event(funcs, ctx, arr, True)
         if status >= DISCARD:
             return status, call
-    p_out = ptr(out.ctypes.data + k * out.strides[0])
+    comp, p_out = ptr(ctx[C_COMP]), ptr(out.ctypes.data + k * out.strides[0])
     n_out = ctx[C_NOUT]
     if ctx[C_MAJOR] == 2:
         status = funcs[F_GET2](comp, ptr(ctx[C_VOUT]), n_out, p_out)
