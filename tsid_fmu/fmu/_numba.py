@@ -2,9 +2,11 @@
 
 Nothing here is a second copy of a loop: the two helpers the loops use,
 :func:`~tsid_fmu.fmu.steploop.ptr` and :func:`~tsid_fmu.fmu.steploop.seq`, get Numba
-implementations (``@overload``), and the loop functions themselves are handed to
-``njit``.  Numba's on-disk cache (``cache=True``) keys the compiled code on
-``steploop.py``, so every process after the first loads it instead of compiling.
+implementations (``@overload``), their shared set-up ``_addresses`` is registered as
+jitable (``register_jitable``: it stays a plain Python function that compiled code can
+call), and the loop functions themselves are handed to ``njit``.  Numba's on-disk
+cache (``cache=True``) keys the compiled code on ``steploop.py``, so every process
+after the first loads it instead of compiling.
 
 Do not import this module directly; :mod:`tsid_fmu.fmu.compiled` does, when Numba is
 installed and wanted.
@@ -16,7 +18,7 @@ from typing import Any
 
 from llvmlite import ir
 from numba import njit, types
-from numba.extending import intrinsic, overload
+from numba.extending import intrinsic, overload, register_jitable
 
 import tsid_fmu.fmu.steploop as steploop
 
@@ -65,5 +67,6 @@ def _jit(fn: Any) -> Any:
         return njit(nogil=True)(fn)
 
 
+register_jitable(steploop._addresses)
 loop2 = _jit(steploop._cs_loop_fmi2)
 loop3 = _jit(steploop._cs_loop_fmi3)

@@ -228,18 +228,8 @@ def warm_up() -> str:
     vr = np.zeros(1, dtype=np.uint32)
     time = np.array([0.0, 1.0])
     u, held, out = np.zeros((2, 1)), np.zeros((0, 1)), np.zeros((2, 1))
-    cs_loop(2)(
-        (*fmi2, sl.FMI2_SETDER(_fail)),
-        0,
-        vr,
-        vr,
-        time,
-        u,
-        held,
-        out,
-        vr,
-        np.ones(1, dtype=np.int32),
-        np.zeros((1, 1)),
-    )
-    cs_loop(3)(fmi3, 0, vr, vr, time, u, held, out, np.zeros(16, dtype=np.uint8))
+    buffers = (vr, vr, u, held, out)
+    derivatives = (vr, np.ones(1, dtype=np.int32), np.zeros((1, 1)))
+    cs_loop(2)((*fmi2, sl.FMI2_SETDER(_fail)), 0, time, buffers, derivatives)
+    cs_loop(3)(fmi3, 0, time, buffers, np.zeros(16, dtype=np.uint8))
     return backend()

@@ -404,21 +404,10 @@ class FMUSession:
         t, u = g.time, g.inputs
         inst.initialize(t[0], t[-1], values, self.variables, self._vr_in, u[0])
         out = np.empty((t.size, self._vr_out.size))
-        args: tuple[Any, ...] = (
-            self._loop_funcs,
-            inst.address,
-            self._vr_in,
-            self._vr_out,
-            t,
-            u,
-            g.held,
-            out,
-        )
-        if self._major == 2:
-            args += (self._vr_der, self._order, g.slopes)
-        else:
-            args += (self._flags,)
-        status, k, call = cs_loop(self._major)(*args)
+        buffers = (self._vr_in, self._vr_out, u, g.held, out)
+        extra = (self._vr_der, self._order, g.slopes) if self._major == 2 else self._flags
+        loop = cs_loop(self._major)
+        status, k, call = loop(self._loop_funcs, inst.address, t, buffers, extra)
         if status:
             raise inst.loop_error(status, k, call, t)
         inst.terminate(t.size - 1, t[-1])

@@ -99,18 +99,50 @@ def seq(values: np.ndarray) -> Any:
     return values.tolist()
 
 
+Buffers = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""``(vr_in, vr_out, inputs, held, out)``, the buffers both loops read and fill.
+
+vr_in, vr_out : C-contiguous ``uint32`` value references of the inputs and outputs.
+inputs : C-contiguous ``float64``, shape ``(n, len(vr_in))``; row ``k + 1`` is set after
+    the step to ``time[k + 1]`` (row 0 is set by the caller during initialization).
+held : C-contiguous ``float64``, shape ``(n - 1, len(vr_in))``: row ``k`` is set just
+    before step ``k`` and held over it (after the outputs of ``time[k]`` were read with
+    ``inputs[k]``); or no rows, when each step holds ``inputs[k]``.
+out : C-contiguous ``float64``, shape ``(n, len(vr_out))``, filled in place: row 0 right
+    away, row ``k + 1`` after step ``k`` and the inputs of ``time[k + 1]``.
+"""
+
+
+def _addresses(buffers: Buffers) -> tuple[int, ...]:
+    """Return what the loops need of ``buffers``, once per run.
+
+    ``(n_in, n_out, a_vin, a_vout, a_in, s_in, n_held, a_held, s_held, a_out, s_out)``:
+    the numbers of inputs and outputs, the addresses (``a_``) of the buffers, the row
+    strides (``s_``) of the tables, and the number of held values (0: no held rows).
+    """
+    vr_in, vr_out, inputs, held, out = buffers
+    n_in = vr_in.size
+    return (
+        n_in,
+        vr_out.size,
+        vr_in.ctypes.data,
+        vr_out.ctypes.data,
+        inputs.ctypes.data,
+        inputs.strides[0],
+        held.shape[0] * n_in,
+        held.ctypes.data,
+        held.strides[0],
+        out.ctypes.data,
+        out.strides[0],
+    )
+
+
 def _cs_loop_fmi2(
     funcs: tuple[Any, Any, Any, Any],
     component: int,
-    vr_in: np.ndarray,
-    vr_out: np.ndarray,
     time: np.ndarray,
-    inputs: np.ndarray,
-    held: np.ndarray,
-    out: np.ndarray,
-    vr_der: np.ndarray,
-    order: np.ndarray,
-    slopes: np.ndarray,
+    buffers: Buffers,
+    derivatives: tuple[np.ndarray, np.ndarray, np.ndarray],
 ) -> tuple[int, int, int]:
     """Step an initialized FMI 2.0 Co-Simulation instance along ``time``.
 
@@ -121,24 +153,14 @@ def _cs_loop_fmi2(
         function pointers taking addresses (see :func:`raw`).
     component : int
         The ``fmi2Component`` address.
-    vr_in, vr_out : numpy.ndarray
-        C-contiguous ``uint32`` value references of the inputs and outputs.
     time : numpy.ndarray
         Communication points, ``float64``, shape ``(n,)``.
-    inputs : numpy.ndarray
-        C-contiguous ``float64``, shape ``(n, len(vr_in))``; row ``k + 1`` is set after
-        the step to ``time[k + 1]`` (row 0 is set by the caller during initialization).
-    held : numpy.ndarray
-        C-contiguous ``float64``, shape ``(n - 1, len(vr_in))``: row ``k`` is set just
-        before step ``k`` and held over it (after the outputs of ``time[k]`` were read
-        with ``inputs[k]``); or no rows, when each step holds ``inputs[k]``.
-    out : numpy.ndarray
-        C-contiguous ``float64``, shape ``(n, len(vr_out))``, filled in place: row 0
-        right away, row ``k + 1`` after step ``k`` and the inputs of ``time[k + 1]``.
-    vr_der, order, slopes : numpy.ndarray
-        Inputs the FMU interpolates (``uint32``, may be empty), ``int32`` ones (at least
-        one), and their derivatives for each step, ``float64`` of shape
-        ``(n - 1, len(vr_der))``, set before step ``k``.
+    buffers : Buffers
+        The inputs, the outputs and their value references (see :data:`Buffers`).
+    derivatives : tuple of numpy.ndarray
+        ``(vr_der, order, slopes)``: inputs the FMU interpolates (``uint32``, may be
+        empty), ``int32`` ones (at least one), and their derivatives for each step,
+        ``float64`` of shape ``(n - 1, len(vr_der))``, set before step ``k``.
 
     Returns
     -------
@@ -150,20 +172,15 @@ def _cs_loop_fmi2(
         Index into ``CALL_NAMES[2]`` of the failing call (0 on success).
     """
     set_real, do_step, get_real, set_der = funcs
+    vr_der, order, slopes = derivatives
     t = seq(time)
     n = len(t)
-    n_in = vr_in.size
-    n_out = vr_out.size
+    n_in, n_out, a_vin, a_vout, a_in, s_in, n_held, a_held, s_held, a_out, s_out = _addresses(
+        buffers
+    )
     n_der = vr_der.size
-    comp = ptr(component)
-    p_vin = ptr(vr_in.ctypes.data)
-    p_vout = ptr(vr_out.ctypes.data)
-    p_vder = ptr(vr_der.ctypes.data)
-    p_order = ptr(order.ctypes.data)
-    a_in, s_in = inputs.ctypes.data, inputs.strides[0]
-    n_held = held.shape[0] * n_in
-    a_held, s_held = held.ctypes.data, held.strides[0]
-    a_out, s_out = out.ctypes.data, out.strides[0]
+    comp, p_vin, p_vout = ptr(component), ptr(a_vin), ptr(a_vout)
+    p_vder, p_order = ptr(vr_der.ctypes.data), ptr(order.ctypes.data)
     a_der, s_der = slopes.ctypes.data, slopes.strides[0]
     status = get_real(comp, p_vout, n_out, ptr(a_out))
     if status >= DISCARD:
@@ -193,12 +210,8 @@ def _cs_loop_fmi2(
 def _cs_loop_fmi3(
     funcs: tuple[Any, Any, Any],
     component: int,
-    vr_in: np.ndarray,
-    vr_out: np.ndarray,
     time: np.ndarray,
-    inputs: np.ndarray,
-    held: np.ndarray,
-    out: np.ndarray,
+    buffers: Buffers,
     flags: np.ndarray,
 ) -> tuple[int, int, int]:
     """Step an initialized FMI 3.0 Co-Simulation instance along ``time``.
@@ -213,20 +226,13 @@ def _cs_loop_fmi3(
     set_real, do_step, get_real = funcs
     t = seq(time)
     n = len(t)
-    n_in = vr_in.size
-    n_out = vr_out.size
-    comp = ptr(component)
-    p_vin = ptr(vr_in.ctypes.data)
-    p_vout = ptr(vr_out.ctypes.data)
-    a_in, s_in = inputs.ctypes.data, inputs.strides[0]
-    n_held = held.shape[0] * n_in
-    a_held, s_held = held.ctypes.data, held.strides[0]
-    a_out, s_out = out.ctypes.data, out.strides[0]
+    n_in, n_out, a_vin, a_vout, a_in, s_in, n_held, a_held, s_held, a_out, s_out = _addresses(
+        buffers
+    )
+    comp, p_vin, p_vout = ptr(component), ptr(a_vin), ptr(a_vout)
     a_flags = flags.ctypes.data
-    p_event = ptr(a_flags)
-    p_term = ptr(a_flags + 1)
-    p_early = ptr(a_flags + 2)
-    p_last = ptr(a_flags + 8)
+    p_event, p_term = ptr(a_flags), ptr(a_flags + 1)
+    p_early, p_last = ptr(a_flags + 2), ptr(a_flags + 8)
     status = get_real(comp, p_vout, n_out, ptr(a_out), n_out)
     if status >= DISCARD:
         return status, 0, CALL_GET
