@@ -217,7 +217,7 @@ def write_fmu(prep: Prepared, out: Path, fmi_version: int = 2) -> Path:
         src.mkdir(parents=True)
         files = wrapper_files(fmi_version)
         for f in files:
-            shutil.copy2(C_DIR / f, src / f)
+            shutil.copy2(C_DIR / f, src / Path(f).name)
         generated = generate_c(
             model, prep.causal, src, guid=token, step_size=prep.step_size, causal_me=prep.causal_me
         )

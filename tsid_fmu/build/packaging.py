@@ -23,28 +23,29 @@ __all__ = [
     "zip_fmu",
 ]
 
-#: Directory of the hand-written, generic C wrappers and the FMI 2.0 and 3.0 headers.
+#: Directory of the hand-written, generic C wrappers; the FMI 2.0 and 3.0 headers, as
+#: published by the Modelica Association (2-Clause BSD), are in its ``third_party/``.
 C_DIR = Path(__file__).resolve().parent / "c"
 
 #: The model-independent core shared by both wrappers.
 _CORE_FILES = ["tsid_core.c", "tsid_core.h"]
 
-#: Files copied from :data:`C_DIR` into every FMI 2.0 FMU's ``sources/``.
+#: Files copied from :data:`C_DIR` into every FMI 2.0 FMU's ``sources/`` (flat).
 WRAPPER_FILES = [
     "fmi2Functions.c",
     *_CORE_FILES,
-    "fmi2Functions.h",
-    "fmi2FunctionTypes.h",
-    "fmi2TypesPlatform.h",
+    "third_party/fmi2Functions.h",
+    "third_party/fmi2FunctionTypes.h",
+    "third_party/fmi2TypesPlatform.h",
 ]
 
-#: Files copied from :data:`C_DIR` into every FMI 3.0 FMU's ``sources/``.
+#: Files copied from :data:`C_DIR` into every FMI 3.0 FMU's ``sources/`` (flat).
 WRAPPER_FILES3 = [
     "fmi3Functions.c",
     *_CORE_FILES,
-    "fmi3Functions.h",
-    "fmi3FunctionTypes.h",
-    "fmi3PlatformTypes.h",
+    "third_party/fmi3Functions.h",
+    "third_party/fmi3FunctionTypes.h",
+    "third_party/fmi3PlatformTypes.h",
 ]
 
 
@@ -59,7 +60,7 @@ def wrapper_files(fmi_version: int) -> list[str]:
     Returns
     -------
     list of str
-        File names in :data:`C_DIR`.
+        Paths relative to :data:`C_DIR`; each goes into ``sources/`` under its name.
     """
     return WRAPPER_FILES3 if fmi_version == 3 else WRAPPER_FILES
 
