@@ -429,3 +429,26 @@ def test_files_get_the_umask_default_mode(tmp_path, umask):
     finally:
         os.umask(old)
     assert (tmp_path / "f.txt").stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_strict_json_turns_every_value_into_json_data():
+    """One converter serves the trail, the fingerprint and result.to_dict."""
+    import dataclasses
+    import json
+    import math
+    from pathlib import Path
+
+    import numpy as np
+
+    from tsid_fmu.trail.files import strict
+
+    @dataclasses.dataclass
+    class Part:
+        value: float
+        where: Path
+
+    data = {1: (np.float64(2.5), np.arange(2)), "p": Part(math.inf, Path("a/b")), "n": math.nan}
+    assert strict(data) == {"1": [2.5, [0, 1]], "p": {"value": None, "where": "a/b"}, "n": None}
+    as_text = strict(data, nonfinite=repr)
+    assert as_text["p"]["value"] == "inf" and as_text["n"] == "nan"
+    json.dumps(strict(data), allow_nan=False)  # strict JSON indeed
