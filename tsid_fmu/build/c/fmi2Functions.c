@@ -99,27 +99,20 @@ void fmi2FreeInstance(fmi2Component c) { coreFree((Core *)c); }
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
                                fmi2Real tolerance, fmi2Real startTime,
                                fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
-    CHECK("fmi2SetupExperiment", StateInstantiated);
-    coreSetupExperiment((Core *)c, toleranceDefined, tolerance, startTime, stopTimeDefined,
-                        stopTime);
-    return fmi2OK;
+    return (fmi2Status)coreSetupExperiment((Core *)c, toleranceDefined, tolerance, startTime,
+                                           stopTimeDefined, stopTime, "fmi2SetupExperiment");
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
-    CHECK("fmi2EnterInitializationMode", StateInstantiated);
-    coreEnterInitializationMode((Core *)c);
-    return fmi2OK;
+    return (fmi2Status)coreEnterInitializationMode((Core *)c, "fmi2EnterInitializationMode");
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-    CHECK("fmi2ExitInitializationMode", StateInitializationMode);
     return (fmi2Status)coreExitInitializationMode((Core *)c, "fmi2ExitInitializationMode");
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
-    CHECK("fmi2Terminate", StateEventMode | StateContinuousTimeMode | StateStepMode);
-    ((Core *)c)->state = StateTerminated;
-    return fmi2OK;
+    return (fmi2Status)coreTerminate((Core *)c, "fmi2Terminate");
 }
 
 fmi2Status fmi2Reset(fmi2Component c) { return (fmi2Status)coreReset((Core *)c); }
@@ -298,12 +291,10 @@ fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], s
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
-    CHECK("fmi2GetContinuousStates", ANY_STATE);
     return (fmi2Status)coreGetContinuousStates((Core *)c, x, nx, "fmi2GetContinuousStates");
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx) {
-    CHECK("fmi2GetNominalsOfContinuousStates", ANY_STATE);
     return (fmi2Status)coreGetNominals((Core *)c, x_nominal, nx,
                                        "fmi2GetNominalsOfContinuousStates");
 }

@@ -176,15 +176,16 @@ void fmi3FreeInstance(fmi3Instance instance) { coreFree((Core *)instance); }
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined,
                                        fmi3Float64 tolerance, fmi3Float64 startTime,
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
-    CHECK("fmi3EnterInitializationMode", StateInstantiated);
-    coreSetupExperiment((Core *)instance, toleranceDefined, tolerance, startTime,
-                        stopTimeDefined, stopTime);
-    coreEnterInitializationMode((Core *)instance);
-    return fmi3OK;
+    /* FMI 2.0's fmi2SetupExperiment and fmi2EnterInitializationMode in one */
+    const char *f = "fmi3EnterInitializationMode";
+    if (coreSetupExperiment((Core *)instance, toleranceDefined, tolerance, startTime,
+                            stopTimeDefined, stopTime, f) != CoreOK) {
+        return fmi3Error;
+    }
+    return (fmi3Status)coreEnterInitializationMode((Core *)instance, f);
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
-    CHECK("fmi3ExitInitializationMode", StateInitializationMode);
     return (fmi3Status)coreExitInitializationMode((Core *)instance, "fmi3ExitInitializationMode");
 }
 
@@ -195,9 +196,7 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance) {
-    CHECK("fmi3Terminate", RUNNING);
-    ((Core *)instance)->state = StateTerminated;
-    return fmi3OK;
+    return (fmi3Status)coreTerminate((Core *)instance, "fmi3Terminate");
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance) { return (fmi3Status)coreReset((Core *)instance); }
@@ -553,17 +552,14 @@ fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndica
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
                                    size_t nContinuousStates) {
-    const char *f = "fmi3GetContinuousStates";
-    CHECK(f, ANY_STATE);
     return (fmi3Status)coreGetContinuousStates((Core *)instance, continuousStates,
-                                               nContinuousStates, f);
+                                               nContinuousStates, "fmi3GetContinuousStates");
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
                                              size_t nContinuousStates) {
-    const char *f = "fmi3GetNominalsOfContinuousStates";
-    CHECK(f, ANY_STATE);
-    return (fmi3Status)coreGetNominals((Core *)instance, nominals, nContinuousStates, f);
+    return (fmi3Status)coreGetNominals((Core *)instance, nominals, nContinuousStates,
+                                       "fmi3GetNominalsOfContinuousStates");
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
