@@ -168,41 +168,12 @@ NO_VARIABLES(String)
 
 /* ------------------------------------------------------------------- FMU state */
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    CHECK("fmi2GetFMUstate", ANY_STATE);
-    return (fmi2Status)coreGetFMUState((Core *)c, FMUstate, "fmi2GetFMUstate");
-}
-
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
-    CHECK("fmi2SetFMUstate", ANY_STATE);
-    return (fmi2Status)coreSetFMUState((Core *)c, FMUstate, "fmi2SetFMUstate");
-}
-
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    return (fmi2Status)coreFreeFMUState((Core *)c, FMUstate);
-}
-
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
-    (void)FMUstate;
-    (void)size;
-    return fail(c, "fmi2SerializedFMUstateSize", "not supported");
-}
-
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte bytes[],
-                                 size_t size) {
-    (void)FMUstate;
-    (void)bytes;
-    (void)size;
-    return fail(c, "fmi2SerializeFMUstate", "not supported");
-}
-
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[],
-                                   size_t size, fmi2FMUstate *FMUstate) {
-    (void)serializedState;
-    (void)size;
-    (void)FMUstate;
-    return fail(c, "fmi2DeSerializeFMUstate", "not supported");
-}
+/* fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate: a copy of the instance data in
+ * memory; fmi2SerializedFMUstateSize, fmi2SerializeFMUstate, fmi2DeSerializeFMUstate: not
+ * supported. Defined as in FMI 3.0 by CORE_FMU_STATE_FUNCTIONS (tsid_core.h). */
+CORE_FMU_STATE_FUNCTIONS(fmi2Status, fmi2Component, fmi2FMUstate, fmi2Byte, fmi2GetFMUstate,
+                         fmi2SetFMUstate, fmi2FreeFMUstate, fmi2SerializedFMUstateSize,
+                         fmi2SerializeFMUstate, fmi2DeSerializeFMUstate)
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown[],
                                         size_t nUnknown, const fmi2ValueReference vKnown[],

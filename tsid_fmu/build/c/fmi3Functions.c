@@ -326,42 +326,12 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
 
 /* ------------------------------------------------------------------- FMU state */
 
-fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    CHECK("fmi3GetFMUState", ANY_STATE);
-    return (fmi3Status)coreGetFMUState((Core *)instance, FMUState, "fmi3GetFMUState");
-}
-
-fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
-    CHECK("fmi3SetFMUState", ANY_STATE);
-    return (fmi3Status)coreSetFMUState((Core *)instance, FMUState, "fmi3SetFMUState");
-}
-
-fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    return (fmi3Status)coreFreeFMUState((Core *)instance, FMUState);
-}
-
-fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState,
-                                      size_t *size) {
-    (void)FMUState;
-    (void)size;
-    return fail(instance, "fmi3SerializedFMUStateSize", "not supported");
-}
-
-fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
-                                 fmi3Byte serializedState[], size_t size) {
-    (void)FMUState;
-    (void)serializedState;
-    (void)size;
-    return fail(instance, "fmi3SerializeFMUState", "not supported");
-}
-
-fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
-                                   size_t size, fmi3FMUState *FMUState) {
-    (void)serializedState;
-    (void)size;
-    (void)FMUState;
-    return fail(instance, "fmi3DeserializeFMUState", "not supported");
-}
+/* fmi3GetFMUState, fmi3SetFMUState, fmi3FreeFMUState: a copy of the instance data in
+ * memory; fmi3SerializedFMUStateSize, fmi3SerializeFMUState, fmi3DeserializeFMUState: not
+ * supported. Defined as in FMI 2.0 by CORE_FMU_STATE_FUNCTIONS (tsid_core.h). */
+CORE_FMU_STATE_FUNCTIONS(fmi3Status, fmi3Instance, fmi3FMUState, fmi3Byte, fmi3GetFMUState,
+                         fmi3SetFMUState, fmi3FreeFMUState, fmi3SerializedFMUStateSize,
+                         fmi3SerializeFMUState, fmi3DeserializeFMUState)
 
 #define NO_DERIVATIVES(F)                                                                   \
     fmi3Status F(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns, \

@@ -264,6 +264,7 @@ CoreStatus coreTerminate(Core *core, const char *caller) {
 
 CoreStatus coreGetFMUState(Core *core, void **state, const char *caller) {
     CoreData *copy;
+    if (!coreAllowed(core, ANY_STATE, caller)) return CoreError;
     if (!state) return coreFail(core, caller, "NULL argument");
     copy = *state ? (CoreData *)*state : (CoreData *)malloc(sizeof(CoreData));
     if (!copy) return coreFail(core, caller, "out of memory");
@@ -273,6 +274,7 @@ CoreStatus coreGetFMUState(Core *core, void **state, const char *caller) {
 }
 
 CoreStatus coreSetFMUState(Core *core, const void *state, const char *caller) {
+    if (!coreAllowed(core, ANY_STATE, caller)) return CoreError;
     if (!state) return coreFail(core, caller, "NULL state");
     core->d = *(const CoreData *)state;
     core->d.dirty = 1;

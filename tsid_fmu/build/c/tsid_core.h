@@ -160,10 +160,47 @@ CoreStatus coreRefresh(Core *core, const char *caller);
 CoreStatus coreSetReals(Core *core, const unsigned int vr[], size_t nvr, const double value[],
                         const char *caller);
 
-/* FMU state: a copy of the CoreData, in *state (allocated if *state is NULL). */
+/* FMU state: a copy of the CoreData, in *state (allocated if *state is NULL); get and
+ * set in any mode. */
 CoreStatus coreGetFMUState(Core *core, void **state, const char *caller);
 CoreStatus coreSetFMUState(Core *core, const void *state, const char *caller);
 CoreStatus coreFreeFMUState(Core *core, void **state);
+
+/* Defines the FMU-state functions of an FMI version, the same in FMI 2.0 and 3.0: get,
+ * set and free keep a copy of the instance data in memory (coreGetFMUState ...), and
+ * the serialization of an FMU state is not supported. Status, Instance, FMUState and
+ * Byte are the version's types; the other arguments name the functions (as the FMI
+ * headers declare them), so that each stands in its wrapper by name. */
+#define CORE_FMU_STATE_FUNCTIONS(Status, Instance, FMUState, Byte, get, set, freeState,     \
+                                 serializedSize, serialize, deserialize)                  \
+    Status get(Instance instance, FMUState *state) {                                      \
+        return (Status)coreGetFMUState((Core *)instance, state, #get);                    \
+    }                                                                                     \
+    Status set(Instance instance, FMUState state) {                                       \
+        return (Status)coreSetFMUState((Core *)instance, state, #set);                    \
+    }                                                                                     \
+    Status freeState(Instance instance, FMUState *state) {                                \
+        return (Status)coreFreeFMUState((Core *)instance, state);                         \
+    }                                                                                     \
+    Status serializedSize(Instance instance, FMUState state, size_t *size) {              \
+        (void)state;                                                                      \
+        (void)size;                                                                       \
+        return (Status)coreFail((Core *)instance, #serializedSize, "not supported");      \
+    }                                                                                     \
+    Status serialize(Instance instance, FMUState state, Byte serializedState[],           \
+                     size_t size) {                                                       \
+        (void)state;                                                                      \
+        (void)serializedState;                                                            \
+        (void)size;                                                                       \
+        return (Status)coreFail((Core *)instance, #serialize, "not supported");           \
+    }                                                                                     \
+    Status deserialize(Instance instance, const Byte serializedState[], size_t size,      \
+                       FMUState *state) {                                                 \
+        (void)serializedState;                                                            \
+        (void)size;                                                                       \
+        (void)state;                                                                      \
+        return (Status)coreFail((Core *)instance, #deserialize, "not supported");         \
+    }
 
 /* Model Exchange. */
 CoreStatus coreInitModes(Core *core, const char *caller);
