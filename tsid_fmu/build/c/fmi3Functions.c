@@ -368,74 +368,32 @@ static fmi3Status noClocks(fmi3Instance instance, size_t nValueReferences, const
     return noVariables(instance, nValueReferences, f, "the model has no Clocks");
 }
 
-fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, fmi3Clock values[]) {
-    unused(valueReferences, values);
-    return noClocks(instance, nValueReferences, "fmi3GetClock");
-}
+/* Defines the Clock function F(instance, valueReferences, nValueReferences, ...): the
+ * model has no Clocks (noClocks). The parameters after nValueReferences follow the names
+ * of its arrays in parentheses; those arrays are not used. */
+#define NO_CLOCKS(F, arrays, ...)                                                        \
+    fmi3Status F(fmi3Instance instance, const fmi3ValueReference valueReferences[],      \
+                 size_t nValueReferences, __VA_ARGS__) {                                 \
+        unused(valueReferences);                                                         \
+        unused arrays;                                                                   \
+        return noClocks(instance, nValueReferences, #F);                                 \
+    }
 
-fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, const fmi3Clock values[]) {
-    unused(valueReferences, values);
-    return noClocks(instance, nValueReferences, "fmi3SetClock");
-}
-
-fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
-                                  const fmi3ValueReference valueReferences[],
-                                  size_t nValueReferences, fmi3Float64 intervals[],
-                                  fmi3IntervalQualifier qualifiers[]) {
-    unused(valueReferences, intervals, qualifiers);
-    return noClocks(instance, nValueReferences, "fmi3GetIntervalDecimal");
-}
-
-fmi3Status fmi3GetIntervalFraction(fmi3Instance instance,
-                                   const fmi3ValueReference valueReferences[],
-                                   size_t nValueReferences, fmi3UInt64 counters[],
-                                   fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[]) {
-    unused(valueReferences, counters, resolutions, qualifiers);
-    return noClocks(instance, nValueReferences, "fmi3GetIntervalFraction");
-}
-
-fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                               size_t nValueReferences, fmi3Float64 shifts[]) {
-    unused(valueReferences, shifts);
-    return noClocks(instance, nValueReferences, "fmi3GetShiftDecimal");
-}
-
-fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, fmi3UInt64 counters[],
-                                fmi3UInt64 resolutions[]) {
-    unused(valueReferences, counters, resolutions);
-    return noClocks(instance, nValueReferences, "fmi3GetShiftFraction");
-}
-
-fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance,
-                                  const fmi3ValueReference valueReferences[],
-                                  size_t nValueReferences, const fmi3Float64 intervals[]) {
-    unused(valueReferences, intervals);
-    return noClocks(instance, nValueReferences, "fmi3SetIntervalDecimal");
-}
-
-fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
-                                   const fmi3ValueReference valueReferences[],
-                                   size_t nValueReferences, const fmi3UInt64 counters[],
-                                   const fmi3UInt64 resolutions[]) {
-    unused(valueReferences, counters, resolutions);
-    return noClocks(instance, nValueReferences, "fmi3SetIntervalFraction");
-}
-
-fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                               size_t nValueReferences, const fmi3Float64 shifts[]) {
-    unused(valueReferences, shifts);
-    return noClocks(instance, nValueReferences, "fmi3SetShiftDecimal");
-}
-
-fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, const fmi3UInt64 counters[],
-                                const fmi3UInt64 resolutions[]) {
-    unused(valueReferences, counters, resolutions);
-    return noClocks(instance, nValueReferences, "fmi3SetShiftFraction");
-}
+NO_CLOCKS(fmi3GetClock, (values), fmi3Clock values[])
+NO_CLOCKS(fmi3SetClock, (values), const fmi3Clock values[])
+NO_CLOCKS(fmi3GetIntervalDecimal, (intervals, qualifiers), fmi3Float64 intervals[],
+          fmi3IntervalQualifier qualifiers[])
+NO_CLOCKS(fmi3GetIntervalFraction, (counters, resolutions, qualifiers), fmi3UInt64 counters[],
+          fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[])
+NO_CLOCKS(fmi3GetShiftDecimal, (shifts), fmi3Float64 shifts[])
+NO_CLOCKS(fmi3GetShiftFraction, (counters, resolutions), fmi3UInt64 counters[],
+          fmi3UInt64 resolutions[])
+NO_CLOCKS(fmi3SetIntervalDecimal, (intervals), const fmi3Float64 intervals[])
+NO_CLOCKS(fmi3SetIntervalFraction, (counters, resolutions), const fmi3UInt64 counters[],
+          const fmi3UInt64 resolutions[])
+NO_CLOCKS(fmi3SetShiftDecimal, (shifts), const fmi3Float64 shifts[])
+NO_CLOCKS(fmi3SetShiftFraction, (counters, resolutions), const fmi3UInt64 counters[],
+          const fmi3UInt64 resolutions[])
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
     return fail(instance, "fmi3EvaluateDiscreteStates",
