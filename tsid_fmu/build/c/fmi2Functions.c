@@ -99,27 +99,20 @@ void fmi2FreeInstance(fmi2Component c) { coreFree((Core *)c); }
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
                                fmi2Real tolerance, fmi2Real startTime,
                                fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
-    CHECK("fmi2SetupExperiment", StateInstantiated);
-    coreSetupExperiment((Core *)c, toleranceDefined, tolerance, startTime, stopTimeDefined,
-                        stopTime);
-    return fmi2OK;
+    return (fmi2Status)coreSetupExperiment((Core *)c, toleranceDefined, tolerance, startTime,
+                                           stopTimeDefined, stopTime, "fmi2SetupExperiment");
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
-    CHECK("fmi2EnterInitializationMode", StateInstantiated);
-    coreEnterInitializationMode((Core *)c);
-    return fmi2OK;
+    return (fmi2Status)coreEnterInitializationMode((Core *)c, "fmi2EnterInitializationMode");
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-    CHECK("fmi2ExitInitializationMode", StateInitializationMode);
     return (fmi2Status)coreExitInitializationMode((Core *)c, "fmi2ExitInitializationMode");
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
-    CHECK("fmi2Terminate", StateEventMode | StateContinuousTimeMode | StateStepMode);
-    ((Core *)c)->state = StateTerminated;
-    return fmi2OK;
+    return (fmi2Status)coreTerminate((Core *)c, "fmi2Terminate");
 }
 
 fmi2Status fmi2Reset(fmi2Component c) { return (fmi2Status)coreReset((Core *)c); }
@@ -175,41 +168,12 @@ NO_VARIABLES(String)
 
 /* ------------------------------------------------------------------- FMU state */
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    CHECK("fmi2GetFMUstate", ANY_STATE);
-    return (fmi2Status)coreGetFMUState((Core *)c, FMUstate, "fmi2GetFMUstate");
-}
-
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
-    CHECK("fmi2SetFMUstate", ANY_STATE);
-    return (fmi2Status)coreSetFMUState((Core *)c, FMUstate, "fmi2SetFMUstate");
-}
-
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    return (fmi2Status)coreFreeFMUState((Core *)c, FMUstate);
-}
-
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
-    (void)FMUstate;
-    (void)size;
-    return fail(c, "fmi2SerializedFMUstateSize", "not supported");
-}
-
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte bytes[],
-                                 size_t size) {
-    (void)FMUstate;
-    (void)bytes;
-    (void)size;
-    return fail(c, "fmi2SerializeFMUstate", "not supported");
-}
-
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[],
-                                   size_t size, fmi2FMUstate *FMUstate) {
-    (void)serializedState;
-    (void)size;
-    (void)FMUstate;
-    return fail(c, "fmi2DeSerializeFMUstate", "not supported");
-}
+/* fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate: a copy of the instance data in
+ * memory; fmi2SerializedFMUstateSize, fmi2SerializeFMUstate, fmi2DeSerializeFMUstate: not
+ * supported. Defined as in FMI 3.0 by CORE_FMU_STATE_FUNCTIONS (tsid_core.h). */
+CORE_FMU_STATE_FUNCTIONS(fmi2Status, fmi2Component, fmi2FMUstate, fmi2Byte, fmi2GetFMUstate,
+                         fmi2SetFMUstate, fmi2FreeFMUstate, fmi2SerializedFMUstateSize,
+                         fmi2SerializeFMUstate, fmi2DeSerializeFMUstate)
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown[],
                                         size_t nUnknown, const fmi2ValueReference vKnown[],
@@ -298,12 +262,10 @@ fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], s
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
-    CHECK("fmi2GetContinuousStates", ANY_STATE);
     return (fmi2Status)coreGetContinuousStates((Core *)c, x, nx, "fmi2GetContinuousStates");
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx) {
-    CHECK("fmi2GetNominalsOfContinuousStates", ANY_STATE);
     return (fmi2Status)coreGetNominals((Core *)c, x_nominal, nx,
                                        "fmi2GetNominalsOfContinuousStates");
 }

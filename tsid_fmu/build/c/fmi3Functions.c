@@ -176,15 +176,16 @@ void fmi3FreeInstance(fmi3Instance instance) { coreFree((Core *)instance); }
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined,
                                        fmi3Float64 tolerance, fmi3Float64 startTime,
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
-    CHECK("fmi3EnterInitializationMode", StateInstantiated);
-    coreSetupExperiment((Core *)instance, toleranceDefined, tolerance, startTime,
-                        stopTimeDefined, stopTime);
-    coreEnterInitializationMode((Core *)instance);
-    return fmi3OK;
+    /* FMI 2.0's fmi2SetupExperiment and fmi2EnterInitializationMode in one */
+    const char *f = "fmi3EnterInitializationMode";
+    if (coreSetupExperiment((Core *)instance, toleranceDefined, tolerance, startTime,
+                            stopTimeDefined, stopTime, f) != CoreOK) {
+        return fmi3Error;
+    }
+    return (fmi3Status)coreEnterInitializationMode((Core *)instance, f);
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
-    CHECK("fmi3ExitInitializationMode", StateInitializationMode);
     return (fmi3Status)coreExitInitializationMode((Core *)instance, "fmi3ExitInitializationMode");
 }
 
@@ -195,9 +196,7 @@ fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance) {
-    CHECK("fmi3Terminate", RUNNING);
-    ((Core *)instance)->state = StateTerminated;
-    return fmi3OK;
+    return (fmi3Status)coreTerminate((Core *)instance, "fmi3Terminate");
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance) { return (fmi3Status)coreReset((Core *)instance); }
@@ -327,42 +326,12 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
 
 /* ------------------------------------------------------------------- FMU state */
 
-fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    CHECK("fmi3GetFMUState", ANY_STATE);
-    return (fmi3Status)coreGetFMUState((Core *)instance, FMUState, "fmi3GetFMUState");
-}
-
-fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
-    CHECK("fmi3SetFMUState", ANY_STATE);
-    return (fmi3Status)coreSetFMUState((Core *)instance, FMUState, "fmi3SetFMUState");
-}
-
-fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    return (fmi3Status)coreFreeFMUState((Core *)instance, FMUState);
-}
-
-fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState,
-                                      size_t *size) {
-    (void)FMUState;
-    (void)size;
-    return fail(instance, "fmi3SerializedFMUStateSize", "not supported");
-}
-
-fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
-                                 fmi3Byte serializedState[], size_t size) {
-    (void)FMUState;
-    (void)serializedState;
-    (void)size;
-    return fail(instance, "fmi3SerializeFMUState", "not supported");
-}
-
-fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[],
-                                   size_t size, fmi3FMUState *FMUState) {
-    (void)serializedState;
-    (void)size;
-    (void)FMUState;
-    return fail(instance, "fmi3DeserializeFMUState", "not supported");
-}
+/* fmi3GetFMUState, fmi3SetFMUState, fmi3FreeFMUState: a copy of the instance data in
+ * memory; fmi3SerializedFMUStateSize, fmi3SerializeFMUState, fmi3DeserializeFMUState: not
+ * supported. Defined as in FMI 2.0 by CORE_FMU_STATE_FUNCTIONS (tsid_core.h). */
+CORE_FMU_STATE_FUNCTIONS(fmi3Status, fmi3Instance, fmi3FMUState, fmi3Byte, fmi3GetFMUState,
+                         fmi3SetFMUState, fmi3FreeFMUState, fmi3SerializedFMUStateSize,
+                         fmi3SerializeFMUState, fmi3DeserializeFMUState)
 
 #define NO_DERIVATIVES(F)                                                                   \
     fmi3Status F(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns, \
@@ -399,74 +368,32 @@ static fmi3Status noClocks(fmi3Instance instance, size_t nValueReferences, const
     return noVariables(instance, nValueReferences, f, "the model has no Clocks");
 }
 
-fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, fmi3Clock values[]) {
-    unused(valueReferences, values);
-    return noClocks(instance, nValueReferences, "fmi3GetClock");
-}
+/* Defines the Clock function F(instance, valueReferences, nValueReferences, ...): the
+ * model has no Clocks (noClocks). The parameters after nValueReferences follow the names
+ * of its arrays in parentheses; those arrays are not used. */
+#define NO_CLOCKS(F, arrays, ...)                                                        \
+    fmi3Status F(fmi3Instance instance, const fmi3ValueReference valueReferences[],      \
+                 size_t nValueReferences, __VA_ARGS__) {                                 \
+        unused(valueReferences);                                                         \
+        unused arrays;                                                                   \
+        return noClocks(instance, nValueReferences, #F);                                 \
+    }
 
-fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                        size_t nValueReferences, const fmi3Clock values[]) {
-    unused(valueReferences, values);
-    return noClocks(instance, nValueReferences, "fmi3SetClock");
-}
-
-fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance,
-                                  const fmi3ValueReference valueReferences[],
-                                  size_t nValueReferences, fmi3Float64 intervals[],
-                                  fmi3IntervalQualifier qualifiers[]) {
-    unused(valueReferences, intervals, qualifiers);
-    return noClocks(instance, nValueReferences, "fmi3GetIntervalDecimal");
-}
-
-fmi3Status fmi3GetIntervalFraction(fmi3Instance instance,
-                                   const fmi3ValueReference valueReferences[],
-                                   size_t nValueReferences, fmi3UInt64 counters[],
-                                   fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[]) {
-    unused(valueReferences, counters, resolutions, qualifiers);
-    return noClocks(instance, nValueReferences, "fmi3GetIntervalFraction");
-}
-
-fmi3Status fmi3GetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                               size_t nValueReferences, fmi3Float64 shifts[]) {
-    unused(valueReferences, shifts);
-    return noClocks(instance, nValueReferences, "fmi3GetShiftDecimal");
-}
-
-fmi3Status fmi3GetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, fmi3UInt64 counters[],
-                                fmi3UInt64 resolutions[]) {
-    unused(valueReferences, counters, resolutions);
-    return noClocks(instance, nValueReferences, "fmi3GetShiftFraction");
-}
-
-fmi3Status fmi3SetIntervalDecimal(fmi3Instance instance,
-                                  const fmi3ValueReference valueReferences[],
-                                  size_t nValueReferences, const fmi3Float64 intervals[]) {
-    unused(valueReferences, intervals);
-    return noClocks(instance, nValueReferences, "fmi3SetIntervalDecimal");
-}
-
-fmi3Status fmi3SetIntervalFraction(fmi3Instance instance,
-                                   const fmi3ValueReference valueReferences[],
-                                   size_t nValueReferences, const fmi3UInt64 counters[],
-                                   const fmi3UInt64 resolutions[]) {
-    unused(valueReferences, counters, resolutions);
-    return noClocks(instance, nValueReferences, "fmi3SetIntervalFraction");
-}
-
-fmi3Status fmi3SetShiftDecimal(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                               size_t nValueReferences, const fmi3Float64 shifts[]) {
-    unused(valueReferences, shifts);
-    return noClocks(instance, nValueReferences, "fmi3SetShiftDecimal");
-}
-
-fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                                size_t nValueReferences, const fmi3UInt64 counters[],
-                                const fmi3UInt64 resolutions[]) {
-    unused(valueReferences, counters, resolutions);
-    return noClocks(instance, nValueReferences, "fmi3SetShiftFraction");
-}
+NO_CLOCKS(fmi3GetClock, (values), fmi3Clock values[])
+NO_CLOCKS(fmi3SetClock, (values), const fmi3Clock values[])
+NO_CLOCKS(fmi3GetIntervalDecimal, (intervals, qualifiers), fmi3Float64 intervals[],
+          fmi3IntervalQualifier qualifiers[])
+NO_CLOCKS(fmi3GetIntervalFraction, (counters, resolutions, qualifiers), fmi3UInt64 counters[],
+          fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[])
+NO_CLOCKS(fmi3GetShiftDecimal, (shifts), fmi3Float64 shifts[])
+NO_CLOCKS(fmi3GetShiftFraction, (counters, resolutions), fmi3UInt64 counters[],
+          fmi3UInt64 resolutions[])
+NO_CLOCKS(fmi3SetIntervalDecimal, (intervals), const fmi3Float64 intervals[])
+NO_CLOCKS(fmi3SetIntervalFraction, (counters, resolutions), const fmi3UInt64 counters[],
+          const fmi3UInt64 resolutions[])
+NO_CLOCKS(fmi3SetShiftDecimal, (shifts), const fmi3Float64 shifts[])
+NO_CLOCKS(fmi3SetShiftFraction, (counters, resolutions), const fmi3UInt64 counters[],
+          const fmi3UInt64 resolutions[])
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
     return fail(instance, "fmi3EvaluateDiscreteStates",
@@ -553,17 +480,14 @@ fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndica
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[],
                                    size_t nContinuousStates) {
-    const char *f = "fmi3GetContinuousStates";
-    CHECK(f, ANY_STATE);
     return (fmi3Status)coreGetContinuousStates((Core *)instance, continuousStates,
-                                               nContinuousStates, f);
+                                               nContinuousStates, "fmi3GetContinuousStates");
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
                                              size_t nContinuousStates) {
-    const char *f = "fmi3GetNominalsOfContinuousStates";
-    CHECK(f, ANY_STATE);
-    return (fmi3Status)coreGetNominals((Core *)instance, nominals, nContinuousStates, f);
+    return (fmi3Status)coreGetNominals((Core *)instance, nominals, nContinuousStates,
+                                       "fmi3GetNominalsOfContinuousStates");
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {

@@ -212,25 +212,32 @@ CoreStatus coreSetReals(Core *core, const unsigned int vr[], size_t nvr, const d
 
 /* ------------------------------------------------------- initialization, FMU state */
 
-void coreSetupExperiment(Core *core, int toleranceDefined, double tolerance, double startTime,
-                         int stopTimeDefined, double stopTime) {
+CoreStatus coreSetupExperiment(Core *core, int toleranceDefined, double tolerance,
+                               double startTime, int stopTimeDefined, double stopTime,
+                               const char *caller) {
     (void)toleranceDefined;
     (void)tolerance;
     (void)stopTimeDefined;
     (void)stopTime;
+    if (!coreAllowed(core, StateInstantiated, caller)) return CoreError;
     core->d.time = startTime;
     core->d.startTime = startTime;
     core->d.nSteps = 0;
     coreInvalidate(core, 1);
+    return CoreOK;
 }
 
-void coreEnterInitializationMode(Core *core) {
+CoreStatus coreEnterInitializationMode(Core *core, const char *caller) {
+    if (!coreAllowed(core, StateInstantiated, caller)) return CoreError;
     core->state = StateInitializationMode;
     coreInvalidate(core, 1);
+    return CoreOK;
 }
 
 CoreStatus coreExitInitializationMode(Core *core, const char *caller) {
-    double h = core->d.r[VR_FIXED_STEP];
+    double h;
+    if (!coreAllowed(core, StateInitializationMode, caller)) return CoreError;
+    h = core->d.r[VR_FIXED_STEP];
     if (!(h > 0.0) || !isfinite(h)) {
         coreLog(core, CoreError, "logStatusError", "%s: fixedStepSize = %g must be > 0",
                 caller, h);
@@ -247,8 +254,17 @@ CoreStatus coreExitInitializationMode(Core *core, const char *caller) {
     return CoreOK;
 }
 
+CoreStatus coreTerminate(Core *core, const char *caller) {
+    if (!coreAllowed(core, StateEventMode | StateContinuousTimeMode | StateStepMode, caller)) {
+        return CoreError;
+    }
+    core->state = StateTerminated;
+    return CoreOK;
+}
+
 CoreStatus coreGetFMUState(Core *core, void **state, const char *caller) {
     CoreData *copy;
+    if (!coreAllowed(core, ANY_STATE, caller)) return CoreError;
     if (!state) return coreFail(core, caller, "NULL argument");
     copy = *state ? (CoreData *)*state : (CoreData *)malloc(sizeof(CoreData));
     if (!copy) return coreFail(core, caller, "out of memory");
@@ -258,6 +274,7 @@ CoreStatus coreGetFMUState(Core *core, void **state, const char *caller) {
 }
 
 CoreStatus coreSetFMUState(Core *core, const void *state, const char *caller) {
+    if (!coreAllowed(core, ANY_STATE, caller)) return CoreError;
     if (!state) return coreFail(core, caller, "NULL state");
     core->d = *(const CoreData *)state;
     core->d.dirty = 1;
@@ -419,6 +436,7 @@ CoreStatus coreSetContinuousStates(Core *core, const double x[], size_t n, const
 
 CoreStatus coreGetContinuousStates(Core *core, double x[], size_t n, const char *caller) {
     size_t i;
+    if (!coreAllowed(core, ANY_STATE, caller)) return CoreError;
     if (checkStates(core, x, n, caller) != CoreOK) return CoreError;
     for (i = 0; i < n; i++) x[i] = core->d.r[X_OFF + i];
     return CoreOK;
@@ -426,6 +444,7 @@ CoreStatus coreGetContinuousStates(Core *core, double x[], size_t n, const char 
 
 CoreStatus coreGetNominals(Core *core, double nominals[], size_t n, const char *caller) {
     size_t i;
+    if (!coreAllowed(core, ANY_STATE, caller)) return CoreError;
     if (checkStates(core, nominals, n, caller) != CoreOK) return CoreError;
     for (i = 0; i < n; i++) nominals[i] = 1.0;
     return CoreOK;

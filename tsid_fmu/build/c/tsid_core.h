@@ -4,8 +4,9 @@
  * logger) and all that both FMI versions do alike, from the checks of arguments and
  * log messages to initialization, FMU states, event handling and the Co-Simulation
  * step. A wrapper keeps what is version-specific: the signatures, the modes in which
- * each function may be called, and the importer's callbacks. The core knows the model
- * only through the generated model.h / model.c:
+ * each function may be called where the versions differ in them, and the importer's
+ * callbacks; where the versions agree, the core function checks the mode itself (each
+ * says which). The core knows the model only through the generated model.h / model.c:
  *   - the real array r[] (value reference = index): states, derivatives, inputs,
  *     outputs + locals, parameters, fixedStepSize;
  *   - live equations: model_ode, model_eval, model_zc;
@@ -135,13 +136,17 @@ int coreIsInput(unsigned int vr);
 void coreInvalidate(Core *core, int initPhase);
 
 /* Initialization: the experiment (only its start time matters: the Co-Simulation
- * integrator has a fixed step and no stop time), then the end of Initialization Mode:
- * checks fixedStepSize, sets the modes and evaluates the model, then StateEventMode
- * (Model Exchange) or StateStepMode. */
-void coreSetupExperiment(Core *core, int toleranceDefined, double tolerance, double startTime,
-                         int stopTimeDefined, double stopTime);
-void coreEnterInitializationMode(Core *core);
+ * integrator has a fixed step and no stop time) and Initialization Mode, both only in
+ * StateInstantiated; then the end of Initialization Mode (only in it): checks
+ * fixedStepSize, sets the modes and evaluates the model, then StateEventMode (Model
+ * Exchange) or StateStepMode. */
+CoreStatus coreSetupExperiment(Core *core, int toleranceDefined, double tolerance,
+                               double startTime, int stopTimeDefined, double stopTime,
+                               const char *caller);
+CoreStatus coreEnterInitializationMode(Core *core, const char *caller);
 CoreStatus coreExitInitializationMode(Core *core, const char *caller);
+/* StateTerminated, from Event, Continuous-Time or Step Mode. */
+CoreStatus coreTerminate(Core *core, const char *caller);
 
 /* Derivatives and algebraic variables of the current state. */
 CoreStatus coreEvaluate(Core *core, const char *caller);
@@ -155,10 +160,47 @@ CoreStatus coreRefresh(Core *core, const char *caller);
 CoreStatus coreSetReals(Core *core, const unsigned int vr[], size_t nvr, const double value[],
                         const char *caller);
 
-/* FMU state: a copy of the CoreData, in *state (allocated if *state is NULL). */
+/* FMU state: a copy of the CoreData, in *state (allocated if *state is NULL); get and
+ * set in any mode. */
 CoreStatus coreGetFMUState(Core *core, void **state, const char *caller);
 CoreStatus coreSetFMUState(Core *core, const void *state, const char *caller);
 CoreStatus coreFreeFMUState(Core *core, void **state);
+
+/* Defines the FMU-state functions of an FMI version, the same in FMI 2.0 and 3.0: get,
+ * set and free keep a copy of the instance data in memory (coreGetFMUState ...), and
+ * the serialization of an FMU state is not supported. Status, Instance, FMUState and
+ * Byte are the version's types; the other arguments name the functions (as the FMI
+ * headers declare them), so that each stands in its wrapper by name. */
+#define CORE_FMU_STATE_FUNCTIONS(Status, Instance, FMUState, Byte, get, set, freeState,     \
+                                 serializedSize, serialize, deserialize)                  \
+    Status get(Instance instance, FMUState *state) {                                      \
+        return (Status)coreGetFMUState((Core *)instance, state, #get);                    \
+    }                                                                                     \
+    Status set(Instance instance, FMUState state) {                                       \
+        return (Status)coreSetFMUState((Core *)instance, state, #set);                    \
+    }                                                                                     \
+    Status freeState(Instance instance, FMUState *state) {                                \
+        return (Status)coreFreeFMUState((Core *)instance, state);                         \
+    }                                                                                     \
+    Status serializedSize(Instance instance, FMUState state, size_t *size) {              \
+        (void)state;                                                                      \
+        (void)size;                                                                       \
+        return (Status)coreFail((Core *)instance, #serializedSize, "not supported");      \
+    }                                                                                     \
+    Status serialize(Instance instance, FMUState state, Byte serializedState[],           \
+                     size_t size) {                                                       \
+        (void)state;                                                                      \
+        (void)serializedState;                                                            \
+        (void)size;                                                                       \
+        return (Status)coreFail((Core *)instance, #serialize, "not supported");           \
+    }                                                                                     \
+    Status deserialize(Instance instance, const Byte serializedState[], size_t size,      \
+                       FMUState *state) {                                                 \
+        (void)serializedState;                                                            \
+        (void)size;                                                                       \
+        (void)state;                                                                      \
+        return (Status)coreFail((Core *)instance, #deserialize, "not supported");         \
+    }
 
 /* Model Exchange. */
 CoreStatus coreInitModes(Core *core, const char *caller);
@@ -169,7 +211,8 @@ void coreEnterEventMode(Core *core);
 CoreStatus coreUpdateModes(Core *core, int *changed, const char *caller);
 CoreStatus coreModeChangePending(Core *core, int *pending, const char *caller);
 void coreSetTime(Core *core, double time);
-/* Arrays of the continuous states: n must be NX (ni: NREL). */
+/* Arrays of the continuous states: n must be NX (ni: NREL). Their getters (not those of
+ * the derivatives and event indicators) in any mode. */
 CoreStatus coreSetContinuousStates(Core *core, const double x[], size_t n, const char *caller);
 CoreStatus coreGetContinuousStates(Core *core, double x[], size_t n, const char *caller);
 CoreStatus coreGetNominals(Core *core, double nominals[], size_t n, const char *caller);
