@@ -2,6 +2,7 @@
 
 import math
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -112,3 +113,21 @@ def test_python_api_builds_the_same_study(tmp_path):
             parameters=[Parameter("k", [1, 2]), Parameter("k", [1, 2])],
             experiments=[Experiment(data="d.csv", outputs={"y": "y"})],
         )
+
+
+def test_study_with_dataframe_data_round_trips_through_toml(tmp_path):
+    """Data given as a DataFrame is written as CSV beside the study file and read back."""
+    import pandas as pd
+
+    (tmp_path / "plant.fmu").write_bytes(b"PK")
+    frame = pd.DataFrame({"time": [0.0, 0.1, 0.2], "u": [1.0, 2.0, 3.0], "y": [0.5, 0.25, 0.0]})
+    s = Study(
+        fmu=tmp_path / "plant.fmu",
+        parameters=[Parameter("k", [1, 2, 3], min=0)],
+        experiments=[Experiment(data=frame, inputs={"u": "u"}, outputs={"y": "y"}, name="step")],
+    )
+    back = Study.from_toml(s.to_toml(tmp_path / "study.toml"))
+    assert Path(back.experiments[0].data) == tmp_path / "study_step.csv"
+    pd.testing.assert_frame_equal(pd.read_csv(back.experiments[0].data), frame)
+    assert back.experiments[0].inputs == {"u": "u"} and back.experiments[0].outputs == {"y": "y"}
+    assert back.first_levels() == s.first_levels()

@@ -355,10 +355,16 @@ def _relative(path: Path, base: Path) -> str:
         return str(path)
 
 
-def _non_default(obj: Any) -> dict[str, Any]:
-    """Fields of a dataclass that differ from their defaults (None values dropped)."""
+def _non_default(obj: Any, skip: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Fields of a dataclass that differ from their defaults (None values dropped).
+
+    Fields named in ``skip`` are left out (an experiment's data, which may be a
+    DataFrame, is written on its own).
+    """
     out = {}
     for f in dataclasses.fields(obj):
+        if f.name in skip:
+            continue
         value = getattr(obj, f.name)
         default = (
             f.default
@@ -380,7 +386,7 @@ def _experiment_table(e: Experiment, base: Path, stem: str) -> dict[str, Any]:
         e.data.to_csv(base / name, index=False)
         file = name
     table: dict[str, Any] = {"file": file, "name": e.name}
-    fields = _non_default(e)
+    fields = _non_default(e, skip=("data",))
     for key, out in (
         ("time_column", "time"),
         ("inputs", "inputs"),
