@@ -170,8 +170,8 @@ def ranged_problem(
     name: str,
     fmu: Path,
     experiment: ProblemExperiment,
-    truth: dict[str, float],
     ranges: dict[str, tuple[float, float, str]],
+    truth: dict[str, float],
     noise: dict[str, float],
     notes: str,
 ) -> Problem:

@@ -124,26 +124,22 @@ def make_data(seed: int = 1) -> pd.DataFrame:
     return pd.DataFrame({"time": t, "u": u, "y": y})
 
 
+NOTES = (
+    "Multimodal along omega (11 local minima at fixed zeta, k). least_squares from "
+    "the centre of the ranges stops at omega 6.37 with zeta on its upper bound "
+    "(cost ~1000x the noise floor); from the omega = 2 corners it stops at omega "
+    "2 or 3.13, from the omega = 20 corners it finds the truth. The global minimum "
+    "is unique (the truth). FMU built from Modelica with tsid_fmu.build."
+)
+"""What the benchmark table prints beside this problem."""
+
+
 def local_minima(seed: int = 1) -> Problem:
     """The ringing oscillator's problem: one experiment ``steps``, input ``u``, output ``y``."""
     experiment = ProblemExperiment(
         name="steps", data=make_data(seed), inputs={"u": "u"}, outputs={"y": "y"}, derived={}
     )
-    return ranged_problem(
-        "local_minima",
-        build_fmu(),
-        experiment,
-        TRUTH,
-        RANGES,
-        NOISE,
-        notes=(
-            "Multimodal along omega (11 local minima at fixed zeta, k). least_squares from "
-            "the centre of the ranges stops at omega 6.37 with zeta on its upper bound "
-            "(cost ~1000x the noise floor); from the omega = 2 corners it stops at omega "
-            "2 or 3.13, from the omega = 20 corners it finds the truth. The global minimum "
-            "is unique (the truth). FMU built from Modelica with tsid_fmu.build."
-        ),
-    )
+    return ranged_problem("local_minima", build_fmu(), experiment, RANGES, TRUTH, NOISE, NOTES)
 
 
 def fit(fmu_session, t: np.ndarray, data: pd.DataFrame, start: dict[str, float]) -> tuple:
