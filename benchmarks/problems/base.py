@@ -6,6 +6,12 @@ FMU itself), the mapping of columns to FMU inputs and outputs, the first paramet
 levels, and -- unlike a real lab -- the truth and the true sensor noise, so that a
 benchmark can score the answer.
 
+Each problem module has a factory ``<name>(seed: int = 1) -> Problem`` (``seed`` seeds
+the sensor noise only: the excitation is always the same) that builds the FMU into
+:data:`CACHE` if needed, and a self-check (``python benchmarks/problems/<name>.py``).
+The sample instants and the exact zero-order-hold solution are those of the examples'
+data generators (``examples/_datagen.py``).
+
 This module deliberately has no ``from __future__ import annotations``: its dataclasses
 then work even when the module is loaded from a file path without being registered in
 ``sys.modules``.
@@ -14,7 +20,11 @@ then work even when the module is loaded from a file path without being register
 import hashlib
 import importlib.util
 import math
+import os
 import sys
+import tempfile
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -105,6 +115,14 @@ def load_module(path: Path, name: str) -> ModuleType:
     return module
 
 
+#: ``examples/_datagen.py``, under the name the examples' generators import it by.
+DATAGEN = load_module(REPO / "examples" / "_datagen.py", "_datagen")
+#: Sample instants ``t_k = k / rate`` from 0 to ``duration`` (s), as the examples'.
+sample_times = DATAGEN.sample_times
+#: Exact response of a linear system to an input held per sample, as the examples'.
+zoh_response = DATAGEN.zoh_response
+
+
 def levels(low: float, high: float, n: int = 5) -> list[float]:
     """``n`` levels from ``low`` to ``high``: log-spaced when they span a decade or more."""
     if high / low >= 10.0 - 1e-12:
@@ -126,17 +144,51 @@ def log_position(value: float, low: float, high: float) -> float:
     return math.log(value / low) / math.log(high / low)
 
 
-def sample_times(duration: float = 10.0, rate: float = 1000.0) -> np.ndarray:
-    """Sample instants ``t_k = k / rate`` from 0 to ``duration`` (s)."""
-    return np.round(np.arange(round(duration * rate) + 1) / rate, 9)
-
-
 def cached_path(stem: str, source: str, suffix: str = ".fmu") -> Path:
     """Cache path of an artefact built from ``source`` (a new path when it changes)."""
     digest = hashlib.sha256(source.encode()).hexdigest()[:12]
     folder = CACHE / f"{stem}-{digest}"
     folder.mkdir(parents=True, exist_ok=True)
     return folder / f"{stem}{suffix}"
+
+
+def cached_build(stem: str, source: str, build: Callable[[Path], Path]) -> Path:
+    """The FMU ``stem`` built from ``source``, from the cache or built into it once.
+
+    ``build(folder)`` makes the FMU in a scratch folder beside the cached one and returns
+    its path; it is then moved into place atomically, so a concurrent build cannot leave
+    half a file.
+    """
+    fmu = cached_path(stem, source)
+    if not fmu.exists():
+        with tempfile.TemporaryDirectory(dir=fmu.parent) as tmp:
+            os.replace(build(Path(tmp)), fmu)
+    return fmu
+
+
+def ranged_problem(
+    name: str,
+    fmu: Path,
+    experiment: ProblemExperiment,
+    ranges: dict[str, tuple[float, float, str]],
+    truth: dict[str, float],
+    noise: dict[str, float],
+    notes: str,
+) -> Problem:
+    """A problem with one experiment and first levels from ``ranges``.
+
+    ``ranges`` maps each parameter to ``(low, high, unit)``: see :func:`parameter`.
+    """
+    return Problem(
+        name=name,
+        fmu=fmu,
+        truth=dict(truth),
+        parameters={k: parameter(lo, hi, unit) for k, (lo, hi, unit) in ranges.items()},
+        experiments=[experiment],
+        noise=dict(noise),
+        start_values={},
+        notes=notes,
+    )
 
 
 def simulate_fmu(
@@ -165,6 +217,36 @@ def rms_over_sigma(a: np.ndarray, b: np.ndarray, sigma: float) -> tuple[float, f
     """RMS and maximum of ``a - b`` in units of ``sigma``."""
     d = np.asarray(a) - np.asarray(b)
     return float(np.sqrt(np.mean(d**2)) / sigma), float(np.max(np.abs(d)) / sigma)
+
+
+def introduce(
+    factory: Callable[[], Problem], build_fmu: Callable[[], Path] | None = None, what: str = ""
+) -> Problem:
+    """Start a self-check: build or find the FMU, make the problem, print both and timings.
+
+    Parameters
+    ----------
+    factory : callable
+        Makes the problem.
+    build_fmu : callable, optional
+        Builds the FMU into the cache (timed on its own); ``None`` for a committed FMU.
+    what : str
+        Appended to the generator's timing line.
+
+    Returns
+    -------
+    Problem
+        The problem ``factory`` made.
+    """
+    if build_fmu is not None:
+        t0 = time.perf_counter()
+        fmu = build_fmu()
+        print(f"FMU {fmu} ({time.perf_counter() - t0:.1f} s to build or find)")
+    t0 = time.perf_counter()
+    problem = factory()
+    print(f"generator: {time.perf_counter() - t0:.2f} s{what}")
+    print(describe(problem))
+    return problem
 
 
 def describe(problem: Problem) -> str:

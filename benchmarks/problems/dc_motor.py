@@ -17,28 +17,26 @@ each, log-spaced, with the truth off centre (at 30 % or 70 % of the log range).
 Run:  python benchmarks/problems/dc_motor.py   (self-check; builds the FMU if needed)
 """
 
-import os
 import subprocess
 import sys
-import tempfile
 import textwrap
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.linalg import expm
 
 if not __package__:  # run as a script, or loaded from a file path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from problems.base import (
     Problem,
     ProblemExperiment,
-    cached_path,
-    describe,
-    parameter,
+    cached_build,
+    introduce,
+    ranged_problem,
     rms_over_sigma,
     sample_times,
+    zoh_response,
 )
 
 #: Truth: a small brushed DC motor (SI units).
@@ -138,25 +136,25 @@ class DCMotor(Fmi2Slave):
 '''
 
 
+def _pythonfmu_build(folder: Path) -> Path:
+    """Build the FMU from :data:`SLAVE` with pythonfmu in ``folder``; return its path."""
+    script = folder / "dcmotor.py"
+    script.write_text(textwrap.dedent(SLAVE).lstrip())
+    proc = subprocess.run(
+        [sys.executable, "-m", "pythonfmu", "build", "-f", str(script), "-d", str(folder)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    built = folder / "DCMotor.fmu"
+    if proc.returncode != 0 or not built.exists():
+        raise RuntimeError(f"pythonfmu build failed:\n{proc.stdout}\n{proc.stderr}")
+    return built
+
+
 def build_fmu() -> Path:
     """Build the pythonfmu FMU into the cache (once per slave source) and return it."""
-    fmu = cached_path("DCMotor", SLAVE)
-    if fmu.exists():
-        return fmu
-    with tempfile.TemporaryDirectory(dir=fmu.parent) as tmp:
-        script = Path(tmp) / "dcmotor.py"
-        script.write_text(textwrap.dedent(SLAVE).lstrip())
-        proc = subprocess.run(
-            [sys.executable, "-m", "pythonfmu", "build", "-f", str(script), "-d", tmp],
-            capture_output=True,
-            text=True,
-            check=False,
-        )
-        built = Path(tmp) / "DCMotor.fmu"
-        if proc.returncode != 0 or not built.exists():
-            raise RuntimeError(f"pythonfmu build failed:\n{proc.stdout}\n{proc.stderr}")
-        os.replace(built, fmu)  # atomic: a concurrent build cannot leave half a file
-    return fmu
+    return cached_build("DCMotor", SLAVE, _pythonfmu_build)
 
 
 def voltage(t: np.ndarray, seed: int = DESIGN_SEED) -> np.ndarray:
@@ -188,17 +186,8 @@ def simulate(t: np.ndarray, v: np.ndarray, params: dict[str, float]) -> np.ndarr
     """
     r, ind, j, b, kt = (params[k] for k in ("R", "L", "J", "b", "Kt"))
     a = np.array([[-r / ind, -kt / ind, 1.0 / ind], [kt / j, -b / j, 0.0], [0.0, 0.0, 0.0]])
-    cache: dict[float, np.ndarray] = {}
-    z = np.zeros(3)
-    out = np.zeros((len(t), 2))
-    for k in range(len(t) - 1):
-        h = round(float(t[k + 1] - t[k]), 15)
-        if h not in cache:
-            cache[h] = expm(a * h)
-        z[2] = v[k]
-        z = cache[h] @ z
-        out[k + 1] = z[1], z[0]
-    return out
+    i, w = zoh_response(a, t, v).T
+    return np.column_stack([w, i])
 
 
 def make_data(seed: int = 1) -> pd.DataFrame:
@@ -212,19 +201,17 @@ def make_data(seed: int = 1) -> pd.DataFrame:
     return pd.DataFrame({"time": t, "V": v, "w": w, "i": i})
 
 
+NOTES = (
+    "pythonfmu FMU (Python slave: each step costs Python time, ~10-20x slower "
+    "than the C FMUs). Independent data by scipy expm (exact ZOH); the FMU's own "
+    "exact step agrees to round-off. All five parameters identifiable from w and "
+    "i (Cramer-Rao relative errors < 0.2 %, see the self-check)."
+)
+"""What the benchmark table prints beside this problem."""
+
+
 def dc_motor(seed: int = 1) -> Problem:
-    """Return the DC-motor problem (builds the FMU into the cache if needed).
-
-    Parameters
-    ----------
-    seed : int
-        Seed of the sensor noise.
-
-    Returns
-    -------
-    Problem
-        One experiment ``prbs``: input ``V``, outputs ``w`` and ``i``.
-    """
+    """The DC-motor problem: one experiment ``prbs``, input ``V``, outputs ``w`` and ``i``."""
     experiment = ProblemExperiment(
         name="prbs",
         data=make_data(seed),
@@ -232,21 +219,7 @@ def dc_motor(seed: int = 1) -> Problem:
         outputs={"w": "w", "i": "i"},
         derived={},
     )
-    return Problem(
-        name="dc_motor",
-        fmu=build_fmu(),
-        truth=dict(TRUTH),
-        parameters={k: parameter(lo, hi, unit) for k, (lo, hi, unit) in RANGES.items()},
-        experiments=[experiment],
-        noise=dict(NOISE),
-        start_values={},
-        notes=(
-            "pythonfmu FMU (Python slave: each step costs Python time, ~10-20x slower "
-            "than the C FMUs). Independent data by scipy expm (exact ZOH); the FMU's own "
-            "exact step agrees to round-off. All five parameters identifiable from w and "
-            "i (Cramer-Rao relative errors < 0.2 %, see the self-check)."
-        ),
-    )
+    return ranged_problem("dc_motor", build_fmu(), experiment, RANGES, TRUTH, NOISE, NOTES)
 
 
 def cramer_rao(t: np.ndarray, v: np.ndarray, rel_step: float = 1e-6) -> dict[str, float]:
@@ -267,13 +240,8 @@ def self_check() -> None:
     """Print the problem, the FMU against the independent solution, and the CRB."""
     from tsid_fmu.fmu import FMUSession
 
-    t0 = time.perf_counter()
-    fmu = build_fmu()
-    print(f"FMU {fmu} ({time.perf_counter() - t0:.1f} s to build or find)")
-    t0 = time.perf_counter()
-    problem = dc_motor()
-    print(f"generator: {time.perf_counter() - t0:.2f} s")
-    print(describe(problem))
+    problem = introduce(dc_motor, build_fmu)
+    fmu = problem.fmu
     data = problem.experiments[0].data
     t, v = data["time"].to_numpy(), data["V"].to_numpy()
     y = simulate(t, v, TRUTH)

@@ -28,10 +28,7 @@ Run:  python benchmarks/problems/local_minima.py   (self-check; builds the FMU i
 """
 
 import itertools
-import os
 import sys
-import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -43,9 +40,9 @@ if not __package__:  # run as a script, or loaded from a file path
 from problems.base import (
     Problem,
     ProblemExperiment,
-    cached_path,
-    describe,
-    parameter,
+    cached_build,
+    introduce,
+    ranged_problem,
     rms_over_sigma,
     sample_times,
 )
@@ -76,14 +73,12 @@ def build_fmu() -> Path:
     """Build the FMU from :data:`MODEL` into the cache (once per source) and return it."""
     from tsid_fmu.build import build_fmu as build
 
-    fmu = cached_path(MODEL_NAME, MODEL)
-    if not fmu.exists():
-        with tempfile.TemporaryDirectory(dir=fmu.parent) as tmp:
-            mo = Path(tmp) / f"{MODEL_NAME}.mo"
-            mo.write_text(MODEL)
-            built = build(mo, MODEL_NAME, Path(tmp) / f"{MODEL_NAME}.fmu")
-            os.replace(built, fmu)  # atomic: a concurrent build cannot leave half a file
-    return fmu
+    def build_in(folder: Path) -> Path:
+        mo = folder / f"{MODEL_NAME}.mo"
+        mo.write_text(MODEL)
+        return build(mo, MODEL_NAME, folder / f"{MODEL_NAME}.fmu")
+
+    return cached_build(MODEL_NAME, MODEL, build_in)
 
 
 def input_signal(t: np.ndarray) -> np.ndarray:
@@ -129,38 +124,22 @@ def make_data(seed: int = 1) -> pd.DataFrame:
     return pd.DataFrame({"time": t, "u": u, "y": y})
 
 
+NOTES = (
+    "Multimodal along omega (11 local minima at fixed zeta, k). least_squares from "
+    "the centre of the ranges stops at omega 6.37 with zeta on its upper bound "
+    "(cost ~1000x the noise floor); from the omega = 2 corners it stops at omega "
+    "2 or 3.13, from the omega = 20 corners it finds the truth. The global minimum "
+    "is unique (the truth). FMU built from Modelica with tsid_fmu.build."
+)
+"""What the benchmark table prints beside this problem."""
+
+
 def local_minima(seed: int = 1) -> Problem:
-    """Return the problem (builds the FMU into the cache if needed).
-
-    Parameters
-    ----------
-    seed : int
-        Seed of the sensor noise.
-
-    Returns
-    -------
-    Problem
-        One experiment ``steps``: input ``u``, output ``y``.
-    """
+    """The ringing oscillator's problem: one experiment ``steps``, input ``u``, output ``y``."""
     experiment = ProblemExperiment(
         name="steps", data=make_data(seed), inputs={"u": "u"}, outputs={"y": "y"}, derived={}
     )
-    return Problem(
-        name="local_minima",
-        fmu=build_fmu(),
-        truth=dict(TRUTH),
-        parameters={k: parameter(lo, hi, unit) for k, (lo, hi, unit) in RANGES.items()},
-        experiments=[experiment],
-        noise=dict(NOISE),
-        start_values={},
-        notes=(
-            "Multimodal along omega (11 local minima at fixed zeta, k). least_squares from "
-            "the centre of the ranges stops at omega 6.37 with zeta on its upper bound "
-            "(cost ~1000x the noise floor); from the omega = 2 corners it stops at omega "
-            "2 or 3.13, from the omega = 20 corners it finds the truth. The global minimum "
-            "is unique (the truth). FMU built from Modelica with tsid_fmu.build."
-        ),
-    )
+    return ranged_problem("local_minima", build_fmu(), experiment, RANGES, TRUTH, NOISE, NOTES)
 
 
 def fit(fmu_session, t: np.ndarray, data: pd.DataFrame, start: dict[str, float]) -> tuple:
@@ -186,13 +165,8 @@ def self_check() -> None:
     """Print the problem, the FMU against the independent solution, and the fits."""
     from tsid_fmu.fmu import FMUSession
 
-    t0 = time.perf_counter()
-    fmu = build_fmu()
-    print(f"FMU {fmu} ({time.perf_counter() - t0:.1f} s to build or find)")
-    t0 = time.perf_counter()
-    problem = local_minima()
-    print(f"generator: {time.perf_counter() - t0:.2f} s")
-    print(describe(problem))
+    problem = introduce(local_minima, build_fmu)
+    fmu = problem.fmu
     data = problem.experiments[0].data
     t, u = data["time"].to_numpy(), data["u"].to_numpy()
     clean = simulate(t, u, TRUTH)

@@ -12,7 +12,6 @@ Run:  python benchmarks/problems/miso.py   (self-check: independent data vs the 
 
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +22,7 @@ from problems.base import (
     REPO,
     Problem,
     ProblemExperiment,
-    describe,
+    introduce,
     load_module,
     parameter,
     rms_over_sigma,
@@ -51,18 +50,10 @@ def _generator():
 
 
 def miso(seed: int = 1) -> Problem:
-    """Return the MISO problem: three experiments, output ``F_o``.
+    """The MISO problem: output ``F_o`` in three experiments.
 
-    Parameters
-    ----------
-    seed : int
-        Seed of the sensor noise.
-
-    Returns
-    -------
-    Problem
-        Experiments ``force_only``, ``motion_only``, ``combined``; columns
-        ``time, F_m, x_o, F_of, F_or``.
+    ``force_only``, ``motion_only`` and ``combined``, with columns
+    ``time, F_m, x_o, F_of, F_or``.
     """
     gen = _generator()
     frames = gen.make_data(seed)
@@ -111,10 +102,7 @@ def self_check() -> None:
     from tsid_fmu.fmu import FMUSession
 
     gen = _generator()
-    t0 = time.perf_counter()
-    problem = miso()
-    print(f"generator: {time.perf_counter() - t0:.2f} s (three experiments)")
-    print(describe(problem))
+    problem = introduce(miso, what=" (three experiments)")
     sigma = problem.noise["F_o"]
     truth = problem.truth
     with FMUSession(FMU, list(INPUTS), ["F_o"], parameters=list(truth)) as fmu:

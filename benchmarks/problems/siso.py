@@ -17,7 +17,7 @@ import numpy as np
 
 if not __package__:  # run as a script, or loaded from a file path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from problems.base import REPO, Problem, ProblemExperiment, describe, load_module, rms_over_sigma
+from problems.base import REPO, Problem, ProblemExperiment, introduce, load_module, rms_over_sigma
 
 FMU = REPO / "fmus" / "LSEA_SISO.fmu"
 GENERATOR = REPO / "examples" / "lsea_siso" / "make_data.py"
@@ -101,10 +101,7 @@ def self_check() -> None:
     from tsid_fmu.fmu import FMUSession
 
     gen = _generator()
-    t0 = time.perf_counter()
-    problem = siso(encoder=True)
-    print(f"generator: {time.perf_counter() - t0:.2f} s")
-    print(describe(problem))
+    problem = introduce(lambda: siso(encoder=True))
     data = problem.experiments[0].data
     t, f_m = data["time"].to_numpy(), data["F_m"].to_numpy()
     x_m, v_m, f_o = gen.simulate(t, f_m, problem.truth)

@@ -35,15 +35,16 @@ dynamics show at about 1 % of the force, the size of the noise.
 Run:  python examples/lsea_miso/make_data.py   (writes the CSV files beside this file)
 """
 
-import argparse
 import math
-import time
+import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from scipy.integrate import solve_ivp
-from scipy.linalg import expm
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # examples/_datagen.py
+from _datagen import command_line, load_cells, quantise, sample_times, zoh_response
 
 HERE = Path(__file__).resolve().parent
 TRUTH: dict[str, float] = {
@@ -61,11 +62,6 @@ NOISE: dict[str, float] = {"F_of": 1.0, "F_or": 1.0, "x_o": ENCODER_STEP / 12**0
 #: Relative tolerance of the integration of the stage-driven response.
 RTOL = 1e-11
 EXPERIMENTS = ("force_only", "motion_only", "combined")
-
-
-def sample_times(duration: float = 10.0, rate: float = 1000.0) -> np.ndarray:
-    """Sample instants ``t_k = k / rate`` from 0 to ``duration`` (s)."""
-    return np.round(np.arange(round(duration * rate) + 1) / rate, 9)
 
 
 def motor_force(t: np.ndarray) -> np.ndarray:
@@ -140,17 +136,7 @@ def _force_response(t: np.ndarray, f_m: np.ndarray, p: dict[str, float]) -> np.n
     """States ``(x, v)`` at ``t`` for the held force alone (stage at rest), exact ZOH."""
     m1, k_s, c_d, c_1 = p["m1"], p["K_s"], p["C_d"], p["C_1"]
     a = np.array([[0.0, 1.0, 0.0], [-k_s / m1, -(c_d + c_1) / m1, 1.0 / m1], [0.0, 0.0, 0.0]])
-    out = np.zeros((len(t), 2))
-    z = np.zeros(3)
-    cache: dict[float, np.ndarray] = {}
-    for k in range(len(t) - 1):
-        h = round(float(t[k + 1] - t[k]), 15)
-        if h not in cache:
-            cache[h] = expm(a * h)
-        z[2] = f_m[k]
-        z = cache[h] @ z
-        out[k + 1] = z[:2]
-    return out
+    return zoh_response(a, t, f_m)
 
 
 def _stage_response(
@@ -246,13 +232,14 @@ def make_data(seed: int = 7) -> dict[str, pd.DataFrame]:
         f_m, stage = experiment_inputs(name, t)
         f_o = simulate(t, f_m, stage, TRUTH)
         x_o = np.zeros_like(t) if stage is None else stage(t)[0]
+        front, rear = load_cells(f_o, NOISE["F_of"], NOISE["F_or"], rng)
         frames[name] = pd.DataFrame(
             {
                 "time": t,
                 "F_m": f_m,
-                "x_o": np.round(x_o / ENCODER_STEP) * ENCODER_STEP,
-                "F_of": np.maximum(f_o, 0.0) + rng.normal(0.0, NOISE["F_of"], t.size),
-                "F_or": np.maximum(-f_o, 0.0) + rng.normal(0.0, NOISE["F_or"], t.size),
+                "x_o": quantise(x_o, ENCODER_STEP),
+                "F_of": front,
+                "F_or": rear,
             }
         )
     return frames
@@ -271,23 +258,13 @@ def check_tolerance() -> None:
     )
 
 
-def main() -> None:
-    """Write the three CSV files beside this file (``--check``: tolerance study instead)."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="tolerance study, no files")
-    parser.add_argument("--seed", type=int, default=7)
-    args = parser.parse_args()
-    if args.check:
-        check_tolerance()
-        return
-    t0 = time.perf_counter()
-    frames = make_data(args.seed)
-    for name, frame in frames.items():
-        frame.to_csv(HERE / f"{name}.csv", index=False, float_format="%.9g")
-        f_o = frame["F_of"] - frame["F_or"]
-        print(f"{name}: F_o from {f_o.min():.1f} to {f_o.max():.1f} N")
-    print(f"{time.perf_counter() - t0:.1f} s; truth {TRUTH}; noise {NOISE}")
-
-
 if __name__ == "__main__":
-    main()
+    command_line(
+        __doc__,
+        seed=7,
+        make=make_data,
+        folder=HERE,
+        truth=TRUTH,
+        noise=NOISE,
+        check=check_tolerance,
+    )

@@ -33,8 +33,7 @@ Run:  python examples/lsea_siso/make_data.py   (writes measured.csv beside this 
 
 from __future__ import annotations
 
-import argparse
-import time
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -42,6 +41,9 @@ import numpy as np
 import pandas as pd
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # examples/_datagen.py
+from _datagen import command_line, load_cells, quantise, sample_times
 
 HERE = Path(__file__).resolve().parent
 #: Table IV of the SISO paper (K_s in N/m).
@@ -56,11 +58,6 @@ NOISE: dict[str, float] = {"F_of": 4.0, "F_or": 4.0, "x_m": ENCODER_STEP / 12**0
 EVENT_TOL = 1e-12
 
 STICK, PLUS, MINUS = 0, 1, 2  # friction modes: stuck, friction -F_cm, friction +F_cm
-
-
-def sample_times(duration: float = 10.0, rate: float = 1000.0) -> np.ndarray:
-    """Sample instants ``t_k = k / rate`` from 0 to ``duration`` (s)."""
-    return np.round(np.arange(round(duration * rate) + 1) / rate, 9)
 
 
 def motor_force(t: np.ndarray) -> np.ndarray:
@@ -249,9 +246,8 @@ def make_data(seed: int = 2024) -> pd.DataFrame:
     f_m = motor_force(t)
     x_m, _, f_o = simulate(t, f_m, TRUTH)
     rng = np.random.default_rng(seed)
-    front = np.maximum(f_o, 0.0) + rng.normal(0.0, NOISE["F_of"], t.size)
-    rear = np.maximum(-f_o, 0.0) + rng.normal(0.0, NOISE["F_or"], t.size)
-    encoder = np.round(x_m / ENCODER_STEP) * ENCODER_STEP
+    front, rear = load_cells(f_o, NOISE["F_of"], NOISE["F_or"], rng)
+    encoder = quantise(x_m, ENCODER_STEP)
     return pd.DataFrame({"time": t, "F_m": f_m, "F_of": front, "F_or": rear, "x_m": encoder})
 
 
@@ -305,23 +301,12 @@ def check_tolerance() -> None:
     )
 
 
-def main() -> None:
-    """Write ``measured.csv`` beside this file (``--check``: tolerance study instead)."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="tolerance study, no file")
-    parser.add_argument("--seed", type=int, default=2024)
-    args = parser.parse_args()
-    if args.check:
-        check_tolerance()
-        return
-    t0 = time.perf_counter()
-    frame = make_data(args.seed)
-    frame.to_csv(HERE / "measured.csv", index=False, float_format="%.9g")
-    print(
-        f"wrote {HERE / 'measured.csv'} ({len(frame)} rows, {time.perf_counter() - t0:.1f} s); "
-        f"truth {TRUTH}; noise {NOISE}"
-    )
+def files(seed: int = 2024) -> dict[str, pd.DataFrame]:
+    """The data by CSV file name: ``measured``."""
+    return {"measured": make_data(seed)}
 
 
 if __name__ == "__main__":
-    main()
+    command_line(
+        __doc__, seed=2024, make=files, folder=HERE, truth=TRUTH, noise=NOISE, check=check_tolerance
+    )
