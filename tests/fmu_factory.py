@@ -22,6 +22,8 @@ to be reused by every test module that needs a real FMU:
     ``pythonfmu`` can build on this machine.
 ``lag_response(time, u, tau, x0, gain, offset)``
     The analytic output of the lag for a zero-order-hold input.
+``lag_case(tmp_dir, dt)``, ``lag_data(tmp_dir, tau, x0)``
+    The lag FMU with an exact step response, or with a noisy measurement to identify.
 ``fmi2_source(model, functions)`` and ``pack_c_fmu(tmp_dir, name, source, ...)``
     What the other factories (``crash_factory``, ``feed_factory``, ``vdp_factory``) build
     their hand-written FMI 2.0 models with: the shared entry points and stubs, and the
@@ -638,6 +640,24 @@ def lag_case(tmp_dir: Path, dt: float = 0.01) -> Path:
         Path(tmp_dir) / "good.csv", index=False
     )
     return fmu
+
+
+def lag_data(tmp_dir: Path, tau: float, x0: float) -> tuple[Path, Path]:
+    """Build the lag FMU (both interfaces) and a noisy measurement ``lag.csv`` of it.
+
+    Five seconds at 10 ms of a square wave (1, then -0.5, period 2 s) plus ``0.3 sin(3t)``
+    as ``u``, and as ``y_meas`` the lag's response for ``tau``, ``x0`` with Gaussian noise
+    of 1 % of its standard deviation (``default_rng(0)``). Returns the FMU's and the CSV's
+    paths.
+    """
+    fmu = build_c_fmu(tmp_dir)
+    t = np.arange(0, 5.0 + 1e-9, 0.01)
+    u = np.where((t % 2.0) < 1.0, 1.0, -0.5) + 0.3 * np.sin(3 * t)
+    y = lag_response(t, u, tau, x0)
+    y = y + np.random.default_rng(0).normal(0, 0.01 * np.std(y), y.shape)
+    data = Path(tmp_dir) / "lag.csv"
+    pd.DataFrame({"time": t, "u": u, "y_meas": y}).to_csv(data, index=False)
+    return fmu, data
 
 
 _PYTHONFMU_SLAVE = '''
