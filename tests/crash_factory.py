@@ -15,15 +15,15 @@ highest threshold crossed wins):
 
 All thresholds default to ``1e300`` and ``delay`` to 0, so by default the FMU is the
 trivial feed-through used by the loop benchmark. The C source does not include the FMI
-headers: the functions a master needs are real, every other ``fmi2*`` symbol that FMPy
-looks up is a stub returning ``fmi2Error``.
+headers: ``fmu_factory.fmi2_source`` adds the shared entry points to the model and its
+``fmi2DoStep``, and stubs every other ``fmi2*`` symbol that FMPy looks up.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from fmu_factory import new_guid, pack_c_fmu
+from fmu_factory import fmi2_source, new_guid, pack_c_fmu
 
 # name, vr, causality, variability, initial, start
 VARIABLES = [
@@ -37,22 +37,13 @@ VARIABLES = [
     ("delay", 7, "parameter", "fixed", "exact", "0"),
 ]
 
-_STUBS = """
-fmi2SetDebugLogging fmi2GetInteger fmi2GetBoolean fmi2GetString fmi2SetInteger
-fmi2SetBoolean fmi2SetString fmi2GetFMUstate fmi2SetFMUstate fmi2FreeFMUstate
-fmi2SerializedFMUstateSize fmi2SerializeFMUstate fmi2DeSerializeFMUstate
-fmi2GetDirectionalDerivative fmi2SetRealInputDerivatives fmi2GetRealOutputDerivatives
-fmi2CancelStep fmi2GetStatus fmi2GetRealStatus fmi2GetIntegerStatus fmi2GetBooleanStatus
-fmi2GetStringStatus
-""".split()
-
-_SOURCE = r"""
+_MODEL = r"""
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
 
-typedef struct { double v[8]; } Model;   /* v[vr]; v[1] = y is computed */
+typedef struct { double v[8], time; } Model;   /* v[vr]; v[1] = y is computed */
 #define M ((Model *)c)
 
 static double now(void) {
@@ -63,33 +54,19 @@ static void defaults(Model *m) {
     memset(m, 0, sizeof *m);
     m->v[2] = 1.0; m->v[4] = 1e300; m->v[5] = 1e300; m->v[6] = 1e300;
 }
+static int get(const Model *m, unsigned vr, double *v) {
+    if (vr > 7) return 3;
+    *v = vr == 1 ? m->v[2] * m->v[0] + m->v[3] : m->v[vr];
+    return 0;
+}
+static int set(Model *m, unsigned vr, double v) {
+    if (vr > 7 || vr == 1) return 3;
+    m->v[vr] = v;
+    return 0;
+}
+"""
 
-const char *fmi2GetTypesPlatform(void) { return "default"; }
-const char *fmi2GetVersion(void) { return "2.0"; }
-void *fmi2Instantiate(const char *name, int type, const char *guid, const char *res,
-                      const void *cb, int visible, int loggingOn) {
-    (void)name; (void)type; (void)res; (void)cb; (void)visible; (void)loggingOn;
-    if (strcmp(guid, GUID) != 0) return NULL;
-    Model *m = malloc(sizeof *m); defaults(m); return m;
-}
-void fmi2FreeInstance(void *c) { free(c); }
-int fmi2SetupExperiment(void *c, int a, double b, double d, int e, double f) {
-    (void)c; (void)a; (void)b; (void)d; (void)e; (void)f; return 0; }
-int fmi2EnterInitializationMode(void *c) { (void)c; return 0; }
-int fmi2ExitInitializationMode(void *c) { (void)c; return 0; }
-int fmi2Terminate(void *c) { (void)c; return 0; }
-int fmi2Reset(void *c) { defaults(M); return 0; }
-int fmi2GetReal(void *c, const unsigned vr[], size_t n, double v[]) {
-    for (size_t i = 0; i < n; i++) {
-        if (vr[i] > 7) return 3;
-        v[i] = vr[i] == 1 ? M->v[2] * M->v[0] + M->v[3] : M->v[vr[i]];
-    }
-    return 0;
-}
-int fmi2SetReal(void *c, const unsigned vr[], size_t n, const double v[]) {
-    for (size_t i = 0; i < n; i++) { if (vr[i] > 7 || vr[i] == 1) return 3; M->v[vr[i]] = v[i]; }
-    return 0;
-}
+_DO_STEP = r"""
 int fmi2DoStep(void *c, double t, double h, int ns) {
     (void)t; (void)h; (void)ns;
     double gain = M->v[2];
@@ -129,5 +106,5 @@ def _model_description(name: str, guid: str) -> str:
 def build_crash_fmu(tmp_dir: Path, name: str = "Crashy") -> Path:
     """Build ``<tmp_dir>/<name>.fmu`` (see the module docstring) and return its path."""
     guid = new_guid()
-    source = _SOURCE + "".join(f"int {s}(void) {{ return 3; }}\n" for s in _STUBS)
+    source = fmi2_source(_MODEL, _DO_STEP)
     return pack_c_fmu(tmp_dir, name, source, _model_description(name, guid), guid, hidden=False)

@@ -23,7 +23,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import fmpy
-from fmu_factory import _FMI3_STUBS, new_guid, pack_c_fmu
+from fmu_factory import _FMI3_STUBS, fmi2_source, new_guid, pack_c_fmu
 
 CALCULATED = ' initial="calculated"'
 
@@ -69,32 +69,9 @@ static void step(Model *m, double t, double h) {
 }
 """
 
-_FMI2 = (
-    _MODEL
-    + r"""
-const char *fmi2GetTypesPlatform(void) { return "default"; }
-const char *fmi2GetVersion(void) { return "2.0"; }
-void *fmi2Instantiate(const char *name, int type, const char *guid, const char *res,
-                      const void *cb, int visible, int loggingOn) {
-    (void)name; (void)type; (void)res; (void)cb; (void)visible; (void)loggingOn;
-    if (strcmp(guid, GUID) != 0) return NULL;
-    Model *m = malloc(sizeof *m); defaults(m); return m;
-}
-void fmi2FreeInstance(void *c) { free(c); }
-int fmi2SetupExperiment(void *c, int a, double b, double d, int e, double f) {
-    (void)a; (void)b; (void)e; (void)f; M->time = d; return 0; }
-int fmi2EnterInitializationMode(void *c) { (void)c; return 0; }
-int fmi2ExitInitializationMode(void *c) { (void)c; return 0; }
-int fmi2Terminate(void *c) { (void)c; return 0; }
-int fmi2Reset(void *c) { defaults(M); return 0; }
-int fmi2GetReal(void *c, const unsigned vr[], size_t n, double v[]) {
-    for (size_t i = 0; i < n; i++) if (get(M, vr[i], &v[i])) return 3;
-    return 0;
-}
-int fmi2SetReal(void *c, const unsigned vr[], size_t n, const double v[]) {
-    for (size_t i = 0; i < n; i++) if (set(M, vr[i], v[i])) return 3;
-    return 0;
-}
+_FMI2 = fmi2_source(
+    _MODEL,
+    r"""
 int fmi2SetRealInputDerivatives(void *c, const unsigned vr[], size_t n, const int order[],
                                 const double v[]) {
     M->nder += 1;
@@ -105,17 +82,8 @@ int fmi2SetRealInputDerivatives(void *c, const unsigned vr[], size_t n, const in
     return 0;
 }
 int fmi2DoStep(void *c, double t, double h, int ns) { (void)ns; step(M, t, h); return 0; }
-"""
+""",
 )
-
-_FMI2_STUBS = """
-fmi2SetDebugLogging fmi2GetInteger fmi2GetBoolean fmi2GetString fmi2SetInteger
-fmi2SetBoolean fmi2SetString fmi2GetFMUstate fmi2SetFMUstate fmi2FreeFMUstate
-fmi2SerializedFMUstateSize fmi2SerializeFMUstate fmi2DeSerializeFMUstate
-fmi2GetDirectionalDerivative fmi2GetRealOutputDerivatives
-fmi2CancelStep fmi2GetStatus fmi2GetRealStatus fmi2GetIntegerStatus fmi2GetBooleanStatus
-fmi2GetStringStatus
-""".split()
 
 _FMI3 = (
     "#include <stdbool.h>\n#include <stddef.h>\n"
@@ -205,7 +173,7 @@ def build_feed_fmu(
     guid = new_guid()
     if fmi_version == "2.0":
         platform_dir = fmpy.platform
-        source = _FMI2 + "".join(f"int {s}(void) {{ return 3; }}\n" for s in _FMI2_STUBS)
+        source = _FMI2
     else:
         platform_dir = fmpy.platform_tuple
         source = _FMI3

@@ -22,10 +22,17 @@ to be reused by every test module that needs a real FMU:
     ``pythonfmu`` can build on this machine.
 ``lag_response(time, u, tau, x0, gain, offset)``
     The analytic output of the lag for a zero-order-hold input.
+``lag_case(tmp_dir, dt)``, ``lag_data(tmp_dir, tau, x0)``
+    The lag FMU with an exact step response, or with a noisy measurement to identify.
+``fmi2_source(model, functions)`` and ``pack_c_fmu(tmp_dir, name, source, ...)``
+    What the other factories (``crash_factory``, ``feed_factory``, ``vdp_factory``) build
+    their hand-written FMI 2.0 models with: the shared entry points and stubs, and the
+    compile-and-zip step.
 """
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -445,6 +452,70 @@ def new_guid() -> str:
     return "{" + str(uuid.uuid4()) + "}"
 
 
+# Every fmi2* function FMPy looks up in an FMI 2.0 binary (common, Model Exchange,
+# Co-Simulation); fmi2_source() stubs the ones a hand-written model leaves out.
+_FMI2_FUNCTIONS = """
+fmi2GetTypesPlatform fmi2GetVersion fmi2SetDebugLogging fmi2Instantiate fmi2FreeInstance
+fmi2SetupExperiment fmi2EnterInitializationMode fmi2ExitInitializationMode fmi2Terminate
+fmi2Reset fmi2GetReal fmi2GetInteger fmi2GetBoolean fmi2GetString fmi2SetReal fmi2SetInteger
+fmi2SetBoolean fmi2SetString fmi2GetFMUstate fmi2SetFMUstate fmi2FreeFMUstate
+fmi2SerializedFMUstateSize fmi2SerializeFMUstate fmi2DeSerializeFMUstate
+fmi2GetDirectionalDerivative
+fmi2EnterEventMode fmi2NewDiscreteStates fmi2EnterContinuousTimeMode
+fmi2CompletedIntegratorStep fmi2SetTime fmi2SetContinuousStates fmi2GetDerivatives
+fmi2GetEventIndicators fmi2GetContinuousStates fmi2GetNominalsOfContinuousStates
+fmi2SetRealInputDerivatives fmi2GetRealOutputDerivatives fmi2DoStep fmi2CancelStep
+fmi2GetStatus fmi2GetRealStatus fmi2GetIntegerStatus fmi2GetBooleanStatus fmi2GetStringStatus
+""".split()
+
+# The FMI 2.0 life cycle and Real access of a hand-written model without the FMI headers.
+_FMI2_ENTRY_POINTS = r"""
+#include <stdlib.h>
+#include <string.h>
+
+const char *fmi2GetTypesPlatform(void) { return "default"; }
+const char *fmi2GetVersion(void) { return "2.0"; }
+int fmi2SetDebugLogging(void *c, int on, size_t n, const char *const cat[]) {
+    (void)c; (void)on; (void)n; (void)cat; return 0; }
+void *fmi2Instantiate(const char *name, int type, const char *guid, const char *res,
+                      const void *cb, int visible, int loggingOn) {
+    (void)name; (void)type; (void)res; (void)cb; (void)visible; (void)loggingOn;
+    if (strcmp(guid, GUID) != 0) return NULL;
+    Model *m = malloc(sizeof *m); defaults(m); return m;
+}
+void fmi2FreeInstance(void *c) { free(c); }
+int fmi2SetupExperiment(void *c, int tolDef, double tol, double start, int stopDef,
+                        double stop) {
+    (void)tolDef; (void)tol; (void)stopDef; (void)stop; M->time = start; return 0; }
+int fmi2EnterInitializationMode(void *c) { (void)c; return 0; }
+int fmi2ExitInitializationMode(void *c) { (void)c; return 0; }
+int fmi2Terminate(void *c) { (void)c; return 0; }
+int fmi2Reset(void *c) { defaults(M); return 0; }
+int fmi2GetReal(void *c, const unsigned vr[], size_t n, double v[]) {
+    for (size_t i = 0; i < n; i++) if (get(M, vr[i], &v[i])) return 3;
+    return 0; }
+int fmi2SetReal(void *c, const unsigned vr[], size_t n, const double v[]) {
+    for (size_t i = 0; i < n; i++) if (set(M, vr[i], v[i])) return 3;
+    return 0; }
+"""
+
+
+def fmi2_source(model: str, functions: str = "") -> str:
+    """The C source of an FMI 2.0 FMU from a hand-written ``model`` and its own ``functions``.
+
+    ``model`` defines ``Model`` (with a ``double time`` that ``fmi2SetupExperiment`` sets),
+    the macro ``M`` (``c`` as a ``Model *``), ``defaults(Model *)``, and ``get(const Model *,
+    unsigned vr, double *)`` and ``set(Model *, unsigned vr, double)`` returning nonzero for
+    a value reference they do not read or write. The shared entry points (instantiation,
+    modes, ``fmi2GetReal``/``fmi2SetReal``) follow it, then ``functions`` (``fmi2DoStep``,
+    the Model Exchange functions, ...), then a stub returning ``fmi2Error`` for every other
+    function FMPy looks up.
+    """
+    source = model + _FMI2_ENTRY_POINTS + functions
+    missing = [f for f in _FMI2_FUNCTIONS if not re.search(rf"\b{f}\(", source)]
+    return source + "".join(f"int {f}(void) {{ return 3; }}\n" for f in missing)
+
+
 def pack_c_fmu(
     tmp_dir: Path,
     name: str,
@@ -569,6 +640,24 @@ def lag_case(tmp_dir: Path, dt: float = 0.01) -> Path:
         Path(tmp_dir) / "good.csv", index=False
     )
     return fmu
+
+
+def lag_data(tmp_dir: Path, tau: float, x0: float) -> tuple[Path, Path]:
+    """Build the lag FMU (both interfaces) and a noisy measurement ``lag.csv`` of it.
+
+    Five seconds at 10 ms of a square wave (1, then -0.5, period 2 s) plus ``0.3 sin(3t)``
+    as ``u``, and as ``y_meas`` the lag's response for ``tau``, ``x0`` with Gaussian noise
+    of 1 % of its standard deviation (``default_rng(0)``). Returns the FMU's and the CSV's
+    paths.
+    """
+    fmu = build_c_fmu(tmp_dir)
+    t = np.arange(0, 5.0 + 1e-9, 0.01)
+    u = np.where((t % 2.0) < 1.0, 1.0, -0.5) + 0.3 * np.sin(3 * t)
+    y = lag_response(t, u, tau, x0)
+    y = y + np.random.default_rng(0).normal(0, 0.01 * np.std(y), y.shape)
+    data = Path(tmp_dir) / "lag.csv"
+    pd.DataFrame({"time": t, "u": u, "y_meas": y}).to_csv(data, index=False)
+    return fmu, data
 
 
 _PYTHONFMU_SLAVE = '''

@@ -4,7 +4,8 @@
 measured inputs, ``replicates - 1`` noisy copies of them (Gaussian noise of
 ``input_noise`` times each input's standard deviation, drawn from
 ``numpy.random.default_rng([seed, index, r])``), weights 1 and residual scale 1 unless
-given.
+given. ``lag_frame(seed, n, ...)`` makes the noisy input and smoothed outputs such
+experiments fit a first-order lag to.
 """
 
 from __future__ import annotations
@@ -16,6 +17,20 @@ import numpy as np
 import pandas as pd
 
 from tsid_fmu.evaluate import EvaluationSpec, PreparedExperiment
+
+
+def lag_frame(seed: int, n: int, *, omega: float, step_at: float, window: int) -> pd.DataFrame:
+    """``n`` samples at 1 ms of an input ``u`` and two outputs ``y``, ``y2`` to fit a lag to.
+
+    ``u`` is ``sin(omega * t)`` plus a unit step after ``step_at`` plus Gaussian noise of
+    0.05 from ``numpy.random.default_rng(seed)``; ``y`` is its centred moving average over
+    ``window`` samples and ``y2 = y / 2``.
+    """
+    t = np.arange(n) * 1e-3
+    rng = np.random.default_rng(seed)
+    u = np.sin(omega * t) + (t > step_at) + 0.05 * rng.standard_normal(n)
+    y = np.convolve(u, np.ones(window) / window, mode="same")
+    return pd.DataFrame({"time": t, "u": u, "y": y, "y2": 0.5 * y})
 
 
 def experiment(

@@ -15,6 +15,7 @@ if shutil.which("cc") is None and shutil.which("gcc") is None:  # pragma: no cov
 
 from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
+from grid_sim import DT, grid, input_signal, simulate_grid
 
 from tsid_fmu.build import build_all, build_fmu, find_models, main
 from tsid_fmu.errors import BuildError
@@ -22,7 +23,6 @@ from tsid_fmu.errors import BuildError
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
 FMUS = ROOT / "fmus"
-DT = 1e-3
 
 OSC = """
 model Osc "Damped oscillator, written only in a test"
@@ -53,14 +53,6 @@ end Loop;
 """
 
 
-def _inputs(names, t, values):
-    sig = np.zeros(len(t), dtype=[("time", float)] + [(n, float) for n in names])
-    sig["time"] = t
-    for n, v in zip(names, values, strict=True):
-        sig[n] = v
-    return sig
-
-
 @pytest.fixture(scope="module")
 def rebuilt(tmp_path_factory):
     out = tmp_path_factory.mktemp("fmus")
@@ -80,17 +72,16 @@ def test_rebuilt_fmus_simulate_identically_to_committed(rebuilt, name, version):
     assert validate_fmu(str(new)) == []
     md = read_model_description(str(new))
     inputs = [v.name for v in md.modelVariables if v.causality == "input"]
-    t = np.arange(0, 5.0 + DT / 2, DT)
+    t = grid(5.0)
     F = np.where((t % 1.0) < 0.5, 1.0, -1.0) * (150 + 50 * np.floor(t))
-    vals = [F if n == "F_m" else 1e-3 * np.sin(2 * np.pi * t) for n in inputs]
-    sig = _inputs(inputs, t, vals)
-    kw = {"stop_time": 5.0, "step_size": DT, "output_interval": DT, "input": sig}
-    a = simulate_fmu(str(new), **kw)
-    b = simulate_fmu(str(old), **kw)
+    vals = {n: F if n == "F_m" else 1e-3 * np.sin(2 * np.pi * t) for n in inputs}
+    kw = {"input": input_signal(t, **vals)}
+    a = simulate_grid(new, 5.0, **kw)
+    b = simulate_grid(old, 5.0, **kw)
     np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-12, atol=1e-9)
     me = {"fmi_type": "ModelExchange", "record_events": False}
-    a = simulate_fmu(str(new), **kw, **me)
-    b = simulate_fmu(str(old), **kw, **me)
+    a = simulate_grid(new, 5.0, **kw, **me)
+    b = simulate_grid(old, 5.0, **kw, **me)
     np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-12, atol=1e-9)
 
 
@@ -151,30 +142,15 @@ def test_extra_model_built_from_test_source(tmp_path):
     fmu = build_fmu(mo, "Osc", tmp_path / "Osc.fmu")
     assert validate_fmu(str(fmu)) == []
     k, m, d = 400.0, 1.0, 2.0
-    t = np.arange(0, 2.0 + DT / 2, DT)
+    t = grid(2.0)
     wd = np.sqrt(k / m - (d / (2 * m)) ** 2)
     sigma = d / (2 * m)
     exact = 0.1 * np.exp(-sigma * t) * (np.cos(wd * t) + sigma / wd * np.sin(wd * t))
     for fmi_type in ("CoSimulation", "ModelExchange"):
-        r = simulate_fmu(
-            str(fmu),
-            fmi_type=fmi_type,
-            stop_time=2.0,
-            step_size=DT,
-            output_interval=DT,
-            output=["y"],
-            relative_tolerance=1e-9,
-        )
+        r = simulate_grid(fmu, 2.0, fmi_type=fmi_type, output=["y"], relative_tolerance=1e-9)
         np.testing.assert_allclose(r["y"], exact, atol=1e-3 * 0.1 * 2)
     # parameter change through start_values follows the equations: 4k -> 2x frequency
-    r4 = simulate_fmu(
-        str(fmu),
-        stop_time=2.0,
-        step_size=DT,
-        output_interval=DT,
-        output=["y"],
-        start_values={"k": 4 * k},
-    )
+    r4 = simulate_grid(fmu, 2.0, output=["y"], start_values={"k": 4 * k})
     wd4 = np.sqrt(4 * k / m - sigma**2)
     exact4 = 0.1 * np.exp(-sigma * t) * (np.cos(wd4 * t) + sigma / wd4 * np.sin(wd4 * t))
     np.testing.assert_allclose(r4["y"], exact4, atol=1e-3 * 0.1 * 2)
@@ -252,9 +228,8 @@ def test_fmu_sources_recompile_with_fmpy(tmp_path, sub):
         [sys.executable, "-m", "fmpy", "compile", str(fmu)], capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    t = np.arange(0, 2.0 + DT / 2, DT)
-    sig = _inputs(["F_m"], t, [np.where(t < 1.0, 300.0, -300.0)])
-    kw = {"stop_time": 2.0, "step_size": DT, "output_interval": DT, "input": sig}
-    a = simulate_fmu(str(fmu), **kw)
-    b = simulate_fmu(str(committed), **kw)
+    t = grid(2.0)
+    sig = input_signal(t, F_m=np.where(t < 1.0, 300.0, -300.0))
+    a = simulate_grid(fmu, 2.0, input=sig)
+    b = simulate_grid(committed, 2.0, input=sig)
     np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-9, atol=1e-6)

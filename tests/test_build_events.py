@@ -179,6 +179,23 @@ def _slave2(fmu):
     return f, {v.name: v.valueReference for v in md.modelVariables}
 
 
+def _ramp(f, set_u, a, b, h, steps=20):
+    """Drive the slave ``f``, in initialization mode, with the input ramp ``u = a + b*t``.
+
+    ``set_u(value)`` sets the input. Sets ``u = a``, leaves initialization mode, then for
+    each of ``steps`` steps of ``h`` sets ``u`` to its value at the step's start ``t`` and
+    yields ``t`` (the caller does the step); after the last step terminates and frees ``f``.
+    """
+    set_u(a)
+    f.exitInitializationMode()
+    for k in range(steps):
+        t = k * h
+        set_u(a + b * t)
+        yield t
+    f.terminate()
+    f.freeInstance()
+
+
 @pytest.mark.parametrize("interpolate", [True, False])
 def test_fmi2_input_derivatives_give_exact_interpolation(tmp_path, interpolate):
     fmu = _build(tmp_path, INTEGRATOR, "Integrator")
@@ -188,18 +205,12 @@ def test_fmi2_input_derivatives_give_exact_interpolation(tmp_path, interpolate):
     f.instantiate()
     f.setupExperiment(startTime=0.0)
     f.enterInitializationMode()
-    f.setReal([vr["u"]], [a])
-    f.exitInitializationMode()
     rows = []
-    for k in range(20):
-        t = k * h
-        f.setReal([vr["u"]], [a + b * t])
+    for t in _ramp(f, lambda u: f.setReal([vr["u"]], [u]), a, b, h):
         if interpolate:
             f.setRealInputDerivatives([vr["u"]], [1], [b])
         f.doStep(t, h)
         rows.append(f.getReal([vr["y"], vr["yu"]]))
-    f.terminate()
-    f.freeInstance()
     y, yu = np.array(rows).T
     t = np.arange(1, 21) * h
     if interpolate:
@@ -235,20 +246,14 @@ def test_fmi3_intermediate_update_gives_exact_interpolation(tmp_path):
 
     f.instantiate(intermediateUpdate=intermediate_update, requiredIntermediateVariables=[vr["u"]])
     f.enterInitializationMode(startTime=0.0)
-    f.setFloat64([vr["u"]], [a])
-    f.exitInitializationMode()
     rows = []
-    for k in range(20):
-        t = k * h
-        f.setFloat64([vr["u"]], [a + b * t])
+    for t in _ramp(f, lambda u: f.setFloat64([vr["u"]], [u]), a, b, h):
         n0 = len(calls)
         f.doStep(t, h)
         inside = np.array(calls[n0:])
         assert inside.min() >= t - 1e-15 and inside.max() <= t + h + 1e-15
         assert np.isclose(inside, t + 0.0125).any()  # RK4 midpoint of the first substep
         rows.append(f.getFloat64([vr["y"], vr["yu"]]))
-    f.terminate()
-    f.freeInstance()
     y, yu = np.array(rows).T
     t = np.arange(1, 21) * h
     np.testing.assert_allclose(y, a * t + 0.5 * b * t**2, rtol=0, atol=1e-12)

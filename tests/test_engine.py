@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from fmu_factory import build_c_fmu, lag_response
+from fmu_factory import lag_data
 
 from tsid_fmu import Experiment, Parameter, Study, identify
 from tsid_fmu.errors import StudyError
@@ -16,15 +16,7 @@ TAU, X0 = 0.37, 0.8
 
 @pytest.fixture(scope="module")
 def lag(tmp_path_factory):
-    d = tmp_path_factory.mktemp("lag")
-    fmu = build_c_fmu(d)
-    t = np.arange(0, 5.0 + 1e-9, 0.01)
-    u = np.where((t % 2.0) < 1.0, 1.0, -0.5) + 0.3 * np.sin(3 * t)
-    y = lag_response(t, u, TAU, X0)
-    y = y + np.random.default_rng(0).normal(0, 0.01 * np.std(y), y.shape)
-    data = d / "lag.csv"
-    pd.DataFrame({"time": t, "u": u, "y_meas": y}).to_csv(data, index=False)
-    return fmu, data
+    return lag_data(tmp_path_factory.mktemp("lag"), TAU, X0)
 
 
 def make_study(lag, **kw):

@@ -9,9 +9,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from crash_factory import build_crash_fmu
-from fmu_factory import build_c_fmu
-from spec_helpers import experiment, make_spec
+from spec_helpers import experiment, lag_frame, make_spec
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate import (
@@ -27,25 +25,15 @@ from tsid_fmu.evaluate import timelimit as timelimit_module
 from tsid_fmu.fmu import FMUSession
 
 
-def _frame(seed: int, n: int = 401) -> pd.DataFrame:
-    t = np.arange(n) * 1e-3
-    rng = np.random.default_rng(seed)
-    u = np.sin(12 * t) + (t > 0.2) + 0.05 * rng.standard_normal(n)
-    y = np.convolve(u, np.ones(30) / 30, mode="same")
-    return pd.DataFrame({"time": t, "u": u, "y": y, "y2": 0.5 * y})
+def _frame(seed: int) -> pd.DataFrame:
+    return lag_frame(seed, 401, omega=12, step_at=0.2, window=30)
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    d = tmp_path_factory.mktemp("evaluate")
-    return {"lag": build_c_fmu(d, "ELag", interfaces=("cs",)), "crash": build_crash_fmu(d)}
-
-
-@pytest.fixture(scope="module")
-def spec(fmus):
+def spec(lag_crash_fmus):
     """Experiment "a" with two noisy replicates, "b" without noise (R = 3 for both)."""
     return make_spec(
-        fmus["lag"],
+        lag_crash_fmus["lag"],
         ["tau", "x0"],
         [
             experiment(
@@ -275,9 +263,9 @@ def test_time_limit_rule():
             TimeLimit(bad)
 
 
-def test_worker_processes_stop_a_hanging_fmu_by_default(fmus, monkeypatch):
+def test_worker_processes_stop_a_hanging_fmu_by_default(lag_crash_fmus, monkeypatch):
     crash_spec = make_spec(
-        fmus["crash"],
+        lag_crash_fmus["crash"],
         ["gain"],
         [experiment(_frame(3), {"u": "u"}, {"y": "y"})],
         start_values={"hang_above": 30.0},

@@ -10,10 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description, simulate_fmu
+from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
+from grid_sim import DT, grid, input_signal, simulate_grid
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
@@ -25,7 +26,6 @@ SISO3 = FMUS / "fmi3" / "LSEA_SISO.fmu"
 MISO3 = FMUS / "fmi3" / "LSEA_MISO.fmu"
 ALL_FMUS = [SISO, MISO, SISO3, MISO3]
 ALL_IDS = ["SISO", "MISO", "SISO-fmi3", "MISO-fmi3"]
-DT = 1e-3
 N = 10_000  # 10 s at 1 kHz
 
 SISO_P = {"F_cm": 88.5, "F_vm": 51.5, "M_m": 4.3, "K_s": 8600.0, "B_s": 2.5, "V_z": 0.001}
@@ -217,20 +217,10 @@ def test_capabilities_events_and_interpolation(path):
 @pytest.mark.parametrize("path", ALL_FMUS, ids=ALL_IDS)
 @pytest.mark.parametrize("fmi_type", ["CoSimulation", "ModelExchange"])
 def test_simulates_with_fmpy_in_cs_and_me(path, fmi_type):
-    t = np.arange(0, 2.0 + DT / 2, DT)
-    sig = np.zeros(len(t), dtype=[("time", float), ("F_m", float)])
-    sig["time"] = t
-    sig["F_m"] = np.where(t < 1.0, 200.0, -200.0)
+    t = grid(2.0)
+    sig = input_signal(t, F_m=np.where(t < 1.0, 200.0, -200.0))
     kw = {"input": sig} if path in (SISO, SISO3) else {"input": _with_zero_motion(sig)}
-    res = simulate_fmu(
-        str(path),
-        fmi_type=fmi_type,
-        stop_time=2.0,
-        step_size=DT,
-        output_interval=DT,
-        output=["F_o"],
-        **kw,
-    )
+    res = simulate_grid(path, 2.0, fmi_type=fmi_type, output=["F_o"], **kw)
     assert np.all(np.isfinite(res["F_o"]))
     assert res["F_o"].max() > 100 and res["F_o"].min() < -100
 
@@ -245,14 +235,11 @@ def _with_zero_motion(sig):
 
 
 def test_me_and_cs_agree_for_miso():
-    t = np.arange(0, 2.0 + DT / 2, DT)
-    sig = np.zeros(len(t), dtype=[("time", float), ("F_m", float)])
-    sig["time"] = t
-    sig["F_m"] = 50.0 * np.sin(2 * np.pi * 3 * t)
-    sig = _with_zero_motion(sig)
-    kw = {"stop_time": 2.0, "step_size": DT, "output_interval": DT, "input": sig, "output": ["F_o"]}
-    cs = simulate_fmu(str(MISO), fmi_type="CoSimulation", **kw)
-    me = simulate_fmu(str(MISO), fmi_type="ModelExchange", relative_tolerance=1e-8, **kw)
+    t = grid(2.0)
+    sig = _with_zero_motion(input_signal(t, F_m=50.0 * np.sin(2 * np.pi * 3 * t)))
+    kw = {"input": sig, "output": ["F_o"]}
+    cs = simulate_grid(MISO, 2.0, fmi_type="CoSimulation", **kw)
+    me = simulate_grid(MISO, 2.0, fmi_type="ModelExchange", relative_tolerance=1e-8, **kw)
     # fmpy feeds inputs to CS (sampled) and ME (interpolated) slightly differently
     assert np.max(np.abs(cs["F_o"] - me["F_o"])) < 0.02 * np.ptp(cs["F_o"])
 

@@ -11,9 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from crash_factory import build_crash_fmu
-from fmu_factory import build_c_fmu
-from spec_helpers import experiment, make_spec
+from spec_helpers import experiment, lag_frame, make_spec
 
 from tsid_fmu.errors import FMUError, StudyError
 from tsid_fmu.evaluate import (
@@ -25,28 +23,15 @@ from tsid_fmu.evaluate import (
 )
 
 
-def _frame(seed: int, n: int = 801) -> pd.DataFrame:
-    t = np.arange(n) * 1e-3
-    rng = np.random.default_rng(seed)
-    u = np.sin(9 * t) + (t > 0.3) + 0.05 * rng.standard_normal(n)
-    y = np.interp(t, t, np.convolve(u, np.ones(40) / 40, mode="same"))
-    return pd.DataFrame({"time": t, "u": u, "y": y, "y2": 0.5 * y})
+def _frame(seed: int) -> pd.DataFrame:
+    return lag_frame(seed, 801, omega=9, step_at=0.3, window=40)
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    d = tmp_path_factory.mktemp("parallel")
-    return {
-        "lag": build_c_fmu(d, "PLag", interfaces=("cs",)),
-        "crash": build_crash_fmu(d, "PCrash"),
-    }
-
-
-@pytest.fixture(scope="module")
-def lag_spec(fmus):
+def lag_spec(lag_crash_fmus):
     noise = {"replicates": 3, "input_noise": 0.02, "seed": 11}
     return make_spec(
-        fmus["lag"],
+        lag_crash_fmus["lag"],
         ["tau", "x0"],
         [
             experiment(_frame(1), {"u": "u"}, {"y": "y"}, name="a", index=0, **noise),
@@ -57,9 +42,9 @@ def lag_spec(fmus):
 
 
 @pytest.fixture(scope="module")
-def crash_spec(fmus):
+def crash_spec(lag_crash_fmus):
     return make_spec(
-        fmus["crash"],
+        lag_crash_fmus["crash"],
         ["gain"],
         [experiment(_frame(3), {"u": "u"}, {"y": "y"}, replicates=2, input_noise=0.01, seed=5)],
         cost="iae",
@@ -119,7 +104,7 @@ def test_make_evaluator_chooses_serial_or_parallel(lag_spec):
     assert available_cores() >= 1
 
 
-def test_startup_errors_are_raised_like_serial(lag_spec, fmus):
+def test_startup_errors_are_raised_like_serial(lag_spec, lag_crash_fmus):
     bad = dataclasses.replace(lag_spec, parameter_names=("tua",))
     with pytest.raises(FMUError, match=r"unknown parameter 'tua'.*Did you mean 'tau'"):
         SerialEvaluator(bad)
@@ -197,7 +182,7 @@ def test_dask_local_cluster_gives_the_same_costs(lag_spec, serial, tmp_path):
     np.testing.assert_array_equal(sim[0].outputs, clean[0].outputs)
 
 
-def test_script_without_main_guard_can_run_workers(fmus, tmp_path):
+def test_script_without_main_guard_can_run_workers(lag_crash_fmus, tmp_path):
     """Workers do not re-run the user's script (no ``if __name__ == "__main__"`` needed)."""
     import subprocess
     from pathlib import Path
@@ -210,7 +195,7 @@ def test_script_without_main_guard_can_run_workers(fmus, tmp_path):
         "e = PreparedExperiment(name='e', time=t, input_names=('u',), output_names=('y',),\n"
         "    inputs=np.sin(t)[:, None], measured=np.sin(t)[:, None], weights=np.ones(1),\n"
         "    scale=np.ones(1))\n"
-        f"spec = EvaluationSpec(fmu={str(fmus['lag'])!r}, parameter_names=('tau',),\n"
+        f"spec = EvaluationSpec(fmu={str(lag_crash_fmus['lag'])!r}, parameter_names=('tau',),\n"
         "    experiments=(e,))\n"
         "with PoolEvaluator(spec, workers=2) as pe:\n"
         "    print('COST', pe.evaluate([{'tau': 0.1}]).costs[0, 0])\n"

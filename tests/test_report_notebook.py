@@ -8,7 +8,7 @@ import matplotlib
 import numpy as np
 import pandas as pd
 import pytest
-from fmu_factory import build_c_fmu, lag_response
+from fmu_factory import build_c_fmu, lag_data, lag_response
 
 from tsid_fmu import Experiment, Parameter, Study, identify
 from tsid_fmu.errors import StudyError
@@ -43,19 +43,14 @@ class _Rows(HTMLParser):
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
     d = tmp_path_factory.mktemp("lag")
-    fmu = build_c_fmu(d)
-    t = np.arange(0, 5.0 + 1e-9, 0.01)
-    u = np.where((t % 2.0) < 1.0, 1.0, -0.5) + 0.3 * np.sin(3 * t)
-    y = lag_response(t, u, 0.37, 0.8)
-    y = y + np.random.default_rng(0).normal(0, 0.01 * np.std(y), y.shape)
-    pd.DataFrame({"time": t, "u": u, "y_meas": y}).to_csv(d / "lag.csv", index=False)
+    fmu, data = lag_data(d, 0.37, 0.8)
     study = Study(
         fmu=fmu,
         parameters=[
             Parameter("tau", [0.05, 0.5, 2.0], min=0.0, unit="s"),
             Parameter("x0", [-1.0, 0.0, 2.0]),
         ],
-        experiments=[Experiment(data=d / "lag.csv", inputs={"u": "u"}, outputs={"y": "y_meas"})],
+        experiments=[Experiment(data=data, inputs={"u": "u"}, outputs={"y": "y_meas"})],
     )
     return identify(study, d / "out", plots=True)
 

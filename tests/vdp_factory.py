@@ -22,7 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from fmu_factory import new_guid, pack_c_fmu
+from fmu_factory import fmi2_source, new_guid, pack_c_fmu
 
 _C = r"""
 #include <math.h>
@@ -55,31 +55,9 @@ static int set(Model *m, unsigned vr, double v) {
     }
 }
 
-const char *fmi2GetTypesPlatform(void) { return "default"; }
-const char *fmi2GetVersion(void) { return "2.0"; }
-int fmi2SetDebugLogging(void *c, int on, size_t n, const char *const cat[]) {
-    (void)c; (void)on; (void)n; (void)cat; return 0; }
-void *fmi2Instantiate(const char *name, int type, const char *guid, const char *res,
-                      const void *cb, int visible, int loggingOn) {
-    (void)name; (void)type; (void)res; (void)cb; (void)visible; (void)loggingOn;
-    if (strcmp(guid, GUID) != 0) return NULL;
-    Model *m = (Model *)calloc(1, sizeof(Model)); defaults(m); return m;
-}
-void fmi2FreeInstance(void *c) { free(c); }
-int fmi2SetupExperiment(void *c, int tolDef, double tol, double start, int stopDef,
-                        double stop) {
-    (void)tolDef; (void)tol; (void)stopDef; (void)stop; M->time = start; return 0; }
-int fmi2EnterInitializationMode(void *c) { (void)c; return 0; }
-int fmi2ExitInitializationMode(void *c) { (void)c; return 0; }
-int fmi2Terminate(void *c) { (void)c; return 0; }
-int fmi2Reset(void *c) { defaults(M); return 0; }
-int fmi2GetReal(void *c, const unsigned vr[], size_t n, double v[]) {
-    for (size_t i = 0; i < n; i++) if (get(M, vr[i], &v[i])) return 3;
-    return 0; }
-int fmi2SetReal(void *c, const unsigned vr[], size_t n, const double v[]) {
-    for (size_t i = 0; i < n; i++) if (set(M, vr[i], v[i])) return 3;
-    return 0; }
+"""
 
+_FUNCTIONS = r"""
 /* Model Exchange: exact derivatives, no events */
 int fmi2EnterEventMode(void *c) { (void)c; return 0; }
 int fmi2NewDiscreteStates(void *c, void *e) {
@@ -113,14 +91,6 @@ int fmi2DoStep(void *c, double t, double h, int ns) {
     return 0;
 }
 """
-
-_STUBS = """
-fmi2GetInteger fmi2GetBoolean fmi2GetString fmi2SetInteger fmi2SetBoolean fmi2SetString
-fmi2GetFMUstate fmi2SetFMUstate fmi2FreeFMUstate fmi2SerializedFMUstateSize
-fmi2SerializeFMUstate fmi2DeSerializeFMUstate fmi2GetDirectionalDerivative
-fmi2SetRealInputDerivatives fmi2GetRealOutputDerivatives fmi2CancelStep fmi2GetStatus
-fmi2GetRealStatus fmi2GetIntegerStatus fmi2GetBooleanStatus fmi2GetStringStatus
-""".split()
 
 # name, value reference, causality, variability, initial, start, derivative of (index)
 _VARIABLES = [
@@ -172,7 +142,7 @@ def build_vdp_fmu(
 ) -> Path:
     """Build ``<tmp_dir>/<name>.fmu`` (see the module docstring) and return its path."""
     guid = new_guid()
-    source = _C + "".join(f"int {s}(void) {{ return 3; }}\n" for s in _STUBS)
+    source = fmi2_source(_C, _FUNCTIONS)
     return pack_c_fmu(
         tmp_dir,
         name,
