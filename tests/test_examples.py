@@ -73,6 +73,7 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     first = plan.extra["groups"]["force only"][0]
     assert {"m1", "K_s"} <= set(first)
     assert plan.extra["percent"]["force only"]["m2"] == 0
+    assert plan.extra["percent"]["force only"]["C_2"] == 0
     phases = [s for s in res.stages if s.kind == "phase"]
     assert phases[0].experiments == ["force only"]
     assert any(s.experiments == ["motion only"] for s in phases)
@@ -84,6 +85,7 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     assert abs((x["C_1"] / x["K_s"]) / (20.0 / 5000.0) - 1) < 0.02
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## Stages" in report and "contribution" in report
+    assert "Input contribution" in report and "Superposition check" in report
     # the same study without grouping, side by side (cost and simulations)
     comp = res.extra["comparison"]
     assert comp["phased"]["nfev"] > 0 and comp["ungrouped"]["nfev"] > 0

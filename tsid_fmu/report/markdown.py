@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -197,7 +198,23 @@ def _contribution(result: IdentificationResult) -> list[str]:
                 ]
             row = ", ".join(f"{k} {fmt(v, 4)} %" for k, v in values.items())
             lines.append(f"- {exp}: {row}")
-    return [*lines, ""] if lines else []
+    return ([*lines, ""] if lines else []) + _input_contribution(result)
+
+
+def _input_contribution(result: IdentificationResult) -> list[str]:
+    """Step i of the MISO paper: the experiments by the size of their output."""
+    plans = [st.extra.get("input") or {} for st in result.stages if st.kind == "contribution"]
+    inputs = plans[0] if plans else {}
+    if not inputs.get("experiments"):
+        return []
+    lines = ["## Input contribution (MISO paper, step i: main contributor first)", ""]
+    for e in inputs["experiments"]:
+        acting = ", ".join(inputs["inputs"].get(e, []))
+        lines.append(
+            f"- {escape(e)} (inputs {escape(acting)}): output RMS "
+            f"{fmt(inputs['rms'].get(e, math.nan))}, range {fmt(inputs['range'].get(e, math.nan))}"
+        )
+    return [*lines, ""]
 
 
 def markdown_report(result: IdentificationResult) -> str:
@@ -229,7 +246,7 @@ def markdown_report(result: IdentificationResult) -> str:
     lines += _uncertainty(result) + _fit(result) + _fidelity(result) + _stages(result)
     lines += _failed_runs(result.iterations)
     if result.validation:
-        lines += ["## Validation experiments (all inputs together)", ""]
+        lines += ["## Superposition check: validation experiments with all inputs together", ""]
         for exp, v in result.validation.items():
             lines.append(
                 f"- {escape(exp)}: "
