@@ -1,0 +1,84 @@
+"""The Taguchi stage on its own: it converges by itself in a coupled valley, never losing
+its best set (the behaviour the canonical-factor stage of the first round was tested
+for, before the restructure replaced it by rotated factors inside the Taguchi stage)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.evaluate import Evaluation
+from tsid_fmu.search.frame import Frame
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.taguchi import TaguchiRun, taguchi_stage
+from tsid_fmu.study.schema import Method
+
+T = np.linspace(0.0, 6.0, 400)
+TRUTH = {"p": 3.0, "q": 0.5}
+NOISE = np.random.default_rng(0).normal(0.0, 0.01, T.size)
+
+
+def _model(p: float, q: float) -> np.ndarray:
+    # the output depends on p*q and p/q only: along the p and q axes the cost surface is
+    # a narrow valley at an angle, which main effects over p and q handle badly
+    return p * q * np.sin(T) + (p / q) * np.cos(2 * T)
+
+
+MEASURED = _model(**TRUTH) + NOISE
+
+
+class ValleyEvaluator:
+    """Scores (p, q) by the weighted sum of squares against the noisy measurement."""
+
+    n_replicates = 1
+    spec = None
+
+    def __init__(self) -> None:
+        self.nfev = 0
+
+    def cost(self, p: float, q: float) -> float:
+        r = (_model(p, q) - MEASURED) / 0.01
+        return float(r @ r)
+
+    def evaluate(self, sets, progress=None):
+        self.nfev += len(sets)
+        residuals = [(_model(**s) - MEASURED) / 0.01 for s in sets]
+        costs = np.array([[float(r @ r)] for r in residuals])
+        return Evaluation(
+            costs=costs, errors=[None] * len(sets), nfev=len(sets), residuals=residuals
+        )
+
+
+@pytest.mark.parametrize("array", ["L9", "L25"])
+def test_taguchi_stage_converges_along_a_coupled_valley_and_never_worsens(array):
+    levels = {"p": [1.0, 2.0, 4.0], "q": [0.2, 0.8, 1.6]} if array == "L9" else None
+    if levels is None:  # five levels each, the truth off every level
+        levels = {"p": [1.0, 1.5, 2.2, 3.3, 5.0], "q": [0.2, 0.3, 0.45, 0.7, 1.1]}
+    space = Space(levels, {n: (1e-6, math.inf) for n in levels}, LevelingOptions())
+    ev = ValleyEvaluator()
+    run = TaguchiRun(
+        name="taguchi",
+        space=space,
+        first=Frame.from_levels(space, levels),
+        method=Method(cost="sse", array=array, max_iterations=60),
+    )
+    stage = taguchi_stage(run, ev)
+    assert stage.status == 0, stage.message  # converged by itself, no refinement
+    best = [rec.best_cost for rec in stage.records]
+    assert all(b <= a for a, b in itertools.pairwise(best))  # the best is kept
+    assert stage.cost == pytest.approx(ev.cost(**stage.x), rel=1e-12)
+    assert stage.nfev == ev.nfev
+    # against SciPy's least squares from the truth: the same minimum
+    fit = least_squares(
+        lambda v: (_model(*v) - MEASURED) / 0.01, [TRUTH["p"], TRUTH["q"]], xtol=1e-12
+    )
+    lsq = 2 * fit.cost
+    assert stage.cost <= (1 + 1e-6) * lsq, (stage.cost, lsq)
+    for k, v in zip(("p", "q"), fit.x, strict=True):
+        assert abs(stage.x[k] / v - 1) < 1e-4, (k, stage.x[k], v)
+    assert stage.nfev <= 300  # 156-160 simulations when this test was written
