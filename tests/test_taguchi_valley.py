@@ -82,3 +82,29 @@ def test_taguchi_stage_converges_along_a_coupled_valley_and_never_worsens(array)
     for k, v in zip(("p", "q"), fit.x, strict=True):
         assert abs(stage.x[k] / v - 1) < 1e-4, (k, stage.x[k], v)
     assert stage.nfev <= 300  # 156-160 simulations when this test was written
+
+
+def test_an_iteration_with_a_failed_run_round_trips_through_strict_json():
+    import json
+
+    from tsid_fmu.search.record import IterationRecord
+
+    levels = {"p": [1.0, 2.0, 4.0], "q": [0.2, 0.8, 1.6]}
+    space = Space(levels, {n: (1e-6, math.inf) for n in levels}, LevelingOptions())
+    run = TaguchiRun(
+        name="taguchi",
+        space=space,
+        first=Frame.from_levels(space, levels),
+        method=Method(cost="sse", array="L9", max_iterations=1),
+    )
+    rec = taguchi_stage(run, ValleyEvaluator()).records[0]
+    rec.costs[3, 0] = np.inf  # a failed run
+    rec.errors[3] = "experiment: simulation failed"
+    text = json.dumps(rec.to_dict(), allow_nan=False)  # other tools read it too
+    back = IterationRecord.from_dict(json.loads(text))
+    assert np.isinf(back.costs[3, 0]) and back.errors[3] == rec.errors[3]
+    assert back.best_x == rec.best_x and back.best_cost == rec.best_cost
+    np.testing.assert_array_equal(back.sets, rec.sets)
+    np.testing.assert_array_equal(
+        back.costs[np.isfinite(rec.costs)], rec.costs[np.isfinite(rec.costs)]
+    )
