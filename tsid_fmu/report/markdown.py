@@ -246,7 +246,13 @@ def markdown_report(result: IdentificationResult) -> str:
     lines += _uncertainty(result) + _fit(result) + _fidelity(result) + _stages(result)
     lines += _failed_runs(result.iterations)
     if result.validation:
-        lines += ["## Superposition check: validation experiments with all inputs together", ""]
+        phased = any(st.kind in ("contribution", "phase") for st in result.stages)
+        lines += [
+            "## Superposition check: validation experiments with all inputs together"
+            if phased
+            else "## Validation experiments",
+            "",
+        ]
         for exp, v in result.validation.items():
             lines.append(
                 f"- {escape(exp)}: "
