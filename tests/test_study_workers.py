@@ -12,34 +12,19 @@ import math
 
 import numpy as np
 import pandas as pd
-import pytest
-from crash_factory import build_crash_fmu
-from fmu_factory import build_c_fmu
+from spec_helpers import lag_frame
 
 import tsid_fmu
 from tsid_fmu import Experiment, Method, Parameter, Study
 
 
-def _frame(seed: int, n: int = 801) -> pd.DataFrame:
-    t = np.arange(n) * 1e-3
-    rng = np.random.default_rng(seed)
-    u = np.sin(9 * t) + (t > 0.3) + 0.05 * rng.standard_normal(n)
-    y = np.convolve(u, np.ones(40) / 40, mode="same")
-    return pd.DataFrame({"time": t, "u": u, "y": y})
+def _frame(seed: int) -> pd.DataFrame:
+    return lag_frame(seed, 801, omega=9.0, step_at=0.3, window=40)
 
 
-@pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    d = tmp_path_factory.mktemp("study_workers")
-    return {
-        "lag": build_c_fmu(d, "WLag", interfaces=("cs",)),
-        "crash": build_crash_fmu(d, "WCrash"),
-    }
-
-
-def test_a_study_gives_the_same_answer_and_count_for_any_worker_count(fmus):
+def test_a_study_gives_the_same_answer_and_count_for_any_worker_count(lag_crash_fmus):
     study = Study(
-        fmu=fmus["lag"],
+        fmu=lag_crash_fmus["lag"],
         parameters=[Parameter("tau", [0.01, 0.03, 0.1]), Parameter("x0", [-0.5, 0.0, 0.5])],
         experiments=[Experiment(data=_frame(1), inputs={"u": "u"}, outputs={"y": "y"})],
         method=Method(cost="iae", replicates=2, input_noise=0.02, seed=2, max_iterations=3),
@@ -55,11 +40,11 @@ def test_a_study_gives_the_same_answer_and_count_for_any_worker_count(fmus):
             np.testing.assert_array_equal(a.costs, b.costs)
 
 
-def test_a_study_survives_crashing_rows_and_reports_them(fmus, tmp_path):
+def test_a_study_survives_crashing_rows_and_reports_them(lag_crash_fmus, tmp_path):
     """Rows whose FMU segfaults are scored worst, the workers are replaced, the study
     finishes, and report.md lists the crashed rows with the signal."""
     study = Study(
-        fmu=fmus["crash"],
+        fmu=lag_crash_fmus["crash"],
         parameters=[Parameter("gain", [0.5, 1.0, 25.0])],
         experiments=[Experiment(data=_frame(3), inputs={"u": "u"}, outputs={"y": "y"})],
         start_values={"abort_above": 10.0, "segv_above": 20.0, "hang_above": 30.0},
