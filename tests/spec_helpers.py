@@ -4,22 +4,25 @@
 measured inputs, ``replicates - 1`` noisy copies of them (Gaussian noise of
 ``input_noise`` times each input's standard deviation, drawn from
 ``numpy.random.default_rng([seed, index, r])``), weights 1 and residual scale 1 unless
-given. ``lag_frame(seed, n, ...)`` makes the noisy input and smoothed outputs such
-experiments fit a first-order lag to.
+given. ``lag_frame(seed, ...)`` makes the noisy input and smoothed outputs such
+experiments fit a first-order lag to. ``CurveEvaluator`` scores parameter sets of a
+plain Python model, for the search stages' tests without an FMU.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from tsid_fmu.evaluate import EvaluationSpec, PreparedExperiment
+from tsid_fmu.evaluate import Evaluation, EvaluationSpec, PreparedExperiment
 
 
-def lag_frame(seed: int, n: int, *, omega: float, step_at: float, window: int) -> pd.DataFrame:
+def lag_frame(
+    seed: int, n: int = 801, *, omega: float = 9.0, step_at: float = 0.3, window: int = 40
+) -> pd.DataFrame:
     """``n`` samples at 1 ms of an input ``u`` and two outputs ``y``, ``y2`` to fit a lag to.
 
     ``u`` is ``sin(omega * t)`` plus a unit step after ``step_at`` plus Gaussian noise of
@@ -81,3 +84,34 @@ def make_spec(
         experiments=tuple(experiments),
         **options,
     )
+
+
+class CurveEvaluator:
+    """Scores parameter sets of ``model(**set)`` against ``measured``, without an FMU.
+
+    The residuals are ``(model(**set) - measured) / scale`` and the cost their sum of
+    squares, as a study's ``sse`` cost; ``asked`` logs every set simulated.
+    """
+
+    n_replicates = 1
+    spec = None
+
+    def __init__(self, model: Callable[..., np.ndarray], measured: np.ndarray, scale: float):
+        self.model, self.measured, self.scale = model, measured, scale
+        self.nfev, self.asked = 0, []
+
+    def residuals(self, params: Mapping[str, float]) -> np.ndarray:
+        return (self.model(**params) - self.measured) / self.scale
+
+    def cost(self, **params: float) -> float:
+        r = self.residuals(params)
+        return float(r @ r)
+
+    def evaluate(self, sets, progress=None) -> Evaluation:
+        residuals = [self.residuals(s) for s in sets]
+        self.nfev += len(sets)
+        self.asked += [dict(s) for s in sets]
+        costs = np.array([[float(r @ r)] for r in residuals])
+        return Evaluation(
+            costs=costs, errors=[None] * len(sets), nfev=len(sets), residuals=residuals
+        )

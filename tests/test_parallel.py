@@ -24,7 +24,7 @@ from tsid_fmu.evaluate import (
 
 
 def _frame(seed: int) -> pd.DataFrame:
-    return lag_frame(seed, 801, omega=9, step_at=0.3, window=40)
+    return lag_frame(seed)
 
 
 @pytest.fixture(scope="module")

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.evaluate import Evaluation
 from tsid_fmu.search import refine
 from tsid_fmu.search.refine import refine_stage
 from tsid_fmu.search.space import Space
@@ -26,23 +26,9 @@ def _model(a: float, k: float, c: float) -> np.ndarray:
 MEASURED = _model(**TRUTH) + NOISE
 
 
-class ResidualEvaluator:
+def ResidualEvaluator() -> CurveEvaluator:
     """Scores sets by a nonlinear least-squares fit, and logs every set it simulates."""
-
-    n_replicates = 1
-    spec = None
-
-    def __init__(self) -> None:
-        self.nfev, self.asked = 0, []
-
-    def evaluate(self, sets, progress=None):
-        residuals = [(_model(**s) - MEASURED) / 0.01 for s in sets]
-        self.nfev += len(sets)
-        self.asked += [dict(s) for s in sets]
-        costs = np.array([[float(r @ r)] for r in residuals])
-        return Evaluation(
-            costs=costs, errors=[None] * len(sets), nfev=len(sets), residuals=residuals
-        )
+    return CurveEvaluator(_model, MEASURED, 0.01)
 
 
 def _stage(with_start=True):

@@ -11,22 +11,17 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pandas as pd
 from spec_helpers import lag_frame
 
 import tsid_fmu
 from tsid_fmu import Experiment, Method, Parameter, Study
 
 
-def _frame(seed: int) -> pd.DataFrame:
-    return lag_frame(seed, 801, omega=9.0, step_at=0.3, window=40)
-
-
 def test_a_study_gives_the_same_answer_and_count_for_any_worker_count(lag_crash_fmus):
     study = Study(
         fmu=lag_crash_fmus["lag"],
         parameters=[Parameter("tau", [0.01, 0.03, 0.1]), Parameter("x0", [-0.5, 0.0, 0.5])],
-        experiments=[Experiment(data=_frame(1), inputs={"u": "u"}, outputs={"y": "y"})],
+        experiments=[Experiment(data=lag_frame(1), inputs={"u": "u"}, outputs={"y": "y"})],
         method=Method(cost="iae", replicates=2, input_noise=0.02, seed=2, max_iterations=3),
     )
     results = {n: tsid_fmu.identify(study, workers=n, plots=False) for n in (1, 2, 3)}
@@ -46,7 +41,7 @@ def test_a_study_survives_crashing_rows_and_reports_them(lag_crash_fmus, tmp_pat
     study = Study(
         fmu=lag_crash_fmus["crash"],
         parameters=[Parameter("gain", [0.5, 1.0, 25.0])],
-        experiments=[Experiment(data=_frame(3), inputs={"u": "u"}, outputs={"y": "y"})],
+        experiments=[Experiment(data=lag_frame(3), inputs={"u": "u"}, outputs={"y": "y"})],
         start_values={"abort_above": 10.0, "segv_above": 20.0, "hang_above": 30.0},
         method=Method(cost="iae", replicates=2, seed=5, max_iterations=2, refine="none"),
     )

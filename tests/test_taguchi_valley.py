@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
+from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.evaluate import Evaluation
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.taguchi import TaguchiRun, taguchi_stage
@@ -32,26 +32,9 @@ def _model(p: float, q: float) -> np.ndarray:
 MEASURED = _model(**TRUTH) + NOISE
 
 
-class ValleyEvaluator:
+def ValleyEvaluator() -> CurveEvaluator:
     """Scores (p, q) by the weighted sum of squares against the noisy measurement."""
-
-    n_replicates = 1
-    spec = None
-
-    def __init__(self) -> None:
-        self.nfev = 0
-
-    def cost(self, p: float, q: float) -> float:
-        r = (_model(p, q) - MEASURED) / 0.01
-        return float(r @ r)
-
-    def evaluate(self, sets, progress=None):
-        self.nfev += len(sets)
-        residuals = [(_model(**s) - MEASURED) / 0.01 for s in sets]
-        costs = np.array([[float(r @ r)] for r in residuals])
-        return Evaluation(
-            costs=costs, errors=[None] * len(sets), nfev=len(sets), residuals=residuals
-        )
+    return CurveEvaluator(_model, MEASURED, 0.01)
 
 
 @pytest.mark.parametrize("array", ["L9", "L25"])
