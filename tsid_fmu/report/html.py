@@ -18,7 +18,7 @@ from tsid_fmu.report.html_iteration import iteration_section
 from tsid_fmu.report.html_tables import CSS, esc, generic, image, table, table_from_frame
 from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
 from tsid_fmu.report.render import Figures, iteration_folders
-from tsid_fmu.report.style import cost_name, fmt
+from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.trail.files import atomic_write
@@ -146,17 +146,8 @@ def _contribution(result: IdentificationResult) -> str:
                 "<h3>Parameter contribution: % of error variation, eq. (7)</h3>"
                 + table(["parameter", *[f"{e} [%]" for e in percent]], rows)
             )
-        inputs = st.extra.get("input", {})
-        if inputs.get("experiments"):
-            rows = [
-                [
-                    e,
-                    ", ".join(inputs["inputs"].get(e, [])),
-                    inputs["rms"].get(e, math.nan),
-                    inputs["range"].get(e, math.nan),
-                ]
-                for e in inputs["experiments"]
-            ]
+        rows = input_contribution(st)
+        if rows:
             parts.append(
                 "<h3>Input contribution (main contributor first)</h3>"
                 + table(["experiment", "inputs acting", "output RMS", "output range"], rows)

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
-from tsid_fmu.report.style import cost_name, fmt
+from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
@@ -203,16 +202,13 @@ def _contribution(result: IdentificationResult) -> list[str]:
 
 def _input_contribution(result: IdentificationResult) -> list[str]:
     """Step i of the MISO paper: the experiments by the size of their output."""
-    plans = [st.extra.get("input") or {} for st in result.stages if st.kind == "contribution"]
-    inputs = plans[0] if plans else {}
-    if not inputs.get("experiments"):
+    rows = next((r for st in result.stages if (r := input_contribution(st))), [])
+    if not rows:
         return []
     lines = ["## Input contribution (MISO paper, step i: main contributor first)", ""]
-    for e in inputs["experiments"]:
-        acting = ", ".join(inputs["inputs"].get(e, []))
+    for e, acting, rms, span in rows:
         lines.append(
-            f"- {escape(e)} (inputs {escape(acting)}): output RMS "
-            f"{fmt(inputs['rms'].get(e, math.nan))}, range {fmt(inputs['range'].get(e, math.nan))}"
+            f"- {escape(e)} (inputs {escape(acting)}): output RMS {fmt(rms)}, range {fmt(span)}"
         )
     return [*lines, ""]
 

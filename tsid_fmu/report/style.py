@@ -24,6 +24,7 @@ __all__ = [
     "cost_name",
     "fmt",
     "fmt_levels",
+    "input_contribution",
     "margins",
     "new_figure",
     "png_bytes",
@@ -132,3 +133,21 @@ def cost_name(study: Any) -> str:
     if weighting and weighting != "none":
         return f"{name}, weighted ({weighting})"
     return name
+
+
+def input_contribution(stage: Any) -> list[list[Any]]:
+    """Rows of the MISO paper's step i in a contribution stage, main contributor first.
+
+    One row per experiment: its name, the inputs acting in it, and its output's RMS and
+    range (NaN where not measured); no rows for any other stage.
+    """
+    inputs = (stage.extra.get("input") or {}) if stage.kind == "contribution" else {}
+    return [
+        [
+            e,
+            ", ".join(inputs["inputs"].get(e, [])),
+            inputs["rms"].get(e, math.nan),
+            inputs["range"].get(e, math.nan),
+        ]
+        for e in inputs.get("experiments") or []
+    ]
