@@ -29,6 +29,7 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.verdict import GATE_RTOL, Stationarity, gauss_newton_gap
 from tsid_fmu.study.schema import Method
 
 __all__ = ["FD_STEP", "refine_stage"]
@@ -60,7 +61,9 @@ class _Problem:
         self.fixed = dict(fixed)
         self.start = evaluator.nfev
         self.best: tuple[float, dict[str, float]] = (math.inf, {})
+        self.best_r: np.ndarray | None = None
         self.last: tuple[np.ndarray, np.ndarray] | None = None
+        self.jacobian: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.known: tuple[np.ndarray, np.ndarray] | None = None
         self.linearised: tuple[np.ndarray, float] | None = None
         self.calls = 0
@@ -78,7 +81,7 @@ class _Problem:
                 r = np.full(self.size or 1, _FAILED)
             self.size = self.size or r.size
             if cost < self.best[0]:
-                self.best = (float(cost), dict(x))
+                self.best, self.best_r = (float(cost), dict(x)), r
             out.append(r)
         return out
 
@@ -113,7 +116,33 @@ class _Problem:
         steps = np.where(s + FD_STEP <= self.space.s_upper, FD_STEP, -FD_STEP)
         trial = list(s + np.diag(steps))  # row j: s with coordinate j stepped
         cols = self._residuals([self.space.to_x(t) for t in trial])
-        return np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
+        jac = np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
+        self.jacobian = (s.copy(), r0, jac)
+        return jac
+
+    def stationarity(self, floor: float = 0.0) -> Stationarity:
+        """Test the answer with the last Jacobian (see :mod:`tsid_fmu.search.verdict`).
+
+        At the answer's own residuals where the refinement has them; the Jacobian is the
+        last one computed (at the answer, or one accepted step before it).
+        """
+        cost, x = self.best
+        if self.jacobian is None or not math.isfinite(cost):
+            return Stationarity(False, "projected Gauss-Newton", math.inf, cost, "no Jacobian")
+        s_lin, r_lin, jac = self.jacobian
+        s = self.space.to_s(x)
+        r = self.best_r if self.best_r is not None else r_lin
+        if not np.array_equal(s, s_lin) and self.best_r is None:
+            s = s_lin
+        gap = gauss_newton_gap(jac, r, s, self.space.s_lower, self.space.s_upper)
+        scale = max(cost, floor)
+        holds = gap <= GATE_RTOL * scale
+        detail = (
+            f"the projected Gauss-Newton step predicts a decrease of {gap:.3g} "
+            f"({gap / scale if scale > 0 else 0.0:.2g} of the cost or the noise floor, "
+            f"whichever is larger; {'at most' if holds else 'more than'} {GATE_RTOL:g})"
+        )
+        return Stationarity(holds, "projected Gauss-Newton", gap, cost, detail)
 
 
 def refine_stage(
@@ -126,6 +155,7 @@ def refine_stage(
     fixed: Mapping[str, float] | None = None,
     progress: ProgressCallback | None = None,
     start_residuals: np.ndarray | None = None,
+    floor: float = 0.0,
 ) -> StageResult:
     """Polish ``start`` by trust-region least squares on the same cost (``sse``).
 
@@ -150,6 +180,11 @@ def refine_stage(
     start_residuals : numpy.ndarray, optional
         The evaluator's residuals of ``start``, if the caller has them: the stage then
         does not simulate ``start`` again.
+    floor : float
+        The noise floor of the cost (:func:`~tsid_fmu.search.verdict.noise_floor`): the
+        stationarity test measures the predicted decrease against it where the cost is
+        below it (an overestimated noise), so that it does not ask for decimals the data
+        do not carry.
 
     Returns
     -------
@@ -170,9 +205,13 @@ def refine_stage(
     if start_residuals is not None and np.array_equal(s0, s_start):
         problem.known = (s0.copy(), start_residuals)
         problem.size = start_residuals.size
+        problem.best_r = start_residuals
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
-    extra: dict[str, Any] = {"method": "scipy.optimize.least_squares(method='trf')"}
+    extra: dict[str, Any] = {
+        "method": "scipy.optimize.least_squares(method='trf')",
+        "start_cost": float(start_cost),
+    }
     try:
         out = least_squares(
             problem.fun,
@@ -194,6 +233,11 @@ def refine_stage(
         message = f"simulation limit ({limit}) of the refinement reached"
     cost, x = problem.best
     nfev = evaluator.nfev - problem.start
+    gate = problem.stationarity(floor)
+    extra["stationarity"] = gate.to_dict()
+    if status == 0 and not gate.holds:
+        status = 1
+        message += f"; not shown to be an optimum: {gate.detail}"
     if progress:
         progress("refinement done", {"stage": name, "cost": cost, "nfev": nfev})
     return StageResult(

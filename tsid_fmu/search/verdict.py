@@ -1,0 +1,217 @@
+"""Whether an answer is shown to be an optimum, and whether its fit is as good as the noise.
+
+A study reports "converged" (exit status 0) only where a stationarity test holds at its
+answer; which test depends on what the last stage knows:
+
+- after a least-squares refinement, the **projected Gauss-Newton test**: from the
+  residuals ``r`` and the Jacobian ``J`` of the refinement's last linearisation, the
+  Gauss-Newton step, restricted to the parameters that are not held at a bound by the
+  gradient and cut short where it would leave the bounds, predicts the cost
+  ``|r + J d|^2``. The test holds when it predicts a decrease of at most
+  :data:`GATE_RTOL` of the cost: no first-order model of the cost sees a better point
+  nearby. It costs no simulation.
+- otherwise (a cost other than ``sse``, or ``refine = "none"``), the **local probe
+  test**: the cost one convergence tolerance on either side of the answer along every
+  parameter (``2 p`` simulations); it holds when no probe is lower. It shows an optimum
+  at the resolution the levels converged to, and no finer.
+
+:func:`noise_floor` gives the cost that residuals at the noise level would have; an
+answer far above it (:data:`POOR_FIT` times) is a poor fit: a model that does not
+explain the data, or a local minimum. Only a search that has shown its answer to be
+stationary may blame the model for it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.evaluate.cost import noise_level
+from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.space import Space
+
+__all__ = [
+    "GATE_RTOL",
+    "POOR_FIT",
+    "Stationarity",
+    "gauss_newton_gap",
+    "noise_floor",
+    "probe_points",
+]
+
+GATE_RTOL = 1e-4
+"""Largest decrease of the cost, relative to itself, that the local model may still
+predict at an answer called stationary."""
+
+POOR_FIT = 3.0
+"""An answer whose cost exceeds the noise floor by this factor is a poor fit."""
+
+
+@dataclass
+class Stationarity:
+    """The outcome of a stationarity test at an answer.
+
+    Attributes
+    ----------
+    holds : bool
+        True where the test shows an optimum.
+    test : str
+        ``"projected Gauss-Newton"`` or ``"local probes"``.
+    gap : float
+        The decrease of the cost the test still sees (predicted, or found by a probe).
+    cost : float
+        The cost at the answer.
+    detail : str
+        One sentence for the log and the report.
+    """
+
+    holds: bool
+    test: str
+    gap: float
+    cost: float
+    detail: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form kept in a stage's ``extra["stationarity"]``."""
+        return {
+            "holds": self.holds,
+            "test": self.test,
+            "gap": self.gap if math.isfinite(self.gap) else None,
+            "cost": self.cost if math.isfinite(self.cost) else None,
+            "detail": self.detail,
+        }
+
+
+def _active(
+    s: np.ndarray, g: np.ndarray, lower: np.ndarray, upper: np.ndarray, tol: float
+) -> np.ndarray:
+    """Parameters held at a bound by the gradient ``g`` (of half the squared residuals)."""
+    return (_at(s, lower, tol) & (g > 0)) | (_at(upper, s, tol) & (g < 0))
+
+
+def _at(high: np.ndarray, low: np.ndarray, tol: float) -> np.ndarray:
+    """Where ``high - low`` is within ``tol`` (relative, at least absolute) of 0; finite only."""
+    bound = np.where(np.isfinite(low), low, high)
+    finite = np.isfinite(low) & np.isfinite(high)
+    return finite & (high - low <= tol * np.maximum(1.0, np.abs(bound)))
+
+
+def _feasible_fraction(s: np.ndarray, d: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+    """Largest ``t`` in [0, 1] with ``s + t d`` within the bounds."""
+    t = 1.0
+    for sj, dj, lo, hi in zip(s, d, lower, upper, strict=True):
+        if dj > 0 and math.isfinite(hi):
+            t = min(t, max(hi - sj, 0.0) / dj)
+        elif dj < 0 and math.isfinite(lo):
+            t = min(t, min(lo - sj, 0.0) / dj)
+    return t
+
+
+def gauss_newton_gap(
+    jac: np.ndarray, r: np.ndarray, s: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> float:
+    """Return the decrease of ``|r|^2`` the projected Gauss-Newton step predicts.
+
+    Parameters
+    ----------
+    jac : numpy.ndarray
+        Jacobian of the residuals, shape ``(m, p)``, in the coordinates ``s``.
+    r : numpy.ndarray
+        Residuals at ``s``, shape ``(m,)``; the cost is ``r @ r``.
+    s, lower, upper : numpy.ndarray
+        The point and the bounds, shape ``(p,)``.
+
+    Returns
+    -------
+    float
+        ``|r|^2 - |r + J t d|^2`` (>= 0) for the Gauss-Newton step ``d`` of the
+        parameters not held at a bound, cut to the largest ``t <= 1`` within the bounds.
+        Parameters held at a bound, or that the step would push straight through one,
+        are dropped from the step in turn.
+    """
+    jac, r = np.asarray(jac, float), np.asarray(r, float)
+    g = jac.T @ r
+    free = ~_active(s, g, lower, upper, 1e-9)
+    cost = float(r @ r)
+    best = 0.0
+    for _ in range(s.size + 1):
+        if not free.any():
+            return best
+        d = np.zeros_like(s)
+        d[free] = np.linalg.lstsq(jac[:, free], -r, rcond=1e-12)[0]
+        t = _feasible_fraction(s, d, lower, upper)
+        predicted = r + t * (jac @ d)
+        best = max(best, cost - float(predicted @ predicted))
+        if t >= 1.0 or t * np.linalg.norm(d) > 1e-9:
+            return best
+        # a free parameter sits at a bound the step points through: hold it there
+        blocked = free & (((d > 0) & _at(upper, s, 1e-12)) | ((d < 0) & _at(s, lower, 1e-12)))
+        if not blocked.any():
+            return best
+        free &= ~blocked
+    return best
+
+
+def probe_points(space: Space, x: Mapping[str, float], step: float) -> list[dict[str, float]]:
+    """Return the ``2 p`` sets ``step`` either side of ``x`` along each coordinate.
+
+    A probe that the bounds would clip back onto ``x`` is left out.
+    """
+    s = space.to_s(x)
+    out = []
+    for j in range(space.dim):
+        for sign in (-1.0, 1.0):
+            t = s.copy()
+            t[j] += sign * step
+            t = space.clip(t)
+            if not np.array_equal(t, s):
+                out.append(space.to_x(t))
+    return out
+
+
+def probe_test(
+    evaluator: Evaluator, space: Space, x: Mapping[str, float], cost: float, step: float
+) -> tuple[Stationarity, dict[str, float], float]:
+    """Run the local probe test; return it and the best of the answer and its probes."""
+    probes = probe_points(space, x, step)
+    if not probes:
+        detail = "no probe fits within the bounds"
+        return Stationarity(True, "local probes", 0.0, cost, detail), dict(x), cost
+    costs = evaluator.evaluate(probes).costs[:, 0]
+    costs = np.where(np.isfinite(costs), costs, math.inf)
+    k = int(np.argmin(costs))
+    gap = max(cost - float(costs[k]), 0.0)
+    if gap > 0:
+        detail = (
+            f"a probe {step:g} of a first range away lowers the cost by {gap:.3g}: "
+            "not shown to be an optimum"
+        )
+        return Stationarity(False, "local probes", gap, cost, detail), probes[k], float(costs[k])
+    detail = (
+        f"no probe {step:g} of a first range either side of the answer along any "
+        f"parameter ({len(probes)} simulations) lowers the cost"
+    )
+    return Stationarity(True, "local probes", 0.0, cost, detail), dict(x), cost
+
+
+def noise_floor(evaluator: Evaluator, weighted: bool) -> float:
+    """Return the cost residuals at the data's noise level would have.
+
+    With noise weighting the residuals are in units of the noise: the floor is their
+    number. Otherwise each output's noise is estimated from its data
+    (:func:`~tsid_fmu.evaluate.cost.noise_level`) and scaled as its residuals are.
+    """
+    total = 0.0
+    spec = getattr(evaluator, "spec", None)
+    for e in spec.experiments if spec is not None else ():
+        n = e.measured.shape[0]
+        if weighted:
+            total += n * e.measured.shape[1]
+        else:
+            sigma = noise_level(e.measured)
+            total += n * float(np.sum((sigma / e.scale) ** 2))
+    return total
