@@ -10,6 +10,7 @@ worse than any run evaluated.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -20,15 +21,24 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import Best, ProgressCallback, run_iteration
 from tsid_fmu.search.nextlevels import next_frame
-from tsid_fmu.search.record import IterationRecord
+from tsid_fmu.search.record import IterationRecord, json_float, unjson_float
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.schema import Method
 
-__all__ = ["RERUN_AFTER", "Recorder", "TaguchiRun", "taguchi_stage"]
+__all__ = ["HANDOVER_GAIN", "RERUN_AFTER", "Recorder", "TaguchiRun", "taguchi_stage"]
 
 RERUN_AFTER = 2
 """Iterations without a lower cost after which the next-best run is re-conducted."""
+
+HANDOVER_GAIN = 0.5
+"""With a hand-over (``refine = "auto"``), an iteration whose best cost is above this
+fraction of the best before it ends the stage: the arrays have stopped making large
+gains, and a local method finishes faster from there."""
+
+HANDOVER_FIT = 100.0
+"""... but only once the best cost is within this factor of the noise floor: farther out
+a local method from the best run too often ends in another basin."""
 
 
 class Recorder(Protocol):
@@ -54,6 +64,9 @@ class TaguchiRun:
     max_iterations: int | None = None
     pause_after: int | None = None
     experiments: list[str] = field(default_factory=list)
+    starts: list[tuple[dict[str, float], str]] = field(default_factory=list)
+    handover: bool = False
+    floor: float | None = None
 
 
 def _next_best(
@@ -134,6 +147,40 @@ def _stalled(records: list[IterationRecord], method: Method) -> str | None:
     )
 
 
+def _handover(records: list[IterationRecord], run: TaguchiRun, before: float) -> str | None:
+    """Whether the last iteration ends the stage for the refinement (see HANDOVER_GAIN)."""
+    if len(records) >= 2:
+        before = records[-2].best_cost
+    now = records[-1].best_cost
+    if not (math.isfinite(before) and math.isfinite(now)) or now <= HANDOVER_GAIN * before:
+        return None
+    if run.floor is not None and now > HANDOVER_FIT * run.floor:
+        return None
+    fell = 100.0 * (1.0 - now / before) if before > 0 else 0.0
+    return (
+        f"handed over to the refinement: iteration {records[-1].index} lowered the best "
+        f"cost by {fell:.3g} % (less than {100 * (1 - HANDOVER_GAIN):g} %)"
+    )
+
+
+def _evaluate_starts(
+    run: TaguchiRun, evaluator: Evaluator, progress: ProgressCallback | None
+) -> tuple[Best | None, list[dict]]:
+    """Score the start points; return the best and what the trail keeps of them."""
+    if not run.starts:
+        return None, []
+    ev = evaluator.evaluate([dict(x) for x, _ in run.starts])
+    kept, best = [], None
+    for (x, source), cost in zip(run.starts, ev.costs[:, 0], strict=True):
+        cost = float(cost) if np.isfinite(cost) else math.inf
+        kept.append({"x": dict(x), "cost": json_float(cost), "source": source})
+        if best is None or cost < best.cost:
+            best = Best(dict(x), cost, source)
+    if progress and best is not None:
+        progress("start", {"stage": run.name, "cost": best.cost, "source": best.source})
+    return best, kept
+
+
 def _limits(run: TaguchiRun, index: int, nfev: int, ran: int) -> tuple[int, str] | None:
     """Whether the stage must stop before iteration ``index`` (status, message)."""
     limit = run.max_iterations or run.method.max_iterations
@@ -147,13 +194,10 @@ def _limits(run: TaguchiRun, index: int, nfev: int, ran: int) -> tuple[int, str]
     return None
 
 
-def taguchi_stage(
+def _resume_point(
     run: TaguchiRun,
-    evaluator: Evaluator,
-    recorder: Recorder | None = None,
-    progress: ProgressCallback | None = None,
-) -> StageResult:
-    """Run (or continue) a Taguchi stage; see the module docstring."""
+) -> tuple[list[IterationRecord], Frame, tuple[str, list[int] | None] | None, Best | None]:
+    """Return the records so far, the next frame, a pending re-run and the best set."""
     records = list(run.prior)
     frame, pending = run.first, None
     if records:
@@ -169,16 +213,50 @@ def taguchi_stage(
         if records
         else None
     )
+    return records, frame, pending, best
+
+
+def _finished(
+    run: TaguchiRun, records: list[IterationRecord], pending: object
+) -> tuple[int, str] | None:
+    """Whether a continued stage had already ended (converged, or handed over)."""
+    if not records or pending is not None:
+        return None
+    if records[-1].decision.converged:
+        return 0, records[-1].decision.message
+    if run.handover and records[-1].extra.get("handover"):
+        return 0, str(records[-1].extra["handover"])
+    return None
+
+
+def taguchi_stage(
+    run: TaguchiRun,
+    evaluator: Evaluator,
+    recorder: Recorder | None = None,
+    progress: ProgressCallback | None = None,
+) -> StageResult:
+    """Run (or continue) a Taguchi stage; see the module docstring.
+
+    A new stage first scores ``run.starts`` (the FMU's start values, the centre of the
+    levels): its answer is never worse than doing nothing. With ``run.handover``, an
+    iteration that lowers the best cost by less than :data:`HANDOVER_GAIN` ends the
+    stage for the refinement; once a stage has handed over, continuing it (with or
+    without ``handover``) runs on without a second hand-over.
+    """
+    records, frame, pending, best = _resume_point(run)
     nfev = records[-1].nfev_total if records else run.nfev_before
+    done = _finished(run, records, pending)
+    if done is not None:
+        return _result(run, records, best, nfev, *done)
+    starts: list[dict] = []
+    if not records:  # never worse than doing nothing: the start points are scored first
+        n0 = evaluator.nfev
+        best, starts = _evaluate_starts(run, evaluator, progress)
+        nfev += evaluator.nfev - n0
+    handover = run.handover and not any("handover" in r.extra for r in records)
     reruns = sum("rerun_from" in r.extra for r in records)
     status, message, ran = 1, "", 0
-    if records and records[-1].decision.converged and pending is None:
-        return _result(run, records, best, nfev, 0, records[-1].decision.message)
-    while True:
-        stop = _limits(run, len(records) + 1, nfev, ran)
-        if stop:
-            status, message = stop
-            break
+    while (stop := _limits(run, len(records) + 1, nfev, ran)) is None:
         index = len(records) + 1
         if progress:
             progress("iteration", {"stage": run.name, "iteration": index, "frame": frame})
@@ -189,27 +267,56 @@ def taguchi_stage(
             rec.extra["rerun"] = pending[0]
             if pending[1] is not None:
                 rec.extra["rerun_from"] = list(pending[1])
-            pending = None
+        if index == 1 and starts:
+            rec.extra["starts"] = starts
         records.append(rec)
         best, nfev, ran = Best(rec.best_x, rec.best_cost, rec.best_source), rec.nfev_total, ran + 1
-        frame = rec.next_frame
-        stalled = None if rec.decision.converged else _stalled(records, run.method)
-        if stalled:
-            rec.decision.converged, rec.decision.message = True, stalled
-        alt = _decide_rerun(records, run, reruns, progress)
-        if alt is not None:
-            frame, note, origin = alt
-            reruns += 1
-            rec.extra["next"] = {"frame": frame.to_dict(), "note": note, "from": origin}
-            pending = (note, origin)
+        frame, pending, ended = _decide(records, run, reruns, handover, progress)
+        reruns += pending is not None and pending[1] is not None
         if recorder is not None:
             recorder.iteration(rec)
         if progress:
             progress("iteration done", {"record": rec})
-        if rec.decision.converged:
-            status, message = 0, rec.decision.message
-            break
+        if ended is not None:
+            return _result(run, records, best, nfev, 0, ended)
+    status, message = stop
     return _result(run, records, best, nfev, status, message)
+
+
+def _decide(
+    records: list[IterationRecord],
+    run: TaguchiRun,
+    reruns: int,
+    handover: bool,
+    progress: ProgressCallback | None,
+) -> tuple[Frame, tuple[str, list[int]] | None, str | None]:
+    """After an iteration: Case 3 by stalling, the hand-over, or a re-run.
+
+    Returns the next frame, a pending re-run (note, origin) and, if the stage ends, why.
+    """
+    rec = records[-1]
+    stalled = None if rec.decision.converged else _stalled(records, run.method)
+    if stalled:
+        rec.decision.converged, rec.decision.message = True, stalled
+    if rec.decision.converged:
+        return rec.next_frame, None, rec.decision.message
+    handed = _handover(records, run, _start_cost(records)) if handover else None
+    if handed:
+        rec.extra["handover"] = handed
+        return rec.next_frame, None, handed
+    alt = _decide_rerun(records, run, reruns, progress)
+    if alt is None:
+        return rec.next_frame, None, None
+    frame, note, origin = alt
+    rec.extra["next"] = {"frame": frame.to_dict(), "note": note, "from": origin}
+    return frame, (note, origin), None
+
+
+def _start_cost(records: list[IterationRecord]) -> float:
+    """Return the best cost of the start points scored before the first iteration."""
+    starts = records[0].extra.get("starts") if records else None
+    costs = [unjson_float(s["cost"]) for s in starts or []]
+    return min(costs, default=math.inf)
 
 
 def _result(
