@@ -28,6 +28,7 @@ from tsid_fmu.report.render import draw_study
 from tsid_fmu.report.ssp import write_model_ssp
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import IdentificationResult
+from tsid_fmu.search.adaptive import answer_stage, verdict
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.pipeline import Control, run_stages
 from tsid_fmu.search.record import IterationRecord
@@ -107,11 +108,16 @@ def _annotate(folder: Path, record: IterationRecord, space: Space) -> None:
 
 
 def _status(stages: list[StageResult]) -> tuple[int, str]:
+    """Return the study's verdict: the answer's stationarity test where one was made."""
     last = stages[-1]
     if last.status == 2:
         return 2, last.message
+    said = "; ".join(f"{s.name}: {s.message}" for s in stages if s.kind != "contribution")
+    tested = verdict(stages)
+    if tested is not None:
+        return tested[0], f"{said}; {tested[1]}" if tested[1] not in said else said
     status = 0 if all(s.status == 0 for s in stages if s.kind != "contribution") else 1
-    return status, "; ".join(f"{s.name}: {s.message}" for s in stages if s.kind != "contribution")
+    return status, said
 
 
 def _weak(result: IdentificationResult) -> dict[str, str]:
@@ -227,12 +233,13 @@ def _finish(
     fidelity: tuple[Fidelity | None, ProgressCallback | None] = (None, None),
 ) -> IdentificationResult:
     status, message = _status(stages)
-    x = {n: stages[-1].x.get(n, math.nan) for n in study.parameter_names}
+    answer = answer_stage(stages)
+    x = {n: answer.x.get(n, math.nan) for n in study.parameter_names}
     nit = sum(len(s.records) for s in stages)
     nfev = sum(s.nfev for s in stages)
     result = IdentificationResult(
         x=x,
-        fun=stages[-1].cost,
+        fun=answer.cost,
         nfev=nfev,
         success=status == 0,
         status=status,
@@ -262,8 +269,8 @@ def _finish(
     result.uncertainty = found.uncertainty
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
     result.warnings = found.warnings + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
-    answer = _fidelity(study, evaluators, x, "answer", callback, found.sensitivities)
-    _record(result, start, answer)
+    checked = _fidelity(study, evaluators, x, "answer", callback, found.sensitivities)
+    _record(result, start, checked)
     result.weak = _weak(result)
     if study.contribution.enabled and study.contribution.compare_ungrouped:
         result.extra["comparison"] = _compare_ungrouped(study, evaluators, store, result)

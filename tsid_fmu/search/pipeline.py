@@ -18,6 +18,7 @@ from typing import Protocol
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.adaptive import answer_stage, restart_start
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.phases import Evaluators, centre_values, joint_levels, plan_phases
@@ -25,7 +26,9 @@ from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.refine import refine_stage
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.start import start_points
 from tsid_fmu.search.taguchi import TaguchiRun, frame_from_run, taguchi_stage
+from tsid_fmu.search.verdict import POOR_FIT, noise_floor, probe_test
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Parameter, Phase
 
@@ -87,14 +90,21 @@ def _taguchi(
     current: Mapping[str, float],
     nfev_before: int,
     max_iterations: int | None,
+    handover: bool = False,
+    records: list[IterationRecord] | None = None,
 ) -> StageResult:
-    """Run (or continue) one Taguchi-kind stage of ``params`` on ``exps``."""
+    """Run (or continue) one Taguchi-kind stage of ``params`` on ``exps``.
+
+    It scores its start points first (:mod:`tsid_fmu.search.start`): the values the
+    earlier stages left where there are some, else the FMU's start values; and the
+    centre of the first levels.
+    """
     method = ctx.study.method
     levels = {p.name: list(p.levels) for p in params}
     space = Space(levels, {p.name: p.bounds for p in params}, method.leveling)
     names = [p.name for p in params]
     fixed = {k: v for k, v in current.items() if k not in names}
-    prior = ctx.store.iterations(key)
+    prior = ctx.store.iterations(key) or list(records or [])
     override, note = None, None
     if prior:
         override = ctx.store.override(key, prior[-1], space)
@@ -116,8 +126,12 @@ def _taguchi(
         max_iterations=max_iterations,
         pause_after=ctx.control.pause_after,
         experiments=list(exps),
+        starts=start_points(space, ctx.study.fmu, current if set(names) <= set(current) else None),
+        handover=handover,
     )
     evaluator = ctx.evaluators.get(names, list(exps), fixed)
+    if handover:
+        run.floor = noise_floor(evaluator, method.weighting == "noise")
     if prior and hasattr(evaluator, "mark_known"):
         # what the interrupted run simulated is not counted again (it was in memory)
         evaluator.mark_known(_simulated_sets(prior))
@@ -145,6 +159,7 @@ def _polish(
 ) -> StageResult:
     """Run the refinement from ``start`` (its cost and residuals come from the memo)."""
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    floor = noise_floor(evaluator, study.method.weighting == "noise")
     scored = evaluator.evaluate([dict(start)])
     return refine_stage(
         name,
@@ -155,20 +170,28 @@ def _polish(
         study.method,
         progress=progress,
         start_residuals=scored.residuals[0] if scored.residuals else None,
+        floor=floor,
     )
 
 
-def _refinement(ctx: _Context, last: StageResult, exps: list[str]) -> StageResult:
+def _refinement(
+    ctx: _Context,
+    start: Mapping[str, float],
+    exps: list[str],
+    key: str = "refinement",
+    name: str = "refinement",
+) -> StageResult:
+    """Refine from ``start`` (a finished refinement from the same start is read back)."""
     study = ctx.study
-    start = {n: last.x[n] for n in study.parameter_names}
-    done = ctx.store.stage("refinement")
+    start = {n: float(start[n]) for n in study.parameter_names}
+    done = ctx.store.stage(key)
     if done is not None and done.extra.get("start") == start:
         return done
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
-    result = _polish("refinement", study, start, evaluator, ctx.progress)
+    result = _polish(name, study, start, evaluator, ctx.progress)
     result.experiments = list(exps)
     result.extra["start"] = start
-    ctx.store.write_stage("refinement", result)
+    ctx.store.write_stage(key, result)
     return result
 
 
@@ -276,29 +299,120 @@ def run_stages(
     ctx = _Context(study, evaluators, store, progress, control or Control())
     if ungrouped:
         return [_run_ungrouped(ctx)]
+    adaptive = study.method.refine == "auto" and study.method.cost == "sse"
     if study.phases or study.contribution.enabled:
         stages = _run_phased(ctx)
     else:
-        # a Taguchi stage always continues from its iterations on disk: finished, it
-        # returns at once; stopped at a limit, it goes on if the limit now allows
-        exps = [e.name for e in study.identify_experiments()]
-        stages = [
-            _taguchi(
-                ctx,
-                "",
-                "taguchi",
-                "taguchi",
-                list(study.parameters),
-                exps,
-                {},
-                0,
-                ctx.control.max_iterations,
-            )
-        ]
-    if study.method.refine != "none" and stages[-1].status != 2:
-        exps = [e.name for e in study.identify_experiments()]
-        stages.append(_refinement(ctx, stages[-1], exps))
+        stages = [_single(ctx, handover=adaptive)]
+    if stages[-1].status == 2:
+        return stages
+    if adaptive or study.method.refine == "least_squares":
+        return _local_search(ctx, stages, adaptive)
+    return [*stages, _check(ctx, answer_stage(stages))]
+
+
+def _single(
+    ctx: _Context, handover: bool, records: list[IterationRecord] | None = None
+) -> StageResult:
+    """Run the one Taguchi stage of an ungrouped study (continued from the trail, if any).
+
+    A Taguchi stage always continues from its iterations on disk: finished, it returns
+    at once; stopped at a limit, it goes on if the limit now allows.
+    """
+    exps = [e.name for e in ctx.study.identify_experiments()]
+    params = list(ctx.study.parameters)
+    limit = ctx.control.max_iterations
+    return _taguchi(ctx, "", "taguchi", "taguchi", params, exps, {}, 0, limit, handover, records)
+
+
+def _poor(stages: list[StageResult], floor: float) -> bool:
+    return answer_stage(stages).cost > POOR_FIT * floor
+
+
+def _unsettled(stages: list[StageResult], floor: float) -> str | None:
+    """Why the answer so far needs more search: no stationarity shown, or a poor fit."""
+    answer = answer_stage(stages)
+    test = answer.extra.get("stationarity") or {}
+    if not test.get("holds", False):
+        return f"the refined answer is not shown to be an optimum ({test.get('detail', '')})"
+    if answer.cost > POOR_FIT * floor:
+        return (
+            f"the refined answer is a poor fit (cost {answer.cost:.6g}, "
+            f"{answer.cost / floor:.3g} times the noise floor)"
+        )
+    return None
+
+
+def _local_search(ctx: _Context, stages: list[StageResult], adaptive: bool) -> list[StageResult]:
+    """Refine the best set; with ``adaptive``, go on where it is not settled.
+
+    See :mod:`tsid_fmu.search.adaptive` for the order of the steps.
+    """
+    study = ctx.study
+    exps = [e.name for e in study.identify_experiments()]
+    stages.append(_refinement(ctx, answer_stage(stages).x, exps))
+    if not adaptive:
+        return stages
+    evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
+    floor = noise_floor(evaluator, study.method.weighting == "noise")
+    first = stages[0]
+    why = _unsettled(stages, floor)
+    if why and first.kind == "taguchi" and first.records[-1].extra.get("handover"):
+        _note(ctx, f"{why}: the Taguchi stage goes on")
+        stages[0] = _single(ctx, handover=False, records=first.records)
+        stages[0].extra["resumed"] = why
+        if stages[0].status == 2:
+            return stages
+        if stages[0].cost < stages[-1].cost:
+            name = "refinement after the Taguchi stage went on"
+            stages.append(_refinement(ctx, stages[0].x, exps, "refinement_02", name))
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    for k in range(1, study.method.max_reruns + 1):
+        why = _unsettled(stages, floor)
+        if why is None:
+            break
+        explored = [s.extra["start"] for s in stages if "start" in s.extra]
+        explored += [s.x for s in stages if s.kind == "refinement"]
+        found = restart_start(stages, space, explored)
+        if found is None:
+            break
+        _note(ctx, f"{why}: restart {k} from a run that cost {found[1]:.6g}")
+        name = f"restart {k} from the next-best run"
+        stages.append(_refinement(ctx, found[0], exps, f"restart_{k:02d}", name))
     return stages
+
+
+def _note(ctx: _Context, message: str) -> None:
+    if ctx.progress:
+        ctx.progress("rerun", {"message": message})
+
+
+def _check(ctx: _Context, last: StageResult) -> StageResult:
+    """Run the local probe test at an answer no refinement tested (a ``check`` stage)."""
+    study = ctx.study
+    exps = [e.name for e in study.identify_experiments()]
+    done = ctx.store.stage("check")
+    x = {n: float(last.x[n]) for n in study.parameter_names}
+    if done is not None and done.extra.get("start") == x:
+        return done
+    evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    n0 = evaluator.nfev
+    step = study.method.leveling.tolerance
+    test, best, cost = probe_test(evaluator, space, x, last.cost, step)
+    result = StageResult(
+        name="stationarity check",
+        kind="check",
+        x=best,
+        cost=cost,
+        nfev=evaluator.nfev - n0,
+        message=test.detail,
+        status=0 if test.holds else 1,
+        experiments=exps,
+        extra={"start": x, "stationarity": test.to_dict()},
+    )
+    ctx.store.write_stage("check", result)
+    return result
 
 
 def _run_ungrouped(ctx: _Context) -> StageResult:

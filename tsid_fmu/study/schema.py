@@ -304,9 +304,16 @@ class Method:
     max_reruns : int
         Re-runs from the next-best run when continuing from the best did not lower the
         cost (MISO paper). Default 2.
-    refine : {"none", "least_squares"}
-        Optional refinement stage after the Taguchi stage: a trust-region least-squares
-        polish of the same cost (``"sse"`` only). Default ``"none"``.
+    refine : {"auto", "least_squares", "none"}
+        What follows the Taguchi stage. ``"auto"`` (default): with the ``sse`` cost, the
+        adaptive pipeline of :mod:`tsid_fmu.search.adaptive` (the Taguchi stage hands
+        over to a trust-region least-squares refinement when its arrays stop making
+        large gains; a poor fit sends the search back to the arrays and then to
+        restarts from the next-best runs); with another cost, as ``"none"``.
+        ``"least_squares"``: the Taguchi stage runs to its own end, then the refinement
+        (``"sse"`` only). ``"none"``: the Taguchi stage alone, then the local probe test
+        of its answer. In every case the study converges (exit status 0) only where a
+        stationarity test holds at its answer (:mod:`tsid_fmu.search.verdict`).
     refine_max_nfev : int, optional
         Most simulations of the refinement stage; default ``30 (p + 1)`` times the
         number of identification experiments (about thirty Jacobians).
@@ -346,7 +353,7 @@ class Method:
     selection: str = "auto"
     rotate: bool = True
     max_reruns: int = 2
-    refine: str = "none"
+    refine: str = "auto"
     refine_max_nfev: int | None = None
     interface: str | None = None
     step: float | None = None
@@ -377,7 +384,7 @@ class Method:
             if not isinstance(getattr(self, flag), bool):
                 raise StudyError(f"{flag} must be true or false, got {getattr(self, flag)!r}")
         self.max_reruns = check_whole(self.max_reruns, "max_reruns", 0)
-        self.refine = check_choice(self.refine, "refine", ("none", "least_squares"))
+        self.refine = check_choice(self.refine, "refine", ("auto", "none", "least_squares"))
         if self.refine == "least_squares" and self.cost != "sse":
             raise StudyError(
                 f'refine = "least_squares" minimises the sse cost; the study uses {self.cost!r}'

@@ -1,0 +1,304 @@
+"""The adaptive pipeline's rules, each on a small FMU-free problem.
+
+Start points are scored; a stalling Taguchi stage hands over to the refinement; an
+answer beyond the first ranges is reached (ranges are extended to the bounds); a poor
+fit sends the search back to the arrays and to restarts; exit status 0 only where a
+stationarity test holds. Each test fails when its rule is removed.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.optimize import least_squares
+from spec_helpers import CurveEvaluator
+
+from tsid_fmu import Experiment, Method, Parameter, Study
+from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.search import adaptive, pipeline, taguchi, verdict
+from tsid_fmu.search.frame import Frame
+from tsid_fmu.search.pipeline import run_stages
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.start import start_points
+from tsid_fmu.search.taguchi import TaguchiRun, taguchi_stage
+from tsid_fmu.trail.folder import NullStore
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+T = np.linspace(0.0, 4.0, 80)
+TRUTH = {"a": 2.0, "k": 1.3}
+SIGMA = 0.01
+NOISE = np.random.default_rng(3).normal(0.0, SIGMA, T.size)
+
+
+def _decay(a: float, k: float) -> np.ndarray:
+    return a * np.exp(-k * T)
+
+
+class FloorEvaluator(CurveEvaluator):
+    """A curve evaluator with the spec ``noise_floor`` reads (residuals in noise units)."""
+
+    def __init__(self, model, measured: np.ndarray, scale: float) -> None:
+        super().__init__(model, measured, scale)
+        exp = SimpleNamespace(measured=measured[:, None], scale=np.array([scale]))
+        self.spec = SimpleNamespace(experiments=[exp])
+
+
+class Evaluators:
+    """Every sub-problem scored by one evaluator (a single-stage study)."""
+
+    def __init__(self, ev: CurveEvaluator) -> None:
+        self.ev = ev
+
+    def spec(self, parameters, experiments, fixed):
+        return self.ev.spec
+
+    def get(self, parameters, experiments, fixed):
+        return self.ev
+
+
+def _study(levels: dict[str, list[float]], bounds=None, **method) -> Study:
+    data = pd.DataFrame({"time": T, "y": np.zeros_like(T)})
+    bounds = bounds or {}
+    params = [Parameter(n, lv, *bounds.get(n, (0.0, math.inf))) for n, lv in levels.items()]
+    options = {"cost": "sse", "weighting": "noise", "replicates": 1, **method}
+    return Study(
+        fmu=ROOT / "no-such.fmu",
+        parameters=params,
+        experiments=[Experiment(data, inputs={}, outputs={"y": "y"}, noise={"y": SIGMA})],
+        method=Method(**options),
+    )
+
+
+def _decay_evaluator() -> FloorEvaluator:
+    return FloorEvaluator(_decay, _decay(**TRUTH) + NOISE, SIGMA)
+
+
+def _optimum(model, measured, x0: dict[str, float]) -> tuple[dict[str, float], float]:
+    names = list(x0)
+    fit = least_squares(
+        lambda v: (model(**dict(zip(names, v, strict=True))) - measured) / SIGMA,
+        [x0[n] for n in names],
+        xtol=1e-14,
+        ftol=1e-14,
+        gtol=1e-14,
+    )
+    return dict(zip(names, fit.x, strict=True)), 2 * float(fit.cost)
+
+
+def _stage_run(levels, **kw) -> TaguchiRun:
+    space = Space(levels, {n: (0.0, math.inf) for n in levels}, LevelingOptions())
+    return TaguchiRun(
+        name="taguchi",
+        space=space,
+        first=Frame.from_levels(space, levels),
+        method=Method(cost="sse", replicates=1, max_iterations=kw.pop("max_iterations", 6)),
+        **kw,
+    )
+
+
+# -- start points -------------------------------------------------------------------------
+
+
+def test_the_start_point_is_scored_first_and_the_answer_is_never_worse():
+    levels = {"a": [5.0, 6.0, 8.0], "k": [4.0, 5.0, 6.0]}  # every run far from the truth
+    ev = _decay_evaluator()
+    with_start = taguchi_stage(_stage_run(levels, starts=[(TRUTH, "given")], max_iterations=1), ev)
+    without = taguchi_stage(_stage_run(levels, max_iterations=1), _decay_evaluator())
+    assert with_start.cost == pytest.approx(ev.cost(**TRUTH), rel=1e-12)
+    assert with_start.records[0].best_source == "given"
+    assert with_start.records[0].extra["starts"][0]["source"] == "given"
+    assert ev.asked[0] == TRUTH  # scored before the first array
+    assert without.cost > 100 * with_start.cost  # what the rule protects against
+    assert with_start.nfev == without.nfev + 1
+
+
+def test_start_points_are_the_fmus_start_values_then_the_centre_of_the_levels():
+    levels = {"F_cm": [10.0, 50.0, 110.0], "K_s": [1000.0, 4000.0, 6000.0]}
+    space = Space(levels, {"F_cm": (0, math.inf), "K_s": (0, 5000.0)}, LevelingOptions())
+    points = start_points(space, ROOT / "fmus" / "LSEA_SISO.fmu")
+    (fmu, source), (centre, where) = points
+    assert source == "the FMU's start values" and fmu["F_cm"] == 88.5
+    assert fmu["K_s"] == 5000.0  # the FMU's 8600 clipped to the study's bound
+    assert where == "the centre of the first levels"
+    assert centre == space.to_x(np.zeros(2))
+    assert start_points(space, ROOT / "no-such.fmu") == [(centre, where)]
+    before = {"F_cm": 70.0, "K_s": 3000.0}
+    assert start_points(space, None, before)[0] == (before, "the values before this stage")
+
+
+# -- hand-over ----------------------------------------------------------------------------
+
+
+def test_a_stalling_taguchi_stage_hands_over_near_the_noise_floor():
+    levels = {"a": [1.0, 2.5, 4.0], "k": [0.5, 1.5, 2.5]}
+    on = taguchi_stage(_stage_run(levels, handover=True, floor=float(T.size)), _decay_evaluator())
+    off = taguchi_stage(_stage_run(levels), _decay_evaluator())
+    far = taguchi_stage(
+        _stage_run(levels, handover=True, floor=1e-9), _decay_evaluator()
+    )  # every cost is far above a tiny floor: no hand-over
+    assert on.status == 0 and on.message.startswith("handed over to the refinement")
+    assert "handover" in on.records[-1].extra
+    fell = [b.best_cost / a.best_cost for a, b in zip(on.records, on.records[1:], strict=False)]
+    assert all(f <= taguchi.HANDOVER_GAIN for f in fell[:-1]) and fell[-1] > taguchi.HANDOVER_GAIN
+    assert len(off.records) > len(on.records)
+    assert len(far.records) == len(off.records)
+
+
+def test_a_handed_over_stage_reads_back_as_finished_and_continues_without_a_second_handover():
+    levels = {"a": [1.0, 2.5, 4.0], "k": [0.5, 1.5, 2.5]}
+    first = taguchi_stage(
+        _stage_run(levels, handover=True, floor=float(T.size)), _decay_evaluator()
+    )
+    ev = _decay_evaluator()
+    again = taguchi_stage(
+        _stage_run(levels, handover=True, floor=float(T.size), prior=first.records), ev
+    )
+    assert ev.nfev == 0 and again.message == first.message
+    more = taguchi_stage(_stage_run(levels, prior=first.records, max_iterations=12), ev)
+    assert len(more.records) > len(first.records) and "handed over" not in more.message
+
+
+def test_the_auto_pipeline_hands_over_and_ends_at_the_least_squares_optimum():
+    study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
+    ev = _decay_evaluator()
+    stages = run_stages(study, Evaluators(ev), NullStore())
+    x, best = _optimum(_decay, ev.measured, TRUTH)
+    answer = adaptive.answer_stage(stages)
+    assert answer.cost == pytest.approx(best, rel=1e-6)
+    assert all(answer.x[n] == pytest.approx(x[n], rel=1e-4) for n in x)
+    assert stages[0].message.startswith("handed over") and stages[1].kind == "refinement"
+    assert adaptive.verdict(stages)[0] == 0
+    fixed = _decay_evaluator()
+    run_stages(_study(study.first_levels(), refine="least_squares"), Evaluators(fixed), NullStore())
+    assert ev.nfev < fixed.nfev  # the arrays stop where a local method finishes faster
+
+
+# -- ranges extended to the bounds -----------------------------------------------------------
+
+
+def test_an_optimum_beyond_the_first_ranges_is_reached_and_a_bound_is_respected():
+    far = {"a": [0.4, 0.6, 0.9], "k": [0.3, 0.5, 0.8]}  # the truth is above every level
+    ev = _decay_evaluator()
+    stages = run_stages(_study(far), Evaluators(ev), NullStore())
+    answer = adaptive.answer_stage(stages)
+    _, best = _optimum(_decay, ev.measured, TRUTH)
+    assert answer.x["a"] > 2 * max(far["a"]) and answer.cost == pytest.approx(best, rel=1e-6)
+    bounded = run_stages(
+        _study(far, bounds={"a": (0.0, 1.0)}), Evaluators(_decay_evaluator()), NullStore()
+    )
+    answer = adaptive.answer_stage(bounded)
+    assert answer.x["a"] == pytest.approx(1.0)  # held at its bound, and
+    assert adaptive.verdict(bounded)[0] == 0  # stationary there (the projected test)
+
+
+# -- local minima: back to the arrays, then restarts ----------------------------------------
+
+W = np.linspace(0.0, 4.0, 300)
+
+
+def _ring(w: float, a: float) -> np.ndarray:
+    return a * np.sin(w * W)
+
+
+RING = _ring(3.0, 1.0) + np.random.default_rng(5).normal(0.0, SIGMA, W.size)
+
+
+def _ring_study(**method) -> Study:
+    data = pd.DataFrame({"time": W, "y": np.zeros_like(W)})
+    # the truth w = 3 lies above the first levels; a sine's cost has a row of minima in w
+    params = [Parameter("w", [0.8, 1.5, 2.2], 0.5, 8.0), Parameter("a", [0.5, 1.0, 2.0], 0.0)]
+    return Study(
+        fmu=ROOT / "no-such.fmu",
+        parameters=params,
+        experiments=[Experiment(data, inputs={}, outputs={"y": "y"}, noise={"y": SIGMA})],
+        method=Method(cost="sse", weighting="noise", replicates=1, **method),
+    )
+
+
+def test_a_poor_fit_after_the_refinement_sends_the_search_back_until_the_global_optimum(
+    monkeypatch,
+):
+    # the hand-over comes early (a huge floor), the refinement lands in a local minimum
+    monkeypatch.setattr(taguchi, "HANDOVER_FIT", 1e12)
+    ev = FloorEvaluator(_ring, RING, SIGMA)
+    stages = run_stages(_ring_study(), Evaluators(ev), NullStore())
+    answer = adaptive.answer_stage(stages)
+    first = next(s for s in stages if s.kind == "refinement")
+    assert first.cost > 100 * answer.cost  # the first refinement sat in a local minimum
+    assert answer.x["w"] == pytest.approx(3.0, rel=1e-3)
+    assert answer.cost < verdict.POOR_FIT * W.size
+    assert adaptive.verdict(stages)[0] == 0
+    # without the rule, the local minimum would be the answer
+    monkeypatch.setattr(pipeline, "POOR_FIT", math.inf)
+    alone = run_stages(_ring_study(), Evaluators(FloorEvaluator(_ring, RING, SIGMA)), NullStore())
+    assert adaptive.answer_stage(alone).cost > 100 * answer.cost
+
+
+def test_a_restart_starts_from_the_best_scored_set_away_from_every_explored_one():
+    levels = {"a": [1.0, 2.5, 4.0], "k": [0.5, 1.5, 2.5]}
+    stage = taguchi_stage(_stage_run(levels, max_iterations=1), _decay_evaluator())
+    space = Space(levels, {n: (0.0, math.inf) for n in levels}, LevelingOptions())
+    costs = stage.records[0].measured_costs
+    order = np.argsort(costs)
+    best = dict(zip(stage.records[0].parameters, stage.records[0].sets[order[0]], strict=True))
+    found, cost = adaptive.restart_start([stage], space, [best])
+    assert cost > costs[order[0]] and found != best
+    s, t = space.to_s(found), space.to_s(best)
+    assert np.max(np.abs(s - t)) >= adaptive.RESTART_SEPARATION
+    everything = [dict(zip(levels, row, strict=True)) for row in stage.records[0].sets]
+    assert adaptive.restart_start([stage], space, everything) is None
+
+
+# -- the stationarity gate ------------------------------------------------------------------
+
+
+def test_the_projected_gauss_newton_gap_of_a_linear_problem():
+    jac = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])
+    r = np.ones(3)
+    free = np.full(2, math.inf)
+    step = np.linalg.lstsq(jac, -r, rcond=None)[0]
+    exact = 3.0 - float(np.sum((r + jac @ step) ** 2))
+    assert verdict.gauss_newton_gap(jac, r, np.zeros(2), -free, free) == pytest.approx(exact)
+    # both coordinates at a lower bound the gradient pushes through: nothing to gain
+    assert verdict.gauss_newton_gap(jac, r, np.zeros(2), np.zeros(2), free) == 0.0
+    # a bound 0.1 away cuts the step short: a smaller gain, not none
+    cut = verdict.gauss_newton_gap(jac, r, np.zeros(2), np.full(2, -0.1), free)
+    assert 0 < cut < exact
+
+
+def test_exit_zero_needs_the_stationarity_test_to_hold():
+    study = _study(
+        {"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]},
+        refine="least_squares",
+        refine_max_nfev=3,
+        max_iterations=1,
+    )
+    stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
+    refined = stages[-1]
+    assert refined.status == 1 and not refined.extra["stationarity"]["holds"]
+    status, why = adaptive.verdict(stages)
+    assert status == 1 and "not shown to be an optimum" in why
+
+
+def test_the_local_probe_test_finds_a_lower_neighbour_and_takes_it():
+    levels = {"a": [1.0, 2.0, 3.0], "k": [1.0, 1.3, 1.6]}
+    space = Space(levels, {n: (0.0, math.inf) for n in levels}, LevelingOptions())
+    ev = _decay_evaluator()
+    x, best = _optimum(_decay, ev.measured, TRUTH)
+    at = verdict.probe_test(ev, space, x, best, 0.005)
+    assert at[0].holds and at[1] == x and ev.nfev == 4
+    off = {"a": x["a"] * 1.05, "k": x["k"]}
+    test, moved, cost = verdict.probe_test(ev, space, off, ev.cost(**off), 0.005)
+    assert not test.holds and cost < ev.cost(**off) and moved["a"] < off["a"]
+
+
+def test_refine_none_ends_with_a_check_stage_that_decides_the_verdict():
+    study = _study({"a": [1.0, 1.7, 2.6], "k": [0.8, 1.1, 1.7]}, refine="none", max_iterations=1)
+    stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
+    assert stages[-1].kind == "check" and stages[-1].nfev == 4
+    assert adaptive.verdict(stages)[0] == (0 if stages[-1].extra["stationarity"]["holds"] else 1)
+    assert adaptive.verdict(stages)[0] == 1  # one array does not reach the optimum

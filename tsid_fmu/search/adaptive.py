@@ -1,0 +1,96 @@
+"""The adaptive pipeline's decisions: which answer stands, is it an optimum, where to restart.
+
+With ``refine = "auto"`` (the default) and the ``sse`` cost a study is not a fixed
+sequence of stages:
+
+1. the Taguchi stage scores its start points and runs arrays while they make large
+   gains; when an iteration lowers the best cost by less than half, it hands over
+   (:data:`~tsid_fmu.search.taguchi.HANDOVER_GAIN`);
+2. the least-squares refinement polishes the best set;
+3. if the answer is a poor fit (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the
+   noise floor), the refinement may sit in a local minimum: the Taguchi stage goes on
+   from where it handed over, to its own end (Case 3 or a limit), and its best set is
+   refined again;
+4. if the fit is still poor, the refinement restarts from the next-best run of the
+   arrays that lies away from every start and answer so far (the MISO paper's re-run
+   from the next-best run), up to ``max_reruns`` times;
+5. the answer is the lowest-cost set of every stage, and the study has converged only
+   where a stationarity test holds there (:mod:`tsid_fmu.search.verdict`).
+
+Every decision names its reason in the stage's message, and so in the log and report.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+
+__all__ = ["RESTART_SEPARATION", "answer_stage", "restart_start", "verdict"]
+
+RESTART_SEPARATION = 0.15
+"""A restart's start lies at least this far (in first ranges, along some parameter) from
+every start and answer of the refinements before it."""
+
+_ANSWERS = ("taguchi", "refinement", "check")
+
+
+def answer_stage(stages: Sequence[StageResult]) -> StageResult:
+    """Return the stage whose answer the study reports: the lowest cost on the full cost.
+
+    The stages that score the whole study (a single Taguchi stage, refinements, checks)
+    and the last stage compete; phases that score a part of it do not.
+    """
+    last = stages[-1]
+    pool = [s for s in stages if s.kind in _ANSWERS] + [last]
+    finite = [s for s in pool if math.isfinite(s.cost)]
+    if not finite:
+        return last
+    best = min(s.cost for s in finite)
+    # the latest stage with the best cost (a check confirms the refinement's answer)
+    return [s for s in finite if s.cost == best][-1]
+
+
+def verdict(stages: Sequence[StageResult]) -> tuple[int, str] | None:
+    """Return (status, reason) from the answer's stationarity test, if one was made."""
+    stage = answer_stage(stages)
+    test = stage.extra.get("stationarity")
+    if not test:
+        return None
+    if test.get("holds"):
+        return 0, f"stationary at the answer ({test.get('test')}): {test.get('detail')}"
+    return 1, f"not shown to be an optimum ({test.get('test')}): {test.get('detail')}"
+
+
+def _points(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float]]]:
+    """Every parameter set the Taguchi stages scored on the full cost, with its cost."""
+    out = []
+    for st in stages:
+        if st.kind != "taguchi":
+            continue
+        for rec in st.records:
+            costs = rec.measured_costs
+            for row, cost in zip(rec.sets, costs, strict=True):
+                out.append((float(cost), dict(zip(rec.parameters, map(float, row), strict=True))))
+            for start in rec.extra.get("starts", []):
+                if start.get("cost") is not None:
+                    out.append((float(start["cost"]), dict(start["x"])))
+    return [(c, x) for c, x in out if math.isfinite(c)]
+
+
+def restart_start(
+    stages: Sequence[StageResult], space: Space, explored: Sequence[dict[str, float]]
+) -> tuple[dict[str, float], float] | None:
+    """Return the lowest-cost scored set away from every explored set, and its cost."""
+    seen = [space.to_s(x) for x in explored]
+    for cost, x in sorted(_points(stages), key=lambda p: p[0]):
+        if not all(n in x for n in space.names):
+            continue
+        s = space.to_s(x)
+        if all(np.max(np.abs(s - t)) >= RESTART_SEPARATION for t in seen):
+            return x, cost
+    return None
