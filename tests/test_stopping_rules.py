@@ -5,7 +5,8 @@ The rules: a range is *small* at a relative span of at most ``tolerance``; an S/
 needs every factor flat and small; the stage stalls when every S/N has been flat for
 ``stall`` iterations and the best cost fell by at most ``stall_rtol`` of itself; and it
 stops before an iteration past ``max_iterations``, at ``max_simulations``, or after
-``pause_after`` iterations of this call.
+``pause_after`` iterations of this call. Rotated factors (search/nextlevels.py) have
+their own copy of the tolerance and flatness rules, pinned the same way.
 """
 
 from __future__ import annotations
@@ -13,11 +14,13 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 from test_taguchi_valley import ValleyEvaluator
 
 from tsid_fmu.doe.leveling import LevelingOptions, relative_span, relevel
-from tsid_fmu.search.frame import Frame
+from tsid_fmu.search.frame import Factor, Frame
+from tsid_fmu.search.nextlevels import _rotated_decisions
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.taguchi import TaguchiRun, _limits, _stalled, taguchi_stage
 from tsid_fmu.study.schema import Method
@@ -95,6 +98,43 @@ def test_a_contribution_at_the_minimum_is_not_minor():
 
     assert case_b(4.99) == "keep"
     assert case_b(5.0) == "recentre"
+
+
+# -- the same rules for rotated factors (search/nextlevels.py) -----------------------------
+
+
+def _rotated(half: float, sn: list[float]) -> tuple[float, int]:
+    """Two rotated factors of offsets +/-``half`` about p = q = 100 (16 per unit)."""
+    space = Space(
+        {"p": [92.0, 108.0], "q": [92.0, 108.0]},
+        {"p": (-math.inf, math.inf), "q": (-math.inf, math.inf)},
+        LevelingOptions(),
+    )
+    offsets = np.array([-half, 0.0, half])
+    factors = [
+        Factor("A1", np.array([1.0, 0.0]), offsets),
+        Factor("A2", np.array([0.0, 1.0]), offsets),
+    ]
+    frame = Frame(np.zeros(2), factors, anchor={"p": 100.0, "q": 100.0})
+    d = _rotated_decisions(
+        frame, space, {"A1": sn, "A2": FLAT}, np.zeros(2), "run 1", LevelingOptions(), {}
+    )
+    return frame.spans(space)["A1"], d.case
+
+
+@pytest.mark.parametrize(("half", "span"), [(1 / 128, 0.0025), (1 / 64, 0.005)])
+def test_flat_rotated_factors_at_or_under_the_tolerance_converge(half, span):
+    assert _rotated(half, FLAT) == (pytest.approx(span, rel=1e-12), 3)
+
+
+@pytest.mark.parametrize(("half", "span"), [(0.02, 0.0064), (0.125, 0.04)])
+def test_flat_rotated_factors_over_the_tolerance_are_narrowed(half, span):
+    assert _rotated(half, FLAT) == (pytest.approx(span, rel=1e-12), 2)
+
+
+def test_a_rotated_factor_at_the_significance_is_case_1():
+    assert _rotated(1 / 128, [0.0, 0.0999, 0.0])[1] == 3
+    assert _rotated(1 / 128, [0.0, 0.1, 0.0])[1] == 1
 
 
 # -- the stall rule (search/taguchi.py ``_stalled``): stall 2, stall_rtol 1e-4 ------------
