@@ -108,11 +108,21 @@ def test_profile_intervals_cover_the_truth_95_percent_of_the_time(white, monkeyp
 @pytest.mark.xfail(
     strict=True,
     reason="issue 27: on AR(1) noise (rho 0.5, 200 samples) the HAC intervals hold the "
-    "truth on 82.0 % (a) and 88.25 % (b) of 400 seeds; the exact sandwich covariance "
-    "gives 94.5 / 94.75 %: the Newey-West estimate is too small at this sample size",
+    "truth on 82.0 % (a) and 88.25 % (b) of 400 seeds (the profile ones 87.75 / 87.0 %); "
+    "the exact sandwich covariance gives 94.5 / 94.75 %: the Newey-West estimate is too "
+    "small at this sample size",
 )
 def test_hac_intervals_cover_the_truth_95_percent_of_the_time_on_ar1_noise(coloured):
     found = bench.coverage(coloured, bench.wald)
+    assert all(bench.in_band(share) for share in found.values()), found
+
+
+@pytest.mark.slow
+def test_on_these_seeds_the_exact_sandwich_covers_the_truth_95_percent_of_the_time(coloured):
+    """The benchmark's AR(1) data and fits are sound: the sandwich with the noise's true
+    covariance holds the truth on 94.5 / 94.75 % of the seeds; the HAC shortfall is the
+    estimate's."""
+    found = bench.coverage(coloured, lambda f: bench.reference(f, exact=True))
     assert all(bench.in_band(share) for share in found.values()), found
 
 
