@@ -22,6 +22,7 @@ traceback); the exit statuses 0, 1, 2, 3 and 130 guard what the lead built.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -29,6 +30,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -352,15 +354,60 @@ def test_each_exit_status_from_a_real_cli_run(folder, tmp_path):
     assert proc.stderr.read() == b""
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def _unwritable(path: Path) -> bool:
+    try:
+        (path / "probe").touch()
+    except OSError:
+        return True
+    (path / "probe").unlink()
+    return False
+
+
+@contextlib.contextmanager
+def _read_only(out: Path) -> Iterator[str]:
+    """Make the empty folder ``out`` unwritable for this process, even as root.
+
+    Without root a mode of 0555 does; root writes through modes (and CI runs as root),
+    so there the folder is made immutable (``chattr +i``), else a read-only tmpfs is
+    mounted on it. Skips, naming what was tried, where neither works.
+    """
+    if os.geteuid() != 0:
+        out.chmod(0o555)
+        try:
+            yield "mode 0555"
+        finally:
+            out.chmod(0o755)
+        return
+    ways = [
+        ("chattr +i", ["chattr", "+i", str(out)], ["chattr", "-i", str(out)]),
+        ("a read-only tmpfs", ["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(out)],
+         ["umount", str(out)]),
+    ]  # fmt: skip
+    tried = []
+    for name, on, off in ways:
+        try:
+            done = subprocess.run(on, capture_output=True, text=True, timeout=30)
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            tried.append(f"{name}: {exc}")
+            continue
+        if done.returncode != 0 or not _unwritable(out):
+            if done.returncode == 0:
+                subprocess.run(off, capture_output=True, timeout=30)
+            tried.append(f"{name}: {(done.stderr or 'root could still write').strip()}")
+            continue
+        try:
+            yield name
+        finally:
+            subprocess.run(off, capture_output=True, timeout=30, check=True)
+        return
+    pytest.skip("as root no folder could be made unwritable; tried " + "; ".join(tried))
+
+
 def test_a_read_only_folder_is_exit_4(folder, tmp_path):
     out = tmp_path / "ro"
     out.mkdir()
-    out.chmod(0o555)
-    try:
+    with _read_only(out):
         proc = _identify(folder / "a.toml", out, _env(tmp_path / "tmp"))
-    finally:
-        out.chmod(0o755)
     assert proc.returncode == 4 and str(out) in _single_error(proc)
 
 

@@ -3,8 +3,9 @@
 The page must render with no console error and no request other than the file itself
 and its embedded ``data:`` images, and show per iteration the response tables for S/N
 and means with Delta and Rank, the ANOVA table and at least one embedded image that the
-browser decoded. Chromium comes from the system's packages (``.ci/run`` installs it);
-the test is skipped only where no Chromium can be found.
+browser decoded. Chromium comes from the system's packages (``.ci/run`` installs it,
+and stops if it cannot); the test is skipped only where no Chromium can be found, and
+fails instead with ``CI`` set (``.ci/run`` sets ``CI=true``).
 """
 
 from __future__ import annotations

@@ -1,0 +1,245 @@
+"""Every stopping rule at its boundary: one case just inside, one just outside (no FMU).
+
+The rules: a range is *small* at a relative span of at most ``tolerance``; an S/N is
+*flat* below ``significance_db``; a factor is *minor* below ``min_contribution``; Case 3
+needs every factor flat and small; the stage stalls when every S/N has been flat for
+``stall`` iterations and the best cost fell by at most ``stall_rtol`` of itself; and it
+stops before an iteration past ``max_iterations``, at ``max_simulations``, or after
+``pause_after`` iterations of this call. Rotated factors (search/nextlevels.py) have
+their own copy of the tolerance and flatness rules, pinned the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from test_taguchi_valley import ValleyEvaluator
+
+from tsid_fmu.doe.leveling import LevelingOptions, relative_span, relevel
+from tsid_fmu.search.frame import Factor, Frame
+from tsid_fmu.search.nextlevels import _rotated_decisions
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.taguchi import TaguchiRun, _limits, _stalled, taguchi_stage
+from tsid_fmu.study.schema import Method
+
+FLAT = [-20.0, -20.0, -20.0]
+
+
+def _case(levels: list[float], sn: list[float], **options) -> tuple[int, str]:
+    d = relevel({"k": levels}, {"k": sn}, LevelingOptions(**options))
+    return d.case, d.parameters[0].case
+
+
+# -- the convergence tolerance (doe/leveling.py): 0.005 by default ------------------------
+
+
+@pytest.mark.parametrize(
+    ("levels", "span"),
+    [([99.8, 100.0, 100.2], 0.004), ([99.75, 100.0, 100.25], 0.005)],
+)
+def test_a_flat_range_at_or_under_the_tolerance_converges(levels, span):
+    assert relative_span(levels) == pytest.approx(span, rel=1e-12)
+    assert _case(levels, FLAT) == (3, "converged")
+
+
+@pytest.mark.parametrize(
+    ("levels", "span"),
+    [([99.7, 100.0, 100.3], 0.006), ([99.0, 100.0, 101.0], 0.02), ([98.0, 100.0, 102.0], 0.04)],
+)
+def test_a_flat_range_over_the_tolerance_is_narrowed_not_stopped(levels, span):
+    """Spans between 0.005 and 0.05: a tolerance ten times too large stops here."""
+    assert relative_span(levels) == pytest.approx(span, rel=1e-12)
+    assert _case(levels, FLAT) == (2, "narrow")
+
+
+def test_the_tolerance_option_moves_the_boundary():
+    levels = [99.0, 100.0, 101.0]  # span 0.02
+    assert _case(levels, FLAT, tolerance=0.02)[0] == 3
+    assert _case(levels, FLAT, tolerance=0.0199)[0] == 2
+
+
+# -- flatness (significance_db, 0.1 dB) and the Case 1/2/3 decision -----------------------
+
+
+def test_an_sn_span_just_under_the_significance_is_flat():
+    small = [99.9, 100.0, 100.1]
+    assert _case(small, [0.0, 0.0999, 0.0]) == (3, "converged")
+    assert _case([50.0, 100.0, 150.0], [0.0, 0.0999, 0.0]) == (2, "narrow")
+
+
+def test_an_sn_span_at_the_significance_is_case_1():
+    small = [99.9, 100.0, 100.1]
+    # 0.1 - 0.0 is exactly significance_db: not flat (the rule is a strict "<")
+    assert _case(small, [0.0, 0.1, 0.0]) == (1, "recentre")
+    assert _case(small, [0.0, 0.0, 0.1001]) == (1, "shift")
+
+
+def test_case_3_needs_every_factor_flat_and_small():
+    small, wide = [99.9, 100.0, 100.1], [50.0, 100.0, 150.0]
+    both = relevel({"a": small, "b": small}, {"a": FLAT, "b": FLAT})
+    assert both.case == 3 and both.converged
+    one_wide = relevel({"a": small, "b": wide}, {"a": FLAT, "b": FLAT})
+    assert one_wide.case == 2 and not one_wide.converged
+    one_moving = relevel({"a": small, "b": small}, {"a": FLAT, "b": [0.0, 0.2, 0.0]})
+    assert one_moving.case == 1 and not one_moving.converged
+
+
+def test_a_contribution_at_the_minimum_is_not_minor():
+    levels = {"a": [1.0, 2.0, 3.0], "b": [10.0, 20.0, 30.0]}
+    sn = {"a": [-30.0, -20.0, -25.0], "b": [-21.0, -20.0, -22.0]}
+    opts = LevelingOptions(selective=True, min_contribution=5.0)
+
+    def case_b(share: float) -> str:
+        d = relevel(levels, sn, opts, contribution={"a": 90.0, "b": share})
+        return d.parameters[1].case
+
+    assert case_b(4.99) == "keep"
+    assert case_b(5.0) == "recentre"
+
+
+# -- the same rules for rotated factors (search/nextlevels.py) -----------------------------
+
+
+def _rotated(half: float, sn: list[float]) -> tuple[float, int]:
+    """Two rotated factors of offsets +/-``half`` about p = q = 100 (16 per unit)."""
+    space = Space(
+        {"p": [92.0, 108.0], "q": [92.0, 108.0]},
+        {"p": (-math.inf, math.inf), "q": (-math.inf, math.inf)},
+        LevelingOptions(),
+    )
+    offsets = np.array([-half, 0.0, half])
+    factors = [
+        Factor("A1", np.array([1.0, 0.0]), offsets),
+        Factor("A2", np.array([0.0, 1.0]), offsets),
+    ]
+    frame = Frame(np.zeros(2), factors, anchor={"p": 100.0, "q": 100.0})
+    d = _rotated_decisions(
+        frame, space, {"A1": sn, "A2": FLAT}, np.zeros(2), "run 1", LevelingOptions(), {}
+    )
+    return frame.spans(space)["A1"], d.case
+
+
+@pytest.mark.parametrize(("half", "span"), [(1 / 128, 0.0025), (1 / 64, 0.005)])
+def test_flat_rotated_factors_at_or_under_the_tolerance_converge(half, span):
+    assert _rotated(half, FLAT) == (pytest.approx(span, rel=1e-12), 3)
+
+
+@pytest.mark.parametrize(("half", "span"), [(0.02, 0.0064), (0.125, 0.04)])
+def test_flat_rotated_factors_over_the_tolerance_are_narrowed(half, span):
+    assert _rotated(half, FLAT) == (pytest.approx(span, rel=1e-12), 2)
+
+
+def test_a_rotated_factor_at_the_significance_is_case_1():
+    assert _rotated(1 / 128, [0.0, 0.0999, 0.0])[1] == 3
+    assert _rotated(1 / 128, [0.0, 0.1, 0.0])[1] == 1
+
+
+# -- the stall rule (search/taguchi.py ``_stalled``): stall 2, stall_rtol 1e-4 ------------
+
+
+def _records(costs: list[float], deltas: list[float] | None = None) -> list[SimpleNamespace]:
+    deltas = deltas or [0.0] * len(costs)
+    return [
+        SimpleNamespace(
+            best_cost=c, decision=SimpleNamespace(parameters=[SimpleNamespace(delta_db=d)])
+        )
+        for c, d in zip(costs, deltas, strict=True)
+    ]
+
+
+STALL = Method(leveling=LevelingOptions(stall_rtol=2.0**-10))  # exact in binary
+
+
+def test_a_fall_of_just_less_than_stall_rtol_stalls():
+    rtol = 1e-4
+    method = Method()
+    assert method.leveling.stall_rtol == rtol and method.leveling.stall == 2
+    assert _stalled(_records([1.0, 1.0, 1.0 - 0.99 * rtol]), method) is not None
+    assert _stalled(_records([8.0, 7.0, 8.0 * (1 - 0.99 * rtol)]), method) is not None
+    # exactly stall_rtol of itself still counts as not improving
+    assert _stalled(_records([1.0, 1.0, 1.0 - 2.0**-10]), STALL) is not None
+
+
+def test_a_fall_of_just_more_than_stall_rtol_does_not_stall():
+    """Kills a ``stall_rtol`` 1000 times too large (a 1.01e-4 fall would then stall)."""
+    rtol = 1e-4
+    assert _stalled(_records([1.0, 1.0, 1.0 - 1.01 * rtol]), Method()) is None
+    assert _stalled(_records([8.0, 7.0, 8.0 * (1 - 1.01 * rtol)]), Method()) is None
+    assert _stalled(_records([1.0, 1.0, 1.0 - 2.0**-10 - 2.0**-20]), STALL) is None
+
+
+def test_the_stall_rule_counts_stall_flat_iterations():
+    fall = 1.0 - 0.5e-4
+    assert _stalled(_records([1.0, 1.0]), Method()) is None  # stall + 1 records needed
+    assert _stalled(_records([1.0, 1.0, fall]), Method()) is not None
+    # the iteration before the window may be significant; one inside it may not
+    assert _stalled(_records([1.0, 1.0, fall], [5.0, 0.0999, 0.0]), Method()) is not None
+    assert _stalled(_records([1.0, 1.0, fall], [0.0, 0.1, 0.0]), Method()) is None
+    assert _stalled(_records([1.0, 1.0, fall], [0.0, 0.0, 0.1]), Method()) is None
+    assert _stalled(_records([1.0] * 4), Method(leveling=LevelingOptions(stall=3))) is not None
+    assert _stalled(_records([1.0] * 3), Method(leveling=LevelingOptions(stall=3))) is None
+    assert _stalled(_records([1.0] * 9), Method(leveling=LevelingOptions(stall=0))) is None
+
+
+# -- the limits (search/taguchi.py ``_limits``) --------------------------------------------
+
+
+def _run(**kw) -> SimpleNamespace:
+    method = Method(max_iterations=kw.pop("method_max", 5), max_simulations=kw.pop("budget", None))
+    args = {"max_iterations": None, "nfev_before": 0, "pause_after": None, **kw}
+    return SimpleNamespace(method=method, **args)
+
+
+def test_the_iteration_limit_allows_the_last_iteration_and_stops_the_next():
+    assert _limits(_run(), 5, 0, 4) is None
+    assert _limits(_run(), 6, 0, 5) == (
+        1,
+        "iteration limit (5) reached before the levels converged",
+    )
+    # a call's own limit replaces the method's
+    assert _limits(_run(max_iterations=3), 3, 0, 2) is None
+    assert _limits(_run(max_iterations=3), 4, 0, 3)[0] == 1
+
+
+def test_the_simulation_limit_counts_this_stages_simulations():
+    run = _run(budget=100, nfev_before=40)
+    assert _limits(run, 2, 139, 1) is None
+    assert _limits(run, 2, 140, 1) == (
+        1,
+        "simulation limit (100) reached before the levels converged",
+    )
+
+
+def test_pause_after_stops_after_that_many_iterations_of_this_call():
+    run = _run(pause_after=2, method_max=20)
+    assert _limits(run, 7, 0, 1) is None
+    assert _limits(run, 7, 0, 2) == (
+        2,
+        "paused after iteration 6: review the proposed levels and resume",
+    )
+
+
+def _valley(max_iterations: int):
+    levels = {"p": [1.0, 2.0, 4.0], "q": [0.2, 0.8, 1.6]}
+    space = Space(levels, {n: (1e-6, math.inf) for n in levels}, LevelingOptions())
+    run = TaguchiRun(
+        name="taguchi",
+        space=space,
+        first=Frame.from_levels(space, levels),
+        method=Method(cost="sse", array="L9", max_iterations=max_iterations),
+    )
+    return taguchi_stage(run, ValleyEvaluator())
+
+
+def test_a_stage_that_converges_on_its_last_allowed_iteration_converges():
+    free = _valley(60)
+    assert free.status == 0
+    n = len(free.records)
+    exact = _valley(n)
+    assert exact.status == 0 and len(exact.records) == n, exact.message
+    short = _valley(n - 1)
+    assert short.status == 1 and len(short.records) == n - 1
+    assert short.message == f"iteration limit ({n - 1}) reached before the levels converged"
