@@ -186,7 +186,7 @@ def noise_level(measured: np.ndarray) -> np.ndarray:
       estimate alone is half the rounding noise.
 
     On the bundled examples' data (whose generators state their noise) this gives the
-    load cells within 2 % and the encoders within 1 %. Pure white noise comes out slightly
+    load cells within 3 % and the encoders within 1 %. Pure white noise comes out slightly
     low (the least of six correlated estimates): by 0.3 % for 10 000 samples, by 4 % for 20.
 
     Parameters
