@@ -1,16 +1,24 @@
 """``tsid init``: write a commented study file from an FMU and a data file.
 
-The FMU's model description gives the parameters (with start values and units), the
-inputs and the outputs; the data file gives the columns. The study written:
+The FMU's model description gives the parameters (with start values, units, declared
+bounds and descriptions), the inputs and the outputs; the data file gives the columns.
+The study written:
 
 - maps each FMU input and output to the data column of the same name, compared
   case-insensitively (also local variables, which a study may compare as outputs, and
   the derived channels given with ``--derived``); what is left unmatched is listed in
-  comments;
-- identifies every real parameter with five log-spaced levels over one decade around
-  its start value (``start / sqrt(10)`` to ``start * sqrt(10)``), with its unit; a
-  parameter that looks like a solver setting (``step`` or ``tolerance`` in its name) is
-  written commented out;
+  comments. An input or output without a column that the columns look like once
+  combined or differentiated gets a ``--derived`` proposal and the ``tsid init`` command
+  that adds it (:func:`~tsid_fmu.scaffold_rules.derived_hints`: ``F_o`` from the load
+  cells ``F_of`` and ``F_or`` as ``F_of - F_or``; ``v_o`` from ``x_o`` as ``der(x_o)``);
+- identifies every real parameter with five levels around its start value: log-spaced
+  over one decade (``start / sqrt(10)`` to ``start * sqrt(10)``), kept inside the
+  ``min``/``max`` the FMU declares, which are written as the parameter's bounds (else
+  ``min = 0`` for a positive start, ``max = 0`` for a negative one), with its unit;
+- writes a parameter that looks like a numerical setting rather than a physical one (a
+  solver step, a tolerance, a threshold such as a velocity "below which the motor side
+  is considered at rest", a regularisation) commented out, with the reason, so that the
+  FMU's value is kept (:func:`~tsid_fmu.scaffold_rules.numerical_setting`);
 - uses ``cost = "sse"``, ``weighting = "noise"``, ``replicates = 1`` and the smallest
   orthogonal array that fits.
 
@@ -20,9 +28,9 @@ The file runs as written: ``tsid identify study.toml``.
 from __future__ import annotations
 
 import json
-import math
 import os
 import re
+import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,23 +40,9 @@ from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.errors import StudyError
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.variables import REAL_TYPES, VariableInfo, parse_start, variable_info
+from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, numerical_setting
 
 __all__ = ["decade_levels", "init_study"]
-
-SOLVER_SETTING = re.compile(r"step|tolerance", re.IGNORECASE)
-"""Parameter names that look like solver settings, not plant parameters."""
-
-
-def decade_levels(start: float, n: int = 5) -> list[float]:
-    """Return ``n`` levels log-spaced over one decade around ``start`` (4 figures).
-
-    A start value of zero gives ``n`` levels from -1 to 1.
-    """
-    if start == 0 or not math.isfinite(start):
-        return [round(-1 + 2 * k / (n - 1), 6) for k in range(n)]
-    mag = abs(start)
-    values = [float(f"{mag * 10 ** (-0.5 + k / (n - 1)):.4g}") for k in range(n)]
-    return values if start > 0 else sorted(-v for v in values)
 
 
 def _key(name: str) -> str:
@@ -95,6 +89,33 @@ def _match(variables: Sequence[VariableInfo], columns: Sequence[str]) -> _Match:
     return _Match(inputs, outputs, list(local_found), missing_in, missing_out, unused)
 
 
+def _number(x: float) -> str:
+    return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
+
+
+def _entry(v: VariableInfo) -> tuple[str, bool]:
+    """Return a parameter's TOML entry and whether the FMU's bounds moved its levels."""
+    start = parse_start(v)
+    start = start if start is not None else 0.0
+    low, high = v.min, v.max
+    if low is not None and high is not None and low >= high:
+        low = high = None  # bounds that contradict each other are no bounds
+    levels = bounded_levels(start, low, high)
+    if low is None and levels[0] >= 0 and start > 0:
+        low = 0.0
+    if high is None and levels[-1] <= 0 and start < 0:
+        high = 0.0
+    bounds = "".join(
+        f", {key} = {_number(float(b))}"
+        for key, b in (("min", low), ("max", high))
+        if b is not None
+    )
+    unit = f", unit = {json.dumps(v.unit)}" if v.unit else ""
+    text = ", ".join(repr(x) for x in levels)
+    entry = f"{_key(v.name)} = {{ levels = [{text}]{bounds}{unit} }}"
+    return entry, levels != decade_levels(start)
+
+
 def _parameter_lines(variables: Sequence[VariableInfo]) -> tuple[list[str], int]:
     lines, count = [], 0
     for v in variables:
@@ -103,19 +124,38 @@ def _parameter_lines(variables: Sequence[VariableInfo]) -> tuple[list[str], int]
         if v.type not in REAL_TYPES:
             lines.append(f"# {v.name}: {v.type} parameter, not identified (levels are real)")
             continue
-        start = parse_start(v)
-        levels = decade_levels(start if start is not None else 0.0)
-        bound = ", min = 0" if (start or 0) > 0 else (", max = 0" if (start or 0) < 0 else "")
-        unit = f", unit = {json.dumps(v.unit)}" if v.unit else ""
-        text = ", ".join(repr(x) for x in levels)
-        entry = f"{_key(v.name)} = {{ levels = [{text}]{bound}{unit} }}"
-        note = f"  # start {v.start}" + (f": {v.description}" if v.description else "")
-        if SOLVER_SETTING.search(v.name):
-            lines.append(f"# {entry}  # looks like a solver setting; uncomment to identify it")
+        entry, bounded = _entry(v)
+        reason = numerical_setting(v)
+        if reason is not None:
+            lines.append(
+                f"# {entry}  # numerical, not physical ({reason}): the FMU's {v.start} is "
+                "kept; uncomment to identify it"
+            )
             continue
-        lines.append(entry + note)
+        note = f"  # start {v.start}" + (" (levels within the FMU's min/max)" if bounded else "")
+        lines.append(entry + note + (f": {v.description}" if v.description else ""))
         count += 1
     return lines, count
+
+
+def _derived_option(name: str, expression: str) -> str:
+    text = f"{name}={expression}"
+    return f'--derived "{text}"' if re.fullmatch(r'[^"$`\\]*', text) else shlex.quote(text)
+
+
+def _hint_lines(
+    paths: Sequence[str], derived: Mapping[str, str], hints: Mapping[str, str]
+) -> list[str]:
+    """Comments proposing ``--derived`` for the FMU inputs and outputs without a column."""
+    lines = [
+        f"# {name} has no column; if it is {expression}: {_derived_option(name, expression)}"
+        for name, expression in hints.items()
+    ]
+    if hints:
+        fmu, data, out = (shlex.quote(p) for p in paths)
+        options = [_derived_option(k, e) for k, e in {**derived, **hints}.items()]
+        lines.append(f"# to add them, run: tsid init {fmu} {data} -o {out} {' '.join(options)}")
+    return lines
 
 
 def _header(fmu: Path, data: Path, m: _Match, time: str, derived: Mapping[str, str]) -> list[str]:
@@ -171,11 +211,14 @@ def init_study(
     probe = load_data(data, time_column=time, derived=derived)
     columns = [c for c in probe.names if c != time]
     match = _match(variables, columns)
+    found = derived_hints(match.missing_outputs + match.missing_inputs, columns, match.unused)
+    hints = _hint_lines([str(fmu), str(data), str(out)], derived or {}, found)
     if not match.outputs:
         outs = [v.name for v in variables if v.causality == "output"]
         raise StudyError(
             f"{data}: no column matches an output of {fmu.name} ({', '.join(outs) or 'none'}); "
             f"columns: {', '.join(columns)}; add one, or give it with --derived NAME=EXPRESSION"
+            + "".join(f"\n{line.removeprefix('# ')}" for line in hints)
         )
     params, count = _parameter_lines(variables)
     if count == 0:
@@ -184,6 +227,7 @@ def init_study(
     base = out.resolve().parent
     rel = {p: Path(os.path.relpath(p.resolve(), base)) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
+    lines += hints
     lines += [
         "",
         "[method]",
@@ -193,7 +237,8 @@ def init_study(
         "replicates = 1       # no input-noise replicates",
         "",
         "[parameters]",
-        "# five log-spaced levels over one decade around the FMU's start value",
+        "# five log-spaced levels over one decade around the FMU's start value, within the",
+        "# FMU's min/max; numerical settings (steps, tolerances, thresholds) commented out",
         *params,
     ]
     text = "\n".join(lines) + "\n"

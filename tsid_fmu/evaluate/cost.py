@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tsid_fmu.errors import StudyError
+from tsid_fmu.errors import DataError, StudyError
+from tsid_fmu.evaluate.noise import column_noise
 
 __all__ = ["COSTS", "NOISE_POWER", "Cost", "fit_percent", "metrics", "noise_level"]
 
@@ -166,34 +167,44 @@ NOISE_POWER = {"iae": 1, "ise": 2, "sse": 2, "rmse": 1, "nrmse": 0}
 
 
 def noise_level(measured: np.ndarray) -> np.ndarray:
-    """Estimate the white-noise standard deviation of each measured column.
+    """Estimate the noise standard deviation of each measured column.
 
-    Uses the second differences ``y[k+1] - 2 y[k] + y[k-1]``: for a signal sampled much
-    faster than it changes they hold almost only the noise, with variance ``6 sigma^2``.
-    Two robust estimates are taken and the larger kept: the median absolute deviation
-    (times 1.4826), and the RMS of the 98 % smallest second differences (corrected for
-    the trimming of a Gaussian). Both ignore the few samples where the signal jumps
-    (steps, impacts); the second also sees the noise of a quantised sensor, whose second
-    differences are mostly exactly zero (a median of 0).
+    Each column's noise is one of two estimates (:mod:`tsid_fmu.evaluate.noise`):
+
+    - white noise, from the differences of orders 1 to 6: the ``k``-th difference of
+      white noise has variance ``C(2k, k) sigma**2``, and each order's trimmed RMS (the
+      90 % smallest differences, so that steps and impacts drop out) estimates the noise
+      plus what the signal leaks into that order; the least over the orders is kept.
+      Second differences alone, used before, still see the curvature of a signal sampled
+      at 1 kHz: on the SISO example's encoder they gave 21 times its noise;
+    - rounding: when every value lies on a grid of step ``q`` (an encoder) and at least
+      5 % of the second differences are whole steps, the sensor's rounding error,
+      ``q / sqrt(12)``, unless the white-noise estimate exceeds twice that (then the
+      noise before rounding dominates). The differences of a rounded signal are mostly
+      0 or one step, whose spread depends on how fast the signal crosses the grid, not
+      on the rounding error (their median is 0): on the SISO encoder the white-noise
+      estimate alone is half the rounding noise.
+
+    On the bundled examples' data (whose generators state their noise) this gives the
+    load cells within 3 % and the encoders within 1 %. Pure white noise comes out slightly
+    low (the least of six correlated estimates): by 0.3 % for 10 000 samples, by 4 % for 20.
 
     Parameters
     ----------
     measured : numpy.ndarray
-        Shape ``(n,)`` or ``(n, n_columns)``, ``n >= 3``.
+        Shape ``(n,)`` or ``(n, n_columns)``, ``n >= 2``.
 
     Returns
     -------
     numpy.ndarray
-        One standard deviation per column (0 for a noise-free column).
+        One standard deviation per column (0, or round-off, for a noise-free column).
+
+    Raises
+    ------
+    DataError
+        Fewer than 2 samples.
     """
     y = _as_2d(np.asarray(measured, dtype=float))
-    d2 = y[2:] - 2.0 * y[1:-1] + y[:-2]
-    mad = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
-    small = np.sort(np.abs(d2), axis=0)[: max(1, int(np.ceil(_KEEP * d2.shape[0])))]
-    trimmed = np.sqrt(np.mean(small**2, axis=0)) / _TRIM_RMS
-    return np.maximum(mad, trimmed) / np.sqrt(6.0)
-
-
-_KEEP = 0.98
-#: RMS of the 98 % smallest of standard-normal samples (by magnitude), relative to 1
-_TRIM_RMS = 0.93436
+    if y.shape[0] < 2:
+        raise DataError(f"the noise of a signal needs at least 2 samples, got {y.shape[0]}")
+    return np.array([column_noise(c) for c in y.T], dtype=float)

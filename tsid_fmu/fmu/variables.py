@@ -8,6 +8,7 @@ closest names the model has.
 from __future__ import annotations
 
 import difflib
+import math
 import zipfile
 import zlib
 from collections.abc import Mapping, Sequence
@@ -54,6 +55,9 @@ class VariableInfo:
         ``"Integer"``, ``"Boolean"``, ...).
     start : str or None
         The start value as written in the model description.
+    min, max : float or None
+        The bounds the model description declares for the value (on the variable or
+        its declared type), or None.
     """
 
     name: str
@@ -65,6 +69,8 @@ class VariableInfo:
     start: str | None
     unit: str | None
     description: str | None
+    min: float | None = None
+    max: float | None = None
 
 
 def _declared_unit(variable: Any) -> str | None:
@@ -72,6 +78,18 @@ def _declared_unit(variable: Any) -> str | None:
     if unit is None and getattr(variable, "declaredType", None) is not None:
         unit = getattr(variable.declaredType, "unit", None)
     return unit
+
+
+def _declared_bound(variable: Any, which: str) -> float | None:
+    """Return the ``min`` or ``max`` of a variable (else of its declared type), or None."""
+    value = getattr(variable, which, None)
+    if value is None and getattr(variable, "declaredType", None) is not None:
+        value = getattr(variable.declaredType, which, None)
+    try:
+        bound = float(str(value).split()[0]) if value is not None else None
+    except (ValueError, IndexError):
+        return None
+    return bound if bound is not None and math.isfinite(bound) else None
 
 
 def variable_info(variable: Any) -> VariableInfo:
@@ -86,6 +104,8 @@ def variable_info(variable: Any) -> VariableInfo:
         start=None if variable.start is None else str(variable.start),
         unit=_declared_unit(variable),
         description=variable.description,
+        min=_declared_bound(variable, "min"),
+        max=_declared_bound(variable, "max"),
     )
 
 
