@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import math
 import os
 import sys
 from collections.abc import Sequence
@@ -36,6 +37,33 @@ exit status:
   130  interrupted (Ctrl-C): finished iterations are kept, continue with --resume
   141  the reader of the output went away (tsid info FMU | head): ends quietly
 """
+
+
+def _workers(text: str) -> int:
+    """``--workers``: a whole number of processes, at least 1 (argparse type)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a whole number of worker processes (1 = serial), got {text!r}"
+        ) from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1 (1 = serial), got {text!r}")
+    return n
+
+
+def _timeout(text: str) -> float:
+    """``--timeout``: seconds per simulation, > 0, or 0 for no limit (argparse type)."""
+    try:
+        seconds = float(text)
+    except ValueError:
+        seconds = math.nan
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise argparse.ArgumentTypeError(
+            "must be a number of seconds > 0, or 0 for no limit (leave it out for the "
+            f"automatic limit), got {text!r}"
+        )
+    return seconds
 
 
 def _parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
@@ -99,7 +127,6 @@ def _print_result(result: Any, out: Path, code: int) -> None:
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
     import dataclasses
-    import json
 
     from tsid_fmu.evaluate.cost import metrics
     from tsid_fmu.evaluate.serial import SerialEvaluator
@@ -111,16 +138,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     values: dict[str, float] = {}
     interface = None  # the interface the identification chose (solver fidelity check)
     if args.result:
-        path = Path(args.result)
-        path = path / "result.json" if path.is_dir() else path
-        try:
-            saved = json.loads(path.read_text())
-            values.update(saved["x"])
-            interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
-        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise StudyError(
-                f"{path}: cannot read identified parameters ({type(exc).__name__})"
-            ) from None
+        saved = _saved_result(Path(args.result))
+        values.update(saved["x"])
+        interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
     for name, text in _parse_assignments(args.set, "--set").items():
         try:
             values[name] = float(text)
@@ -128,7 +148,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             raise StudyError(f"--set {name}={text}: not a number") from None
     unknown = sorted(set(values) - set(study.parameter_names))
     if unknown:
-        raise StudyError(f"--set: {unknown} are not parameters of the study")
+        raise StudyError(_not_parameters(unknown, study.parameter_names))
     # parameters not given keep the FMU's start values
     spec = prepare(study, None, [n for n in study.parameter_names if n in values])
     if interface is not None:
@@ -157,6 +177,44 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     failed = [sim.experiment for sim in simulated if sim.error is not None]
     print(f"simulation failed: {', '.join(failed)}" if failed else "simulated every experiment")
     return 1 if failed else 0
+
+
+def _saved_result(path: Path) -> dict[str, Any]:
+    """Read the identified values of ``--result`` (a results folder or its result.json)."""
+    import json
+
+    if not path.exists():
+        raise StudyError(f"--result {path}: no such file or folder")
+    file = path / "result.json" if path.is_dir() else path
+    if not file.is_file():
+        raise StudyError(
+            f"--result {path}: no result.json in this folder (is it the --out folder of a "
+            "finished tsid identify?)"
+        )
+    try:
+        saved = json.loads(file.read_text(encoding="utf-8"))
+        if not isinstance(saved.get("x"), dict):
+            raise TypeError("no parameters")
+        saved["x"] = {str(k): float(v) for k, v in saved["x"].items()}
+    except (OSError, UnicodeDecodeError, ValueError, TypeError, AttributeError) as exc:
+        raise StudyError(
+            f"{file}: cannot read identified parameters ({type(exc).__name__})"
+        ) from None
+    return saved
+
+
+def _not_parameters(unknown: Sequence[str], names: Sequence[str]) -> str:
+    """The message for ``--set`` names that are no parameter, with the closest ones."""
+    import difflib
+
+    said = []
+    for n in unknown:
+        close = difflib.get_close_matches(n, names, n=3, cutoff=0.6)
+        hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
+        said.append(f"{n!r}{hint}")
+    return f"--set: not a parameter of the study: {', '.join(said)}; its parameters: " + ", ".join(
+        names
+    )
 
 
 def _write_csv(path: Path, spec: Any, simulated: Sequence[Any]) -> list[Path]:
@@ -209,6 +267,11 @@ def _cmd_init(args: argparse.Namespace) -> int:
     from tsid_fmu.scaffold import init_study
 
     derived = _parse_assignments(args.derived, "--derived")
+    target = Path(args.output)
+    if target.is_dir():
+        raise StudyError(f"-o {target}: is a folder; give the study file to write")
+    if target.exists() and not args.force:
+        raise StudyError(f"-o {target}: the file exists; give --force to overwrite it")
     init_study(args.fmu, args.data, args.output, derived=derived)
     print(f"study written: {args.output}")
     print(f"run it: tsid identify {args.output} --out DIR")
@@ -252,13 +315,17 @@ def _identify_parser(sub: Any) -> None:
         help="with --resume: centre the next levels on run N of the last iteration",
     )
     p.add_argument(
-        "--workers", type=int, metavar="N", help="worker processes (default: all cores; 1 = serial)"
+        "--workers",
+        type=_workers,
+        metavar="N",
+        help="worker processes (default: all cores; 1 = serial)",
     )
     p.add_argument(
         "--timeout",
-        type=float,
+        type=_timeout,
         metavar="SECONDS",
-        help="time limit per simulation; a run past it fails and the study goes on",
+        help="time limit per simulation (0: none; default: automatic, from the first runs); "
+        "a run past it fails and the study goes on",
     )
     p.add_argument(
         "--scheduler",
@@ -314,6 +381,7 @@ def _other_parsers(sub: Any) -> None:
     p.add_argument("fmu", help="the .fmu file")
     p.add_argument("data", help="measured data (CSV; a column 'time' or the first column)")
     p.add_argument("-o", "--output", default="study.toml", help="study file to write")
+    p.add_argument("--force", action="store_true", help="overwrite the study file if it exists")
     p.add_argument(
         "--derived",
         action="append",
