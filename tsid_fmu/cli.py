@@ -204,7 +204,7 @@ def _saved_result(path: Path) -> dict[str, Any]:
 
 
 def _not_parameters(unknown: Sequence[str], names: Sequence[str]) -> str:
-    """The message for ``--set`` names that are no parameter, with the closest ones."""
+    """Return the message for ``--set`` names that are no parameter, with close ones."""
     import difflib
 
     said = []
