@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
@@ -103,6 +105,46 @@ class IdentificationResult:
     def iterations(self) -> list[IterationRecord]:
         """Every Taguchi iteration of every stage, in order."""
         return [rec for st in self.stages for rec in st.records]
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Identified value of each parameter by name (lmfit's name; a copy of ``x``)."""
+        return dict(self.x)
+
+    def x_at(self, k: int) -> dict[str, float]:
+        """Return the best parameter set known after Taguchi iteration ``k``.
+
+        Parameters
+        ----------
+        k : int
+            Position in :attr:`iterations`, 1-based as in the report (``iteration_01``);
+            negative counts from the end (``-1``: the last).
+
+        Returns
+        -------
+        dict
+            Value of each parameter: the iteration's best set for those it varied, and
+            for the others the answer of the stages before it (in a phased study), as
+            the iteration ran. Parameters no stage had set by then are left out.
+
+        Raises
+        ------
+        IndexError
+            There is no iteration ``k``.
+        """
+        count = len(self.iterations)
+        if not isinstance(k, int | np.integer) or isinstance(k, bool):
+            raise TypeError(f"k must be an iteration number, got {k!r}")
+        if k == 0 or not -count <= k <= count:
+            raise IndexError(f"iteration {k}: the result has {count} (1 .. {count}, or -1 ..)")
+        sets: list[dict[str, float]] = []
+        known: dict[str, float] = {}
+        for stage in self.stages:
+            sets += [{**known, **rec.best_x} for rec in stage.records]
+            if stage.kind != "contribution":
+                known.update(stage.x)
+        values = sets[int(k) - 1 if k > 0 else int(k)]
+        return {n: float(values[n]) for n in self.x if n in values}
 
     def __repr__(self) -> str:
         keys = ["message", "success", "status", "fun", "x", "nfev", "nit", "intervals"]
