@@ -59,7 +59,7 @@ class Study:
     Parameters
     ----------
     fmu : str or Path
-        The FMU file.
+        The FMU file (kept resolved: absolute, without ``..`` or links).
     parameters : list of Parameter
         Parameters to identify.
     experiments : list of Experiment
@@ -149,7 +149,7 @@ class Study:
             raise StudyError(msg if msg.startswith(where) else f"{where}{msg}") from None
 
     def _check(self) -> None:
-        self.fmu = Path(self.fmu)
+        self.fmu = Path(self.fmu).resolve()  # one spelling per file: equal studies compare equal
         if not self.parameters:
             raise StudyError("no parameters to identify")
         names = self.parameter_names
