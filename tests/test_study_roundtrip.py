@@ -110,10 +110,9 @@ def studies(draw, folder: Path):
     phases = []
     if draw(st.booleans()):
         group = draw(st.lists(st.sampled_from(names), min_size=1, unique=True))
-        phases.append(
-            Phase(group, [exps[0].name], name=draw(st.sampled_from(["", "first"])),
-                  max_iterations=draw(st.none() | st.integers(1, 9)))  # fmt: skip
-        )
+        name = draw(st.sampled_from(["", "first"]))
+        limit = draw(st.none() | st.integers(1, 9))
+        phases.append(Phase(group, [exps[0].name], name=name, max_iterations=limit))
     values = {n: [1.0, 2.0, 3.0] for n in names[:1]} if draw(st.booleans()) else {}
     method = draw(METHODS)
     return Study(
