@@ -77,3 +77,81 @@ def test_set_with_an_unknown_name_suggests_the_close_one(tmp_path, capsys):
     assert err.count("\n") == 1
     assert "'K_S' (did you mean 'K_s'?)" in err and "'zzz'" in err and "K_s, B_s" in err
     assert not (tmp_path / "s.png").exists()
+
+
+def _schema() -> dict:
+    import json
+    from importlib.resources import files
+
+    return json.loads((files("tsid_fmu") / "schemas" / "result-summary.schema.json").read_text())
+
+
+def test_identify_json_prints_the_summary_that_the_schema_describes(tmp_path, capsys):
+    import json
+
+    import jsonschema
+    from fmu_factory import lag_data
+
+    from tsid_fmu import Experiment, Parameter, Study
+
+    fmu, data = lag_data(tmp_path, 0.37, 0.8)
+    study = Study(
+        fmu=fmu,
+        parameters=[
+            Parameter("tau", [0.05, 0.5, 2.0], min=0.0, unit="s"),
+            Parameter("x0", [-1.0, 0.0, 2.0]),
+        ],
+        experiments=[Experiment(data=data, inputs={"u": "u"}, outputs={"y": "y_meas"})],
+        replicates=1,
+    ).to_toml(tmp_path / "lag.toml")
+    out = tmp_path / "out"
+    rc = main(["identify", str(study), "--out", str(out), "--json", "-q", "--no-plots",
+               "--workers", "1", "--max-iterations", "2"])  # fmt: skip
+    summary = json.loads(capsys.readouterr().out)  # nothing but the JSON on stdout
+    jsonschema.validate(summary, _schema())
+    saved = json.loads((out / "result.json").read_text())
+    assert summary["exit_status"] == rc == {0: 0, 1: 1, 2: 3}[saved["status"]]
+    assert {k: v["value"] for k, v in summary["parameters"].items()} == saved["x"]
+    assert summary["parameters"]["tau"]["unit"] == "s"
+    assert summary["parameters"]["tau"]["interval"] == saved["intervals"]["tau"]
+    for key in ("fun", "nfev", "nit", "status", "success", "message"):
+        assert summary[key] == saved[key], key
+    assert [s["name"] for s in summary["stages"]] == [s["name"] for s in saved["stages"]]
+    assert summary["out_dir"] == str(out)
+
+
+def test_the_summary_of_a_result_without_intervals_still_fits_the_schema():
+    import json
+    import math
+
+    import jsonschema
+
+    from tsid_fmu import IdentificationResult
+
+    res = IdentificationResult(
+        x={"a": math.nan, "b": 2.0}, fun=math.inf, nfev=0, success=False, status=1, message="m"
+    )
+    summary = res.summary()
+    json.dumps(summary, allow_nan=False)
+    jsonschema.validate(summary, _schema())
+    assert summary["parameters"]["a"] == {
+        "value": None,
+        "interval": [None, None],
+        "unit": "",
+        "weak": None,
+    }
+    assert summary["fun"] is None and summary["out_dir"] is None
+    bad = {**summary, "surprise": 1}
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(bad, _schema())
+
+
+def test_the_schema_is_shipped_with_the_package():
+    import tomllib
+
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())
+    assert "schemas/*.json" in project["tool"]["setuptools"]["package-data"]["tsid_fmu"]
+    assert any(
+        r.startswith("jsonschema") for r in project["project"]["optional-dependencies"]["test"]
+    )
+    assert _schema()["title"] == "tsid identify --json"

@@ -94,7 +94,13 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
     )
     code = {0: 0, 1: 1, 2: 3}[result.status]
-    _print_result(result, out, code)
+    if args.json:
+        import json
+
+        summary = {**result.summary(), "exit_status": code}
+        print(json.dumps(summary, indent=1, allow_nan=False))
+    else:
+        _print_result(result, out, code)
     return code
 
 
@@ -336,6 +342,12 @@ def _identify_parser(sub: Any) -> None:
         "--no-plots", action="store_true", help="skip the figures (report.html has tables only)"
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the result as JSON on stdout instead of the table (progress stays on "
+        "stderr); its layout: tsid_fmu/schemas/result-summary.schema.json",
+    )
     p.set_defaults(func=_cmd_identify)
 
 

@@ -214,6 +214,53 @@ class IdentificationResult:
             }
         )
 
+    def summary(self) -> dict[str, Any]:
+        """Return the answer in brief, as strict JSON data (``tsid identify --json``).
+
+        It follows ``tsid_fmu/schemas/result-summary.schema.json``: ``parameters`` (per
+        name its ``value``, 95 % ``interval`` and ``unit``, and why it is ``weak``),
+        ``fun``, ``nfev``, ``nit``, ``status``, ``success``, ``message``, the ``stages``
+        (name, kind, cost, simulations, iterations, status, message), the ``warnings``
+        and ``out_dir``. Non-finite numbers are ``null``.
+        """
+        units = {p.name: p.unit for p in self.study.parameters} if self.study else {}
+        params = {
+            name: {
+                "value": value,
+                "interval": list(self.intervals.get(name) or [None, None]),
+                "unit": units.get(name, ""),
+                "weak": self.weak.get(name),
+            }
+            for name, value in self.x.items()
+        }
+        stages = [
+            {
+                "name": s.name,
+                "kind": s.kind,
+                "cost": s.cost,
+                "nfev": s.nfev,
+                "nit": len(s.records),
+                "status": s.status,
+                "message": s.message,
+            }
+            for s in self.stages
+        ]
+        return strict(
+            {
+                "format": 1,
+                "parameters": params,
+                "fun": self.fun,
+                "nfev": self.nfev,
+                "nit": self.nit,
+                "status": self.status,
+                "success": self.success,
+                "message": self.message,
+                "stages": stages,
+                "warnings": list(self.warnings),
+                "out_dir": None if self.out_dir is None else str(self.out_dir),
+            }
+        )
+
     def to_pandas(self) -> pd.DataFrame:
         """Return every run of every Taguchi iteration as one DataFrame."""
         import pandas as pd
