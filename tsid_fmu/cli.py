@@ -12,13 +12,19 @@ from __future__ import annotations
 
 import argparse
 import errno
-import math
 import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tsid_fmu.cli_values import (
+    not_parameters,
+    parse_assignments,
+    saved_result,
+    timeout_seconds,
+    worker_count,
+)
 from tsid_fmu.errors import StudyError, TsidError
 from tsid_fmu.interrupt import delivered_interrupts
 
@@ -37,43 +43,6 @@ exit status:
   130  interrupted (Ctrl-C): finished iterations are kept, continue with --resume
   141  the reader of the output went away (tsid info FMU | head): ends quietly
 """
-
-
-def _workers(text: str) -> int:
-    """``--workers``: a whole number of processes, at least 1 (argparse type)."""
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"must be a whole number of worker processes (1 = serial), got {text!r}"
-        ) from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1 (1 = serial), got {text!r}")
-    return n
-
-
-def _timeout(text: str) -> float:
-    """``--timeout``: seconds per simulation, > 0, or 0 for no limit (argparse type)."""
-    try:
-        seconds = float(text)
-    except ValueError:
-        seconds = math.nan
-    if not (math.isfinite(seconds) and seconds >= 0):
-        raise argparse.ArgumentTypeError(
-            "must be a number of seconds > 0, or 0 for no limit (leave it out for the "
-            f"automatic limit), got {text!r}"
-        )
-    return seconds
-
-
-def _parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip() or not value.strip():
-            raise StudyError(f"{what} must look like NAME=VALUE, got {item!r}")
-        out[name.strip()] = value.strip()
-    return out
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
@@ -144,17 +113,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     values: dict[str, float] = {}
     interface = None  # the interface the identification chose (solver fidelity check)
     if args.result:
-        saved = _saved_result(Path(args.result))
+        saved = saved_result(Path(args.result))
         values.update(saved["x"])
         interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
-    for name, text in _parse_assignments(args.set, "--set").items():
+    for name, text in parse_assignments(args.set, "--set").items():
         try:
             values[name] = float(text)
         except ValueError:
             raise StudyError(f"--set {name}={text}: not a number") from None
     unknown = sorted(set(values) - set(study.parameter_names))
     if unknown:
-        raise StudyError(_not_parameters(unknown, study.parameter_names))
+        raise StudyError(not_parameters(unknown, study.parameter_names))
     # parameters not given keep the FMU's start values
     spec = prepare(study, None, [n for n in study.parameter_names if n in values])
     if interface is not None:
@@ -183,44 +152,6 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     failed = [sim.experiment for sim in simulated if sim.error is not None]
     print(f"simulation failed: {', '.join(failed)}" if failed else "simulated every experiment")
     return 1 if failed else 0
-
-
-def _saved_result(path: Path) -> dict[str, Any]:
-    """Read the identified values of ``--result`` (a results folder or its result.json)."""
-    import json
-
-    if not path.exists():
-        raise StudyError(f"--result {path}: no such file or folder")
-    file = path / "result.json" if path.is_dir() else path
-    if not file.is_file():
-        raise StudyError(
-            f"--result {path}: no result.json in this folder (is it the --out folder of a "
-            "finished tsid identify?)"
-        )
-    try:
-        saved = json.loads(file.read_text(encoding="utf-8"))
-        if not isinstance(saved.get("x"), dict):
-            raise TypeError("no parameters")
-        saved["x"] = {str(k): float(v) for k, v in saved["x"].items()}
-    except (OSError, UnicodeDecodeError, ValueError, TypeError, AttributeError) as exc:
-        raise StudyError(
-            f"{file}: cannot read identified parameters ({type(exc).__name__})"
-        ) from None
-    return saved
-
-
-def _not_parameters(unknown: Sequence[str], names: Sequence[str]) -> str:
-    """Return the message for ``--set`` names that are no parameter, with close ones."""
-    import difflib
-
-    said = []
-    for n in unknown:
-        close = difflib.get_close_matches(n, names, n=3, cutoff=0.6)
-        hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
-        said.append(f"{n!r}{hint}")
-    return f"--set: not a parameter of the study: {', '.join(said)}; its parameters: " + ", ".join(
-        names
-    )
 
 
 def _write_csv(path: Path, spec: Any, simulated: Sequence[Any]) -> list[Path]:
@@ -272,7 +203,7 @@ def _all_variables(path: Path) -> str:
 def _cmd_init(args: argparse.Namespace) -> int:
     from tsid_fmu.scaffold import init_study
 
-    derived = _parse_assignments(args.derived, "--derived")
+    derived = parse_assignments(args.derived, "--derived")
     target = Path(args.output)
     if target.is_dir():
         raise StudyError(f"-o {target}: is a folder; give the study file to write")
@@ -322,13 +253,13 @@ def _identify_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--workers",
-        type=_workers,
+        type=worker_count,
         metavar="N",
         help="worker processes (default: all cores; 1 = serial)",
     )
     p.add_argument(
         "--timeout",
-        type=_timeout,
+        type=timeout_seconds,
         metavar="SECONDS",
         help="time limit per simulation (0: none; default: automatic, from the first runs); "
         "a run past it fails and the study goes on",
