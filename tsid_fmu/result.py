@@ -9,12 +9,14 @@ its identification experiments), ``nfev``, ``success``, ``status``, ``message``,
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from tsid_fmu.errors import TsidError
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
@@ -24,10 +26,32 @@ from tsid_fmu.uncertainty.intervals import Uncertainty
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["STATUS", "IdentificationResult"]
+__all__ = ["STATUS", "IdentificationResult", "register_views"]
 
 STATUS = {0: "converged", 1: "stopped at a limit", 2: "paused for review"}
 """Meaning of :attr:`IdentificationResult.status`."""
+
+_VIEWS: dict[str, Callable[..., Any]] = {}
+
+
+def register_views(**views: Callable[..., Any]) -> None:
+    """Provide the notebook view and the ``plot_*`` figures of a result.
+
+    The reports sit above this module and read the result; the result does not import
+    them. :mod:`tsid_fmu.report.notebook` registers ``result_html``, ``plot_fit``,
+    ``plot_convergence``, ``plot_main_effects`` and ``plot_parameters`` when it is
+    imported (``import tsid_fmu`` imports it), each called with the result first.
+    """
+    _VIEWS.update(views)
+
+
+def _view(name: str) -> Callable[..., Any]:
+    try:
+        return _VIEWS[name]
+    except KeyError:
+        raise TsidError(
+            f"{name}: the reports are not loaded; import tsid_fmu.report first"
+        ) from None
 
 
 @dataclass
@@ -153,24 +177,18 @@ class IdentificationResult:
 
     def _repr_html_(self) -> str:
         """Return the notebook view: headline, parameters with intervals, stages."""
-        from tsid_fmu.report.notebook import result_html
-
-        return result_html(self)
+        return _view("result_html")(self)
 
     def plot_fit(self) -> Any:
         """Return a matplotlib figure of measured vs simulated outputs and residuals.
 
         Simulates the study's FMU once at ``x`` (the study must be attached).
         """
-        from tsid_fmu.report.notebook import plot_fit
-
-        return plot_fit(self)
+        return _view("plot_fit")(self)
 
     def plot_convergence(self) -> Any:
         """Return a matplotlib figure of the best cost per iteration (one axis per measure)."""
-        from tsid_fmu.report.notebook import plot_convergence
-
-        return plot_convergence(self)
+        return _view("plot_convergence")(self)
 
     def plot_main_effects(self, iteration: int | IterationRecord = -1) -> Any:
         """Return a matplotlib figure of one iteration's S/N and mean-cost main effects.
@@ -180,15 +198,11 @@ class IdentificationResult:
         iteration : int or IterationRecord
             Position in :attr:`iterations` (1-based; negative from the end), or a record.
         """
-        from tsid_fmu.report.notebook import plot_main_effects
-
-        return plot_main_effects(self, iteration)
+        return _view("plot_main_effects")(self, iteration)
 
     def plot_parameters(self) -> Any:
         """Return a matplotlib figure of each parameter's best value per iteration."""
-        from tsid_fmu.report.notebook import plot_parameters
-
-        return plot_parameters(self)
+        return _view("plot_parameters")(self)
 
     def to_dict(self) -> dict[str, Any]:
         """Return the result as strict-JSON data (the content of ``result.json``)."""
