@@ -118,3 +118,16 @@ def test_x_at_gives_each_iterations_best_set(run):
             res.x_at(bad)
     with pytest.raises(TypeError):
         res.x_at("1")
+
+
+def test_a_result_json_of_an_older_version_is_read_with_a_warning(run, tmp_path):
+    res, out = run
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    data = json.loads((copy / "result.json").read_text())
+    del data["digest"], data["study_folder"]
+    (copy / "result.json").write_text(json.dumps(data))
+    back = load(copy)
+    assert back.x == res.x and back.study is None
+    assert any("no checksum" in w for w in back.warnings)
+    assert any("study is not attached" in w for w in back.warnings)
