@@ -18,6 +18,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tsid_fmu.cli_values import (
+    not_parameters,
+    parse_assignments,
+    saved_result,
+    timeout_seconds,
+    worker_count,
+)
 from tsid_fmu.errors import StudyError, TsidError
 from tsid_fmu.interrupt import delivered_interrupts
 
@@ -38,16 +45,6 @@ exit status:
 """
 
 
-def _parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip() or not value.strip():
-            raise StudyError(f"{what} must look like NAME=VALUE, got {item!r}")
-        out[name.strip()] = value.strip()
-    return out
-
-
 def _cmd_identify(args: argparse.Namespace) -> int:
     from tsid_fmu.identify import identify
 
@@ -66,7 +63,13 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
     )
     code = {0: 0, 1: 1, 2: 3}[result.status]
-    _print_result(result, out, code)
+    if args.json:
+        import json
+
+        summary = {**result.summary(), "exit_status": code}
+        print(json.dumps(summary, indent=1, allow_nan=False))
+    else:
+        _print_result(result, out, code)
     return code
 
 
@@ -99,7 +102,6 @@ def _print_result(result: Any, out: Path, code: int) -> None:
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
     import dataclasses
-    import json
 
     from tsid_fmu.evaluate.cost import metrics
     from tsid_fmu.evaluate.serial import SerialEvaluator
@@ -111,24 +113,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     values: dict[str, float] = {}
     interface = None  # the interface the identification chose (solver fidelity check)
     if args.result:
-        path = Path(args.result)
-        path = path / "result.json" if path.is_dir() else path
-        try:
-            saved = json.loads(path.read_text())
-            values.update(saved["x"])
-            interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
-        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise StudyError(
-                f"{path}: cannot read identified parameters ({type(exc).__name__})"
-            ) from None
-    for name, text in _parse_assignments(args.set, "--set").items():
+        saved = saved_result(Path(args.result))
+        values.update(saved["x"])
+        interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
+    for name, text in parse_assignments(args.set, "--set").items():
         try:
             values[name] = float(text)
         except ValueError:
             raise StudyError(f"--set {name}={text}: not a number") from None
     unknown = sorted(set(values) - set(study.parameter_names))
     if unknown:
-        raise StudyError(f"--set: {unknown} are not parameters of the study")
+        raise StudyError(not_parameters(unknown, study.parameter_names))
     # parameters not given keep the FMU's start values
     spec = prepare(study, None, [n for n in study.parameter_names if n in values])
     if interface is not None:
@@ -208,7 +203,12 @@ def _all_variables(path: Path) -> str:
 def _cmd_init(args: argparse.Namespace) -> int:
     from tsid_fmu.scaffold import init_study
 
-    derived = _parse_assignments(args.derived, "--derived")
+    derived = parse_assignments(args.derived, "--derived")
+    target = Path(args.output)
+    if target.is_dir():
+        raise StudyError(f"-o {target}: is a folder; give the study file to write")
+    if target.exists() and not args.force:
+        raise StudyError(f"-o {target}: the file exists; give --force to overwrite it")
     init_study(args.fmu, args.data, args.output, derived=derived)
     print(f"study written: {args.output}")
     print(f"run it: tsid identify {args.output} --out DIR")
@@ -252,13 +252,17 @@ def _identify_parser(sub: Any) -> None:
         help="with --resume: centre the next levels on run N of the last iteration",
     )
     p.add_argument(
-        "--workers", type=int, metavar="N", help="worker processes (default: all cores; 1 = serial)"
+        "--workers",
+        type=worker_count,
+        metavar="N",
+        help="worker processes (default: all cores; 1 = serial)",
     )
     p.add_argument(
         "--timeout",
-        type=float,
+        type=timeout_seconds,
         metavar="SECONDS",
-        help="time limit per simulation; a run past it fails and the study goes on",
+        help="time limit per simulation (0: none; default: automatic, from the first runs); "
+        "a run past it fails and the study goes on",
     )
     p.add_argument(
         "--scheduler",
@@ -269,6 +273,12 @@ def _identify_parser(sub: Any) -> None:
         "--no-plots", action="store_true", help="skip the figures (report.html has tables only)"
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the result as JSON on stdout instead of the table (progress stays on "
+        "stderr); its layout: tsid_fmu/schemas/result-summary.schema.json",
+    )
     p.set_defaults(func=_cmd_identify)
 
 
@@ -314,6 +324,7 @@ def _other_parsers(sub: Any) -> None:
     p.add_argument("fmu", help="the .fmu file")
     p.add_argument("data", help="measured data (CSV; a column 'time' or the first column)")
     p.add_argument("-o", "--output", default="study.toml", help="study file to write")
+    p.add_argument("--force", action="store_true", help="overwrite the study file if it exists")
     p.add_argument(
         "--derived",
         action="append",

@@ -9,10 +9,14 @@ its identification experiments), ``nfev``, ``success``, ``status``, ``message``,
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
+from tsid_fmu.errors import TsidError
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
@@ -22,10 +26,32 @@ from tsid_fmu.uncertainty.intervals import Uncertainty
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["STATUS", "IdentificationResult"]
+__all__ = ["STATUS", "IdentificationResult", "register_views"]
 
 STATUS = {0: "converged", 1: "stopped at a limit", 2: "paused for review"}
 """Meaning of :attr:`IdentificationResult.status`."""
+
+_VIEWS: dict[str, Callable[..., Any]] = {}
+
+
+def register_views(**views: Callable[..., Any]) -> None:
+    """Provide the notebook view and the ``plot_*`` figures of a result.
+
+    The reports sit above this module and read the result; the result does not import
+    them. :mod:`tsid_fmu.report.notebook` registers ``result_html``, ``plot_fit``,
+    ``plot_convergence``, ``plot_main_effects`` and ``plot_parameters`` when it is
+    imported (``import tsid_fmu`` imports it), each called with the result first.
+    """
+    _VIEWS.update(views)
+
+
+def _view(name: str) -> Callable[..., Any]:
+    try:
+        return _VIEWS[name]
+    except KeyError:
+        raise TsidError(
+            f"{name}: the reports are not loaded; import tsid_fmu.report first"
+        ) from None
 
 
 @dataclass
@@ -104,6 +130,46 @@ class IdentificationResult:
         """Every Taguchi iteration of every stage, in order."""
         return [rec for st in self.stages for rec in st.records]
 
+    @property
+    def params(self) -> dict[str, float]:
+        """Identified value of each parameter by name (lmfit's name; a copy of ``x``)."""
+        return dict(self.x)
+
+    def x_at(self, k: int) -> dict[str, float]:
+        """Return the best parameter set known after Taguchi iteration ``k``.
+
+        Parameters
+        ----------
+        k : int
+            Position in :attr:`iterations`, 1-based as in the report (``iteration_01``);
+            negative counts from the end (``-1``: the last).
+
+        Returns
+        -------
+        dict
+            Value of each parameter: the iteration's best set for those it varied, and
+            for the others the answer of the stages before it (in a phased study), as
+            the iteration ran. Parameters no stage had set by then are left out.
+
+        Raises
+        ------
+        IndexError
+            There is no iteration ``k``.
+        """
+        count = len(self.iterations)
+        if not isinstance(k, int | np.integer) or isinstance(k, bool):
+            raise TypeError(f"k must be an iteration number, got {k!r}")
+        if k == 0 or not -count <= k <= count:
+            raise IndexError(f"iteration {k}: the result has {count} (1 .. {count}, or -1 ..)")
+        sets: list[dict[str, float]] = []
+        known: dict[str, float] = {}
+        for stage in self.stages:
+            sets += [{**known, **rec.best_x} for rec in stage.records]
+            if stage.kind != "contribution":
+                known.update(stage.x)
+        values = sets[int(k) - 1 if k > 0 else int(k)]
+        return {n: float(values[n]) for n in self.x if n in values}
+
     def __repr__(self) -> str:
         keys = ["message", "success", "status", "fun", "x", "nfev", "nit", "intervals"]
         width = max(map(len, keys))
@@ -111,24 +177,18 @@ class IdentificationResult:
 
     def _repr_html_(self) -> str:
         """Return the notebook view: headline, parameters with intervals, stages."""
-        from tsid_fmu.report.notebook import result_html
-
-        return result_html(self)
+        return _view("result_html")(self)
 
     def plot_fit(self) -> Any:
         """Return a matplotlib figure of measured vs simulated outputs and residuals.
 
         Simulates the study's FMU once at ``x`` (the study must be attached).
         """
-        from tsid_fmu.report.notebook import plot_fit
-
-        return plot_fit(self)
+        return _view("plot_fit")(self)
 
     def plot_convergence(self) -> Any:
         """Return a matplotlib figure of the best cost per iteration (one axis per measure)."""
-        from tsid_fmu.report.notebook import plot_convergence
-
-        return plot_convergence(self)
+        return _view("plot_convergence")(self)
 
     def plot_main_effects(self, iteration: int | IterationRecord = -1) -> Any:
         """Return a matplotlib figure of one iteration's S/N and mean-cost main effects.
@@ -138,15 +198,11 @@ class IdentificationResult:
         iteration : int or IterationRecord
             Position in :attr:`iterations` (1-based; negative from the end), or a record.
         """
-        from tsid_fmu.report.notebook import plot_main_effects
-
-        return plot_main_effects(self, iteration)
+        return _view("plot_main_effects")(self, iteration)
 
     def plot_parameters(self) -> Any:
         """Return a matplotlib figure of each parameter's best value per iteration."""
-        from tsid_fmu.report.notebook import plot_parameters
-
-        return plot_parameters(self)
+        return _view("plot_parameters")(self)
 
     def to_dict(self) -> dict[str, Any]:
         """Return the result as strict-JSON data (the content of ``result.json``)."""
@@ -169,6 +225,53 @@ class IdentificationResult:
                 "warnings": self.warnings,
                 "comparison": self.extra.get("comparison"),
                 "extra": {k: self.extra[k] for k in ("fidelity",) if k in self.extra},
+            }
+        )
+
+    def summary(self) -> dict[str, Any]:
+        """Return the answer in brief, as strict JSON data (``tsid identify --json``).
+
+        It follows ``tsid_fmu/schemas/result-summary.schema.json``: ``parameters`` (per
+        name its ``value``, 95 % ``interval`` and ``unit``, and why it is ``weak``),
+        ``fun``, ``nfev``, ``nit``, ``status``, ``success``, ``message``, the ``stages``
+        (name, kind, cost, simulations, iterations, status, message), the ``warnings``
+        and ``out_dir``. Non-finite numbers are ``null``.
+        """
+        units = {p.name: p.unit for p in self.study.parameters} if self.study else {}
+        params = {
+            name: {
+                "value": value,
+                "interval": list(self.intervals.get(name) or [None, None]),
+                "unit": units.get(name, ""),
+                "weak": self.weak.get(name),
+            }
+            for name, value in self.x.items()
+        }
+        stages = [
+            {
+                "name": s.name,
+                "kind": s.kind,
+                "cost": s.cost,
+                "nfev": s.nfev,
+                "nit": len(s.records),
+                "status": s.status,
+                "message": s.message,
+            }
+            for s in self.stages
+        ]
+        return strict(
+            {
+                "format": 1,
+                "parameters": params,
+                "fun": self.fun,
+                "nfev": self.nfev,
+                "nit": self.nit,
+                "status": self.status,
+                "success": self.success,
+                "message": self.message,
+                "stages": stages,
+                "warnings": list(self.warnings),
+                "out_dir": None if self.out_dir is None else str(self.out_dir),
             }
         )
 

@@ -142,6 +142,65 @@ def _auto_pool(ss: np.ndarray, dof: np.ndarray, residual_dof: int, target: float
     return chosen
 
 
+@dataclass(frozen=True)
+class _Squares:
+    """Sums of squares of a main-effects design, before any pooling (step 1 of anova)."""
+
+    ss: np.ndarray
+    dof: np.ndarray
+    ss_total: float
+    dof_total: int
+    residual_ss: float
+    residual_dof: int
+
+
+def _squares(lev: np.ndarray, y: np.ndarray, k: np.ndarray) -> _Squares:
+    """Return each factor's SS and dof, the total, and the residual (the empty columns).
+
+    Raises
+    ------
+    StudyError
+        The factors have more degrees of freedom than the runs allow.
+    """
+    n_runs = y.shape[0]
+    counts, sums = level_stats(lev, y, k)
+    grand = y.mean()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = np.where(counts > 0, sums / np.maximum(counts, 1), grand)
+    ss = (counts * (means - grand) ** 2).sum(axis=1)
+    dof = (counts > 0).sum(axis=1) - 1
+    ss_total = float(((y - grand) ** 2).sum())
+    dof_total = n_runs - 1
+    residual_dof = dof_total - int(dof.sum())
+    if residual_dof < 0:
+        raise StudyError(
+            f"the factors have {int(dof.sum())} degrees of freedom but {n_runs} runs allow "
+            f"only {dof_total}"
+        )
+    residual_ss = ss_total - float(ss.sum())
+    if residual_ss < 1e-10 * max(ss_total, np.finfo(float).tiny):
+        residual_ss = 0.0
+    return _Squares(ss, dof, ss_total, dof_total, residual_ss, residual_dof)
+
+
+def _contributions(
+    sq: _Squares, is_pooled: np.ndarray, error_ss: float, error_ms: float, error_dof: int
+) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Return the percent contributions: plain and pure per factor, then of the error."""
+    if sq.ss_total > 0:
+        contribution = 100.0 * sq.ss / sq.ss_total
+        ve = error_ms if error_dof > 0 else 0.0
+        pure = np.maximum(100.0 * (sq.ss - sq.dof * ve) / sq.ss_total, 0.0)
+        error_contribution = 100.0 * error_ss / sq.ss_total
+    else:
+        contribution = np.zeros(len(sq.ss))
+        pure = np.zeros(len(sq.ss))
+        error_contribution = 0.0
+    pure = np.where(is_pooled, 0.0, pure)
+    error_pure = 100.0 - float(pure.sum()) if sq.ss_total > 0 else 0.0
+    return contribution, pure, error_contribution, error_pure
+
+
 def anova(
     levels_matrix: ArrayLike,
     response: ArrayLike,
@@ -194,72 +253,44 @@ def anova(
     lev, y, names, k = prepare_design(levels_matrix, response, factor_names, n_levels)
     if not 0.0 <= pool_fraction <= 1.0:
         raise StudyError(f"pool_fraction must be in [0, 1], got {pool_fraction}")
-    n_runs = y.shape[0]
-    counts, sums = level_stats(lev, y, k)
-    grand = y.mean()
-    with np.errstate(invalid="ignore", divide="ignore"):
-        means = np.where(counts > 0, sums / np.maximum(counts, 1), grand)
-    ss = (counts * (means - grand) ** 2).sum(axis=1)
-    dof = (counts > 0).sum(axis=1) - 1
-    ss_total = float(((y - grand) ** 2).sum())
-    dof_total = n_runs - 1
-    residual_dof = dof_total - int(dof.sum())
-    if residual_dof < 0:
-        raise StudyError(
-            f"the factors have {int(dof.sum())} degrees of freedom but {n_runs} runs allow "
-            f"only {dof_total}"
-        )
-    residual_ss = ss_total - float(ss.sum())
-    if residual_ss < 1e-10 * max(ss_total, np.finfo(float).tiny):
-        residual_ss = 0.0
-
+    sq = _squares(lev, y, k)
     if isinstance(pool, str) and pool == "auto":
-        pooled_idx = _auto_pool(ss, dof, residual_dof, pool_fraction * dof_total)
+        pooled_idx = _auto_pool(sq.ss, sq.dof, sq.residual_dof, pool_fraction * sq.dof_total)
     else:
         pooled_idx = _pooled(pool, names)
     is_pooled = np.zeros(len(names), dtype=bool)
     is_pooled[pooled_idx] = True
 
-    error_ss = residual_ss + float(ss[is_pooled].sum())
-    error_dof = residual_dof + int(dof[is_pooled].sum())
+    error_ss = sq.residual_ss + float(sq.ss[is_pooled].sum())
+    error_dof = sq.residual_dof + int(sq.dof[is_pooled].sum())
     error_ms = error_ss / error_dof if error_dof > 0 else np.nan
-
-    ms, f_ratio, p_value = _f_tests(ss, dof, error_ms, error_dof, is_pooled)
-
-    if ss_total > 0:
-        contribution = 100.0 * ss / ss_total
-        ve = error_ms if error_dof > 0 else 0.0
-        pure = np.maximum(100.0 * (ss - dof * ve) / ss_total, 0.0)
-        error_contribution = 100.0 * error_ss / ss_total
-    else:
-        contribution = np.zeros(len(names))
-        pure = np.zeros(len(names))
-        error_contribution = 0.0
-    pure = np.where(is_pooled, 0.0, pure)
-    error_pure = 100.0 - float(pure.sum()) if ss_total > 0 else 0.0
+    ms, f_ratio, p_value = _f_tests(sq.ss, sq.dof, error_ms, error_dof, is_pooled)
+    contribution, pure, error_contribution, error_pure = _contributions(
+        sq, is_pooled, error_ss, error_ms, error_dof
+    )
 
     def as_dict(values: np.ndarray, cast=float) -> dict:
         return {n: cast(values[i]) for i, n in enumerate(names)}
 
     return AnovaTable(
         factor_names=names,
-        dof=as_dict(dof, int),
-        ss=as_dict(ss),
+        dof=as_dict(sq.dof, int),
+        ss=as_dict(sq.ss),
         ms=as_dict(ms),
         f=as_dict(f_ratio),
         p=as_dict(p_value),
         contribution=as_dict(contribution),
         pure_contribution=as_dict(pure),
         pooled=[names[i] for i in pooled_idx],
-        ss_total=ss_total,
-        dof_total=dof_total,
+        ss_total=sq.ss_total,
+        dof_total=sq.dof_total,
         error_ss=error_ss,
         error_dof=error_dof,
         error_ms=float(error_ms),
         error_contribution=float(error_contribution),
         error_pure_contribution=float(error_pure),
-        residual_ss=residual_ss,
-        residual_dof=residual_dof,
+        residual_ss=sq.residual_ss,
+        residual_dof=sq.residual_dof,
     )
 
 

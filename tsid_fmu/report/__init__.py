@@ -10,6 +10,7 @@ from tsid_fmu.report.console import ConsoleProgress
 from tsid_fmu.report.files import parameter_set_ssv, write_result_files
 from tsid_fmu.report.html import html_report, write_html
 from tsid_fmu.report.markdown import markdown_report, markdown_table
+from tsid_fmu.report.notebook import parameter_rows  # registers the result's views
 from tsid_fmu.report.plots import convergence_plot, fit_plot, main_effects_plot
 from tsid_fmu.report.render import Figures, draw_study
 
@@ -23,6 +24,7 @@ __all__ = [
     "main_effects_plot",
     "markdown_report",
     "markdown_table",
+    "parameter_rows",
     "parameter_set_ssv",
     "write_html",
     "write_result_files",

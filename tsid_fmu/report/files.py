@@ -7,6 +7,7 @@ from xml.etree import ElementTree as ET
 
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.trail.files import atomic_write, write_json
+from tsid_fmu.trail.integrity import seal
 
 __all__ = ["parameter_set_ssv", "write_result_files"]
 
@@ -30,12 +31,18 @@ def parameter_set_ssv(
 
 
 def write_result_files(result: IdentificationResult, out: Path) -> None:
-    """Write ``result.json``, ``parameters.csv`` and ``parameters.ssv`` into ``out``."""
+    """Write ``result.json``, ``parameters.csv`` and ``parameters.ssv`` into ``out``.
+
+    ``result.json`` ends with a ``digest`` of the rest (:func:`~tsid_fmu.trail.integrity.seal`),
+    which :func:`tsid_fmu.load` checks before it trusts the file.
+    """
     study = result.study
     data = result.to_dict()
     if study is not None:
         data = {"study": study.name, "fmu": str(study.fmu), **data}
-    write_json(out / "result.json", data)
+        if study.source is not None:  # the folder the paths of the copied study.toml start at
+            data["study_folder"] = str(Path(study.source).resolve().parent)
+    write_json(out / "result.json", seal(data))
     if study is None:
         return
     atomic_write(out / "parameters.csv", result.parameters_frame().to_csv())

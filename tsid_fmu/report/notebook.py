@@ -1,8 +1,9 @@
 """Notebook display of a result and its ``plot_*`` figures.
 
 :class:`~tsid_fmu.result.IdentificationResult` delegates here (``_repr_html_``,
-``plot_fit``, ...); nothing in this module imports the result class, so the result
-module stays below the reports.
+``plot_fit``, ...): this module registers its functions with
+:func:`~tsid_fmu.result.register_views` when imported, so that the report reads the
+result and the result module never imports the reports (they sit above it).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import Any
 from tsid_fmu.errors import StudyError
 from tsid_fmu.report.html_tables import esc, table
 from tsid_fmu.report.style import fmt, fmt_levels
+from tsid_fmu.result import register_views
 
 __all__ = [
     "parameter_rows",
@@ -151,3 +153,12 @@ def plot_parameters(result: Any) -> Any:
     from tsid_fmu.report.units import study_units
 
     return trajectory_figure(result.iterations, list(result.x), study_units(result.study), result.x)
+
+
+register_views(
+    result_html=result_html,
+    plot_fit=plot_fit,
+    plot_convergence=plot_convergence,
+    plot_main_effects=plot_main_effects,
+    plot_parameters=plot_parameters,
+)

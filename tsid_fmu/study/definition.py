@@ -59,7 +59,7 @@ class Study:
     Parameters
     ----------
     fmu : str or Path
-        The FMU file.
+        The FMU file (kept resolved: absolute, without ``..`` or links).
     parameters : list of Parameter
         Parameters to identify.
     experiments : list of Experiment
@@ -76,7 +76,8 @@ class Study:
     name : str
         Label for reports.
     source : Path, optional
-        The study file this came from (errors and reports name it).
+        The study file this came from (errors and reports name it). Not compared:
+        two studies are equal when they would run alike, wherever they were read.
     phases : list of Phase
         Explicit phases (parameter groups identified in turn; MISO paper).
     contribution : ContributionOptions
@@ -95,7 +96,7 @@ class Study:
     interface: str = "auto"
     step_size: float | None = None
     name: str = "study"
-    source: Path | None = None
+    source: Path | None = field(default=None, compare=False)  # where it was read, not what
     phases: list[Phase] = field(default_factory=list)
     contribution: ContributionOptions = field(default_factory=ContributionOptions)
 
@@ -148,7 +149,7 @@ class Study:
             raise StudyError(msg if msg.startswith(where) else f"{where}{msg}") from None
 
     def _check(self) -> None:
-        self.fmu = Path(self.fmu)
+        self.fmu = Path(self.fmu).resolve()  # one spelling per file: equal studies compare equal
         if not self.parameters:
             raise StudyError("no parameters to identify")
         names = self.parameter_names

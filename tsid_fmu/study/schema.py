@@ -8,6 +8,7 @@ study fails at once with a :class:`~tsid_fmu.errors.StudyError` naming the key.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -98,7 +99,9 @@ class Experiment:
     Parameters
     ----------
     data : str or Path or pandas.DataFrame
-        The measured data (file path, or a frame for scripts and notebooks).
+        The measured data (file path, or a frame for scripts and notebooks). A path is
+        kept resolved (absolute, without ``..`` or links), as read from the current
+        folder.
     inputs : mapping of str to str
         FMU input variable -> data column (or derived channel) that drives it.
     outputs : mapping of str to str
@@ -144,9 +147,13 @@ class Experiment:
     noise: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if isinstance(self.data, str | os.PathLike):
+            # one spelling per file, so that equal studies compare equal (and the TOML
+            # written by Study.to_toml reads back to the same study)
+            self.data = Path(self.data).resolve()
         if not self.name:
-            is_path = isinstance(self.data, str | Path)
-            self.name = Path(self.data).stem if is_path else "experiment"
+            is_path = isinstance(self.data, Path)
+            self.name = self.data.stem if is_path else "experiment"
         where = f"experiment {self.name!r}"
         check_text(self.name, f"{where}: name")
         if not self.outputs:

@@ -184,7 +184,7 @@ def _experiment(e: Mapping[str, Any], base: Path, where: _Where, label: str, i: 
     file = _get(e, "file", str, where, label)
     if file is None:
         raise where.error(label, "is missing the key 'file'")
-    path = Path(file) if Path(file).is_absolute() else (base / file)
+    path = (Path(file) if Path(file).is_absolute() else (base / file)).resolve()
     outputs = _map(e, "outputs", str, where, label)
     if not outputs:
         raise where.error(label, 'needs outputs = { FMU_VARIABLE = "column" }')
@@ -436,12 +436,15 @@ def _document(fields: Mapping[str, Any], base: Path, stem: str) -> dict[str, Any
 def write_study_file(path: str | Path, fields: Mapping[str, Any]) -> Path:
     """Write a study's fields as a TOML file; return its path.
 
-    Paths are written relative to the file's folder; data given as DataFrames are
-    written as ``<stem>_<experiment>.csv`` beside it.
+    Paths are written relative to the file's folder, which is made if it is missing;
+    data given as DataFrames are written as ``<stem>_<experiment>.csv`` beside it.
     """
     import tomli_w
 
     path = Path(path)
+    if path.is_dir():
+        raise StudyError(f"{path}: is a folder; give the study file to write")
+    path.parent.mkdir(parents=True, exist_ok=True)
     base = path.parent.resolve()
     doc = _document(fields, base, path.stem)
     path.write_text(tomli_w.dumps(doc), encoding="utf-8")

@@ -42,10 +42,11 @@ from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
-from tsid_fmu.trail.files import atomic_write, read_json, write_json
-from tsid_fmu.trail.integrity import file_hashes, seal, unseal, verify_files
+from tsid_fmu.trail.files import atomic_write, write_json
+from tsid_fmu.trail.integrity import file_hashes, seal
 from tsid_fmu.trail.levels import read_next_levels, write_next_levels
 from tsid_fmu.trail.owner import FolderLock, check_owner, fingerprint, write_fingerprint
+from tsid_fmu.trail.reader import read_record, read_stage
 
 __all__ = ["NullStore", "Trail"]
 
@@ -141,13 +142,7 @@ class Trail:
         """Return a stage's complete iterations; an interrupted one is removed (redone)."""
         records: list[IterationRecord] = []
         while (path := self.iteration_dir(key, len(records) + 1) / "record.json").exists():
-            advice = f"restore it, or delete {path.parent} and the iterations after it to redo them"
-            data = unseal(read_json(path, "iteration record"), path, "iteration record", advice)
-            verify_files(path.parent, data.pop("files", None), path)
-            try:
-                records.append(IterationRecord.from_dict(data))
-            except (KeyError, TypeError, ValueError) as exc:
-                raise StudyError(f"{path}: damaged iteration record ({exc})") from None
+            records.append(read_record(path))
         if records and records[-1].parameters != self._parameters(records[-1]):
             raise StudyError(
                 f"{self.stage_dir(key)}: the trail identifies {records[-1].parameters} but the "
@@ -180,20 +175,7 @@ class Trail:
 
     def stage(self, key: str) -> StageResult | None:
         """Return a finished stage written by :meth:`write_stage`, or None."""
-        path = self.stage_dir(key) / "stage.json"
-        if not path.exists():
-            return None
-        try:
-            return StageResult.from_dict(
-                unseal(
-                    read_json(path, "stage record"),
-                    path,
-                    "stage record",
-                    "restore it, or delete it to finish the stage again",
-                )
-            )
-        except (KeyError, TypeError, ValueError) as exc:
-            raise StudyError(f"{path}: damaged stage record ({exc})") from None
+        return read_stage(self.stage_dir(key), records=False)
 
     def write_stage(self, key: str, result: StageResult) -> None:
         """Mark a stage finished: its summary in ``stage.json``."""

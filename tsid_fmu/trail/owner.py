@@ -39,7 +39,16 @@ try:
 except ImportError:  # pragma: no cover - Windows: no advisory lock
     fcntl = None  # type: ignore[assignment]
 
-__all__ = ["FINGERPRINT", "LOCK", "FolderLock", "check_owner", "fingerprint", "write_fingerprint"]
+__all__ = [
+    "FINGERPRINT",
+    "LOCK",
+    "FolderLock",
+    "check_owner",
+    "differences",
+    "fingerprint",
+    "read_fingerprint",
+    "write_fingerprint",
+]
 
 FINGERPRINT = "fingerprint.json"
 LOCK = ".tsid.lock"
@@ -145,7 +154,8 @@ def write_fingerprint(out: Path, items: dict[str, Any]) -> None:
     write_json(out / FINGERPRINT, seal({"format": 1, "tool": "tsid-fmu", "study": items}))
 
 
-def _read_fingerprint(path: Path) -> dict[str, Any]:
+def read_fingerprint(path: Path) -> dict[str, Any]:
+    """Return the study items of a ``fingerprint.json``, after checking its digest."""
     advice = "tsid-fmu cannot tell which study the folder holds; choose another --out folder"
     body = unseal(read_json(path, "study fingerprint"), path, "study fingerprint", advice)
     if not isinstance(body.get("study"), dict):
@@ -191,7 +201,7 @@ def check_owner(out: Path, items: dict[str, Any], resume: bool, locked: bool) ->
         if resume:
             raise StudyError(f"{out}: nothing to resume (no study in this folder)")
         return True
-    changed = differences(_read_fingerprint(out / FINGERPRINT), items)
+    changed = differences(read_fingerprint(out / FINGERPRINT), items)
     if changed and (foreign or resume):
         head = (
             f"--resume: the study changed since {out} was written"

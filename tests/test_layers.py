@@ -1,0 +1,50 @@
+"""The layers of docs/architecture.md point one way (issue 26): the result sits below
+the reports, which read it; the result reaches its notebook view and figures through
+what the reports register, never by importing them."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+
+from test_structure import MODULES, _imports
+
+import tsid_fmu
+from tsid_fmu.result import _VIEWS
+
+
+def _reaches(start: str) -> set[str]:
+    graph = {n: _imports(n, ast.parse(p.read_text(encoding="utf-8"))) for n, p in MODULES.items()}
+    seen, todo = set(), [start]
+    while todo:
+        for nxt in graph[todo.pop()] - seen:
+            seen.add(nxt)
+            todo.append(nxt)
+    return seen
+
+
+def test_the_result_module_does_not_import_the_reports():
+    reached = _reaches("tsid_fmu.result")
+    assert not {m for m in reached if m.startswith("tsid_fmu.report")}
+    assert "tsid_fmu.identify" not in reached and "tsid_fmu.cli" not in reached
+
+
+def test_the_reports_register_the_views_of_a_result():
+    assert tsid_fmu.IdentificationResult is not None
+    assert set(_VIEWS) == {
+        "result_html",
+        "plot_fit",
+        "plot_convergence",
+        "plot_main_effects",
+        "plot_parameters",
+    }
+
+
+def test_importing_the_result_alone_registers_the_views():
+    code = (
+        "from tsid_fmu.result import IdentificationResult as R\n"
+        "r = R(x={'a': 1.0}, fun=0.5, nfev=3, success=True, status=0, message='ok')\n"
+        "assert 'a' in r._repr_html_()\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -1,0 +1,126 @@
+"""The values of ``tsid``'s options, checked as the shell expects.
+
+A bad value stops ``tsid`` at argument parsing, before a study or FMU is read, with
+one line naming the option (argparse's exit status 2); values that need the study
+(``--set`` names, ``--result``) are :class:`~tsid_fmu.errors.StudyError` naming the
+option and the file or name, with the close matches where a name is misspelt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.errors import StudyError
+
+__all__ = [
+    "not_parameters",
+    "parse_assignments",
+    "saved_result",
+    "timeout_seconds",
+    "worker_count",
+]
+
+
+def worker_count(text: str) -> int:
+    """Return the value of ``--workers``: a whole number of processes, at least 1.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Anything else (argparse names the option and exits with status 2).
+    """
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a whole number of worker processes (1 = serial), got {text!r}"
+        ) from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1 (1 = serial), got {text!r}")
+    return n
+
+
+def timeout_seconds(text: str) -> float:
+    """Return the value of ``--timeout``: seconds per simulation, or 0 for no limit.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        A negative, non-finite or non-numeric value (argparse names the option and
+        exits with status 2).
+    """
+    try:
+        seconds = float(text)
+    except ValueError:
+        seconds = math.nan
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise argparse.ArgumentTypeError(
+            "must be a number of seconds > 0, or 0 for no limit (leave it out for the "
+            f"automatic limit), got {text!r}"
+        )
+    return seconds
+
+
+def parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
+    """Return ``{NAME: VALUE}`` of options such as ``--set NAME=VALUE``.
+
+    Raises
+    ------
+    StudyError
+        An item is not ``NAME=VALUE``, naming the option ``what``.
+    """
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            raise StudyError(f"{what} must look like NAME=VALUE, got {item!r}")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def saved_result(path: Path) -> dict[str, Any]:
+    """Return result.json of ``--result`` (a results folder or the file), checked.
+
+    Raises
+    ------
+    StudyError
+        No such file or folder, a folder without result.json, or no parameters in it.
+    """
+    import json
+
+    if not path.exists():
+        raise StudyError(f"--result {path}: no such file or folder")
+    file = path / "result.json" if path.is_dir() else path
+    if not file.is_file():
+        raise StudyError(
+            f"--result {path}: no result.json in this folder (is it the --out folder of a "
+            "finished tsid identify?)"
+        )
+    try:
+        saved = json.loads(file.read_text(encoding="utf-8"))
+        if not isinstance(saved.get("x"), dict):
+            raise TypeError("no parameters")
+        saved["x"] = {str(k): float(v) for k, v in saved["x"].items()}
+    except (OSError, UnicodeDecodeError, ValueError, TypeError, AttributeError) as exc:
+        raise StudyError(
+            f"{file}: cannot read identified parameters ({type(exc).__name__})"
+        ) from None
+    return saved
+
+
+def not_parameters(unknown: Sequence[str], names: Sequence[str]) -> str:
+    """Return the message for ``--set`` names that are no parameter, with close ones."""
+    import difflib
+
+    said = []
+    for n in unknown:
+        close = difflib.get_close_matches(n, names, n=3, cutoff=0.6)
+        hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
+        said.append(f"{n!r}{hint}")
+    return f"--set: not a parameter of the study: {', '.join(said)}; its parameters: " + ", ".join(
+        names
+    )

@@ -1,0 +1,212 @@
+"""Read a finished study's results folder back into an :class:`IdentificationResult`.
+
+``tsid identify --out DIR`` (or :func:`tsid_fmu.identify`) leaves ``DIR/result.json``
+and the audit trail; :func:`load` turns them back into the object ``identify``
+returned, so that a run from the shell can be studied in a notebook::
+
+    res = tsid_fmu.load("results")
+    res.params, res.fun, res.to_pandas(), res.plot_convergence()
+
+Nothing is trusted unchecked: ``result.json``, every ``stage.json`` and every
+iteration's ``record.json`` carry a digest, and the records the hashes of their
+files (:mod:`tsid_fmu.trail.integrity`); a file changed or damaged since tsid-fmu
+wrote it is a :class:`~tsid_fmu.errors.StudyError` naming it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.errors import StudyError
+from tsid_fmu.result import IdentificationResult
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.study.definition import Study
+from tsid_fmu.study.toml import study_from_document
+from tsid_fmu.trail.files import read_json
+from tsid_fmu.trail.integrity import unseal
+from tsid_fmu.trail.owner import FINGERPRINT, differences, fingerprint, read_fingerprint
+from tsid_fmu.trail.reader import read_stage
+from tsid_fmu.uncertainty.intervals import Uncertainty
+
+__all__ = ["load"]
+
+_OLD = "result.json has no checksum (an older tsid-fmu wrote it): not verified"
+
+
+def _number(value: Any) -> float:
+    """Return a float of result.json (``null`` stands for a non-finite one)."""
+    return math.nan if value is None else float(value)
+
+
+def _numbers(values: Any) -> dict[str, float]:
+    return {str(k): _number(v) for k, v in (values or {}).items()}
+
+
+def _uncertainty(data: Mapping[str, Any] | None) -> Uncertainty | None:
+    if not data:
+        return None
+    known = {f.name for f in dataclasses.fields(Uncertainty)}
+    kwargs = {k: v for k, v in data.items() if k in known}
+    for key in ("values", "std_error", "relative", "cramer_rao"):
+        kwargs[key] = _numbers(kwargs.get(key))
+    for key in ("condition", "inflation"):
+        if key in kwargs:
+            kwargs[key] = _number(kwargs[key])
+    return Uncertainty(**kwargs)
+
+
+def _stage_dirs(out: Path, summaries: list[Mapping[str, Any]]) -> list[Path]:
+    """Return each stage's folder, in the order of result.json (``search/pipeline.py``)."""
+    dirs, phases = [], 0
+    for s in summaries:
+        kind = s.get("kind")
+        if kind == "phase":
+            phases += 1
+            dirs.append(out / f"phase_{phases:02d}")
+        elif kind in ("contribution", "refinement"):
+            dirs.append(out / str(kind))
+        else:
+            dirs.append(out)
+    return dirs
+
+
+def _stages(out: Path, summaries: list[Mapping[str, Any]]) -> list[StageResult]:
+    """Each stage with its iterations, from the trail; it must agree with result.json."""
+    stages = []
+    for summary, folder in zip(summaries, _stage_dirs(out, summaries), strict=True):
+        stage = read_stage(folder)
+        if stage is None:
+            raise StudyError(
+                f"{folder / 'stage.json'}: missing, but result.json lists the stage "
+                f"{summary.get('name')!r}; restore it, or run the study again"
+            )
+        if stage.name != summary.get("name") or len(stage.records) != summary.get("iterations"):
+            raise StudyError(
+                f"{folder}: the trail does not match result.json (stage {summary.get('name')!r}"
+                f" with {summary.get('iterations')} iterations); the folder was changed after "
+                "the study finished"
+            )
+        stages.append(stage)
+    return stages
+
+
+def _read(out: Path) -> tuple[dict[str, Any], list[str]]:
+    """Return result.json's content, checked, and the warnings about it."""
+    path = out / "result.json"
+    if not out.is_dir():
+        raise StudyError(f"{out}: no such folder")
+    if not path.is_file():
+        raise StudyError(
+            f"{out}: no result.json; not the folder of a finished study (a paused one "
+            "writes none: continue it with resume=True)"
+        )
+    data = read_json(path, "result")
+    if not isinstance(data, dict):
+        raise StudyError(f"{path}: damaged result (not a JSON object)")
+    if "digest" not in data:
+        return data, [_OLD]
+    advice = "run the study again, or restore the file from a copy"
+    return unseal(data, path, "result", advice), []
+
+
+def _copied_study(out: Path, folder: Any) -> Study:
+    """Return the study of the folder's ``study.toml``, its paths read from ``folder``.
+
+    ``study.toml`` is the study file as run, copied: its relative paths start at the
+    folder the original was in (``study_folder`` in result.json).
+    """
+    path = out / "study.toml"
+    if not path.is_file() or not isinstance(folder, str):
+        raise StudyError(f"{out}: no study.toml, or result.json does not say where it was")
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise StudyError(f"{path}: cannot read the study ({type(exc).__name__})") from None
+    return Study(**study_from_document(doc, Path(folder), str(path)), source=path)
+
+
+def _study(
+    out: Path, study: Study | str | Path | None, folder: Any
+) -> tuple[Study | None, list[str]]:
+    """Return the study to attach, and a warning where there is none or it changed."""
+    if study is None:
+        try:
+            study = _copied_study(out, folder)
+        except StudyError as exc:
+            return None, [f"the study is not attached ({exc}); pass study= to load()"]
+    elif not isinstance(study, Study):
+        study = Study.from_toml(study)
+    try:
+        changed = differences(read_fingerprint(out / FINGERPRINT), fingerprint(study))
+    except StudyError as exc:
+        return study, [str(exc)]
+    if changed:
+        shown = "; ".join(changed[:4]) + (" ..." if len(changed) > 4 else "")
+        return study, [f"the study or its files changed since this run: {shown}"]
+    return study, []
+
+
+def load(out_dir: str | Path, study: Study | str | Path | None = None) -> IdentificationResult:
+    """Return the :class:`IdentificationResult` of a finished study's results folder.
+
+    Parameters
+    ----------
+    out_dir : path
+        The folder ``tsid identify --out`` (or ``identify(study, out)``) wrote.
+    study : Study or path, optional
+        The study, to attach (units, plots, ``parameters_frame``); default the folder's
+        ``study.toml`` (the study file as run), else none. A warning says where none
+        is attached, or where the study or its FMU and data files differ from those
+        of the run (its ``fingerprint.json``).
+
+    Returns
+    -------
+    IdentificationResult
+        ``x``, ``fun``, ``nfev``, ``status``, the stages with their iterations, the
+        intervals and uncertainty, fit, noise, validation and warnings as ``identify``
+        returned them, with ``out_dir`` set.
+
+    Raises
+    ------
+    StudyError
+        No such folder, no ``result.json`` (a paused or interrupted study), or a file
+        of the folder changed or damaged since tsid-fmu wrote it.
+    """
+    out = Path(out_dir)
+    data, warnings = _read(out)
+    attached, more = _study(out, study, data.get("study_folder"))
+    try:
+        result = IdentificationResult(
+            x=_numbers(data["x"]),
+            fun=_number(data["fun"]),
+            nfev=int(data["nfev"]),
+            success=bool(data["success"]),
+            status=int(data["status"]),
+            message=str(data["message"]),
+            nit=int(data.get("nit", 0)),
+            stages=_stages(out, list(data.get("stages") or [])),
+            intervals={str(k): list(v) for k, v in (data.get("intervals") or {}).items()},
+            uncertainty=_uncertainty(data.get("uncertainty")),
+            fit=dict(data.get("fit") or {}),
+            noise=dict(data.get("noise") or {}),
+            validation=dict(data.get("validation") or {}),
+            weak=dict(data.get("weak") or {}),
+            warnings=[*map(str, data.get("warnings") or []), *warnings, *more],
+            extra=dict(data.get("extra") or {}),
+            study=attached,
+            out_dir=out,
+        )
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise StudyError(f"{out / 'result.json'}: damaged result ({exc!r})") from None
+    if data.get("comparison") is not None:
+        result.extra["comparison"] = data["comparison"]
+    result.contribution = {
+        n: [float(r.anova.contribution[n]) for r in result.iterations if n in r.names]
+        for n in result.x
+    }
+    return result
