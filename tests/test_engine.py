@@ -41,7 +41,9 @@ def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
     assert res.success and res.status == 0, res.message
     assert res.x["tau"] == pytest.approx(TAU, rel=0.01)
     assert res.x["x0"] == pytest.approx(X0, rel=0.05)
-    assert res.nit <= 12 and res.nfev > 9 * res.nit
+    # 13, not 12 as before start points were scored: the centre of the first levels costs
+    # less than every run of the first array, and the iterations go on from there
+    assert res.nit <= 13 and res.nfev > 9 * res.nit
     # the answer is never worse than any row evaluated
     assert res.fun <= min(float(r.mean_costs.min()) for r in res.iterations)
     runs = res.to_pandas()

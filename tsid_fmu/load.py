@@ -65,8 +65,12 @@ def _stage_dirs(out: Path, summaries: list[Mapping[str, Any]]) -> list[Path]:
     dirs, phases = [], 0
     for s in summaries:
         kind = s.get("kind")
+        folder = (s.get("extra") or {}).get("folder")
         if kind == "phase":
             phases += 1
+        if isinstance(folder, str) and Path(folder).name == folder:  # written by the trail
+            dirs.append(out / folder if folder else out)
+        elif kind == "phase":
             dirs.append(out / f"phase_{phases:02d}")
         elif kind in ("contribution", "refinement"):
             dirs.append(out / str(kind))

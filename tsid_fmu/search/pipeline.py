@@ -3,10 +3,13 @@
 A single-group study runs one ``taguchi`` stage over all parameters. A phased study
 (explicit ``[[phases]]``, or ``[contribution] enabled``) runs the ``contribution``
 analyses, one ``phase`` stage per parameter group, and a joint phase over all
-parameters on all identification experiments. Either may end with the optional
-``refinement`` stage. Every stage gets its own evaluator spec (its parameters, its
-experiments, the others held at their current values) and reports its answer, its cost
-on its measured inputs, its simulations and why it stopped.
+parameters on all identification experiments. Then, by ``[method] refine``: the
+adaptive local search of :mod:`tsid_fmu.search.adaptive` (``"auto"`` with the ``sse``
+cost: refinement, back to the arrays, restarts), the ``refinement`` alone
+(``"least_squares"``), or the ``check`` stage's local probes (otherwise). Every stage
+gets its own evaluator spec (its parameters, its experiments, the others held at their
+current values) and reports its answer, its cost on its measured inputs, its
+simulations and why it stopped.
 """
 
 from __future__ import annotations

@@ -193,7 +193,7 @@ def probe_test(
         return Stationarity(False, "local probes", gap, cost, detail), probes[k], float(costs[k])
     detail = (
         f"no probe {step:g} of a first range either side of the answer along any "
-        f"parameter ({len(probes)} simulations) lowers the cost"
+        f"parameter ({len(probes)} probes) lowers the cost"
     )
     return Stationarity(True, "local probes", 0.0, cost, detail), dict(x), cost
 

@@ -178,7 +178,12 @@ class Trail:
         return read_stage(self.stage_dir(key), records=False)
 
     def write_stage(self, key: str, result: StageResult) -> None:
-        """Mark a stage finished: its summary in ``stage.json``."""
+        """Mark a stage finished: its summary in ``stage.json``.
+
+        The stage's folder (relative to the output folder) is kept in its
+        ``extra["folder"]``, so that ``result.json`` names where each stage lies.
+        """
+        result.extra["folder"] = key
         write_json(self.stage_dir(key) / "stage.json", seal(result.to_dict()))
 
     def write_iteration(self, key: str, record: IterationRecord, space: Space) -> None:
