@@ -29,7 +29,7 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.verdict import GATE_RTOL, Stationarity, gauss_newton_gap
+from tsid_fmu.search.verdict import GATE_RTOL, Stationarity, gauss_newton_step
 from tsid_fmu.study.schema import Method
 
 __all__ = ["FD_STEP", "refine_stage"]
@@ -124,7 +124,11 @@ class _Problem:
         """Test the answer with the last Jacobian (see :mod:`tsid_fmu.search.verdict`).
 
         At the answer's own residuals where the refinement has them; the Jacobian is the
-        last one computed (at the answer, or one accepted step before it).
+        last one computed (at the answer, or one accepted step before it). Where the
+        predicted decrease is too large, the predicted step and its half are tried (two
+        simulations): a lower cost there becomes the answer and the test fails; if
+        neither lowers the cost, the first-order model does not hold this close to the
+        answer, and the test holds on that evidence.
         """
         cost, x = self.best
         if self.jacobian is None or not math.isfinite(cost):
@@ -134,15 +138,26 @@ class _Problem:
         r = self.best_r if self.best_r is not None else r_lin
         if not np.array_equal(s, s_lin) and self.best_r is None:
             s = s_lin
-        gap = gauss_newton_gap(jac, r, s, self.space.s_lower, self.space.s_upper)
+        gap, step = gauss_newton_step(jac, r, s, self.space.s_lower, self.space.s_upper)
         scale = max(cost, floor)
-        holds = gap <= GATE_RTOL * scale
+        share = gap / scale if scale > 0 else 0.0
         detail = (
-            f"the projected Gauss-Newton step predicts a decrease of {gap:.3g} "
-            f"({gap / scale if scale > 0 else 0.0:.2g} of the cost or the noise floor, "
-            f"whichever is larger; {'at most' if holds else 'more than'} {GATE_RTOL:g})"
+            f"the projected Gauss-Newton step predicts a decrease of {gap:.3g} ({share:.2g} "
+            f"of the cost or the noise floor, whichever is larger; "
+            f"{'at most' if gap <= GATE_RTOL * scale else 'more than'} {GATE_RTOL:g})"
         )
-        return Stationarity(holds, "projected Gauss-Newton", gap, cost, detail)
+        if gap <= GATE_RTOL * scale:
+            return Stationarity(True, "projected Gauss-Newton", gap, cost, detail)
+        try:
+            self._residuals([self.space.to_x(self.space.clip(s + f * step)) for f in (1.0, 0.5)])
+        except _Budget:
+            return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
+        if self.best[0] < cost:
+            found = cost - self.best[0]
+            detail += f"; tried, the step lowered the cost by {found:.3g}"
+            return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
+        detail += "; tried, the step and its half raise the cost: no lower point there"
+        return Stationarity(True, "projected Gauss-Newton, step tried", gap, cost, detail)
 
 
 def refine_stage(
@@ -231,9 +246,9 @@ def refine_stage(
     except _Budget:
         status = 1
         message = f"simulation limit ({limit}) of the refinement reached"
+    gate = problem.stationarity(floor)
     cost, x = problem.best
     nfev = evaluator.nfev - problem.start
-    gate = problem.stationarity(floor)
     extra["stationarity"] = gate.to_dict()
     if status == 0 and not gate.holds:
         status = 1

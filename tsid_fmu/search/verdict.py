@@ -39,6 +39,7 @@ __all__ = [
     "POOR_FIT",
     "Stationarity",
     "gauss_newton_gap",
+    "gauss_newton_step",
     "noise_floor",
     "probe_points",
 ]
@@ -116,6 +117,16 @@ def gauss_newton_gap(
 ) -> float:
     """Return the decrease of ``|r|^2`` the projected Gauss-Newton step predicts.
 
+    See :func:`gauss_newton_step`, which also returns the step.
+    """
+    return gauss_newton_step(jac, r, s, lower, upper)[0]
+
+
+def gauss_newton_step(
+    jac: np.ndarray, r: np.ndarray, s: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> tuple[float, np.ndarray]:
+    """Return the decrease of ``|r|^2`` the projected Gauss-Newton step predicts.
+
     Parameters
     ----------
     jac : numpy.ndarray
@@ -127,25 +138,28 @@ def gauss_newton_gap(
 
     Returns
     -------
-    float
+    gap : float
         ``|r|^2 - |r + J t d|^2`` (>= 0) for the Gauss-Newton step ``d`` of the
         parameters not held at a bound, cut to the largest ``t <= 1`` within the bounds.
         Parameters held at a bound, or that the step would push straight through one,
         are dropped from the step in turn.
+    step : numpy.ndarray
+        ``t d``, the step that predicts it (zeros where nothing is gained).
     """
     jac, r = np.asarray(jac, float), np.asarray(r, float)
     g = jac.T @ r
     free = ~_active(s, g, lower, upper, 1e-9)
     cost = float(r @ r)
-    best = 0.0
+    best = (0.0, np.zeros_like(s, dtype=float))
     for _ in range(s.size + 1):
         if not free.any():
             return best
-        d = np.zeros_like(s)
+        d = np.zeros_like(s, dtype=float)
         d[free] = np.linalg.lstsq(jac[:, free], -r, rcond=1e-12)[0]
         t = _feasible_fraction(s, d, lower, upper)
         predicted = r + t * (jac @ d)
-        best = max(best, cost - float(predicted @ predicted))
+        if cost - float(predicted @ predicted) > best[0]:
+            best = (cost - float(predicted @ predicted), t * d)
         if t >= 1.0 or t * np.linalg.norm(d) > 1e-9:
             return best
         # a free parameter sits at a bound the step points through: hold it there
