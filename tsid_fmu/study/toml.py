@@ -13,13 +13,13 @@ import dataclasses
 import difflib
 import math
 import os
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import StudyError
+from tsid_fmu.study.checks import parse_toml
 from tsid_fmu.study.schema import ContributionOptions, Experiment, Method, Parameter, Phase
 
 __all__ = ["read_study_file", "study_from_document", "write_study_file"]
@@ -335,12 +335,7 @@ def read_study_file(path: Path) -> dict[str, Any]:
         raise StudyError(f"{path}: study file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise StudyError(f"{path}: cannot read the study file ({type(exc).__name__})") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise StudyError(f"{path}: not valid TOML: {exc}") from None
-    except RecursionError:
-        raise StudyError(f"{path}: not valid TOML: nested too deeply") from None
+    doc = parse_toml(text, str(path))
     return study_from_document(doc, path.parent, str(path))
 
 

@@ -10,7 +10,6 @@ parameter values; the next iteration then runs those exact levels.
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +19,7 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
+from tsid_fmu.study.checks import parse_toml
 
 __all__ = ["read_next_levels", "write_next_levels"]
 
@@ -135,13 +135,10 @@ def read_next_levels(path: Path, space: Space) -> Frame:
         malformed factors; the message names the file.
     """
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise StudyError(f"{path}: cannot read ({type(exc).__name__})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise StudyError(f"{path}: not valid TOML: {exc}") from None
-    except RecursionError:
-        raise StudyError(f"{path}: not valid TOML: nested too deeply") from None
+    doc = parse_toml(text, str(path))
     if isinstance(doc.get("levels"), dict):
         return _levels_frame(path, doc["levels"], space)
     return _rotated_frame(path, doc, space)
