@@ -14,8 +14,11 @@ folder can recompute them.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
+import os
+import stat
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -32,9 +35,19 @@ _CHUNK = 1 << 20
 
 
 def sha256_file(path: Path) -> str:
-    """Return the SHA-256 of a file's bytes, as hexadecimal."""
+    """Return the SHA-256 of a file's bytes, as hexadecimal.
+
+    Raises
+    ------
+    OSError
+        Also for a path that is not a regular file (``/dev/zero``, a named pipe), whose
+        reading would never end; it is opened without blocking and not read.
+    """
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with open(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", os.fspath(path))
         while chunk := fh.read(_CHUNK):
             h.update(chunk)
     return h.hexdigest()
