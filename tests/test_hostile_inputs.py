@@ -113,3 +113,123 @@ def test_a_huge_integer_in_an_expression_is_a_data_error(tmp_path):
         load_data(tmp_path / "d.csv", derived={"big": "9" * 400})
     data = load_data(tmp_path / "d.csv", derived={"ok": str(10**300)})
     assert data.column("ok")[0] == 1e300
+
+
+# ------------------------------------------------ 2. files that are not tables
+
+NOT_TABLES = {
+    "secret.env": 'API_KEY="sk-live-SECRET123"\nDB_PASSWORD="hunter2"\n',
+    "os-release": 'PRETTY_NAME="Debian GNU/Linux 12 (bookworm)"\nNAME="Debian GNU/Linux"\n'
+    'VERSION_ID="12"\nID=debian\n',
+    "secret.csv": "API_KEY,sk-live-SECRET123\nDB_PASSWORD,hunter2\n",
+    "notes.txt": "Meeting notes\nAsk Bob for the PIN\n",
+}
+LEAKS = ("API_KEY", "sk-live", "SECRET123", "hunter2", "PRETTY", "Debian", "bookworm", "Bob",
+         "Meeting")  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(NOT_TABLES))
+def test_a_file_that_is_no_table_shows_none_of_its_lines(lag, tmp_path, capsys, name):
+    (tmp_path / name).write_text(NOT_TABLES[name])
+    err = run(tmp_path, study_text(lag, data=(tmp_path / name).as_posix()), capsys)
+    shown = err.replace(str(tmp_path), "")
+    assert not [s for s in LEAKS if s in shown], err
+    with pytest.raises(DataError) as info:
+        load_data(tmp_path / name).column("u")
+    assert not [s for s in LEAKS if s in str(info.value).replace(str(tmp_path), "")]
+
+
+def test_a_real_header_is_still_listed(tmp_path):
+    (tmp_path / "d.csv").write_text("t,u_in,y_out\n0,1,0\n0.01,1,0\n")
+    with pytest.raises(DataError, match=r"columns are t, u_in, y_out"):
+        load_data(tmp_path / "d.csv")
+    (tmp_path / "d.csv").write_text("t,u_in,y_out\n,,\n")  # no number, but nothing filled in
+    with pytest.raises(DataError, match=r"columns are t, u_in, y_out"):
+        load_data(tmp_path / "d.csv")
+    (tmp_path / "d.csv").write_text("time;u\n0;1\n0.5;2\n")
+    assert load_data(tmp_path / "d.csv").names == ["time", "u"]
+
+
+# ------------------------------------------------ 3. devices, pipes, endless lines
+
+
+@pytest.mark.parametrize("device", ["/dev/zero", "/dev/urandom", "fifo"])
+def test_a_device_or_pipe_as_data_is_refused_at_once(lag, tmp_path, device):
+    import os
+    import subprocess
+    import sys
+
+    if device == "fifo":
+        device = str(tmp_path / "data.csv")
+        os.mkfifo(device)
+    elif not Path(device).exists():
+        pytest.skip(f"no {device} here")
+    (tmp_path / "study.toml").write_text(study_text(lag, data=device))
+    cmd = [sys.executable, "-m", "tsid_fmu", "identify", str(tmp_path / "study.toml"),
+           "--out", str(tmp_path / "out"), "-q", "--no-plots"]  # fmt: skip
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"reading {device} did not end")
+    assert done.returncode == 2, done.stderr
+    assert re.fullmatch(r"tsid: error: .*: not a file \((a device|a named pipe)\).*\n", done.stderr)
+    with pytest.raises(DataError, match="not a file"):
+        load_data(device)
+
+
+def test_a_file_without_a_line_break_is_read_no_further_than_its_head(tmp_path, monkeypatch):
+    from tsid_fmu.data import textfile
+
+    monkeypatch.setattr(textfile, "HEAD_BYTES", 1000)
+    (tmp_path / "blob.csv").write_bytes(b"\0" * 5000)
+    (tmp_path / "long.csv").write_bytes(b"time" + b",u" * 3000 + b"\n0" + b",1" * 3000 + b"\n")
+    with pytest.raises(DataError, match=r"blob\.csv: no header line in its first 1000 bytes"):
+        load_data(tmp_path / "blob.csv")
+    with pytest.raises(DataError, match=r"long\.csv: no header line in its first 1000 bytes"):
+        load_data(tmp_path / "long.csv")
+
+
+# ------------------------------------------------ 9. duplicate columns, 11. BOM
+
+
+@pytest.mark.parametrize(
+    ("header", "message"),
+    [
+        ("time,F_m,u,y,F_m", r"columns 2 and 5 are both named 'F_m'"),
+        ("time,u,y,y", r"columns 3 and 4 are both named 'y'"),
+        ("time,u, y,y ", r"columns 3 and 4 are both named 'y'"),
+        ("time;u;y;u", r"columns 2 and 4 are both named 'u'"),
+        ("time,u,y,$x,$x", r"columns 4 and 5 are both named alike"),
+        ("\ufefftime,time,u,y", r"columns 1 and 2 are both named 'time'"),
+    ],
+)
+def test_a_column_named_twice_is_refused_naming_both(lag, tmp_path, capsys, header, message):
+    n = header.count(",") + header.count(";") + 1
+    sep = ";" if ";" in header else ","
+    rows = "".join(sep.join([f"{i * DT:g}"] + ["1"] * (n - 1)) + "\n" for i in range(101))
+    (tmp_path / "d.csv").write_text(header + "\n" + rows, encoding="utf-8")
+    err = run(tmp_path, study_text(lag, data=(tmp_path / "d.csv").as_posix()), capsys)
+    assert re.search(message, err), err
+    assert ".1" not in err.replace(str(tmp_path), "")
+
+
+def test_a_frame_with_a_column_named_twice_is_refused():
+    import pandas as pd
+
+    frame = pd.DataFrame([[0.0, 1.0, 2.0], [0.1, 1.0, 2.0]], columns=["time", "u", "u"])
+    from tsid_fmu.data import MeasuredData
+
+    with pytest.raises(DataError, match=r"<frame>: columns 2 and 3 are both named 'u'"):
+        MeasuredData.from_frame(frame)
+
+
+def test_a_byte_order_mark_is_not_part_of_the_header(lag, tmp_path, capsys):
+    good = (lag.parent / "good.csv").read_text()
+    (tmp_path / "excel.csv").write_bytes(b"\xef\xbb\xbf" + good.encode())
+    data = load_data(tmp_path / "excel.csv")
+    assert data.names == ["time", "u", "y"]
+    (tmp_path / "t.csv").write_bytes(b"\xef\xbb\xbft,u\n0,1\n0.1,2\n")
+    with pytest.raises(DataError, match=r"time column 'time' not found; columns are t, u\."):
+        load_data(tmp_path / "t.csv")
+    text = study_text(lag, data=(tmp_path / "excel.csv").as_posix())
+    run(tmp_path, text, capsys, status=1)  # runs, to its iteration limit
