@@ -233,3 +233,44 @@ def test_a_byte_order_mark_is_not_part_of_the_header(lag, tmp_path, capsys):
         load_data(tmp_path / "t.csv")
     text = study_text(lag, data=(tmp_path / "excel.csv").as_posix())
     run(tmp_path, text, capsys, status=1)  # runs, to its iteration limit
+
+
+# ------------------------------------------------ 10. the machine's fault, not the FMU's
+
+
+def test_a_file_size_limit_while_extracting_is_an_environment_error(lag, tmp_path):
+    import os
+    import resource
+    import subprocess
+    import sys
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (6000, 6000))  # less than the FMU's library
+
+    (tmp_path / "study.toml").write_text(study_text(lag))
+    (tmp_path / "tmp").mkdir()
+    env = {**os.environ, "TMPDIR": str(tmp_path / "tmp")}
+    cmd = [sys.executable, "-m", "tsid_fmu", "identify", str(tmp_path / "study.toml"),
+           "--out", str(tmp_path / "out"), "-q", "--no-plots", "--workers", "1"]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env,
+                          preexec_fn=limit)  # fmt: skip
+    assert done.returncode == 4, done.stderr
+    assert re.fullmatch(r"tsid: error: cannot extract Lag\.fmu: writing .*TMPDIR.*\n", done.stderr)
+    assert "File too large" in done.stderr and str(tmp_path / "tmp") in done.stderr
+
+
+def test_a_full_temporary_folder_is_an_environment_error(lag, tmp_path, capsys, monkeypatch):
+    from collections import namedtuple
+
+    from tsid_fmu.errors import FMUError, TsidError
+    from tsid_fmu.fmu import archive, safe_extract
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(archive.shutil, "disk_usage", lambda p: usage(10**6, 10**6 - 100, 100))
+    with pytest.raises(TsidError, match=r"it needs [\d,]+ bytes but only 100 are free") as info:
+        safe_extract(lag, tmp_path / "x")
+    assert not isinstance(info.value, FMUError)
+    err = run(tmp_path, study_text(lag), capsys, status=4)
+    assert re.fullmatch(
+        r"tsid: error: cannot extract Lag\.fmu: .*only 100 are free.*TMPDIR.*\n", err
+    )

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from tsid_fmu.errors import StudyError, TsidError
+from tsid_fmu.errors import ResourceError, StudyError, TsidError
 from tsid_fmu.interrupt import delivered_interrupts
 
 __all__ = ["EXIT_STATUSES", "main"]
@@ -394,6 +394,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit
         return status
+    except ResourceError as exc:  # a TsidError, but the machine's fault, not the input's
+        return _error(str(exc), 4)
     except TsidError as exc:
         return _error(str(exc), 2)
     except RecursionError:
