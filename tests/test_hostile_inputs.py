@@ -274,3 +274,19 @@ def test_a_full_temporary_folder_is_an_environment_error(lag, tmp_path, capsys, 
     assert re.fullmatch(
         r"tsid: error: cannot extract Lag\.fmu: .*only 100 are free.*TMPDIR.*\n", err
     )
+
+
+# ------------------------------------------------ 11. smaller ones
+
+SCRIPT = "<script>alert(1)</script>"
+IMG = "<img src=x onerror=alert(2)>"
+
+
+def test_html_in_a_study_name_or_unit_is_escaped_in_report_md(lag, tmp_path, capsys):
+    text = study_text(lag).replace("[study]\n", f'[study]\nname = "{SCRIPT} & co"\n')
+    text = text.replace("min = 0 }", f'min = 0, unit = "{IMG}" }}')
+    run(tmp_path, text, capsys, status=1)
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "<script" not in report and "<img" not in report
+    assert "&lt;script&gt;alert(1)&lt;/script&gt; &amp; co" in report
+    assert "&lt;img src=x onerror=alert(2)&gt;" in report
