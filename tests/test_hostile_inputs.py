@@ -290,3 +290,28 @@ def test_html_in_a_study_name_or_unit_is_escaped_in_report_md(lag, tmp_path, cap
     assert "<script" not in report and "<img" not in report
     assert "&lt;script&gt;alert(1)&lt;/script&gt; &amp; co" in report
     assert "&lt;img src=x onerror=alert(2)&gt;" in report
+
+
+def test_two_row_data_give_no_numpy_warnings(lag, tmp_path, capsys):
+    import warnings
+
+    (tmp_path / "two.csv").write_text("time,u,y\n0,1,0\n0.01,1,0.03\n")
+    text = study_text(lag, data=(tmp_path / "two.csv").as_posix())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run(tmp_path, text, capsys, "--workers", "1", status=1)
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], caught
+    assert "RuntimeWarning" not in capsys.readouterr().err
+
+
+def test_levels_about_extreme_logs_give_no_numpy_warnings():
+    import numpy as np
+
+    from tsid_fmu.doe.leveling import _levels_about
+    from tsid_fmu.doe.options import LevelingOptions
+
+    with np.errstate(all="raise"):  # a warning would be an exception here
+        levels = _levels_about(
+            np.float64(-200.0), np.float64(150.0), 3, True, (0.0, np.inf), LevelingOptions()
+        )
+    assert len(levels) == 3 and all(np.isfinite(levels))
