@@ -315,3 +315,26 @@ def test_levels_about_extreme_logs_give_no_numpy_warnings():
             np.float64(-200.0), np.float64(150.0), 3, True, (0.0, np.inf), LevelingOptions()
         )
     assert len(levels) == 3 and all(np.isfinite(levels))
+
+
+def test_files_tsid_did_not_write_in_the_trail_are_warned_about(lag, tmp_path, capsys):
+    (tmp_path / "study.toml").write_text(study_text(lag, iterations=3))
+    out = tmp_path / "out"
+    cmd = ["identify", str(tmp_path / "study.toml"), "--out", str(out), "-q"]
+    assert main([*cmd, "--pause-after", "1"]) == 3  # with the figures the report draws
+    assert {"fit.svg", "main_effects.svg"} <= {p.name for p in (out / "iteration_01").iterdir()}
+    assert main([*cmd, "--pause-after", "1", "--resume"]) == 3
+    assert "warning" not in capsys.readouterr().out  # tsid's own files are no surprise
+    (out / "iteration_01" / "notes.txt").write_text("my notes\n")
+    (out / "iteration_01" / "study.toml").write_text("# a copy\n")
+    (out / "study.toml").write_text((out / "study.toml").read_text() + "# edited\n")
+    rc = main(["identify", str(tmp_path / "study.toml"), "--out", str(out), "-q", "--no-plots",
+               "--resume"])  # fmt: skip
+    captured = capsys.readouterr()
+    assert rc in (0, 1), captured.err
+    assert re.search(
+        r"warning: .*iteration_01: 'notes\.txt', 'study\.toml' not written by tsid-fmu; ignored",
+        captured.out,
+    ), captured.out
+    assert re.search(r"warning: .*out/study\.toml differs from .*study\.toml", captured.out)
+    assert "not written by tsid-fmu" in (out / "report.md").read_text()

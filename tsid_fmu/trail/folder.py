@@ -43,7 +43,7 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
 from tsid_fmu.trail.files import atomic_write, read_json, write_json
-from tsid_fmu.trail.integrity import file_hashes, seal, unseal, verify_files
+from tsid_fmu.trail.integrity import file_hashes, seal, unexpected_files, unseal, verify_files
 from tsid_fmu.trail.levels import read_next_levels, write_next_levels
 from tsid_fmu.trail.owner import FolderLock, check_owner, fingerprint, write_fingerprint
 
@@ -52,6 +52,11 @@ __all__ = ["NullStore", "Trail"]
 
 class NullStore:
     """A store that keeps nothing (a study run without an output folder)."""
+
+    @property
+    def notes(self) -> list[str]:
+        """Return no warnings."""
+        return []
 
     def iterations(self, key: str) -> list[IterationRecord]:
         """Return no iterations."""
@@ -105,19 +110,32 @@ class Trail:
         self.out = Path(out)
         self.study = study
         self.on_iteration = on_iteration
+        self.notes: list[str] = []  # warnings about the folder, for the result
         items = fingerprint(study)
         check_owner(self.out, items, resume, locked=False)
         self.out.mkdir(parents=True, exist_ok=True)
         self._lock = FolderLock(self.out)
         self._lock.acquire()
         try:
+            source = Path(study.source) if study.source is not None else None
             if check_owner(self.out, items, resume, locked=True):
                 write_fingerprint(self.out, items)
-                if study.source is not None and Path(study.source).is_file():
-                    atomic_write(self.out / "study.toml", Path(study.source).read_bytes())
+                if source is not None and source.is_file():
+                    atomic_write(self.out / "study.toml", source.read_bytes())
+            elif source is not None and source.is_file():
+                self._compare_copy(source)
         except BaseException:
             self._lock.release()
             raise
+
+    def _compare_copy(self, source: Path) -> None:
+        """Note a copy ``study.toml`` that differs from the study file being resumed."""
+        copy = self.out / "study.toml"
+        if copy.is_file() and copy.read_bytes() != source.read_bytes():
+            self.notes.append(
+                f"{copy} differs from {source}, the study file being run (edited by hand?); "
+                "the run follows the study file and leaves the copy as it is"
+            )
 
     def close(self) -> None:
         """Release the folder's lock."""
@@ -143,7 +161,9 @@ class Trail:
         while (path := self.iteration_dir(key, len(records) + 1) / "record.json").exists():
             advice = f"restore it, or delete {path.parent} and the iterations after it to redo them"
             data = unseal(read_json(path, "iteration record"), path, "iteration record", advice)
-            verify_files(path.parent, data.pop("files", None), path)
+            hashes = data.pop("files", None)
+            verify_files(path.parent, hashes, path)
+            self._note_extra(path.parent, hashes)
             try:
                 records.append(IterationRecord.from_dict(data))
             except (KeyError, TypeError, ValueError) as exc:
@@ -157,6 +177,16 @@ class Trail:
         if stale.exists():
             shutil.rmtree(stale)
         return records
+
+    def _note_extra(self, folder: Path, hashes: object) -> None:
+        """Note files in an iteration's folder that tsid-fmu did not write (ignored)."""
+        extra = unexpected_files(folder, hashes)
+        note = (
+            f"{folder}: {', '.join(map(repr, extra))} not written by tsid-fmu; ignored (an "
+            "iteration is read from the files its record.json lists)"
+        )
+        if extra and note not in self.notes:
+            self.notes.append(note)
 
     def _parameters(self, record: IterationRecord) -> list[str]:
         names = set(self.study.parameter_names)
