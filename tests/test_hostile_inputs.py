@@ -338,3 +338,14 @@ def test_files_tsid_did_not_write_in_the_trail_are_warned_about(lag, tmp_path, c
     ), captured.out
     assert re.search(r"warning: .*out/study\.toml differs from .*study\.toml", captured.out)
     assert "not written by tsid-fmu" in (out / "report.md").read_text()
+
+
+def test_a_huge_integer_cell_in_the_data_is_located_not_a_crash(lag, tmp_path, capsys):
+    (tmp_path / "d.csv").write_text(f"time,u,y\n0,1,0\n0.01,{'9' * 400},0\n0.02,1,0\n")
+    with pytest.raises(DataError, match=r"column 'u' is inf in row 2$"):
+        load_data(tmp_path / "d.csv")
+    err = run(tmp_path, study_text(lag, data=(tmp_path / "d.csv").as_posix()), capsys)
+    assert "column 'u' is inf in row 2" in err and "999" not in err
+    (tmp_path / "d.csv").write_text(f"time,u,y\n0,1,0\n0.01,1_000,0\n0.02,-{'9' * 400},0\n")
+    with pytest.raises(DataError, match=r"column 'u' has a non-numeric value in row 2$"):
+        load_data(tmp_path / "d.csv")

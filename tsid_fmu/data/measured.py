@@ -179,7 +179,10 @@ def _to_numeric(frame: pd.DataFrame, source: str) -> pd.DataFrame:
         if pd.api.types.is_bool_dtype(col) or pd.api.types.is_numeric_dtype(col):
             out[name] = col.astype(np.float64)
             continue
-        converted = pd.to_numeric(col, errors="coerce")
+        try:
+            converted = pd.to_numeric(col, errors="coerce")
+        except (OverflowError, ValueError):  # an integer cell of hundreds of digits
+            converted = pd.to_numeric(col.map(_cell_number), errors="coerce")
         bad = converted.isna() & col.notna() & (col.astype(str).str.strip() != "")
         if bad.any():
             pos = int(np.flatnonzero(bad.to_numpy())[0])
@@ -189,6 +192,15 @@ def _to_numeric(frame: pd.DataFrame, source: str) -> pd.DataFrame:
             )
         out[name] = converted.astype(np.float64)
     return pd.DataFrame(out, index=frame.index)
+
+
+def _cell_number(value: Any) -> float:
+    """Return a cell as a float (an integer beyond the float range is +-inf), NaN if text."""
+    text = str(value).strip()
+    try:
+        return float("nan") if "_" in text else float(text)  # "1_000": text to pandas too
+    except ValueError:
+        return float("nan")
 
 
 def _listing(name: str, names: list[str], cutoff: float = 0.6) -> str:
