@@ -204,8 +204,9 @@ class Trail:
             else record.next_frame
         )
         same = frame.to_dict()["factors"] == proposed.to_dict()["factors"] and (
-            frame.axis_aligned or list(frame.centre) == list(proposed.centre)
-        )
+            frame.axis_aligned
+            or (list(frame.centre) == list(proposed.centre) and frame.anchor == proposed.anchor)
+        )  # rotated: the [centre] a person writes is the anchor (an edit of it was ignored)
         return None if same else frame
 
     def stage(self, key: str) -> StageResult | None:

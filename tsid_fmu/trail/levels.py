@@ -101,6 +101,16 @@ def _levels_frame(path: Path, table: dict, space: Space) -> Frame:
     return Frame.from_levels(space, levels)
 
 
+def _unit(d: np.ndarray) -> np.ndarray:
+    """Return ``d`` scaled to length 1; a direction of length 1 already is kept as written.
+
+    Dividing a unit vector by its computed norm changes the last bit of about a third
+    of them, so a resumed study ran other levels than the uninterrupted one (issue 25).
+    """
+    norm = float(np.linalg.norm(d))
+    return d if abs(norm - 1.0) <= 8 * np.finfo(float).eps else d / norm
+
+
 def _rotated_frame(path: Path, doc: dict, space: Space) -> Frame:
     centre, factors = doc.get("centre"), doc.get("factors")
     if not isinstance(centre, dict) or not isinstance(factors, list) or not factors:
@@ -117,9 +127,7 @@ def _rotated_frame(path: Path, doc: dict, space: Space) -> Frame:
         if not np.all(np.isfinite(d)) or np.linalg.norm(d) == 0:
             raise StudyError(f"{path}: [[factors]] #{i + 1} direction must be finite, not zero")
         offsets = _numbers(path, f"[[factors]] #{i + 1} offsets", f.get("offsets"))
-        out.append(
-            Factor(str(f.get("name", f"A{i + 1}")), d / np.linalg.norm(d), np.asarray(offsets))
-        )
+        out.append(Factor(str(f.get("name", f"A{i + 1}")), _unit(d), np.asarray(offsets)))
     if len(out) != space.dim:
         raise StudyError(f"{path}: needs {space.dim} [[factors]], got {len(out)}")
     return Frame(centre=np.zeros(space.dim), factors=out, anchor=x)
