@@ -349,3 +349,31 @@ def test_a_huge_integer_cell_in_the_data_is_located_not_a_crash(lag, tmp_path, c
     (tmp_path / "d.csv").write_text(f"time,u,y\n0,1,0\n0.01,1_000,0\n0.02,-{'9' * 400},0\n")
     with pytest.raises(DataError, match=r"column 'u' has a non-numeric value in row 2$"):
         load_data(tmp_path / "d.csv")
+
+
+@pytest.mark.parametrize("device", ["/dev/zero", "fifo"])
+def test_a_device_or_pipe_as_study_file_is_refused_at_once(tmp_path, device):
+    import os
+    import subprocess
+    import sys
+
+    if device == "fifo":
+        device = str(tmp_path / "study.toml")
+        os.mkfifo(device)
+    cmd = [sys.executable, "-m", "tsid_fmu", "simulate", device]
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"reading {device} did not end")
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == f"tsid: error: {device}: the study file is not a regular file\n"
+
+
+def test_a_study_file_with_a_bom_or_old_mac_line_ends_loads(lag, tmp_path):
+    from tsid_fmu.study import load_study
+
+    text = study_text(lag)
+    (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    (tmp_path / "cr.toml").write_bytes(text.replace("\n", "\r").encode())
+    assert load_study(tmp_path / "bom.toml").parameter_names == ["tau"]
+    assert load_study(tmp_path / "cr.toml").parameter_names == ["tau"]

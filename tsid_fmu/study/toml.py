@@ -13,6 +13,7 @@ import dataclasses
 import difflib
 import math
 import os
+import stat
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -328,9 +329,14 @@ def study_from_document(doc: Mapping[str, Any], base: Path, source: str) -> dict
 def read_study_file(path: Path) -> dict[str, Any]:
     """Read a study file and return the keyword arguments of a Study (see module doc)."""
     try:
-        if path.stat().st_size > MAX_FILE_BYTES:
+        if not stat.S_ISREG(path.stat().st_mode):  # a device or pipe is never read to its end
+            raise StudyError(f"{path}: the study file is not a regular file")
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_FILE_BYTES + 1)  # bounded, whatever stat says
+        if len(raw) > MAX_FILE_BYTES:
             raise StudyError(f"{path}: the study file is larger than {MAX_FILE_BYTES} bytes")
-        text = path.read_text(encoding="utf-8")
+        # as read_text did (universal newlines); a byte order mark (Notepad) is dropped
+        text = raw.decode("utf-8-sig").replace("\r\n", "\n").replace("\r", "\n")
     except FileNotFoundError:
         raise StudyError(f"{path}: study file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
