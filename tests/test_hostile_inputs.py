@@ -1,12 +1,18 @@
-"""Issue 25, attacks that got through: each is a bad input, exit 2 with one line.
+"""Issue 25, attacks that got through: each is now one line and the right exit status.
 
-* a huge integer (``derived``, ``levels``, a resumed ``next_levels.toml``) was an
-  ``OverflowError`` traceback and exit 70; it is now refused naming the key;
+* a huge integer (``derived``, ``levels``, a resumed ``next_levels.toml``, a data cell)
+  was an ``OverflowError`` traceback and exit 70; it is bad input naming the key;
 * a file that is not a table (a secrets file ``API_KEY="sk-..."``, ``/etc/os-release``)
   had its first line printed as column names;
-* ``/dev/zero`` as data hung, reading forever;
+* ``/dev/zero``, ``/dev/urandom`` or a named pipe as data or study file hung, reading
+  forever; a file without line breaks was read whole while looking for the header;
 * duplicated data columns were used silently (the first one) or renamed by pandas;
-* a UTF-8 BOM (as Excel writes CSV) made the header "not a header".
+* a full temporary folder or a file-size limit while the FMU was extracted blamed the
+  FMU (exit 2); it is an environment error, exit 4, naming ``TMPDIR``;
+* HTML in a study name or unit went verbatim into ``report.md``; a UTF-8 BOM (Excel's
+  CSV) made the header "not a header"; two-row data and extreme levels printed raw numpy
+  RuntimeWarnings; files in an iteration folder that tsid did not write, and an edited
+  ``study.toml`` copy, were accepted silently (now warnings).
 
 Each test here failed on the code before its fix (checked by reverting the fix).
 """
