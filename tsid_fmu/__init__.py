@@ -12,11 +12,14 @@ The flat public API, over the layers of the data flow (see ``docs/architecture.m
 
 from __future__ import annotations
 
+# first of all: `tsid` on the command line holds Ctrl-C while the imports below run
+import tsid_fmu._startup  # noqa: F401  # isort: skip
 from tsid_fmu.errors import (
     ArrayError,
     BuildError,
     DataError,
     FMUError,
+    ResourceError,
     SimulationError,
     StudyError,
     TsidError,
@@ -40,6 +43,7 @@ __all__ = [
     "Method",
     "Parameter",
     "Phase",
+    "ResourceError",
     "SimulationError",
     "Study",
     "StudyError",

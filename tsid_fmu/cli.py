@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import errno
 import os
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,8 +26,12 @@ from tsid_fmu.cli_values import (
     timeout_seconds,
     worker_count,
 )
-from tsid_fmu.errors import StudyError, TsidError
-from tsid_fmu.interrupt import delivered_interrupts
+from tsid_fmu.errors import ResourceError, StudyError, TsidError
+from tsid_fmu.interrupt import (
+    delivered_interrupts,
+    take_startup_interrupt,
+    terminated_as_interrupt,
+)
 
 __all__ = ["EXIT_STATUSES", "main"]
 
@@ -41,6 +46,7 @@ exit status:
        naming the path)
   70   internal error: a bug in tsid-fmu (the traceback is printed: please report it)
   130  interrupted (Ctrl-C): finished iterations are kept, continue with --resume
+  143  terminated (SIGTERM): as 130
   141  the reader of the output went away (tsid info FMU | head): ends quietly
 """
 
@@ -397,14 +403,31 @@ def _error(message: str, status: int) -> int:
     return status
 
 
+def _interrupted(terminated: bool) -> int:
+    """Say how an interrupted command line ends; return 130 (Ctrl-C) or 143 (SIGTERM)."""
+    what = "terminated (SIGTERM)" if terminated else "interrupted"
+    print(
+        f"\ntsid: {what}; finished iterations are kept - continue with --resume",
+        file=sys.stderr,
+    )
+    return 143 if terminated else 130
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (see :data:`EXIT_STATUSES`)."""
-    args = make_parser().parse_args(argv)
+    held = take_startup_interrupt()  # Ctrl-C or SIGTERM while the package was imported
+    if held is not None:
+        return _interrupted(held == signal.SIGTERM)
+    terminated: list[int] = []
     try:
-        with delivered_interrupts():  # Ctrl-C neither lost nor raised inside an import
+        # Ctrl-C and SIGTERM neither lost nor raised inside an import
+        with terminated_as_interrupt() as terminated, delivered_interrupts():
+            args = make_parser().parse_args(argv)
             status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit
         return status
+    except ResourceError as exc:  # a TsidError, but the machine's fault, not the input's
+        return _error(str(exc), 4)
     except TsidError as exc:
         return _error(str(exc), 2)
     except RecursionError:
@@ -417,11 +440,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MemoryError:
         return _error("out of memory", 4)
     except KeyboardInterrupt:
-        print(
-            "\ntsid: interrupted; finished iterations are kept - continue with --resume",
-            file=sys.stderr,
-        )
-        return 130
+        return _interrupted(bool(terminated))
     except Exception:  # a bug: the traceback is what a report of it needs
         import traceback
 

@@ -12,6 +12,7 @@ __all__ = [
     "BuildError",
     "DataError",
     "FMUError",
+    "ResourceError",
     "SimulationError",
     "StudyError",
     "TsidError",
@@ -44,3 +45,11 @@ class FMUError(TsidError):
 
 class SimulationError(TsidError):
     """A simulation of an FMU failed (FMI error status, non-finite output, time-out)."""
+
+
+class ResourceError(TsidError):
+    """The machine lacks what a run needs: room or write access in a folder, a file-size limit.
+
+    An environment error, not bad input: the command line exits with 4 (a full temporary
+    folder while an FMU is extracted names ``TMPDIR``, where that folder can be moved).
+    """

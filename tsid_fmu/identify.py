@@ -248,6 +248,7 @@ def _finish(
         stages=stages,
         study=study,
     )
+    result.warnings = list(store.notes)  # files in the output folder tsid did not write
     result.contribution = {
         n: [float(r.anova.contribution[n]) for r in result.iterations if n in r.names]
         for n in study.parameter_names
@@ -268,7 +269,11 @@ def _finish(
     result.fun, result.fit, result.noise = found.fun, found.fit, found.noise
     result.uncertainty = found.uncertainty
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
-    result.warnings = found.warnings + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
+    result.warnings = (
+        found.warnings
+        + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
+        + result.warnings
+    )
     checked = _fidelity(study, evaluators, x, "answer", callback, found.sensitivities)
     _record(result, start, checked)
     result.weak = _weak(result)

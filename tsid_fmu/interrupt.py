@@ -21,6 +21,19 @@ left; each time, the interrupt is raised unless the main thread is inside an imp
 :class:`KeyboardInterrupt` (the cleanup of ``finally`` blocks is left alone). An interrupt
 that CPython drops is dropped silently (:data:`sys.unraisablehook`): the next repeat
 brings it again.
+
+Two more ways the command line can be stopped are handled the same way:
+
+- **Ctrl-C while** ``tsid`` **starts**: importing the package (numpy, pandas, scipy,
+  matplotlib) takes a good part of a second, before any code of the command line runs.
+  When this process *is* the command line (``tsid ...`` or ``python -m tsid_fmu ...``,
+  judged from :data:`sys.orig_argv`), :mod:`tsid_fmu._startup`, imported first thing
+  by the package, holds Ctrl-C until :func:`~tsid_fmu.cli.main` takes it
+  (:func:`take_startup_interrupt`) and exits with 130. A program that merely imports
+  tsid-fmu is left alone.
+- **SIGTERM** (``kill``, a batch system's time limit): under :func:`terminated_as_interrupt`
+  it is delivered as Ctrl-C is, so the same cleanup runs (workers, the FMU's
+  extraction folder, the folder's lock) and the command line exits with 143.
 """
 
 from __future__ import annotations
@@ -33,7 +46,12 @@ from contextlib import contextmanager
 from types import FrameType
 from typing import Any
 
-__all__ = ["RETRY_S", "delivered_interrupts"]
+__all__ = [
+    "RETRY_S",
+    "delivered_interrupts",
+    "take_startup_interrupt",
+    "terminated_as_interrupt",
+]
 
 RETRY_S = 0.05
 """Seconds between the repeats of SIGINT after Ctrl-C, until the interrupt is out."""
@@ -106,3 +124,49 @@ def delivered_interrupts() -> Iterator[None]:
         sys.unraisablehook = previous_hook
     if repeater:
         raise KeyboardInterrupt  # Ctrl-C came, and the block ended before it got out
+
+
+def take_startup_interrupt() -> int | None:
+    """Stop holding Ctrl-C and SIGTERM (the defaults again); return the first that came.
+
+    They are held while the command line starts (:mod:`tsid_fmu._startup`).
+    """
+    from tsid_fmu import _startup
+
+    if signal.getsignal(signal.SIGINT) is _startup.hold:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if signal.getsignal(signal.SIGTERM) is _startup.hold:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    return _startup.HELD[0] if _startup.HELD else None
+
+
+@contextmanager
+def terminated_as_interrupt() -> Iterator[list[int]]:
+    """Within the block, SIGTERM interrupts as Ctrl-C does; yield the signals that came.
+
+    The handler hands SIGTERM to SIGINT's handler (that of :func:`delivered_interrupts`
+    when the block is inside it, so it is not raised inside an import either) and
+    records it in the yielded list, for the exit status. Does nothing outside the main
+    thread or when SIGTERM already has a handler. The previous handler is restored.
+    """
+    came: list[int] = []
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+    ):
+        yield came
+        return
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        came.append(signum)
+        on_sigint = signal.getsignal(signal.SIGINT)
+        if callable(on_sigint):
+            on_sigint(signal.SIGINT, frame)
+        else:
+            raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield came
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -40,6 +40,9 @@ MAX_DEPTH = 64
 
 CONSTANTS = {"pi": math.pi, "e": math.e}
 
+_LARGEST = int(np.finfo(np.float64).max)
+"""Largest integer literal that converts to a float (larger ones overflow)."""
+
 _UNARY: dict[str, Callable[..., np.ndarray]] = {
     name: getattr(np, name)
     for name in (
@@ -103,6 +106,9 @@ def _check(node: ast.AST, depth: int) -> None:
     if isinstance(node, ast.Constant):
         if isinstance(node.value, bool) or not isinstance(node.value, int | float):
             raise _Refused(f"uses the literal {node.value!r}; only numbers are allowed")
+        if isinstance(node.value, int) and abs(node.value) > _LARGEST:
+            digits = len(str(abs(node.value)))  # parsed, so within the str() limit
+            raise _Refused(f"uses an integer of {digits} digits, more than a float holds")
         return
     if isinstance(node, ast.Name):
         return
@@ -256,8 +262,10 @@ def evaluate(
         with np.errstate(all="ignore"):
             value = _Evaluator(columns, sample_time)(tree.body)
     except _Refused as exc:
+        long = isinstance(expression, str) and len(expression) > 80
+        shown = expression[:60] + "..." if long else expression
         raise DataError(
-            f"{source}: derived channel {channel!r} = {expression!r} {exc}; "
+            f"{source}: derived channel {channel!r} = {shown!r} {exc}; "
             f"{describe_columns(list(columns))} (functions: {', '.join(FUNCTIONS)})"
         ) from None
     n = len(next(iter(columns.values()))) if columns else 0

@@ -24,6 +24,14 @@ import numpy as np
 
 from tsid_fmu.data.expressions import evaluate
 from tsid_fmu.data.names import column_label, describe_columns, safe_names
+from tsid_fmu.data.textfile import (
+    check_duplicates,
+    check_regular,
+    header_fields,
+    hide_names_unless_table,
+    read_head,
+    sniff_delimiter,
+)
 from tsid_fmu.errors import DataError
 
 if TYPE_CHECKING:
@@ -132,6 +140,7 @@ class MeasuredData:
         # spaces only: a tab or control character keeps the name from looking like a
         # header, so that a file that is not a data file is never quoted (data.names)
         frame.columns = [str(c).strip(" ") for c in frame.columns]
+        check_duplicates(list(frame.columns), source)
         if frame.shape[0] == 0 or frame.shape[1] == 0:
             raise DataError(f"{source}: no data (the table is empty)")
         if time_column not in frame.columns:
@@ -170,7 +179,10 @@ def _to_numeric(frame: pd.DataFrame, source: str) -> pd.DataFrame:
         if pd.api.types.is_bool_dtype(col) or pd.api.types.is_numeric_dtype(col):
             out[name] = col.astype(np.float64)
             continue
-        converted = pd.to_numeric(col, errors="coerce")
+        try:
+            converted = pd.to_numeric(col, errors="coerce")
+        except (OverflowError, ValueError):  # an integer cell of hundreds of digits
+            converted = pd.to_numeric(col.map(_cell_number), errors="coerce")
         bad = converted.isna() & col.notna() & (col.astype(str).str.strip() != "")
         if bad.any():
             pos = int(np.flatnonzero(bad.to_numpy())[0])
@@ -180,6 +192,15 @@ def _to_numeric(frame: pd.DataFrame, source: str) -> pd.DataFrame:
             )
         out[name] = converted.astype(np.float64)
     return pd.DataFrame(out, index=frame.index)
+
+
+def _cell_number(value: Any) -> float:
+    """Return a cell as a float (an integer beyond the float range is +-inf), NaN if text."""
+    text = str(value).strip()
+    try:
+        return float("nan") if "_" in text else float(text)  # "1_000": text to pandas too
+    except ValueError:
+        return float("nan")
 
 
 def _listing(name: str, names: list[str], cutoff: float = 0.6) -> str:
@@ -252,25 +273,48 @@ def _check_time(time: np.ndarray, time_column: str, source: str) -> float:
     return float((time[-1] - time[0]) / (time.size - 1))
 
 
+_BINARY = (".parquet", ".feather", ".xlsx", ".xls", ".mat")
+_TSV_SEP = r"\s+|\t|,|;"
+
+
+def _text_options(path: Path, suffix: str, options: dict[str, Any]) -> dict[str, Any]:
+    """Return the reader's options for a text file, reading and checking its header.
+
+    The delimiter is sniffed among the usual ones only (never ``=`` or ``:``), a UTF-8
+    byte order mark is dropped, and a header naming a column twice is refused
+    (:mod:`tsid_fmu.data.textfile`).
+    """
+    encoding = options.get("encoding", "utf-8-sig")
+    line = read_head(path, encoding)
+    defaults: dict[str, Any] = {"engine": "python", "encoding": encoding}
+    if suffix in (".tsv", ".txt"):
+        defaults["sep"] = _TSV_SEP
+    elif "sep" not in options and "delimiter" not in options:
+        defaults["sep"] = sniff_delimiter(line)
+    merged = {**defaults, **options}
+    sep = merged.get("sep") or merged.get("delimiter")
+    if isinstance(sep, str) and sep and not {"header", "names", "skiprows"} & set(options):
+        check_duplicates(header_fields(line, sep), str(path))
+    return merged
+
+
 def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) -> pd.DataFrame:
     import pandas as pd
 
     suffix = path.suffix.lower()
+    if suffix not in _BINARY:
+        options = _text_options(path, suffix, options)
     try:
-        if suffix in (".csv", ".dat", ""):
-            frame = pd.read_csv(path, **{"sep": None, "engine": "python", **options})
-        elif suffix in (".tsv", ".txt"):
-            frame = pd.read_csv(path, **{"sep": r"\s+|\t|,|;", "engine": "python", **options})
+        if suffix not in _BINARY:
+            frame = pd.read_csv(path, **options)
         elif suffix == ".parquet":
             frame = pd.read_parquet(path, **options)
         elif suffix == ".feather":
             frame = pd.read_feather(path, **options)
         elif suffix in (".xlsx", ".xls"):
             frame = pd.read_excel(path, **options)
-        elif suffix == ".mat":
-            frame = _read_mat(path, options)
         else:
-            frame = pd.read_csv(path, **{"sep": None, "engine": "python", **options})
+            frame = _read_mat(path, options)
     except ImportError as exc:
         raise DataError(f"{path}: reading {suffix} files needs an optional package: {exc}") from exc
     except pd.errors.EmptyDataError as exc:
@@ -279,6 +323,7 @@ def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) ->
         raise
     except (OSError, ValueError, pd.errors.ParserError, UnicodeDecodeError, csv.Error) as exc:
         raise DataError(f"{path}: cannot read the file: {_reason(exc)}") from None
+    frame = hide_names_unless_table(frame)
     if columns is not None:
         missing = [c for c in columns if c not in frame.columns]
         if missing:
@@ -364,10 +409,7 @@ def load_data(
         column and row.
     """
     path = Path(path)
-    if not path.exists():
-        raise DataError(f"data file not found: {path}")
-    if not path.is_file():
-        raise DataError(f"{path}: not a file")
+    check_regular(path)  # never a device or pipe: reading those does not end
     if path.stat().st_size == 0:
         raise DataError(f"{path}: the file is empty")
     if columns is not None and time_column not in columns:

@@ -327,8 +327,10 @@ def _levels_about(
     """Levels spanning ``centre +/- half`` in the (possibly log10) domain."""
     lo_u, hi_u = centre_u - half_u, centre_u + half_u
     if log:
-        lo, hi = 10.0**lo_u, 10.0**hi_u
-        # keep geometric spacing only while the new range still spans decades
-        keep_log = options.scale == "log" or hi / lo >= options.log_ratio
-        return make_levels(lo, hi, n, log=keep_log, bounds=bounds)
+        with np.errstate(over="ignore", under="ignore"):  # beyond float range: bounds clip
+            lo, hi = np.power(10.0, lo_u), np.power(10.0, hi_u)
+        # keep geometric spacing only while the new range still spans decades (compared
+        # in decades: lo may underflow to 0, and hi / lo was a division by zero)
+        keep_log = options.scale == "log" or hi_u - lo_u >= np.log10(options.log_ratio)
+        return make_levels(float(lo), float(hi), n, log=keep_log, bounds=bounds)
     return make_levels(lo_u, hi_u, n, log=False, bounds=bounds)

@@ -17,6 +17,7 @@ PosixPath('/tmp/plant')
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import shutil
@@ -25,7 +26,7 @@ import zipfile
 import zlib
 from pathlib import Path, PurePosixPath
 
-from tsid_fmu.errors import FMUError
+from tsid_fmu.errors import FMUError, ResourceError
 
 __all__ = ["MAX_BYTES", "MAX_MEMBERS", "safe_extract"]
 
@@ -35,6 +36,18 @@ MAX_BYTES = 2 * 1024**3
 MAX_MEMBERS = 100_000
 
 _CHUNK = 1 << 20
+#: errors of writing that are the machine's (full disk, file-size limit, read-only
+#: or forbidden folder), not the FMU's
+_ENVIRONMENT = {
+    errno.ENOSPC,
+    errno.EDQUOT,
+    errno.EFBIG,
+    errno.EROFS,
+    errno.EACCES,
+    errno.EPERM,
+    errno.EMFILE,
+    errno.ENFILE,
+}
 _DRIVE_RE = re.compile(r"^[A-Za-z]:")
 #: ``create_system`` values whose ``external_attr`` high word is a Unix mode
 _UNIX_SYSTEMS = {3, 19}  # Unix, OS X
@@ -196,9 +209,20 @@ def _extract_member(
     except (zipfile.BadZipFile, zlib.error, EOFError, ValueError) as exc:
         raise FMUError(f"{fmu}: member {info.filename!r} is damaged: {exc}") from exc
     except OSError as exc:
+        if exc.errno in _ENVIRONMENT:
+            raise _no_room(fmu, target, exc.strerror or str(exc)) from exc
         raise FMUError(
             f"{fmu}: cannot extract member {info.filename!r} to {target}: {exc}"
         ) from exc
+
+
+def _no_room(fmu: Path, where: Path, reason: str) -> ResourceError:
+    """Return the error of an extraction the machine, not the FMU, stopped (exit 4)."""
+    return ResourceError(
+        f"cannot extract {fmu.name}: writing {where}: {reason}; this is the temporary "
+        "folder unless you chose another: point TMPDIR at a folder with room (and check "
+        "the file-size limit, ulimit -f)"
+    )
 
 
 def safe_extract(
@@ -232,10 +256,14 @@ def safe_extract(
         The file is missing or not a ZIP archive; it has no ``modelDescription.xml`` at
         its root; a member's name is absolute, has a drive letter, ``..`` or a NUL byte;
         a member is a symbolic link or a special file; the declared sizes, or the bytes
-        actually decompressed, exceed ``max_bytes``; there is not enough free disk space;
-        a member is corrupt, encrypted or uses an unsupported compression.  The message
-        names the FMU file and the member at fault.  ``dest`` may hold part of the
-        archive afterwards; the caller owns and removes it.
+        actually decompressed, exceed ``max_bytes``; a member is corrupt, encrypted or
+        uses an unsupported compression.  The message names the FMU file and the member
+        at fault.
+    ResourceError
+        Not the FMU's fault: not enough free space in ``dest``, a file-size limit, a
+        folder that cannot be written (the message names the folder and ``TMPDIR``).
+
+    ``dest`` may hold part of the archive afterwards; the caller owns and removes it.
     """
     fmu = Path(fmu_path)
     limit = MAX_BYTES if max_bytes is None else int(max_bytes)
@@ -248,9 +276,7 @@ def safe_extract(
         root = root.resolve()
         free = shutil.disk_usage(root).free
         if total > free:
-            raise FMUError(
-                f"{fmu}: extracting needs {total:,} bytes but only {free:,} are free in {root}"
-            )
+            raise _no_room(fmu, root, f"it needs {total:,} bytes but only {free:,} are free")
         # 2. extract, counting the bytes actually produced
         written = 0
         for info, rel in plan:

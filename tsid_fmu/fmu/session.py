@@ -40,7 +40,7 @@ import numpy as np
 
 import tsid_fmu.fmu.exchange as exchange
 import tsid_fmu.fmu.grid as grid
-from tsid_fmu.errors import FMUError, SimulationError
+from tsid_fmu.errors import FMUError, ResourceError, SimulationError
 from tsid_fmu.fmu.archive import safe_extract
 from tsid_fmu.fmu.compiled import cs_loop
 from tsid_fmu.fmu.instance import Instance, Values
@@ -256,7 +256,14 @@ class FMUSession:
             raise FMUError(f"FMU file not found: {self.path}")
         if not zipfile.is_zipfile(self.path):
             raise FMUError(f"{self.path}: not an FMU (an FMU is a ZIP archive)")
-        self._tempdir = Path(tempfile.mkdtemp(prefix="tsid-fmu-"))
+        try:
+            self._tempdir = Path(tempfile.mkdtemp(prefix="tsid-fmu-"))
+        except OSError as exc:  # no usable temporary folder: the machine's, not the FMU's
+            raise ResourceError(
+                f"cannot create a folder to extract {self.path.name} in the temporary "
+                f"folder (TMPDIR={os.environ.get('TMPDIR', 'not set')}): "
+                f"{exc.strerror or exc}; point TMPDIR at a writable folder with room"
+            ) from None
         # checks member names, types and sizes; FMUError names the member at fault
         safe_extract(self.path, self._tempdir)
         return self._tempdir

@@ -14,14 +14,16 @@ __all__ = ["escape", "markdown_report", "markdown_table"]
 
 
 def escape(text: Any) -> str:
-    r"""Return ``text`` as it may be printed into the report: no control characters.
+    r"""Return ``text`` as it may be printed into the report: no control characters, no HTML.
 
     Names and messages come from study files, data files and FMUs; a terminal escape
     sequence (ESC ``[2J``), a newline or a bidirectional override in one of them is
     shown as its Python escape (``\x1b[2J``) instead of acting on whoever reads the
-    report.
+    report. ``&``, ``<`` and ``>`` become HTML entities, as in ``report.html``: Markdown
+    viewers render raw HTML, so a study named ``<script>...`` would run in them.
     """
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
 def _cell(v: Any) -> str:

@@ -7,11 +7,81 @@ The study's parts (:mod:`tsid_fmu.study.schema`) and the study itself
 from __future__ import annotations
 
 import math
+import tomllib
 from typing import Any
 
 from tsid_fmu.errors import StudyError
 
-__all__ = ["check_bound", "check_choice", "check_number", "check_text", "check_whole"]
+__all__ = [
+    "INT64",
+    "check_bound",
+    "check_choice",
+    "check_number",
+    "check_text",
+    "check_whole",
+    "parse_toml",
+]
+
+INT64 = (-(2**63), 2**63 - 1)
+"""The integers TOML promises to hold; a study file's integers must lie in this range."""
+
+
+def _digits(value: int) -> int:
+    """Return about how many decimal digits ``value`` has (without printing it)."""
+    try:
+        return len(str(abs(value)))
+    except ValueError:  # beyond sys.get_int_max_str_digits(): an estimate
+        return int(abs(value).bit_length() * math.log10(2)) + 1
+
+
+def _as_float(value: int | float, what: str) -> float:
+    """Return ``float(value)``; an integer too large for a float is a StudyError."""
+    try:
+        return float(value)
+    except OverflowError:
+        raise StudyError(
+            f"{what} must be a number a float can hold, got an integer of {_digits(value)} digits"
+        ) from None
+
+
+def _walk_integers(value: Any, key: str, source: str) -> None:
+    """Refuse an integer outside :data:`INT64` anywhere in a parsed TOML document."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _walk_integers(v, f"{key}.{k}" if key else str(k), source)
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _walk_integers(v, f"{key}[{i}]", source)
+    elif isinstance(value, int) and not isinstance(value, bool):
+        if not INT64[0] <= value <= INT64[1]:
+            raise StudyError(
+                f"{source}: {key} is an integer of {_digits(value)} digits, outside the 64-bit "
+                "range of TOML integers (write a float such as 1e30 if you mean a large number)"
+            )
+
+
+def parse_toml(text: str, source: str) -> dict[str, Any]:
+    """Parse TOML text; every failure is a StudyError naming ``source`` (and the key).
+
+    Beyond :func:`tomllib.loads`, an integer outside the 64-bit range of TOML is refused
+    naming its key (Python reads any number of digits, which no float holds), as are
+    integers too long for Python to read at all.
+
+    Raises
+    ------
+    StudyError
+        Not valid TOML, nested too deeply, or an integer out of range.
+    """
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise StudyError(f"{source}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise StudyError(f"{source}: not valid TOML: nested too deeply") from None
+    except ValueError:  # an integer of more than sys.get_int_max_str_digits() digits
+        raise StudyError(f"{source}: not valid TOML: an integer has too many digits") from None
+    _walk_integers(doc, "", source)
+    return doc
 
 
 def check_number(value: Any, what: str) -> float:
@@ -24,18 +94,22 @@ def check_number(value: Any, what: str) -> float:
     """
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise StudyError(f"{what} must be a number, got {value!r}")
-    if not math.isfinite(value):
+    number = _as_float(value, what)
+    if not math.isfinite(number):
         raise StudyError(f"{what} must be finite, got {value!r}")
-    return float(value)
+    return number
 
 
 def check_bound(value: Any, what: str, default: float) -> float:
     """Return a bound: a number, ``None`` (the default) or an infinity, never NaN."""
     if value is None:
         return default
-    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
+    if isinstance(value, bool) or not isinstance(value, int | float):
         raise StudyError(f"{what} must be a number, got {value!r}")
-    return float(value)
+    number = _as_float(value, what)
+    if math.isnan(number):
+        raise StudyError(f"{what} must be a number, got {value!r}")
+    return number
 
 
 def check_whole(value: Any, what: str, low: int, high: int | None = None) -> int:

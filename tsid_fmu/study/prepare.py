@@ -16,6 +16,7 @@ from tsid_fmu.study.schema import Experiment
 
 __all__ = [
     "NOISE_FLOOR",
+    "data_noise",
     "load_experiment",
     "prepare",
     "prepare_experiment",
@@ -56,13 +57,26 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return out
 
 
+def data_noise(measured: np.ndarray) -> np.ndarray:
+    """Return each column's noise (:func:`~tsid_fmu.evaluate.cost.noise_level`), 0 if unseen.
+
+    The noise is seen in second differences, so data of fewer than 3 samples show none:
+    their outputs count as noise-free, as constant ones do (the estimate was NaN, with
+    numpy's "Mean of empty slice" warnings on stderr).
+    """
+    measured = np.asarray(measured, dtype=float)
+    if measured.shape[0] >= 3:
+        return noise_level(measured)
+    return np.zeros(measured.shape[1] if measured.ndim == 2 else 1)
+
+
 def _weights_and_scale(
     study: Study, experiment: Experiment, measured: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each output's cost weight and residual scale, from the noise seen in the data."""
     names = list(experiment.outputs)
     user = np.array([(experiment.weights or {}).get(n, 1.0) for n in names], dtype=float)
-    sigma = noise_level(measured)
+    sigma = data_noise(measured)
     sigma = np.array([experiment.noise.get(n, s) for n, s in zip(names, sigma, strict=True)])
     rms = np.sqrt(np.mean(measured**2, axis=0))
     quiet = ~(sigma > 1e-6 * np.maximum(np.ptp(measured, axis=0), 1e-300))

@@ -13,13 +13,14 @@ import dataclasses
 import difflib
 import math
 import os
-import tomllib
+import stat
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import StudyError
+from tsid_fmu.study.checks import parse_toml
 from tsid_fmu.study.schema import ContributionOptions, Experiment, Method, Parameter, Phase
 
 __all__ = ["read_study_file", "study_from_document", "write_study_file"]
@@ -328,19 +329,19 @@ def study_from_document(doc: Mapping[str, Any], base: Path, source: str) -> dict
 def read_study_file(path: Path) -> dict[str, Any]:
     """Read a study file and return the keyword arguments of a Study (see module doc)."""
     try:
-        if path.stat().st_size > MAX_FILE_BYTES:
+        if not stat.S_ISREG(path.stat().st_mode):  # a device or pipe is never read to its end
+            raise StudyError(f"{path}: the study file is not a regular file")
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_FILE_BYTES + 1)  # bounded, whatever stat says
+        if len(raw) > MAX_FILE_BYTES:
             raise StudyError(f"{path}: the study file is larger than {MAX_FILE_BYTES} bytes")
-        text = path.read_text(encoding="utf-8")
+        # as read_text did (universal newlines); a byte order mark (Notepad) is dropped
+        text = raw.decode("utf-8-sig").replace("\r\n", "\n").replace("\r", "\n")
     except FileNotFoundError:
         raise StudyError(f"{path}: study file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise StudyError(f"{path}: cannot read the study file ({type(exc).__name__})") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise StudyError(f"{path}: not valid TOML: {exc}") from None
-    except RecursionError:
-        raise StudyError(f"{path}: not valid TOML: nested too deeply") from None
+    doc = parse_toml(text, str(path))
     return study_from_document(doc, path.parent, str(path))
 
 

@@ -43,7 +43,7 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
 from tsid_fmu.trail.files import atomic_write, write_json
-from tsid_fmu.trail.integrity import file_hashes, seal
+from tsid_fmu.trail.integrity import file_hashes, seal, unexpected_files
 from tsid_fmu.trail.levels import read_next_levels, write_next_levels
 from tsid_fmu.trail.owner import FolderLock, check_owner, fingerprint, write_fingerprint
 from tsid_fmu.trail.reader import read_record, read_stage
@@ -53,6 +53,11 @@ __all__ = ["NullStore", "Trail"]
 
 class NullStore:
     """A store that keeps nothing (a study run without an output folder)."""
+
+    @property
+    def notes(self) -> list[str]:
+        """Return no warnings."""
+        return []
 
     def iterations(self, key: str) -> list[IterationRecord]:
         """Return no iterations."""
@@ -106,19 +111,32 @@ class Trail:
         self.out = Path(out)
         self.study = study
         self.on_iteration = on_iteration
+        self.notes: list[str] = []  # warnings about the folder, for the result
         items = fingerprint(study)
         check_owner(self.out, items, resume, locked=False)
         self.out.mkdir(parents=True, exist_ok=True)
         self._lock = FolderLock(self.out)
         self._lock.acquire()
         try:
+            source = Path(study.source) if study.source is not None else None
             if check_owner(self.out, items, resume, locked=True):
                 write_fingerprint(self.out, items)
-                if study.source is not None and Path(study.source).is_file():
-                    atomic_write(self.out / "study.toml", Path(study.source).read_bytes())
+                if source is not None and source.is_file():
+                    atomic_write(self.out / "study.toml", source.read_bytes())
+            elif source is not None and source.is_file():
+                self._compare_copy(source)
         except BaseException:
             self._lock.release()
             raise
+
+    def _compare_copy(self, source: Path) -> None:
+        """Note a copy ``study.toml`` that differs from the study file being resumed."""
+        copy = self.out / "study.toml"
+        if copy.is_file() and copy.read_bytes() != source.read_bytes():
+            self.notes.append(
+                f"{copy} differs from {source}, the study file being run (edited by hand?); "
+                "the run follows the study file and leaves the copy as it is"
+            )
 
     def close(self) -> None:
         """Release the folder's lock."""
@@ -142,7 +160,7 @@ class Trail:
         """Return a stage's complete iterations; an interrupted one is removed (redone)."""
         records: list[IterationRecord] = []
         while (path := self.iteration_dir(key, len(records) + 1) / "record.json").exists():
-            records.append(read_record(path))
+            records.append(read_record(path, self._note_extra))
         if records and records[-1].parameters != self._parameters(records[-1]):
             raise StudyError(
                 f"{self.stage_dir(key)}: the trail identifies {records[-1].parameters} but the "
@@ -152,6 +170,16 @@ class Trail:
         if stale.exists():
             shutil.rmtree(stale)
         return records
+
+    def _note_extra(self, folder: Path, hashes: object) -> None:
+        """Note files in an iteration's folder that tsid-fmu did not write (ignored)."""
+        extra = unexpected_files(folder, hashes)
+        note = (
+            f"{folder}: {', '.join(map(repr, extra))} not written by tsid-fmu; ignored (an "
+            "iteration is read from the files its record.json lists)"
+        )
+        if extra and note not in self.notes:
+            self.notes.append(note)
 
     def _parameters(self, record: IterationRecord) -> list[str]:
         names = set(self.study.parameter_names)
@@ -169,8 +197,9 @@ class Trail:
             else record.next_frame
         )
         same = frame.to_dict()["factors"] == proposed.to_dict()["factors"] and (
-            frame.axis_aligned or list(frame.centre) == list(proposed.centre)
-        )
+            frame.axis_aligned
+            or (list(frame.centre) == list(proposed.centre) and frame.anchor == proposed.anchor)
+        )  # rotated: the [centre] a person writes is the anchor (an edit of it was ignored)
         return None if same else frame
 
     def stage(self, key: str) -> StageResult | None:

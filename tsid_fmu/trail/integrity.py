@@ -14,8 +14,11 @@ folder can recompute them.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
+import os
+import stat
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -23,18 +26,40 @@ from typing import Any
 from tsid_fmu.errors import StudyError
 from tsid_fmu.trail.files import strict
 
-__all__ = ["EDITABLE", "file_hashes", "seal", "sha256_file", "unseal", "verify_files"]
+__all__ = [
+    "EDITABLE",
+    "REPORT_FIGURES",
+    "file_hashes",
+    "seal",
+    "sha256_file",
+    "unexpected_files",
+    "unseal",
+    "verify_files",
+]
 
 EDITABLE = frozenset({"next_levels.toml"})
 """Files of an iteration that a person may edit between runs."""
+
+REPORT_FIGURES = frozenset({"main_effects.svg", "fit.svg"})
+"""Files the report draws into an iteration's folder after its record (report/render.py)."""
 
 _CHUNK = 1 << 20
 
 
 def sha256_file(path: Path) -> str:
-    """Return the SHA-256 of a file's bytes, as hexadecimal."""
+    """Return the SHA-256 of a file's bytes, as hexadecimal.
+
+    Raises
+    ------
+    OSError
+        Also for a path that is not a regular file (``/dev/zero``, a named pipe), whose
+        reading would never end; it is opened without blocking and not read.
+    """
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with open(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", os.fspath(path))
         while chunk := fh.read(_CHUNK):
             h.update(chunk)
     return h.hexdigest()
@@ -106,3 +131,15 @@ def verify_files(folder: Path, hashes: Any, record: Path) -> None:
                 f"from the one in {record.name}); restore it, or delete {folder} and the "
                 "iterations after it to redo them"
             )
+
+
+def unexpected_files(folder: Path, hashes: Any) -> list[str]:
+    """Return the names in an iteration's folder that tsid-fmu did not write there.
+
+    Known are the files the record lists, ``record.json`` and :data:`REPORT_FIGURES`;
+    hidden names (an atomic write cut short) are left out.
+    """
+    known = {*(hashes if isinstance(hashes, dict) else {}), "record.json", *REPORT_FIGURES}
+    return sorted(
+        p.name for p in folder.iterdir() if not p.name.startswith(".") and p.name not in known
+    )

@@ -10,7 +10,6 @@ parameter values; the next iteration then runs those exact levels.
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +19,7 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
+from tsid_fmu.study.checks import parse_toml
 
 __all__ = ["read_next_levels", "write_next_levels"]
 
@@ -101,6 +101,16 @@ def _levels_frame(path: Path, table: dict, space: Space) -> Frame:
     return Frame.from_levels(space, levels)
 
 
+def _unit(d: np.ndarray) -> np.ndarray:
+    """Return ``d`` scaled to length 1; a direction of length 1 already is kept as written.
+
+    Dividing a unit vector by its computed norm changes the last bit of about a third
+    of them, so a resumed study ran other levels than the uninterrupted one (issue 25).
+    """
+    norm = float(np.linalg.norm(d))
+    return d if abs(norm - 1.0) <= 8 * np.finfo(float).eps else d / norm
+
+
 def _rotated_frame(path: Path, doc: dict, space: Space) -> Frame:
     centre, factors = doc.get("centre"), doc.get("factors")
     if not isinstance(centre, dict) or not isinstance(factors, list) or not factors:
@@ -117,9 +127,7 @@ def _rotated_frame(path: Path, doc: dict, space: Space) -> Frame:
         if not np.all(np.isfinite(d)) or np.linalg.norm(d) == 0:
             raise StudyError(f"{path}: [[factors]] #{i + 1} direction must be finite, not zero")
         offsets = _numbers(path, f"[[factors]] #{i + 1} offsets", f.get("offsets"))
-        out.append(
-            Factor(str(f.get("name", f"A{i + 1}")), d / np.linalg.norm(d), np.asarray(offsets))
-        )
+        out.append(Factor(str(f.get("name", f"A{i + 1}")), _unit(d), np.asarray(offsets)))
     if len(out) != space.dim:
         raise StudyError(f"{path}: needs {space.dim} [[factors]], got {len(out)}")
     return Frame(centre=np.zeros(space.dim), factors=out, anchor=x)
@@ -135,13 +143,10 @@ def read_next_levels(path: Path, space: Space) -> Frame:
         malformed factors; the message names the file.
     """
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise StudyError(f"{path}: cannot read ({type(exc).__name__})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise StudyError(f"{path}: not valid TOML: {exc}") from None
-    except RecursionError:
-        raise StudyError(f"{path}: not valid TOML: nested too deeply") from None
+    doc = parse_toml(text, str(path))
     if isinstance(doc.get("levels"), dict):
         return _levels_frame(path, doc["levels"], space)
     return _rotated_frame(path, doc, space)

@@ -9,6 +9,7 @@ another process reads it too. Every file is checked against its digest and hashe
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from tsid_fmu.errors import StudyError
@@ -20,8 +21,13 @@ from tsid_fmu.trail.integrity import unseal, verify_files
 __all__ = ["read_record", "read_records", "read_stage"]
 
 
-def read_record(path: Path) -> IterationRecord:
+def read_record(
+    path: Path, on_files: Callable[[Path, object], None] | None = None
+) -> IterationRecord:
     """Return the iteration of a ``record.json``, after checking it and its files.
+
+    ``on_files(folder, hashes)``, if given, sees the files the record lists (a resumed
+    study notes the files in the folder that tsid-fmu did not write).
 
     Raises
     ------
@@ -30,7 +36,10 @@ def read_record(path: Path) -> IterationRecord:
     """
     advice = f"restore it, or delete {path.parent} and the iterations after it to redo them"
     data = unseal(read_json(path, "iteration record"), path, "iteration record", advice)
-    verify_files(path.parent, data.pop("files", None), path)
+    hashes = data.pop("files", None)
+    verify_files(path.parent, hashes, path)
+    if on_files is not None:
+        on_files(path.parent, hashes)
     try:
         return IterationRecord.from_dict(data)
     except (KeyError, TypeError, ValueError) as exc:

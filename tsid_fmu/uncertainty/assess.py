@@ -10,10 +10,11 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.evaluate.cost import Cost, metrics, noise_level
+from tsid_fmu.evaluate.cost import Cost, metrics
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
+from tsid_fmu.study.prepare import data_noise
 from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, scale_groups, uncertainty
 from tsid_fmu.uncertainty.profile import CHI2_95, ProfileProblem, profile_intervals
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, sensitivities
@@ -44,7 +45,7 @@ def _fit(spec: EvaluationSpec, sims: list[Simulated]) -> tuple[dict, dict, list[
     noise: dict[str, dict[str, float]] = {}
     warnings = []
     for e, sim in zip(spec.experiments, sims, strict=True):
-        sigma = noise_level(e.measured)
+        sigma = data_noise(e.measured)
         noise[e.name] = dict(zip(e.output_names, map(float, sigma), strict=True))
         if sim.outputs is None:
             fit[e.name] = {"error": sim.error}

@@ -16,12 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from tsid_fmu.evaluate.cost import noise_level
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.fmu.delay import delayed_inputs, split_delays
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.session import FMUSession
-from tsid_fmu.study.prepare import NOISE_FLOOR
+from tsid_fmu.study.prepare import NOISE_FLOOR, data_noise
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
 
 __all__ = [
@@ -122,7 +121,7 @@ def output_noise(
     """
     y = experiment.measured
     given = given or {}
-    names, estimate = experiment.output_names, noise_level(y)
+    names, estimate = experiment.output_names, data_noise(y)
     sigma = np.array([given.get(n, s) for n, s in zip(names, estimate, strict=True)])
     quiet = ~(sigma > 1e-6 * np.maximum(np.ptp(y, axis=0), 1e-300))
     rms = np.sqrt(np.mean(y**2, axis=0))
