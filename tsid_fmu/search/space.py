@@ -85,7 +85,8 @@ class Space:
             u = math.log10(v) if v > 0 else self.origin[j] - 0.5 * self.width[j] - 3.0
         else:
             u = v
-        return float((u - self.origin[j]) / self.width[j])
+        # plain floats: levels many decades apart overflow to inf without a numpy warning
+        return float(u - float(self.origin[j])) / float(self.width[j])
 
     def value(self, j: int, s: float) -> float:
         """Return parameter ``j``'s value at coordinate ``s``, clipped to its bounds."""
