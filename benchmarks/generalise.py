@@ -42,12 +42,15 @@ import math
 import os
 import sys
 import time
+import zlib
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
 
+# this checkout's tsid_fmu (not an installed one), and benchmarks/problems
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from problems.base import CACHE
 from problems.generalise_draw import GenProblem
@@ -75,7 +78,8 @@ USER_METHOD = {"cost": "sse", "weighting": "noise", "replicates": 1}
 def draw(family: str, index: int, seeds: str) -> GenProblem:
     """Problem ``index`` of ``family`` in the seed set ``seeds`` (``dev`` or ``eval``)."""
     seed = SEED_BASE[seeds] + index
-    family_key = list(FAMILIES).index(family)
+    # keyed by the family's name, so adding a family leaves the others' draws alone
+    family_key = zlib.crc32(family.encode())
     sequence = np.random.SeedSequence(seed, spawn_key=(STREAM[seeds], family_key))
     return FAMILIES[family][0](np.random.default_rng(sequence), seed)
 

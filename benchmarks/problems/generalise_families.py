@@ -13,6 +13,7 @@ lsea_siso      fmus/LSEA_SISO.fmu (tsid-fmu's Modelica)    dry friction, stick-s
 lsea_miso      fmus/LSEA_MISO.fmu (tsid-fmu's Modelica)    two inputs, derived inputs
 dc_motor       pythonfmu DC motor (Python slave)           5 parameters, two outputs
 duffing        hand-written C FMU (tests' C factory)       nonlinear oscillator
+pendulum       DrivenPendulum (tsid-fmu's Modelica)        large swings, sin(theta)
 second_order   RingingOscillator (tsid-fmu's Modelica)     linear second-order system
 local_minima   RingingOscillator, lightly damped           a cost with local minima
 =============  ==========================================  ============================
@@ -20,6 +21,7 @@ local_minima   RingingOscillator, lightly damped           a cost with local min
 
 import math
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -29,7 +31,7 @@ from problems import duffing_c
 from problems import local_minima as lm_mod
 from problems import miso as miso_mod
 from problems import siso as siso_mod
-from problems.base import Problem, ProblemExperiment, sample_times
+from problems.base import Problem, ProblemExperiment, cached_build, sample_times
 from problems.generalise_draw import (
     MISMATCHES,
     GenProblem,
@@ -320,12 +322,67 @@ def local_minima(rng: np.random.Generator, seed: int) -> GenProblem:
     )
 
 
+PENDULUM_NAME = "DrivenPendulum"
+PENDULUM = """\
+model DrivenPendulum "Pendulum driven by a torque, with viscous friction"
+  parameter Real J(unit = "kg.m2") = 0.05 "Moment of inertia about the pivot";
+  parameter Real b(unit = "N.m.s") = 0.02 "Viscous friction";
+  parameter Real mgl(unit = "N.m") = 0.5 "Gravity torque at 90 degrees (m g l)";
+  input Real tau(start = 0) "Torque";
+  output Real y "Measured angle";
+  Real theta(start = 0, fixed = true) "Angle from the bottom";
+  Real w(start = 0, fixed = true) "Angular velocity";
+equation
+  der(theta) = w;
+  J * der(w) = tau - b * w - mgl * sin(theta);
+  y = theta;
+end DrivenPendulum;
+"""
+
+
+def pendulum_fmu() -> Path:
+    """Build the pendulum FMU from :data:`PENDULUM` (tsid_fmu.build) into the cache."""
+    from tsid_fmu.build import build_fmu
+
+    def build_in(folder: Path) -> Path:
+        mo = folder / f"{PENDULUM_NAME}.mo"
+        mo.write_text(PENDULUM)
+        return build_fmu(mo, PENDULUM_NAME, folder / f"{PENDULUM_NAME}.fmu")
+
+    return cached_build(PENDULUM_NAME, PENDULUM, build_in)
+
+
+def pendulum(rng: np.random.Generator, seed: int) -> GenProblem:
+    """Modelica pendulum, torque up to 1.5x its gravity torque: large swings, 8 s at 100 Hz."""
+    truth = perturb(rng, {"J": 0.05, "b": 0.02, "mgl": 0.5}, 0.6)
+    t = sample_times(8.0, 100.0)
+    tau = multilevel(rng, t, truth["mgl"] * rng.uniform(0.6, 1.5), (0.5, 3.0))
+    j, b, mgl = truth["J"], truth["b"], truth["mgl"]
+
+    def rhs(_t: float, s: np.ndarray, torque: float) -> list[float]:
+        return [s[1], (torque - b * s[1] - mgl * math.sin(s[0])) / j]
+
+    def simulate(mismatch: str, lag: float) -> dict[str, np.ndarray]:
+        return {"y": integrate(rhs, [0.0, 0.0], t, tau, mismatch, lag)[:, 0]}
+
+    units = {"J": "kg.m2", "b": "N.m.s", "mgl": "N.m"}
+    return _ode_problem(
+        rng,
+        ("pendulum", seed),
+        (pendulum_fmu(), truth, units),
+        (t, tau, "tau"),
+        simulate,
+        (0.005, 0.02),
+    )
+
+
 #: Family name -> (draw function, problems per seed set).
 FAMILIES: dict[str, tuple[Callable[[np.random.Generator, int], GenProblem], int]] = {
-    "lsea_siso": (lsea_siso, 3),
+    "lsea_siso": (lsea_siso, 5),
     "lsea_miso": (lsea_miso, 1),
-    "dc_motor": (dc_motor, 3),
-    "duffing": (duffing, 4),
-    "second_order": (second_order, 3),
-    "local_minima": (local_minima, 3),
+    "dc_motor": (dc_motor, 4),
+    "duffing": (duffing, 8),
+    "pendulum": (pendulum, 6),
+    "second_order": (second_order, 6),
+    "local_minima": (local_minima, 6),
 }

@@ -74,6 +74,11 @@ def _rate(ok: list[bool]) -> str:
     return f"{sum(ok)}/{len(ok)} ({100 * sum(ok) / len(ok):.0f} %)" if ok else "-"
 
 
+def _refit(tsid: dict) -> bool:
+    """Whether tsid's reported cost differs from the benchmark's evaluation of its answer."""
+    return abs(tsid["fun"] - tsid["cost"]) > 1e-6 * max(abs(tsid["cost"]), 1e-300)
+
+
 def _median(values: list[int]) -> float:
     return float(statistics.median(values)) if values else float("nan")
 
@@ -115,6 +120,8 @@ def summary(rows: Sequence[dict], wall: float) -> tuple[list[str], bool]:
     lines += [
         f"tsid succeeded where LS-c failed: {_rate(rescued)}",
         f"tsid false convergence (exit 0, not a success): {len(false_conv)} of {len(done)}",
+        "tsid's own cost differs from the benchmark's re-evaluation (> 1e-6) in "
+        f"{sum(_refit(r['methods']['tsid']) for r in done)} of {len(done)}",
         f"errors: {errors}; total wall time {wall:.0f} s",
     ]
     success = sum(tsid_ok) / len(tsid_ok)
