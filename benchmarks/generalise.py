@@ -7,9 +7,8 @@ swings, a linear second-order system and a lightly damped oscillator whose cost 
 local minima (36 problems per seed set, about 10 minutes on 2 cores).  Each draws
 random true values, excitation, sensor noise (white or AR(1)), a model mismatch, first
 ranges as users type them (truth inside, at an edge or outside by up to 2x; linear, log
-or rounded levels)
-and FMU start values that are plausible but not the truth.  The data always come from an
-independent solution, never from the FMU.
+or rounded levels) and FMU start values that are plausible but not the truth.  The
+data always come from an independent solution, never from the FMU.
 
 Each problem runs two ways: ``hand`` (the study a user writes, with the drawn levels)
 and ``init`` (the study ``tsid init`` writes from the FMU and a CSV file, run unedited).
