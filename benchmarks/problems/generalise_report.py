@@ -1,0 +1,149 @@
+"""The generalisation benchmark's table and summary (``benchmarks/generalise.py``).
+
+:func:`render` takes the rows of the runs (one per problem and variant) and returns the
+per-problem table, the summary (success rates overall and per family, simulations of
+tsid against ``least_squares`` from the centre, tsid's successes where
+``least_squares`` failed, false convergences, wall time) and whether tsid meets the
+``--check`` bar (success >= 95 % and median-sims ratio <= 2).
+"""
+
+import statistics
+from collections.abc import Sequence
+
+#: ``--check``: lowest acceptable success rate of tsid, highest sims ratio.
+MIN_SUCCESS = 0.95
+MAX_SIMS_RATIO = 2.0
+
+COLUMNS = [
+    "family",
+    "seed",
+    "var",
+    "p",
+    "tsid sims",
+    "tsid ratio",
+    "exit",
+    "LS-c sims",
+    "LS-c ratio",
+    "CMA sims",
+    "CMA ratio",
+    "LS-t ratio",
+    "tsid ok, LS-c not",
+    "s",
+]
+
+
+def _ratio(r: dict) -> str:
+    mark = "" if r["ok"] else " x"
+    return f"{r['ratio']:.4g}{mark}"
+
+
+def _cells(row: dict) -> list[str]:
+    if "error" in row:
+        return [row["family"], str(row["seed"]), row["variant"], "-", "ERROR " + row["error"]]
+    m = row["methods"]
+    rescue = "yes" if m["tsid"]["ok"] and not m["LS-c"]["ok"] else ""
+    return [
+        row["family"],
+        str(row["seed"]),
+        row["variant"],
+        str(row["p"]),
+        str(m["tsid"]["nfev"]),
+        _ratio(m["tsid"]),
+        str(m["tsid"]["status"]),
+        str(m["LS-c"]["nfev"]),
+        _ratio(m["LS-c"]),
+        str(m["CMA"]["nfev"]),
+        _ratio(m["CMA"]),
+        _ratio(m["LS-t"]),
+        rescue,
+        f"{row['time']:.0f}",
+    ]
+
+
+def _table(rows: Sequence[dict], markdown: bool) -> list[str]:
+    cells = [_cells(r) for r in rows]
+    if markdown:
+        lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+        return lines + ["| " + " | ".join(c) + " |" for c in cells]
+    widths = [max(len(h), *(len(c[i]) for c in cells if i < len(c))) for i, h in enumerate(COLUMNS)]
+    fmt = lambda c: "  ".join(v.rjust(widths[i]) for i, v in enumerate(c))  # noqa: E731
+    return [fmt(COLUMNS), *(fmt(c) for c in cells)]
+
+
+def _rate(ok: list[bool]) -> str:
+    return f"{sum(ok)}/{len(ok)} ({100 * sum(ok) / len(ok):.0f} %)" if ok else "-"
+
+
+def _refit(tsid: dict) -> bool:
+    """Whether tsid's reported cost differs from the benchmark's evaluation of its answer."""
+    return abs(tsid["fun"] - tsid["cost"]) > 1e-6 * max(abs(tsid["cost"]), 1e-300)
+
+
+def _median(values: list[int]) -> float:
+    return float(statistics.median(values)) if values else float("nan")
+
+
+def _group_line(name: str, rows: Sequence[dict], methods: Sequence[str]) -> tuple[str, float]:
+    """One summary line: success per method, median sims of tsid / LS-c; and that ratio."""
+    rates = ", ".join(f"{m} {_rate([r['methods'][m]['ok'] for r in rows])}" for m in methods)
+    tsid = _median([r["methods"]["tsid"]["nfev"] for r in rows])
+    ls = _median([r["methods"]["LS-c"]["nfev"] for r in rows])
+    ratio = tsid / ls if ls else float("inf")
+    return (
+        f"{name:<14} success: {rates}; median sims tsid {tsid:g} / LS-c {ls:g} = {ratio:.2f}",
+        ratio,
+    )
+
+
+def summary(rows: Sequence[dict], wall: float) -> tuple[list[str], bool]:
+    """The summary lines and whether tsid meets the ``--check`` bar."""
+    done = [r for r in rows if "error" not in r]
+    errors = len(rows) - len(done)
+    if not done:
+        return [f"no problem ran ({errors} errors); wall time {wall:.0f} s"], False
+    methods = [m for m in ("tsid", "LS-c", "CMA", "DE") if m in done[0]["methods"]]
+    lines = ["", "Summary (success: final cost <= 1.001 x the lowest any method found)"]
+    line, ratio = _group_line("all", done, methods)
+    lines.append(line)
+    for variant in ("hand", "init"):
+        group = [r for r in done if r["variant"] == variant]
+        if group:
+            lines.append(_group_line(f"  {variant}", group, methods)[0])
+    for family in dict.fromkeys(r["family"] for r in done):
+        lines.append(_group_line(family, [r for r in done if r["family"] == family], methods)[0])
+    ls_failed = [r for r in done if not r["methods"]["LS-c"]["ok"]]
+    rescued = [r["methods"]["tsid"]["ok"] for r in ls_failed]
+    false_conv = [
+        r for r in done if r["methods"]["tsid"]["status"] == 0 and not r["methods"]["tsid"]["ok"]
+    ]
+    tsid_ok = [r["methods"]["tsid"]["ok"] for r in done]
+    lines += [
+        f"tsid succeeded where LS-c failed: {_rate(rescued)}",
+        f"tsid false convergence (exit 0, not a success): {len(false_conv)} of {len(done)}",
+        "tsid's own cost differs from the benchmark's re-evaluation (> 1e-6) in "
+        f"{sum(_refit(r['methods']['tsid']) for r in done)} of {len(done)}",
+        f"errors: {errors}; total wall time {wall:.0f} s",
+    ]
+    success = sum(tsid_ok) / len(tsid_ok)
+    verdict = errors == 0 and success >= MIN_SUCCESS and ratio <= MAX_SIMS_RATIO
+    lines.append(
+        f"check (tsid success >= {100 * MIN_SUCCESS:.0f} %, sims ratio <= {MAX_SIMS_RATIO:g}): "
+        + ("pass" if verdict else "FAIL")
+    )
+    return lines, verdict
+
+
+def render(
+    rows: Sequence[dict], wall: float, *, markdown: bool, seeds: str, workers: int
+) -> tuple[str, bool]:
+    """The whole report (table, then summary) and the ``--check`` verdict."""
+    head = [f"Generalisation benchmark, {seeds} seeds, {workers} worker(s)", ""]
+    lines, verdict = summary(rows, wall)
+    notes = ["", "Drawn per problem (hand variant's ranges: placement/style):"]
+    for r in rows:
+        if "notes" in r and r["variant"] == "hand":
+            notes.append(
+                f"  {r['family']} {r['seed']}: "
+                + "; ".join(f"{k} {v}" for k, v in r["notes"].items())
+            )
+    return "\n".join(head + _table(rows, markdown) + lines + notes), verdict
