@@ -12,8 +12,8 @@ This module imports nothing but built-in modules, so that the hold starts within
 microseconds of the package's first line.
 """
 
+import _signal as signal  # the C module: `signal` builds its enums first (milliseconds)
 import os
-import signal
 import sys
 
 HELD: list[int] = []
