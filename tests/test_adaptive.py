@@ -192,7 +192,9 @@ def test_an_optimum_beyond_the_first_ranges_is_reached_and_a_bound_is_respected(
     )
     answer = adaptive.answer_stage(bounded)
     assert answer.x["a"] == pytest.approx(1.0)  # held at its bound, and
-    assert adaptive.verdict(bounded)[0] == 0  # stationary there (the projected test)
+    assert answer.extra["stationarity"]["holds"]  # stationary there (the projected test),
+    status, why = adaptive.verdict(bounded)  # but the bound keeps the fit poor: not exit 0
+    assert status == 1 and "times the noise floor" in why
 
 
 # -- local minima: back to the arrays, then restarts ----------------------------------------
@@ -245,12 +247,25 @@ def test_a_restart_starts_from_the_best_scored_set_away_from_every_explored_one(
     costs = stage.records[0].measured_costs
     order = np.argsort(costs)
     best = dict(zip(stage.records[0].parameters, stage.records[0].sets[order[0]], strict=True))
-    found, cost = adaptive.restart_start([stage], space, [best])
+    found, cost, origin = adaptive.restart_start([stage], space, [best])
+    assert origin == "a run of the arrays"
     assert cost > costs[order[0]] and found != best
     s, t = space.to_s(found), space.to_s(best)
     assert np.max(np.abs(s - t)) >= adaptive.RESTART_SEPARATION
     everything = [dict(zip(levels, row, strict=True)) for row in stage.records[0].sets]
     assert adaptive.restart_start([stage], space, everything) is None
+
+
+def test_restarts_try_the_start_points_first_where_a_local_method_alone_would_start():
+    levels = {"a": [1.0, 2.5, 4.0], "k": [0.5, 1.5, 2.5]}
+    starts = [({"a": 1.7, "k": 1.0}, "given")]
+    stage = taguchi_stage(_stage_run(levels, starts=starts, max_iterations=1), _decay_evaluator())
+    space = Space(levels, {n: (0.0, math.inf) for n in levels}, LevelingOptions())
+    best = dict(zip(stage.records[0].parameters, stage.records[0].sets[0], strict=True))
+    found, _, origin = adaptive.restart_start([stage], space, [best], starts_first=True)
+    assert (found, origin) == (starts[0][0], "given")
+    _, _, origin = adaptive.restart_start([stage], space, [best, found], starts_first=True)
+    assert origin == "a run of the arrays"
 
 
 # -- the stationarity gate ------------------------------------------------------------------

@@ -30,7 +30,7 @@ import numpy as np
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 
-__all__ = ["RESTART_SEPARATION", "answer_stage", "restart_start", "verdict"]
+__all__ = ["RESTART_SEPARATION", "answer_stage", "restart_start", "start_sets", "verdict"]
 
 RESTART_SEPARATION = 0.15
 """A restart's start lies at least this far (in first ranges, along some parameter) from
@@ -61,6 +61,13 @@ def verdict(stages: Sequence[StageResult]) -> tuple[int, str] | None:
     test = stage.extra.get("stationarity")
     if not test:
         return None
+    poor = stage.extra.get("poor_fit")
+    if test.get("holds") and poor:
+        return 1, (
+            f"stationary at the answer ({test.get('test')}), but its cost is "
+            f"{poor['ratio']:.3g} times the noise floor after {poor['restarts']} restart(s): "
+            "a local minimum, or a model that does not explain these data"
+        )
     if test.get("holds"):
         return 0, f"stationary at the answer ({test.get('test')}): {test.get('detail')}"
     return 1, f"not shown to be an optimum ({test.get('test')}): {test.get('detail')}"
@@ -82,15 +89,32 @@ def _points(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float]
     return [(c, x) for c, x in out if math.isfinite(c)]
 
 
+def start_sets(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float], str]]:
+    """Return the start points the first Taguchi stage scored: (cost, set, source)."""
+    first = next((s for s in stages if s.kind == "taguchi" and s.records), None)
+    starts = first.records[0].extra.get("starts", []) if first is not None else []
+    out = [(float(s["cost"]), dict(s["x"]), str(s["source"])) for s in starts if s.get("cost")]
+    return sorted((p for p in out if math.isfinite(p[0])), key=lambda p: p[0])
+
+
 def restart_start(
-    stages: Sequence[StageResult], space: Space, explored: Sequence[dict[str, float]]
-) -> tuple[dict[str, float], float] | None:
-    """Return the lowest-cost scored set away from every explored set, and its cost."""
+    stages: Sequence[StageResult],
+    space: Space,
+    explored: Sequence[dict[str, float]],
+    starts_first: bool = False,
+) -> tuple[dict[str, float], float, str] | None:
+    """Return the lowest-cost scored set away from every explored set, its cost and origin.
+
+    With ``starts_first``, the start points (the FMU's start values, the centre of the
+    first levels: where a local method alone would start) come before the arrays' runs.
+    """
     seen = [space.to_s(x) for x in explored]
-    for cost, x in sorted(_points(stages), key=lambda p: p[0]):
+    starts = [(c, x, s) for c, x, s in start_sets(stages)] if starts_first else []
+    runs = [(c, x, "a run of the arrays") for c, x in sorted(_points(stages), key=lambda p: p[0])]
+    for cost, x, origin in starts + runs:
         if not all(n in x for n in space.names):
             continue
         s = space.to_s(x)
         if all(np.max(np.abs(s - t)) >= RESTART_SEPARATION for t in seen):
-            return x, cost
+            return x, cost, origin
     return None

@@ -21,7 +21,7 @@ from typing import Protocol
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.adaptive import answer_stage, restart_start
+from tsid_fmu.search.adaptive import answer_stage, restart_start, start_sets
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.phases import Evaluators, centre_values, joint_levels, plan_phases
@@ -369,20 +369,33 @@ def _local_search(ctx: _Context, stages: list[StageResult], adaptive: bool) -> l
         if stages[0].cost < stages[-1].cost:
             name = "refinement after the Taguchi stage went on"
             stages.append(_refinement(ctx, stages[0].x, exps, "refinement_02", name))
+    _restarts(ctx, stages, floor, exps)
+    return stages
+
+
+def _restarts(ctx: _Context, stages: list[StageResult], floor: float, exps: list[str]) -> None:
+    """Refine from the start points, then from the next-best runs, while unsettled."""
+    study = ctx.study
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    for k in range(1, study.method.max_reruns + 1):
+    k, limit = 0, study.method.max_reruns
+    while k < limit + len(start_sets(stages)):
         why = _unsettled(stages, floor)
         if why is None:
             break
         explored = [s.extra["start"] for s in stages if "start" in s.extra]
         explored += [s.x for s in stages if s.kind == "refinement"]
-        found = restart_start(stages, space, explored)
+        found = restart_start(stages, space, explored, starts_first=True)
         if found is None:
             break
-        _note(ctx, f"{why}: restart {k} from a run that cost {found[1]:.6g}")
-        name = f"restart {k} from the next-best run"
+        k += 1
+        _note(ctx, f"{why}: restart {k} from {found[2]} (cost {found[1]:.6g})")
+        name = f"restart {k} from {found[2]}"
         stages.append(_refinement(ctx, found[0], exps, f"restart_{k:02d}", name))
-    return stages
+        if found[2].startswith("a run") and k >= limit:
+            break
+    answer = answer_stage(stages)
+    if floor > 0 and answer.cost > POOR_FIT * floor and "stationarity" in answer.extra:
+        answer.extra["poor_fit"] = {"floor": floor, "ratio": answer.cost / floor, "restarts": k}
 
 
 def _note(ctx: _Context, message: str) -> None:
