@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's tsid_fmu
 
 from problems import dc_motor as dc_mod
 from problems import local_minima as lm_mod
@@ -89,20 +90,11 @@ PROBLEMS = {
     "local_minima": lm_mod.local_minima,
 }
 
-METHOD = Method(cost="sse", weighting="noise", replicates=1)
-"""What a user writes for these data: the noise-weighted SSE; everything else default."""
-
-
-def _without_fmu_start_values() -> None:
-    """Start from the centre of the first levels, as the peers do.
-
-    The project's FMUs carry the truth as their start values, and tsid scores an FMU's
-    start values first: left on, every problem would start at its answer. A vendor's FMU
-    rarely carries the values of the unit on the bench, so the benchmark hides them.
-    """
-    import tsid_fmu.search.start as start
-
-    start.fmu_start_values = lambda path, names: {}
+METHOD = Method(cost="sse", weighting="noise", replicates=1, start="centre")
+"""What a user writes for these data: the noise-weighted SSE; everything else default,
+but for the start point: the project's FMUs carry the truth as their start values, which
+tsid would score first, so it starts from the centre of the first levels, as the peers
+do (a vendor's FMU rarely carries the values of the unit on the bench)."""
 
 
 class Scorer:
@@ -279,7 +271,6 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--de-budget", type=int, default=1500)
     args = parser.parse_args()
-    _without_fmu_start_values()
     unknown = sorted(set(args.problems) - set(PROBLEMS))
     if unknown:
         parser.error(f"unknown problem(s) {unknown}; choose from {', '.join(PROBLEMS)}")

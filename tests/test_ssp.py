@@ -87,10 +87,7 @@ def _identified(result) -> dict[str, float]:
     return {**result.x, **result.study.start_values}
 
 
-def test_siso_model_ssp_simulates_like_tsid(tmp_path, monkeypatch):
-    # the FMU's start values are the example's truth, and a study scores them first: hide
-    # them, so that the identified values differ from the FMU's defaults (checked below)
-    monkeypatch.setattr("tsid_fmu.search.start.fmu_start_values", lambda path, names: {})
+def test_siso_model_ssp_simulates_like_tsid(tmp_path):
     study = load_study(EXAMPLES / "lsea_siso" / "study.toml")
     data = pd.read_csv(EXAMPLES / "lsea_siso" / "measured.csv").iloc[:1001]
     data = data.assign(F_o=data["F_of"] - data["F_or"])

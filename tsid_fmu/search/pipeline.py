@@ -129,7 +129,11 @@ def _taguchi(
         max_iterations=max_iterations,
         pause_after=ctx.control.pause_after,
         experiments=list(exps),
-        starts=start_points(space, ctx.study.fmu, current if set(names) <= set(current) else None),
+        starts=start_points(
+            space,
+            ctx.study.fmu if method.start == "fmu" else None,
+            current if set(names) <= set(current) else None,
+        ),
         handover=handover,
     )
     evaluator = ctx.evaluators.get(names, list(exps), fixed)

@@ -324,6 +324,11 @@ class Method:
     refine_max_nfev : int, optional
         Most simulations of the refinement stage; default ``30 (p + 1)`` times the
         number of identification experiments (about thirty Jacobians).
+    start : {"fmu", "centre"}
+        The start point the Taguchi stage scores before its first array, beside the
+        centre of the first levels (:mod:`tsid_fmu.search.start`): ``"fmu"`` (default)
+        the FMU's start values of the parameters; ``"centre"`` the centre alone (an FMU
+        whose start values are placeholders, or a benchmark whose FMU holds the truth).
     interface : {"auto", "cs", "me"}, optional
         FMI interface to simulate with (the same as ``[study] interface``, which it
         replaces; giving both with different values is an error). ``"auto"`` (the
@@ -362,6 +367,7 @@ class Method:
     max_reruns: int = 2
     refine: str = "auto"
     refine_max_nfev: int | None = None
+    start: str = "fmu"
     interface: str | None = None
     step: float | None = None
     tolerance: float = 1e-10
@@ -396,6 +402,7 @@ class Method:
             raise StudyError(
                 f'refine = "least_squares" minimises the sse cost; the study uses {self.cost!r}'
             )
+        self.start = check_choice(self.start, "start", ("fmu", "centre"))
         if self.refine_max_nfev is not None:
             self.refine_max_nfev = check_whole(self.refine_max_nfev, "refine_max_nfev", 1)
         if self.interface is not None:

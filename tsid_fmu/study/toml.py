@@ -69,6 +69,7 @@ _METHOD_TYPES: dict[str, type] = {
     "max_reruns": int,
     "refine": str,
     "refine_max_nfev": int,
+    "start": str,
     "interface": str,
     "step": float,
     "tolerance": float,
