@@ -274,6 +274,8 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
     if de:
         rows["DE"] = run_de(scorer, gp.seed)
     best = min(r["cost"] for r in rows.values())
+    # the noise floor: residuals in noise units, one per sample and output
+    floor = float(scorer.residuals(scorer.to_s(res.x)).size)
     for r in rows.values():
         r["ratio"] = r["cost"] / best if best > 0 else (1.0 if r["cost"] == best else math.inf)
         r["ok"] = r["cost"] <= TOLERANCE * best
@@ -283,6 +285,7 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
         "variant": variant,
         "p": len(scorer.names),
         "best": best,
+        "best_over_floor": best / floor if floor > 0 else math.nan,
         "methods": rows,
         "notes": gp.notes,
         "time": time.perf_counter() - t0,

@@ -120,6 +120,19 @@ def _status(stages: list[StageResult]) -> tuple[int, str]:
     return status, said
 
 
+def _poor_fit(answer: StageResult) -> list[str]:
+    """Return the warning for an answer still far above the noise after the restarts."""
+    poor = answer.extra.get("poor_fit")
+    if not poor:
+        return []
+    return [
+        f"the answer's cost is {poor['ratio']:.3g} times the noise floor, and "
+        f"{poor['restarts']} restart(s) found no lower basin: the model may not explain "
+        "these data, the noise may be strongly coloured, or the answer is a local minimum "
+        "the search did not leave (try wider first levels, or other start values)"
+    ]
+
+
 def _weak(result: IdentificationResult) -> dict[str, str]:
     weak = {}
     u = result.uncertainty
@@ -270,7 +283,8 @@ def _finish(
     result.uncertainty = found.uncertainty
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
     result.warnings = (
-        found.warnings
+        _poor_fit(answer)
+        + found.warnings
         + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
         + result.warnings
     )

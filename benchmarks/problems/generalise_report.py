@@ -7,6 +7,7 @@ tsid against ``least_squares`` from the centre, tsid's successes where
 ``--check`` bar (success >= 95 % and median-sims ratio <= 2).
 """
 
+import math
 import statistics
 from collections.abc import Sequence
 
@@ -27,6 +28,7 @@ COLUMNS = [
     "CMA sims",
     "CMA ratio",
     "LS-t ratio",
+    "best/floor",
     "tsid ok, LS-c not",
     "s",
 ]
@@ -55,6 +57,7 @@ def _cells(row: dict) -> list[str]:
         str(m["CMA"]["nfev"]),
         _ratio(m["CMA"]),
         _ratio(m["LS-t"]),
+        f"{row.get('best_over_floor', math.nan):.3g}",
         rescue,
         f"{row['time']:.0f}",
     ]

@@ -61,13 +61,6 @@ def verdict(stages: Sequence[StageResult]) -> tuple[int, str] | None:
     test = stage.extra.get("stationarity")
     if not test:
         return None
-    poor = stage.extra.get("poor_fit")
-    if test.get("holds") and poor:
-        return 1, (
-            f"stationary at the answer ({test.get('test')}), but its cost is "
-            f"{poor['ratio']:.3g} times the noise floor after {poor['restarts']} restart(s): "
-            "a local minimum, or a model that does not explain these data"
-        )
     if test.get("holds"):
         return 0, f"stationary at the answer ({test.get('test')}): {test.get('detail')}"
     return 1, f"not shown to be an optimum ({test.get('test')}): {test.get('detail')}"

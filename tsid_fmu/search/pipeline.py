@@ -21,7 +21,7 @@ from typing import Protocol
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.adaptive import answer_stage, restart_start, start_sets
+from tsid_fmu.search.adaptive import answer_stage, restart_start
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.phases import Evaluators, centre_values, joint_levels, plan_phases
@@ -378,11 +378,15 @@ def _local_search(ctx: _Context, stages: list[StageResult], adaptive: bool) -> l
 
 
 def _restarts(ctx: _Context, stages: list[StageResult], floor: float, exps: list[str]) -> None:
-    """Refine from the start points, then from the next-best runs, while unsettled."""
+    """Refine from the start points, then from the next-best runs, while unsettled.
+
+    At most ``max_reruns`` restarts. An answer still a poor fit after them is recorded
+    (``extra["poor_fit"]``): the warnings then say that the search found no better basin.
+    """
     study = ctx.study
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    k, limit = 0, study.method.max_reruns
-    while k < limit + len(start_sets(stages)):
+    k = 0
+    while k < study.method.max_reruns:
         why = _unsettled(stages, floor)
         if why is None:
             break
@@ -395,10 +399,8 @@ def _restarts(ctx: _Context, stages: list[StageResult], floor: float, exps: list
         _note(ctx, f"{why}: restart {k} from {found[2]} (cost {found[1]:.6g})")
         name = f"restart {k} from {found[2]}"
         stages.append(_refinement(ctx, found[0], exps, f"restart_{k:02d}", name))
-        if found[2].startswith("a run") and k >= limit:
-            break
     answer = answer_stage(stages)
-    if floor > 0 and answer.cost > POOR_FIT * floor and "stationarity" in answer.extra:
+    if floor > 0 and answer.cost > POOR_FIT * floor:
         answer.extra["poor_fit"] = {"floor": floor, "ratio": answer.cost / floor, "restarts": k}
 
 

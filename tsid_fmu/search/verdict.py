@@ -48,8 +48,12 @@ GATE_RTOL = 1e-4
 """Largest decrease of the cost, relative to itself, that the local model may still
 predict at an answer called stationary."""
 
-POOR_FIT = 3.0
-"""An answer whose cost exceeds the noise floor by this factor is a poor fit."""
+POOR_FIT = 20.0
+"""An answer whose cost exceeds the noise floor by this factor is a poor fit. On the
+generalisation benchmark's dev seeds the optima of mismatched models sit at up to about
+10 times the floor (strongly coloured noise far more: 311 times at AR(1) 0.86), local
+minima at hundreds to thousands of times: a poor fit sends the search on, but it does
+not change the verdict."""
 
 
 @dataclass
