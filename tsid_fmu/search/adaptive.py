@@ -4,18 +4,23 @@ With ``refine = "auto"`` (the default) and the ``sse`` cost a study is not a fix
 sequence of stages:
 
 1. the Taguchi stage scores its start points and runs arrays while they make large
-   gains; when an iteration lowers the best cost by less than half, it hands over
-   (:data:`~tsid_fmu.search.taguchi.HANDOVER_GAIN`);
+   gains; once an iteration lowers the best cost by less than half, within 100 times the
+   noise floor, it hands over (:data:`~tsid_fmu.search.taguchi.HANDOVER_GAIN`,
+   :data:`~tsid_fmu.search.taguchi.HANDOVER_FIT`);
 2. the least-squares refinement polishes the best set;
-3. if the answer is a poor fit (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the
-   noise floor), the refinement may sit in a local minimum: the Taguchi stage goes on
-   from where it handed over, to its own end (Case 3 or a limit), and its best set is
-   refined again;
-4. if the fit is still poor, the refinement restarts from the next-best run of the
-   arrays that lies away from every start and answer so far (the MISO paper's re-run
-   from the next-best run), up to ``max_reruns`` times;
+3. if the refined answer is not shown to be stationary, or is a poor fit
+   (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the noise floor), the refinement may
+   sit in a local minimum: the Taguchi stage goes on from where it handed over, to its
+   own end (Case 3 or a limit), and its best set is refined again;
+4. while that still holds, the refinement restarts, up to ``max_reruns`` times: from the
+   start points first (where a local method alone would start), then from the next-best
+   run of the arrays that lies away from every start and answer so far (the MISO
+   paper's re-run from the next-best run);
 5. the answer is the lowest-cost set of every stage, and the study has converged only
-   where a stationarity test holds there (:mod:`tsid_fmu.search.verdict`).
+   where a stationarity test holds there (:mod:`tsid_fmu.search.verdict`). A poor fit
+   that no restart improved is a warning, not a verdict: the optima of a model that
+   does not quite explain the data, or of strongly coloured noise, are far above the
+   floor too.
 
 Every decision names its reason in the stage's message, and so in the log and report.
 """

@@ -332,10 +332,6 @@ def _single(
     return _taguchi(ctx, "", "taguchi", "taguchi", params, exps, {}, 0, limit, handover, records)
 
 
-def _poor(stages: list[StageResult], floor: float) -> bool:
-    return answer_stage(stages).cost > POOR_FIT * floor
-
-
 def _unsettled(stages: list[StageResult], floor: float) -> str | None:
     """Why the answer so far needs more search: no stationarity shown, or a poor fit."""
     answer = answer_stage(stages)
