@@ -20,6 +20,8 @@ __all__ = [
     "PNG_DPI",
     "SCREEN_DPI",
     "SIGNIFICANT",
+    "SVG_TICK_PX",
+    "TICK_PT",
     "axis_formatter",
     "cost_name",
     "fmt",
@@ -39,6 +41,13 @@ SCREEN_DPI = 80
 
 PNG_DPI = 2 * SCREEN_DPI
 """Dots per inch of the PNG files (2x: sharp on high-density screens)."""
+
+TICK_PT = 8.5
+"""Font size of the tick labels of the matplotlib figures, in points (9.4 CSS pixels at
+:data:`SCREEN_DPI`; 7 points were under 8 pixels, too small to read)."""
+
+SVG_TICK_PX = 12.0
+"""Font size of the tick labels of the SVG figures of each iteration, in CSS pixels."""
 
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf")
 """Line colours, in order of use."""
