@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
@@ -223,7 +224,7 @@ def markdown_report(result: IdentificationResult) -> str:
     lines = [
         f"# Identification report: {name}",
         "",
-        f"- FMU: `{escape(study.fmu) if study else '-'}`",
+        f"- FMU: `{escape(fmu_label(study))}`",
         f"- Result: **{escape(result.message)}** (status {result.status}: {STATUS[result.status]}; "
         f"{result.nit} Taguchi iterations, {result.nfev} simulations)",
         f"- Cost ({cost}) on the measured inputs of the identification experiments: "
