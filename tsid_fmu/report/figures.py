@@ -21,6 +21,7 @@ from tsid_fmu.report.style import (
     fmt_levels,
     margins,
     new_figure,
+    short_combination,
     with_unit,
 )
 from tsid_fmu.search.record import IterationRecord
@@ -141,8 +142,7 @@ def _panel_title(
 ) -> str:
     factor = next(f for f in rec.frame.factors if f.name == name)
     if factor.values is None:
-        terms = (describe or {}).get(name, "").split()
-        short = " ".join(terms[:4]) + (" …" if len(terms) > 4 else "")
+        short = short_combination((describe or {}).get(name, ""))
         label = f"{name}: {short}" if short else f"{name} (offset)"
     else:
         label = with_unit(name, (units or {}).get(name))

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import math
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -30,6 +31,7 @@ __all__ = [
     "margins",
     "new_figure",
     "png_bytes",
+    "short_combination",
     "with_unit",
 ]
 
@@ -94,6 +96,18 @@ def fmt_levels(values: Sequence[float]) -> list[str]:
 def with_unit(name: str, unit: str | None) -> str:
     """Return an axis label: ``name [unit]``, or the name alone without a unit."""
     return f"{name} [{unit}]" if unit else name
+
+
+def short_combination(describe: str, terms: int = 2) -> str:
+    """Return the first ``terms`` terms of a rotated factor's description, whole.
+
+    ``"+0.71 lg F_vm -0.70 lg B_s +0.05 M_m"`` gives ``"+0.71 lg F_vm -0.70 lg B_s …"``:
+    a term is a signed weight and its coordinate (``lg X`` or ``X``), never cut apart.
+    """
+    found = re.findall(r"[+-]\d+(?:\.\d+)? (?:lg )?\S+", describe)
+    if not found:
+        return describe
+    return " ".join(found[:terms]) + (" …" if len(found) > terms else "")
 
 
 def axis_formatter() -> Any:
