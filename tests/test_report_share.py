@@ -13,7 +13,7 @@ from tsid_fmu.report.figures import convergence_figure
 from tsid_fmu.report.html import html_report
 from tsid_fmu.report.html_tables import table
 from tsid_fmu.report.markdown import markdown_report
-from tsid_fmu.report.svg import Panel
+from tsid_fmu.report.svg import Panel, nice_ticks
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study import Study
 
@@ -80,3 +80,14 @@ def test_tick_labels_are_large_enough_to_read():
     fig = convergence_figure([stage])
     labels = fig.axes[0].get_xticklabels() + fig.axes[0].get_yticklabels()
     assert labels and min(t.get_fontsize() for t in labels) >= 8.5
+
+
+def test_large_tick_values_are_written_short():
+    # costs of 1e15 and more: integer ticks were written with every digit
+    # ("5000000000000000"), wider than the figure's left margin
+    ticks = nice_ticks(0.0, 1.6e16, 4)
+    assert all(isinstance(t, float) for t in ticks)
+    panel = Panel(80, 20, 300, 120, (0.0, 1.0), (0.0, 1.6e16))
+    panel.frame(ticks)
+    labels = re.findall(r">([^<]+)</text>", "".join(panel.parts))
+    assert labels == ["0", "1e16"], labels

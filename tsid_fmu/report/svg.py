@@ -30,12 +30,12 @@ def nice_ticks(lo: float, hi: float, n: int = 5) -> list[float]:
     if hi <= lo:
         return [lo]
     raw = (hi - lo) / max(n - 1, 1)
-    base = 10 ** math.floor(math.log10(raw))
+    base = 10.0 ** math.floor(math.log10(raw))  # a float: an int prints every digit
     step = next(m * base for m in (1, 2, 2.5, 5, 10) if m * base >= raw)
     first = math.ceil(lo / step - 1e-9) * step
     ticks, k = [], 0
     while first + k * step <= hi + 1e-9 * step and k < 50:
-        ticks.append(round(first + k * step, 12))
+        ticks.append(float(round(first + k * step, 12)))
         k += 1
     return ticks
 
