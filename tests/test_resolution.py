@@ -68,3 +68,21 @@ def test_a_standard_error_at_the_profile_floor_is_a_bound_not_an_estimate():
     assert rows["sharp"][4].startswith("below the profile's resolution (< ")
     assert rows["soft"][4] == u.relative["soft"]  # a real estimate stays a number
     assert u.to_dict()["resolution"] == {"sharp": u.relative["sharp"]}
+
+
+def test_report_md_writes_the_bound_too():
+    from pathlib import Path
+
+    from tsid_fmu.report.markdown import markdown_report
+    from tsid_fmu.study import Study
+
+    study = Study.from_toml(Path(__file__).resolve().parents[1] / "examples/lsea_siso/study.toml")
+    x = {n: 2.0 for n in study.parameter_names}
+    u = Uncertainty(values=x, relative={n: 3.0 for n in x}, resolution={"K_s": 0.014685})
+    res = IdentificationResult(
+        x=x, fun=1.0, nfev=1, success=True, status=0, message="m", study=study, uncertainty=u
+    )
+    rows = [r for r in markdown_report(res).splitlines() if r.startswith("| K_s |")]
+    # Markdown cells escape "<" (it renders as "<")
+    assert len(rows) == 1 and "below the profile's resolution (&lt; 0.015)" in rows[0]
+    assert "0.014685" not in rows[0]

@@ -42,6 +42,18 @@ def markdown_table(frame: Any) -> str:
     return "\n".join(lines)
 
 
+def _parameters(result: IdentificationResult) -> Any:
+    """Return the parameter table, with a standard error at resolution as its bound."""
+    frame = result.parameters_frame()
+    bounds = result.uncertainty.resolution if result.uncertainty else {}
+    if bounds and "std error [%]" in frame:
+        frame["std error [%]"] = [
+            f"below the profile's resolution (< {fmt(bounds[n], 2)})" if n in bounds else v
+            for n, v in frame["std error [%]"].items()
+        ]
+    return frame
+
+
 def _stage_folder(stage: StageResult, index: int) -> str:
     if stage.kind == "taguchi":
         return ""
@@ -234,7 +246,7 @@ def markdown_report(result: IdentificationResult) -> str:
     ]
     if result.warnings:
         lines += ["## Warnings", "", *[f"- {escape(w)}" for w in result.warnings], ""]
-    lines += ["## Identified parameters", "", markdown_table(result.parameters_frame()), ""]
+    lines += ["## Identified parameters", "", markdown_table(_parameters(result)), ""]
     if result.weak:
         lines += [
             "## Weakly determined parameters",
