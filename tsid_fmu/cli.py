@@ -61,7 +61,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         resume=args.resume,
         max_iterations=args.max_iterations,
         pause_after=args.pause_after,
-        progress=not args.quiet,
+        progress=_show_progress(args.quiet, sys.stderr),
         plots=not args.no_plots,
         continue_from_run=args.continue_from_run,
         workers=args.workers,
@@ -77,6 +77,16 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     else:
         _print_result(result, out, code)
     return code
+
+
+def _show_progress(quiet: bool, stream: Any) -> bool:
+    """Return True if ``tsid identify`` shows its progress: on a terminal, unless ``-q``.
+
+    Written to a file or a pipe (a log, a CI job), stderr gets no progress at all,
+    only the errors and warnings.
+    """
+    isatty = getattr(stream, "isatty", None)
+    return not quiet and callable(isatty) and bool(isatty())
 
 
 def _print_result(result: Any, out: Path, code: int) -> None:
@@ -278,7 +288,12 @@ def _identify_parser(sub: Any) -> None:
     p.add_argument(
         "--no-plots", action="store_true", help="skip the figures (report.html has tables only)"
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+    p.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="no progress display (shown only when stderr is a terminal)",
+    )
     p.add_argument(
         "--json",
         action="store_true",

@@ -20,7 +20,8 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.factory import make_evaluator
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.report.console import ConsoleProgress
+from tsid_fmu.fmu.compiled import CompileNotice, warm_up
+from tsid_fmu.report.console import COMPILING, ConsoleProgress
 from tsid_fmu.report.files import write_result_files
 from tsid_fmu.report.html import write_html
 from tsid_fmu.report.markdown import markdown_report
@@ -92,10 +93,45 @@ class _Evaluators:
             self.pool[key] = make_evaluator(self.spec(params, exps, fixed), **self.runner)
         return self.pool[key]
 
+    @property
+    def nfev(self) -> int:
+        """Simulations run so far by the evaluators of the study."""
+        if self.given is not None:
+            return int(self.given.nfev)
+        return sum(int(ev.nfev) for ev in self.pool.values())
+
     def close(self) -> None:
         for ev in self.pool.values():
             ev.close()
         self.pool.clear()
+
+
+def _progress(
+    progress: bool | ProgressCallback, evaluators: _Evaluators
+) -> tuple[ProgressCallback | None, CompileNotice | None]:
+    """Return the study's progress callback and, with one, the compile notice (to close).
+
+    ``"row"`` events get ``nfev``, the simulations run so far. With a callback, the
+    simulation loop is compiled (or loaded from Numba's cache) here, before the first
+    run: a first compile is announced (``"compiling"``) instead of a silent pause,
+    and worker processes started later load it from the cache.
+    """
+    given = ConsoleProgress() if progress is True else (progress or None)
+    if not given:
+        return None, None
+
+    def callback(event: str, info: dict[str, Any]) -> None:
+        if event == "row" and "nfev" not in info:
+            info = {**info, "nfev": evaluators.nfev}
+        given(event, info)
+
+    notice = CompileNotice(lambda: callback("compiling", {"message": COMPILING}))
+    try:
+        warm_up()
+    except BaseException:
+        notice.close()
+        raise
+    return callback, notice
 
 
 def _annotate(folder: Path, record: IterationRecord, space: Space) -> None:
@@ -366,10 +402,10 @@ def identify(
         raise StudyError("resume needs the output folder of the study (out=...)")
     if continue_from_run is not None and not resume:
         raise StudyError("continue_from_run needs resume=True and the study's folder")
-    callback = ConsoleProgress() if progress is True else (progress or None)
     evaluators = _Evaluators(
         study, {"workers": workers, "timeout": timeout, "scheduler": scheduler}, evaluator
     )
+    callback, notice = _progress(progress, evaluators)
     store: Trail | NullStore = NullStore()
     try:
         if out is not None:
@@ -382,6 +418,8 @@ def identify(
     finally:
         evaluators.close()
         store.close()  # the output folder's lock
+        if notice is not None:
+            notice.close()
     if callback:
         callback("done", {"result": result})
     return result

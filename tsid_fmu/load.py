@@ -52,7 +52,7 @@ def _uncertainty(data: Mapping[str, Any] | None) -> Uncertainty | None:
         return None
     known = {f.name for f in dataclasses.fields(Uncertainty)}
     kwargs = {k: v for k, v in data.items() if k in known}
-    for key in ("values", "std_error", "relative", "cramer_rao"):
+    for key in ("values", "std_error", "relative", "cramer_rao", "resolution"):
         kwargs[key] = _numbers(kwargs.get(key))
     for key in ("condition", "inflation"):
         if key in kwargs:

@@ -26,10 +26,18 @@ from tsid_fmu.uncertainty.intervals import Uncertainty
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["STATUS", "IdentificationResult", "register_views"]
+__all__ = ["RUNS_NOTE", "STATUS", "IdentificationResult", "register_views"]
 
 STATUS = {0: "converged", 1: "stopped at a limit", 2: "paused for review"}
 """Meaning of :attr:`IdentificationResult.status`."""
+
+RUNS_NOTE = (
+    "one row per run of an orthogonal array (a parameter set), simulated on every "
+    "identification experiment and replicate; nfev also counts the start points, one "
+    "confirmation run per iteration, the refinement and the checks: see "
+    "attrs['simulations'] or simulations_frame()"
+)
+"""What the rows of :meth:`IdentificationResult.to_pandas` are, beside ``nfev``."""
 
 _VIEWS: dict[str, Callable[..., Any]] = {}
 
@@ -276,11 +284,51 @@ class IdentificationResult:
         )
 
     def to_pandas(self) -> pd.DataFrame:
-        """Return every run of every Taguchi iteration as one DataFrame."""
+        """Return every run of every Taguchi iteration as one DataFrame.
+
+        It has fewer rows than :attr:`nfev` counts simulations: a row is one run of an
+        orthogonal array (a parameter set), simulated on every identification
+        experiment and replicate, and the stages simulate more than their arrays (the
+        start points, a confirmation run per iteration, the refinement, the checks).
+        ``attrs["note"]`` says so and ``attrs["simulations"]`` holds the account,
+        stage by stage (:meth:`simulations_frame`).
+        """
         import pandas as pd
 
         frames = [rec.runs_frame() for rec in self.iterations]
-        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+        df = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+        df.attrs["note"] = RUNS_NOTE
+        df.attrs["simulations"] = self.simulations_frame().to_dict(orient="index")
+        return df
+
+    def simulations_frame(self) -> pd.DataFrame:
+        """Return where the :attr:`nfev` simulations went, one row per stage.
+
+        Columns: ``kind``; ``array runs`` (the stage's rows of :meth:`to_pandas`);
+        ``confirmation runs`` (one parameter set per iteration, at the predicted
+        optimum); ``array simulations`` (what the array runs and confirmation runs
+        simulated, every experiment and replicate); ``other simulations`` (start points
+        and re-runs of a Taguchi stage, or the whole of a refinement, contribution
+        analysis or check); ``simulations`` (their sum, the stage's ``nfev``). The
+        column ``simulations`` adds up to :attr:`nfev`.
+        """
+        import pandas as pd
+
+        rows = []
+        for s in self.stages:
+            arrays = sum(int(r.nfev) for r in s.records)
+            rows.append(
+                {
+                    "stage": s.name,
+                    "kind": s.kind,
+                    "array runs": sum(len(r.sets) for r in s.records),
+                    "confirmation runs": len(s.records),
+                    "array simulations": arrays,
+                    "other simulations": int(s.nfev) - arrays,
+                    "simulations": int(s.nfev),
+                }
+            )
+        return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
 
     def stages_frame(self) -> pd.DataFrame:
         """Return one row per stage: kind, cost, simulations, what it contributed."""

@@ -31,7 +31,15 @@ import numpy as np
 import tsid_fmu.fmu.meloop as meloop
 import tsid_fmu.fmu.steploop as steploop
 
-__all__ = ["LOOP_ENV", "backend", "cs_loop", "me_loop", "numba_available", "warm_up"]
+__all__ = [
+    "LOOP_ENV",
+    "CompileNotice",
+    "backend",
+    "cs_loop",
+    "me_loop",
+    "numba_available",
+    "warm_up",
+]
 
 LOOP_ENV = "TSID_FMU_LOOP"
 """Environment variable: ``python`` forces the interpreted loops (default: compiled)."""
@@ -233,3 +241,52 @@ def warm_up() -> str:
     cs_loop(2)((*fmi2, sl.FMI2_SETDER(_fail)), 0, time, buffers, derivatives)
     cs_loop(3)(fmi3, 0, time, buffers, np.zeros(16, dtype=np.uint8))
     return backend()
+
+
+class CompileNotice:
+    """Call ``notify()`` once when Numba starts compiling a loop of this package.
+
+    Loading the loops from Numba's on-disk cache does not count: only a real compile
+    (the first run on a machine, or after an upgrade) does, which takes seconds.
+    Listens from creation until :meth:`close`; does nothing without Numba or when
+    :data:`LOOP_ENV` forces the Python loops.
+
+    Parameters
+    ----------
+    notify : callable
+        Called with no arguments, at most once, as the first compile starts.
+    """
+
+    def __init__(self, notify: Callable[[], None]) -> None:
+        self.notify: Callable[[], None] | None = notify
+        self._listener: Any = None
+        if os.environ.get(LOOP_ENV, "").strip().lower() == "python" or not numba_available():
+            return
+        from numba.core import event
+
+        owner = self
+
+        class _Listener(event.Listener):  # type: ignore[misc]
+            def on_start(self, ev: Any) -> None:
+                func = getattr(ev.data.get("dispatcher"), "py_func", None)
+                if getattr(func, "__module__", "").startswith("tsid_fmu."):
+                    owner._fire()
+
+            def on_end(self, ev: Any) -> None:
+                return None
+
+        self._listener = _Listener()
+        event.register("numba:compile", self._listener)
+
+    def _fire(self) -> None:
+        notify, self.notify = self.notify, None
+        if notify is not None:
+            notify()
+
+    def close(self) -> None:
+        """Stop listening."""
+        if self._listener is not None:
+            from numba.core import event
+
+            event.unregister("numba:compile", self._listener)
+            self._listener = None

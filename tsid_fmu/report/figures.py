@@ -15,11 +15,13 @@ import numpy as np
 
 from tsid_fmu.report.style import (
     COLORS,
+    TICK_PT,
     axis_formatter,
     fmt,
     fmt_levels,
     margins,
     new_figure,
+    short_combination,
     with_unit,
 )
 from tsid_fmu.search.record import IterationRecord
@@ -75,7 +77,7 @@ class MainEffects:
                     0.5, 1.04, "", transform=ax.transAxes, ha="center", va="bottom", fontsize=8
                 )
                 ax.yaxis.set_major_formatter(axis_formatter())
-                ax.tick_params(labelsize=7, labelleft=col == 0)
+                ax.tick_params(labelsize=TICK_PT, labelleft=col == 0)
                 ax.grid(True, alpha=0.3)
                 panels.append(
                     {"ax": ax, "grand": grand, "line": line, "mark": mark, "title": title}
@@ -109,7 +111,7 @@ class MainEffects:
                 p["mark"].set_data([x[chosen]], [y[chosen]])
                 _limits(p["ax"], [*y, table.grand_mean], len(y))
                 p["ax"].set_xticks(x)
-                p["ax"].set_xticklabels(_level_labels(rec, name), fontsize=7, rotation=30)
+                p["ax"].set_xticklabels(_level_labels(rec, name), fontsize=TICK_PT, rotation=30)
                 p["title"].set_text(_panel_title(rec, name, row, table, describe, units))
         panels[-1]["heading"].set_text(
             f"{rec.stage}, iteration {rec.index} ({rec.array}): main effects "
@@ -140,8 +142,7 @@ def _panel_title(
 ) -> str:
     factor = next(f for f in rec.frame.factors if f.name == name)
     if factor.values is None:
-        terms = (describe or {}).get(name, "").split()
-        short = " ".join(terms[:4]) + (" …" if len(terms) > 4 else "")
+        short = short_combination((describe or {}).get(name, ""))
         label = f"{name}: {short}" if short else f"{name} (offset)"
     else:
         label = with_unit(name, (units or {}).get(name))
@@ -202,7 +203,7 @@ def convergence_figure(stages: Sequence[StageResult], cost_name: str = "cost") -
         )
         ax.legend(fontsize=7, loc="upper right", framealpha=0.85)
         ax.grid(True, which="major", alpha=0.3)
-        ax.tick_params(labelsize=7)
+        ax.tick_params(labelsize=TICK_PT)
     axes[-1][0].set_xlabel("simulations of the study so far", fontsize=8)
     margins(fig, 0.45, 0.5, left=0.1, right=0.98, hspace=0.45)
     return fig
@@ -252,7 +253,7 @@ def trajectory_figure(
         else:
             ax.yaxis.set_major_formatter(axis_formatter())
         ax.set_title(with_unit(name, (units or {}).get(name)), fontsize=8)
-        ax.tick_params(labelsize=7)
+        ax.tick_params(labelsize=TICK_PT)
         ax.grid(True, which="major", alpha=0.3)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlim(0.5, len(records) + 0.5)

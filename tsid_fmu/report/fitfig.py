@@ -13,7 +13,15 @@ import numpy as np
 
 from tsid_fmu.evaluate.protocol import Simulated
 from tsid_fmu.evaluate.spec import PreparedExperiment
-from tsid_fmu.report.style import COLORS, axis_formatter, fmt, margins, new_figure, with_unit
+from tsid_fmu.report.style import (
+    COLORS,
+    TICK_PT,
+    axis_formatter,
+    fmt,
+    margins,
+    new_figure,
+    with_unit,
+)
 
 __all__ = ["BINS", "FitFigure", "envelope"]
 
@@ -82,7 +90,7 @@ class FitFigure:
             note = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize=7)
             for a in (ax, ax_r):
                 a.grid(True, alpha=0.3)
-                a.tick_params(labelsize=7)
+                a.tick_params(labelsize=TICK_PT)
                 a.yaxis.set_major_formatter(axis_formatter())
                 a.set_xlim(float(e.time[0]), float(e.time[-1]))
             self.lines.append((ax, ax_r, sim, res, note))

@@ -17,13 +17,14 @@ from pathlib import Path
 from tsid_fmu.report.html_iteration import iteration_section
 from tsid_fmu.report.html_tables import CSS, esc, generic, image, table, table_from_frame
 from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
+from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.trail.files import atomic_write
 
-__all__ = ["FIT_NOTE", "STAGES_NOTE", "html_report", "write_html"]
+__all__ = ["FIT_NOTE", "STAGES_NOTE", "html_report", "verdict_tone", "write_html"]
 
 FIT_NOTE = (
     "fit % = 100 (1 − NRMSE) with NRMSE = ‖simulated − measured‖ / ‖measured − its mean‖ "
@@ -48,15 +49,35 @@ def _section(title: str, body: str, anchor: str) -> str:
     return f'<h2 id="{esc(anchor)}">{esc(title)}</h2>\n{body}'
 
 
+def verdict_tone(result: IdentificationResult) -> str:
+    """Return the colour of the headline: that of the worst finding of the report.
+
+    ``"good"`` (green) only for a converged study with no warning and no weakly
+    determined parameter; ``"caution"`` (amber) for a converged study with either, or
+    one stopped at a limit (exit status 1) without warnings; ``"bad"`` (red) for exit
+    status 1 with warnings; ``"paused"`` (blue) for a study paused for review.
+    """
+    if result.status == 2:
+        return "paused"
+    findings = bool(result.warnings) or bool(result.weak)
+    if result.status == 0:
+        return "caution" if findings else "good"
+    return "bad" if result.warnings else "caution"
+
+
 def _headline(result: IdentificationResult, cost: str) -> str:
-    study = result.study
     exit_status = {0: 0, 1: 1, 2: 3}.get(result.status, result.status)
+    tone = verdict_tone(result)
+    said = [f"{len(result.warnings)} warning(s)"] if result.warnings else []
+    said += [f"{len(result.weak)} weakly determined parameter(s)"] if result.weak else []
+    findings = f"; {', '.join(said)}: see below" if said else ""
     lines = [
-        f'<p class="headline status-{result.status}"><b>{esc(STATUS[result.status])}</b> '
-        f"(exit status {exit_status} of <code>tsid identify</code>)</p>",
+        f'<p class="headline status-{result.status} verdict-{tone}">'
+        f"<b>{esc(STATUS[result.status])}</b> "
+        f"(exit status {exit_status} of <code>tsid identify</code>{esc(findings)})</p>",
         f'<p class="note">{esc(result.message)}</p>',
         "<ul>",
-        f"<li>FMU: <code>{esc(study.fmu if study else '-')}</code></li>",
+        f"<li>FMU: <code>{esc(fmu_label(result.study))}</code></li>",
         f"<li>Cost ({esc(cost)}) on the measured inputs of the identification experiments: "
         f"<b>{fmt(result.fun)}</b></li>",
         f"<li>{result.nit} Taguchi iterations; {result.nfev} simulations by the stages "

@@ -32,8 +32,8 @@ tr.total td { font-weight: 600; }
 tr.failed td { background: #fff0f0; }
 .note { color: #555; font-size: 12.5px; max-width: 980px; }
 .headline { font-size: 16px; padding: 6px 10px; border-radius: 4px; display: inline-block; }
-.status-0 { background: #e6f4ea; } .status-1 { background: #fff4e0; }
-.status-2 { background: #e8f0fe; }
+.verdict-good { background: #e6f4ea; } .verdict-caution { background: #fff4e0; }
+.verdict-bad { background: #fde8e8; } .verdict-paused { background: #e8f0fe; }
 .warn { background: #fff4e0; padding: 4px 10px; margin: 4px 0; border-left: 3px solid #f0a030; }
 details { margin: 6px 0; border: 1px solid #e2e2e2; border-radius: 4px; padding: 2px 10px; }
 summary { cursor: pointer; font-weight: 600; padding: 3px 0; }
@@ -55,6 +55,19 @@ def _cell(v: Any, tag: str = "td") -> str:
     return f"<{tag}>{esc(fmt(v))}</{tag}>"
 
 
+def _text_columns(n: int, rows: Sequence[Sequence[Any]]) -> list[bool]:
+    """Return per column whether its cells are mostly text (left-aligned, as its header).
+
+    The first column (the rows' names) is always text; a column with no cells counts as
+    numbers.
+    """
+    out = [True] + [False] * max(n - 1, 0)
+    for i in range(1, n):
+        cells = [row[i] for row in rows if i < len(row)]
+        out[i] = 2 * sum(isinstance(v, str) for v in cells) > len(cells)
+    return out[:n]
+
+
 def table(
     columns: Sequence[str],
     rows: Sequence[Sequence[Any]],
@@ -66,8 +79,9 @@ def table(
 
     The first column is a header cell of each row (the row's name).
     """
+    text = _text_columns(len(columns), rows)
     head = "".join(
-        f'<th class="text">{esc(c)}</th>' if i == 0 else f"<th>{esc(c)}</th>"
+        f'<th class="text">{esc(c)}</th>' if text[i] else f"<th>{esc(c)}</th>"
         for i, c in enumerate(columns)
     )
     body = []

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
@@ -39,6 +40,18 @@ def markdown_table(frame: Any) -> str:
     for idx, row in frame.iterrows():
         lines.append("| " + " | ".join([_cell(idx)] + [_cell(v) for v in row]) + " |")
     return "\n".join(lines)
+
+
+def _parameters(result: IdentificationResult) -> Any:
+    """Return the parameter table, with a standard error at resolution as its bound."""
+    frame = result.parameters_frame()
+    bounds = result.uncertainty.resolution if result.uncertainty else {}
+    if bounds and "std error [%]" in frame:
+        frame["std error [%]"] = [
+            f"below the profile's resolution (< {fmt(bounds[n], 2)})" if n in bounds else v
+            for n, v in frame["std error [%]"].items()
+        ]
+    return frame
 
 
 def _stage_folder(stage: StageResult, index: int) -> str:
@@ -223,7 +236,7 @@ def markdown_report(result: IdentificationResult) -> str:
     lines = [
         f"# Identification report: {name}",
         "",
-        f"- FMU: `{escape(study.fmu) if study else '-'}`",
+        f"- FMU: `{escape(fmu_label(study))}`",
         f"- Result: **{escape(result.message)}** (status {result.status}: {STATUS[result.status]}; "
         f"{result.nit} Taguchi iterations, {result.nfev} simulations)",
         f"- Cost ({cost}) on the measured inputs of the identification experiments: "
@@ -233,7 +246,7 @@ def markdown_report(result: IdentificationResult) -> str:
     ]
     if result.warnings:
         lines += ["## Warnings", "", *[f"- {escape(w)}" for w in result.warnings], ""]
-    lines += ["## Identified parameters", "", markdown_table(result.parameters_frame()), ""]
+    lines += ["## Identified parameters", "", markdown_table(_parameters(result)), ""]
     if result.weak:
         lines += [
             "## Weakly determined parameters",

@@ -43,6 +43,16 @@ def _interval(low: float | None, value: float, high: float | None) -> str:
     return f"{lo} .. {hi}"
 
 
+def _std_error(u: Any, name: str) -> float | str:
+    """Return the relative standard error, or the bound where it is below resolution."""
+    if u is None:
+        return math.nan
+    bound = getattr(u, "resolution", {}).get(name)
+    if bound is not None:
+        return f"below the profile's resolution (< {fmt(bound, 2)})"
+    return u.relative.get(name, math.nan)
+
+
 def parameter_rows(result: Any) -> list[list[Any]]:
     """Rows of the parameter table: value, unit, 95 % interval, standard error, flags."""
     rows = []
@@ -53,7 +63,7 @@ def parameter_rows(result: Any) -> list[list[Any]]:
     for name in names:
         value = result.x.get(name, math.nan)
         low, high = result.intervals.get(name, [None, None])
-        se = result.uncertainty.relative.get(name, math.nan) if result.uncertainty else math.nan
+        se = _std_error(result.uncertainty, name)
         rows.append(
             [
                 name,

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import math
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -20,6 +21,8 @@ __all__ = [
     "PNG_DPI",
     "SCREEN_DPI",
     "SIGNIFICANT",
+    "SVG_TICK_PX",
+    "TICK_PT",
     "axis_formatter",
     "cost_name",
     "fmt",
@@ -28,6 +31,7 @@ __all__ = [
     "margins",
     "new_figure",
     "png_bytes",
+    "short_combination",
     "with_unit",
 ]
 
@@ -39,6 +43,13 @@ SCREEN_DPI = 80
 
 PNG_DPI = 2 * SCREEN_DPI
 """Dots per inch of the PNG files (2x: sharp on high-density screens)."""
+
+TICK_PT = 8.5
+"""Font size of the tick labels of the matplotlib figures, in points (9.4 CSS pixels at
+:data:`SCREEN_DPI`; 7 points were under 8 pixels, too small to read)."""
+
+SVG_TICK_PX = 12.0
+"""Font size of the tick labels of the SVG figures of each iteration, in CSS pixels."""
 
 COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf")
 """Line colours, in order of use."""
@@ -85,6 +96,18 @@ def fmt_levels(values: Sequence[float]) -> list[str]:
 def with_unit(name: str, unit: str | None) -> str:
     """Return an axis label: ``name [unit]``, or the name alone without a unit."""
     return f"{name} [{unit}]" if unit else name
+
+
+def short_combination(describe: str, terms: int = 2) -> str:
+    """Return the first ``terms`` terms of a rotated factor's description, whole.
+
+    ``"+0.71 lg F_vm -0.70 lg B_s +0.05 M_m"`` gives ``"+0.71 lg F_vm -0.70 lg B_s …"``:
+    a term is a signed weight and its coordinate (``lg X`` or ``X``), never cut apart.
+    """
+    found = re.findall(r"[+-]\d+(?:\.\d+)? (?:lg )?\S+", describe)
+    if not found:
+        return describe
+    return " ".join(found[:terms]) + (" …" if len(found) > terms else "")
 
 
 def axis_formatter() -> Any:

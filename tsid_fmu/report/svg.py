@@ -16,7 +16,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from tsid_fmu.report.style import fmt
+from tsid_fmu.report.style import SVG_TICK_PX, fmt
 
 __all__ = ["Canvas", "Panel", "nice_ticks"]
 
@@ -30,12 +30,12 @@ def nice_ticks(lo: float, hi: float, n: int = 5) -> list[float]:
     if hi <= lo:
         return [lo]
     raw = (hi - lo) / max(n - 1, 1)
-    base = 10 ** math.floor(math.log10(raw))
+    base = 10.0 ** math.floor(math.log10(raw))  # a float: an int prints every digit
     step = next(m * base for m in (1, 2, 2.5, 5, 10) if m * base >= raw)
     first = math.ceil(lo / step - 1e-9) * step
     ticks, k = [], 0
     while first + k * step <= hi + 1e-9 * step and k < 50:
-        ticks.append(round(first + k * step, 12))
+        ticks.append(float(round(first + k * step, 12)))
         k += 1
     return ticks
 
@@ -85,7 +85,7 @@ class Panel:
                     f'y2="{_num(py)}" stroke="#e3e3e3"/>'
                 )
             if labels:
-                self.parts.append(_text(self.x - 4, py + 3.5, fmt(t, 4), 10, "end"))
+                self.parts.append(_text(self.x - 4, py + 4, fmt(t, 4), SVG_TICK_PX, "end"))
         self.parts.append(
             f'<rect x="{_num(self.x)}" y="{_num(self.y)}" width="{_num(self.w)}" '
             f'height="{_num(self.h)}" fill="none" stroke="#333"/>'
@@ -101,10 +101,10 @@ class Panel:
                 'stroke="#333"/>'
             )
             if rotate:
-                extra = f' transform="rotate(-30 {_num(px)} {_num(base + 14)})"'
-                self.parts.append(_text(px, base + 14, label, 10, "end", extra))
+                extra = f' transform="rotate(-30 {_num(px)} {_num(base + 15)})"'
+                self.parts.append(_text(px, base + 15, label, SVG_TICK_PX, "end", extra))
             else:
-                self.parts.append(_text(px, base + 15, label, 10))
+                self.parts.append(_text(px, base + 17, label, SVG_TICK_PX))
 
     def line(
         self,

@@ -17,7 +17,7 @@ import numpy as np
 from tsid_fmu.evaluate.protocol import Simulated
 from tsid_fmu.evaluate.spec import PreparedExperiment
 from tsid_fmu.report.fitfig import envelope
-from tsid_fmu.report.style import COLORS, fmt, fmt_levels, with_unit
+from tsid_fmu.report.style import COLORS, fmt, fmt_levels, short_combination, with_unit
 from tsid_fmu.report.svg import Canvas, Panel, nice_ticks
 from tsid_fmu.search.record import IterationRecord
 
@@ -37,8 +37,7 @@ def _title(rec: IterationRecord, name: str, describe: Mapping[str, str], units: 
     factor = next(f for f in rec.frame.factors if f.name == name)
     if factor.values is not None:
         return with_unit(name, units.get(name))
-    terms = describe.get(name, "").split()
-    short = " ".join(terms[:4]) + (" …" if len(terms) > 4 else "")
+    short = short_combination(describe.get(name, ""))
     return f"{name}: {short}" if short else f"{name} (offset)"
 
 

@@ -169,10 +169,15 @@ class Frame:
         return out
 
     def describe(self, space: Space, factor: Factor) -> str:
-        """Say which parameters a factor moves: ``+0.71 lg F_vm -0.70 lg B_s``."""
+        """Say which parameters a factor moves: ``+0.71 lg F_vm -0.70 lg B_s``.
+
+        In the stage's working domain (``space``), also for anchored frames: their unit
+        steps mean there what they mean in ``space`` (relative changes for log
+        parameters), whereas their own parameter units would let the parameter with the
+        largest value swamp every direction.
+        """
         if factor.values is not None:
             return factor.name
-        space = self.coords(space)
         u = space.u_direction(factor.direction)
         terms = [(abs(c), c, space.label(j)) for j, c in enumerate(u) if abs(c) >= 0.05]
         terms.sort(reverse=True)

@@ -135,9 +135,13 @@ def _widen_by_profile(
         if low is None or high is None:
             u.std_error[name] = u.relative[name] = math.inf
         else:
-            u.std_error[name] = max(u.std_error[name], 0.5 * (high - low) / Z95)
+            profiled = 0.5 * (high - low) / Z95
+            floor = name in problem.unresolved and profiled > u.std_error[name]
+            u.std_error[name] = max(u.std_error[name], profiled)
             if x[name]:
                 u.relative[name] = 100 * u.std_error[name] / abs(x[name])
+                if floor:  # the profile's resolution, not an estimate: a bound
+                    u.resolution[name] = u.relative[name]
     u.method = (
         "the wider of a HAC sandwich (Newey-West, at least the Cramer-Rao bound) and the "
         "profile likelihood"

@@ -75,6 +75,10 @@ class Uncertainty:
         optimistic white-residual standard errors would be.
     method : str
         How the intervals were computed.
+    resolution : dict
+        Parameters whose standard error lies below what the profile likelihood resolves
+        (:data:`tsid_fmu.uncertainty.profile.RESOLUTION`): the bound, in percent of the
+        value. Their ``std_error`` and ``relative`` hold that bound, not an estimate.
     """
 
     values: dict[str, float]
@@ -91,6 +95,7 @@ class Uncertainty:
     profile: dict[str, list[float | None]] = field(default_factory=dict)
     scale_groups: list[dict[str, Any]] = field(default_factory=list)
     method: str = "HAC sandwich (Newey-West), at least the Cramer-Rao bound"
+    resolution: dict[str, float] = field(default_factory=dict)
 
     @property
     def sigma(self) -> dict[str, list[float]]:
@@ -134,6 +139,7 @@ class Uncertainty:
             "profile",
             "scale_groups",
             "method",
+            "resolution",
         )
         return clean({k: getattr(self, k) for k in keys})
 

@@ -22,14 +22,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.space import Space
 
-__all__ = ["CHI2_95", "ProfileProblem", "profile_intervals"]
+__all__ = ["CHI2_95", "RESOLUTION", "ProfileProblem", "profile_intervals"]
 
 CHI2_95 = 3.841458820694124
 """95 % quantile of the chi-square distribution with one degree of freedom."""
@@ -47,6 +47,11 @@ starts below what the simulations resolve would only measure their numerical noi
 
 BISECTIONS = 3
 """Bisections of the bracket around an interval end."""
+
+RESOLUTION = MIN_STEP / 2**BISECTIONS
+"""Shortest distance to an interval end the profile can tell, in search coordinates:
+an end closer than the first step and every bisection of it is only known to lie
+within this of the answer."""
 
 
 @dataclass
@@ -67,6 +72,10 @@ class ProfileProblem:
         ``(n, p)`` derivative of the cost residuals with respect to the coordinates.
     threshold : float
         Rise of the cost that bounds the 95 % interval.
+    unresolved : set of str
+        Filled by :func:`profile_intervals`: the parameters whose ends both lie within
+        the last bisection of the first step (within :data:`RESOLUTION` for the smallest
+        step): their profile interval is only an upper bound.
     """
 
     evaluator: Evaluator
@@ -75,6 +84,7 @@ class ProfileProblem:
     cost0: float
     jacobian: np.ndarray
     threshold: float
+    unresolved: set[str] = field(default_factory=set)
 
     def cost(self, s: np.ndarray) -> tuple[float, np.ndarray | None]:
         """Return the cost and the cost residuals at coordinates ``s``."""
@@ -101,20 +111,26 @@ def _refit(problem: ProfileProblem, j: int, delta: float, pinv: np.ndarray) -> f
     return best
 
 
-def _end(problem: ProfileProblem, j: int, sign: float, step: float, pinv: np.ndarray) -> float:
-    """Coordinate offset of the interval's end on one side (``inf``: not reached)."""
+def _end(
+    problem: ProfileProblem, j: int, sign: float, step: float, pinv: np.ndarray
+) -> tuple[float, bool]:
+    """Coordinate offset of the interval's end on one side (``inf``: not reached).
+
+    The flag is False where no point inside the interval was found: the end is then
+    only known to lie within the offset returned.
+    """
     inside, rise = 0.0, 0.0
     delta = step
     for _ in range(MAX_DOUBLINGS):
         target = problem.s0[j] + sign * delta
         if not problem.space.s_lower[j] - 1.0 <= target <= problem.space.s_upper[j] + 1.0:
-            return math.inf
+            return math.inf, True
         rise = _refit(problem, j, sign * delta, pinv) - problem.cost0
         if rise > problem.threshold:
             break
         inside, delta = delta, 2 * delta
     else:
-        return math.inf
+        return math.inf, True
     outside = delta
     for _ in range(BISECTIONS):
         mid = 0.5 * (inside + outside)
@@ -122,7 +138,7 @@ def _end(problem: ProfileProblem, j: int, sign: float, step: float, pinv: np.nda
             outside = mid
         else:
             inside = mid
-    return outside
+    return outside, inside > 0
 
 
 def profile_intervals(
@@ -142,7 +158,9 @@ def profile_intervals(
     -------
     dict
         ``{name: [low, high]}``; an end the profile does not reach within
-        :data:`MAX_DOUBLINGS` doublings, or beyond the bounds, is ``None``.
+        :data:`MAX_DOUBLINGS` doublings, or beyond the bounds, is ``None``. The
+        parameters neither of whose ends was bracketed from inside go into
+        ``problem.unresolved``.
     """
     out: dict[str, list[float | None]] = {}
     jac = problem.jacobian
@@ -151,10 +169,13 @@ def profile_intervals(
         pinv = np.linalg.pinv(jac[:, others]) if others else np.zeros((0, jac.shape[0]))
         step = steps.get(name, MIN_STEP)
         step = max(step, MIN_STEP) if math.isfinite(step) else MIN_STEP
-        ends = []
+        ends, resolved = [], []
         for sign in (-1.0, 1.0):
-            off = _end(problem, j, sign, step, pinv)
+            off, found = _end(problem, j, sign, step, pinv)
             s = problem.s0[j] + sign * off
             ends.append(None if not math.isfinite(off) else problem.space.value(j, s))
+            resolved.append(found)
         out[name] = ends
+        if not any(resolved):
+            problem.unresolved.add(name)
     return out
