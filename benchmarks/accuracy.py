@@ -6,7 +6,9 @@ with a rig's conventions: commands held per sample, continuous outputs sampled, 
 noise level per sensor. On the same FMU, data and cost (noise-weighted SSE, so that
 ``least_squares`` minimises exactly the study's cost), each method runs and is scored:
 
-- **tsid**: the Taguchi stage alone, and the whole study (Taguchi + refinement);
+- **tsid**: the Taguchi stage alone, and the whole study (the default ``refine =
+  "auto"``), and the whole study with ``refine = "least_squares"`` (the Taguchi stage to
+  its own end, then the refinement: the procedure of the round before);
 - **least_squares**: SciPy's trust-region least squares from the centre of the first
   ranges, and from the two range corners (every parameter at its first level, every
   parameter at its last level), in the same search coordinates;
@@ -214,6 +216,11 @@ def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
     prob = PROBLEMS[name]()
     study = study_of(prob, METHOD)
     rows, res = run_tsid(study, prob.truth, workers)
+    # the procedure of the round before, in the same run: the Taguchi stage to its own end
+    whole = study_of(prob, dataclasses.replace(METHOD, refine="least_squares"))
+    row = run_tsid(whole, prob.truth, workers)[0][1]
+    row["method"] = 'tsid: refine = "least_squares" (arrays to their end)'
+    rows.append(row)
     scorer = Scorer(dataclasses.replace(study, method=dataclasses.replace(METHOD)), workers)
     try:
         truth_cost = scorer.cost(scorer.space.to_s(prob.truth))
