@@ -316,3 +316,23 @@ def test_refine_none_ends_with_a_check_stage_that_decides_the_verdict():
     assert stages[-1].kind == "check" and stages[-1].nfev == 4
     assert adaptive.verdict(stages)[0] == (0 if stages[-1].extra["stationarity"]["holds"] else 1)
     assert adaptive.verdict(stages)[0] == 1  # one array does not reach the optimum
+
+
+def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatch):
+    polish = pipeline._polish
+
+    def collapsing(name, *args, **kwargs):
+        stage = polish(name, *args, **kwargs)
+        if name == "refinement":  # as SciPy says it when the trust region collapses
+            stage.message = "least squares: `xtol` termination condition is satisfied."
+        return stage
+
+    monkeypatch.setattr(pipeline, "_polish", collapsing)
+    study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
+    stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
+    first = stages[0]
+    assert "trust region collapsed" in first.extra["resumed"]
+    assert first.records[-1].extra.get("handover") is None  # it went on past the hand-over
+    monkeypatch.setattr(pipeline, "_collapsed", lambda stage: None)
+    alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
+    assert "resumed" not in alone[0].extra and len(alone[0].records) < len(first.records)

@@ -9,9 +9,11 @@ sequence of stages:
    :data:`~tsid_fmu.search.taguchi.HANDOVER_FIT`);
 2. the least-squares refinement polishes the best set;
 3. if the refined answer is not shown to be stationary, or is a poor fit
-   (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the noise floor), the refinement may
-   sit in a local minimum: the Taguchi stage goes on from where it handed over, to its
-   own end (Case 3 or a limit), and its best set is refined again;
+   (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the noise floor), or the
+   refinement's trust region collapsed (SciPy's ``xtol``: its local model did not hold,
+   as on dry friction's rough cost), the refinement may sit in a local minimum: the
+   Taguchi stage goes on from where it handed over, to its own end (Case 3 or a limit),
+   and its best set is refined again;
 4. while that still holds, the refinement restarts, up to ``max_reruns`` times: from the
    start points first (where a local method alone would start), then from the next-best
    run of the arrays that lies away from every start and answer so far (the MISO

@@ -346,6 +346,18 @@ def _unsettled(stages: list[StageResult], floor: float) -> str | None:
     return None
 
 
+def _collapsed(refined: StageResult) -> str | None:
+    """Whether the refinement stopped because its trust region collapsed (SciPy's xtol).
+
+    A collapsed trust region means the steps its Jacobian proposed kept failing: on a
+    rough cost (dry friction's stick-slip) or in a sharply curved valley the local model
+    does not hold, and the arrays, which need no derivative, are the better judge.
+    """
+    if refined.kind == "refinement" and "xtol" in refined.message:
+        return "the refinement's trust region collapsed (xtol): its local model did not hold"
+    return None
+
+
 def _local_search(ctx: _Context, stages: list[StageResult], adaptive: bool) -> list[StageResult]:
     """Refine the best set; with ``adaptive``, go on where it is not settled.
 
@@ -359,7 +371,7 @@ def _local_search(ctx: _Context, stages: list[StageResult], adaptive: bool) -> l
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
     floor = noise_floor(evaluator, study.method.weighting == "noise")
     first = stages[0]
-    why = _unsettled(stages, floor)
+    why = _unsettled(stages, floor) or _collapsed(stages[-1])
     if why and first.kind == "taguchi" and first.records[-1].extra.get("handover"):
         _note(ctx, f"{why}: the Taguchi stage goes on")
         stages[0] = _single(ctx, handover=False, records=first.records)
