@@ -68,7 +68,9 @@ def _table(rows: Sequence[dict], markdown: bool) -> list[str]:
     if markdown:
         lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
         return lines + ["| " + " | ".join(c) + " |" for c in cells]
-    widths = [max(len(h), *(len(c[i]) for c in cells if i < len(c))) for i, h in enumerate(COLUMNS)]
+    widths = [
+        max([len(h)] + [len(c[i]) for c in cells if i < len(c)]) for i, h in enumerate(COLUMNS)
+    ]
     fmt = lambda c: "  ".join(v.rjust(widths[i]) for i, v in enumerate(c))  # noqa: E731
     return [fmt(COLUMNS), *(fmt(c) for c in cells)]
 
