@@ -42,6 +42,7 @@ __all__ = [
     "gauss_newton_step",
     "noise_floor",
     "probe_points",
+    "probe_test",
 ]
 
 GATE_RTOL = 1e-4
@@ -105,7 +106,7 @@ def _at(high: np.ndarray, low: np.ndarray, tol: float) -> np.ndarray:
     return finite & (high - low <= tol * np.maximum(1.0, np.abs(bound)))
 
 
-def _feasible_fraction(s: np.ndarray, d: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+def _feasible_fraction(s: np.ndarray, d: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
     """Largest ``t`` in [0, 1] with ``s + t d`` within the bounds."""
     t = 1.0
     for sj, dj, lo, hi in zip(s, d, lower, upper, strict=True):
