@@ -660,6 +660,44 @@ def lag_data(tmp_dir: Path, tau: float, x0: float) -> tuple[Path, Path]:
     return fmu, data
 
 
+def lag_study(tmp_dir: Path, **options):
+    """The study of :func:`lag_data` (tau 0.37, x0 0.8): tau in s and x0 over three levels.
+
+    ``options`` go to :class:`tsid_fmu.Study` (``name``, ``replicates``, ...).
+    """
+    from tsid_fmu import Experiment, Parameter, Study
+
+    fmu, data = lag_data(tmp_dir, 0.37, 0.8)
+    return Study(
+        fmu=fmu,
+        parameters=[
+            Parameter("tau", [0.05, 0.5, 2.0], min=0.0, unit="s"),
+            Parameter("x0", [-1.0, 0.0, 2.0]),
+        ],
+        experiments=[Experiment(data=data, inputs={"u": "u"}, outputs={"y": "y_meas"})],
+        **options,
+    )
+
+
+LAG_TOML = """\
+[study]
+fmu = "Lag.fmu"
+[data]
+file = "d.csv"
+inputs = { u = "u" }
+outputs = { y = "y" }
+[method]
+seed = 7
+max_iterations = 8
+[leveling]
+tolerance = 0.0001
+[parameters]
+tau = { levels = [0.05, 0.5, 2.0], min = 0 }
+x0 = { levels = [-1.0, 0.0, 2.0] }
+"""
+"""A lag study on ``Lag.fmu`` and ``d.csv`` in its folder, for the signal and resume tests."""
+
+
 _PYTHONFMU_SLAVE = '''
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 

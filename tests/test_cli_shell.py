@@ -90,20 +90,9 @@ def test_identify_json_prints_the_summary_that_the_schema_describes(tmp_path, ca
     import json
 
     import jsonschema
-    from fmu_factory import lag_data
+    from fmu_factory import lag_study
 
-    from tsid_fmu import Experiment, Parameter, Study
-
-    fmu, data = lag_data(tmp_path, 0.37, 0.8)
-    study = Study(
-        fmu=fmu,
-        parameters=[
-            Parameter("tau", [0.05, 0.5, 2.0], min=0.0, unit="s"),
-            Parameter("x0", [-1.0, 0.0, 2.0]),
-        ],
-        experiments=[Experiment(data=data, inputs={"u": "u"}, outputs={"y": "y_meas"})],
-        replicates=1,
-    ).to_toml(tmp_path / "lag.toml")
+    study = lag_study(tmp_path, replicates=1).to_toml(tmp_path / "lag.toml")
     out = tmp_path / "out"
     rc = main(["identify", str(study), "--out", str(out), "--json", "-q", "--no-plots",
                "--workers", "1", "--max-iterations", "2"])  # fmt: skip

@@ -22,27 +22,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from fmu_factory import build_c_fmu, lag_response
+from fmu_factory import LAG_TOML, build_c_fmu, lag_response
 
 POLL = 0.002
 TIMEOUT = 120.0
 
-STUDY = """\
-[study]
-fmu = "Lag.fmu"
-[data]
-file = "d.csv"
-inputs = { u = "u" }
-outputs = { y = "y" }
-[method]
-seed = 7
-max_iterations = 8
-[leveling]
-tolerance = 0.0001
-[parameters]
-tau = { levels = [0.05, 0.5, 2.0], min = 0 }
-x0 = { levels = [-1.0, 0.0, 2.0] }
-"""
+STUDY = LAG_TOML
 
 
 @pytest.fixture(scope="module")

@@ -8,27 +8,16 @@ import math
 import shutil
 
 import pytest
-from fmu_factory import lag_data
+from fmu_factory import lag_study
 
 import tsid_fmu
-from tsid_fmu import Experiment, Parameter, Study, StudyError, identify, load
+from tsid_fmu import StudyError, identify, load
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     d = tmp_path_factory.mktemp("lag")
-    fmu, data = lag_data(d, 0.37, 0.8)
-    study = Study(
-        fmu=fmu,
-        parameters=[
-            Parameter("tau", [0.05, 0.5, 2.0], min=0.0, unit="s"),
-            Parameter("x0", [-1.0, 0.0, 2.0]),
-        ],
-        experiments=[Experiment(data=data, inputs={"u": "u"}, outputs={"y": "y_meas"})],
-        name="lag",
-        max_iterations=4,
-        replicates=1,
-    )
+    study = lag_study(d, name="lag", max_iterations=4, replicates=1)
     path = study.to_toml(d / "study" / "lag.toml")
     res = identify(path, d / "out", plots=False, workers=1)
     return res, d / "out"

@@ -8,7 +8,7 @@ import matplotlib
 import numpy as np
 import pandas as pd
 import pytest
-from fmu_factory import build_c_fmu, lag_data, lag_response
+from fmu_factory import build_c_fmu, lag_response, lag_study
 
 from tsid_fmu import Experiment, Parameter, Study, identify
 from tsid_fmu.errors import StudyError
@@ -43,15 +43,7 @@ class _Rows(HTMLParser):
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
     d = tmp_path_factory.mktemp("lag")
-    fmu, data = lag_data(d, 0.37, 0.8)
-    study = Study(
-        fmu=fmu,
-        parameters=[
-            Parameter("tau", [0.05, 0.5, 2.0], min=0.0, unit="s"),
-            Parameter("x0", [-1.0, 0.0, 2.0]),
-        ],
-        experiments=[Experiment(data=data, inputs={"u": "u"}, outputs={"y": "y_meas"})],
-    )
+    study = lag_study(d)
     return identify(study, d / "out", plots=True)
 
 

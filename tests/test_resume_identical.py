@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from fmu_factory import build_c_fmu, lag_response
+from fmu_factory import LAG_TOML, build_c_fmu, lag_response
 
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.space import Space
@@ -26,22 +26,7 @@ from tsid_fmu.study import load_study
 from tsid_fmu.trail.levels import read_next_levels
 
 ROOT = Path(__file__).resolve().parents[1]
-STUDY = """\
-[study]
-fmu = "Lag.fmu"
-[data]
-file = "d.csv"
-inputs = { u = "u" }
-outputs = { y = "y" }
-[method]
-seed = 7
-max_iterations = 8
-[leveling]
-tolerance = 0.0001
-[parameters]
-tau = { levels = [0.05, 0.5, 2.0], min = 0 }
-x0 = { levels = [-1.0, 0.0, 2.0] }
-"""
+STUDY = LAG_TOML
 
 
 @pytest.fixture(scope="module")
