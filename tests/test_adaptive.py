@@ -325,6 +325,7 @@ def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatc
         stage = polish(name, *args, **kwargs)
         if name == "refinement":  # as SciPy says it when the trust region collapses
             stage.message = "least squares: `xtol` termination condition is satisfied."
+            stage.extra["stop"] = "xtol"
         return stage
 
     monkeypatch.setattr(pipeline, "_polish", collapsing)

@@ -353,7 +353,7 @@ def _collapsed(refined: StageResult) -> str | None:
     rough cost (dry friction's stick-slip) or in a sharply curved valley the local model
     does not hold, and the arrays, which need no derivative, are the better judge.
     """
-    if refined.kind == "refinement" and "xtol" in refined.message:
+    if refined.kind == "refinement" and refined.extra.get("stop") == "xtol":
         return "the refinement's trust region collapsed (xtol): its local model did not hold"
     return None
 

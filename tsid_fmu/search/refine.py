@@ -104,7 +104,7 @@ class _Problem:
         if reduction < _FTOL * cost_old:
             raise _Converged(f"the last step lowered the cost by less than ftol={_FTOL:g}")
         if step < _XTOL * (_XTOL + float(np.linalg.norm(s_old))):
-            raise _Converged(f"the last step was shorter than xtol={_XTOL:g}")
+            raise _Converged(f"the last step was shorter than xtol={_XTOL:g}", "xtol")
 
     def jac(self, s: np.ndarray) -> np.ndarray:
         if self.last is None or not np.array_equal(self.last[0], s):
@@ -240,9 +240,11 @@ def refine_stage(
             max_nfev=10_000,
         )
         status, message = 0, f"least squares: {out.message}"
+        extra["stop"] = {1: "gtol", 2: "ftol", 3: "xtol", 4: "xtol"}.get(int(out.status), "")
         extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
     except _Converged as stop:
         status, message = 0, f"least squares: {stop}; stopped before another Jacobian"
+        extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
     except _Budget:
         status = 1
         message = f"simulation limit ({limit}) of the refinement reached"
