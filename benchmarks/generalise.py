@@ -28,6 +28,7 @@ A method succeeds on a problem when its final cost is at most 1.001 times the lo
 cost any method found there.  Run::
 
     python benchmarks/generalise.py --seeds dev            # development seeds
+    python benchmarks/generalise.py --seeds dev2 --family pendulum --count 12  # more dev
     python benchmarks/generalise.py --quick                # small subset (CI)
     python benchmarks/generalise.py --seeds dev --family duffing --workers 2 --markdown
     python benchmarks/generalise.py --seeds eval --check   # exit 1 below the bar
@@ -64,9 +65,10 @@ from tsid_fmu.scaffold import init_study
 from tsid_fmu.study import prepare
 
 #: First seed of each seed set; a set's problems use ``base + k`` with its own stream.
-SEED_BASE = {"dev": 0, "eval": 10_000}
-#: SeedSequence spawn key of each seed set (the eval set is a separate stream).
-STREAM = {"dev": 0, "eval": 1}
+SEED_BASE = {"dev": 0, "dev2": 20_000, "eval": 10_000}
+#: SeedSequence spawn key of each seed set (each set is a separate stream).  ``dev2``
+#: is a second development set: more problems to tune on, still apart from ``eval``.
+STREAM = {"dev": 0, "dev2": 2, "eval": 1}
 #: ``--quick``: (family, problem index) drawn from the dev seeds.
 QUICK = [("duffing", 0), ("second_order", 0), ("local_minima", 0)]
 #: Success: final cost within this factor of the lowest cost any method found.
@@ -323,12 +325,16 @@ def run_problem(family: str, index: int, seeds: str, de: bool) -> list[dict]:
     return out
 
 
-def tasks(seeds: str, quick: bool, family: str | None) -> list[tuple[str, int]]:
-    """The (family, index) pairs to run."""
+def tasks(
+    seeds: str, quick: bool, family: str | None, count: int | None = None
+) -> list[tuple[str, int]]:
+    """The (family, index) pairs to run (``count`` problems per family if given)."""
     if quick:
         chosen = list(QUICK)
     else:
-        chosen = [(f, k) for f, (_, count) in FAMILIES.items() for k in range(count)]
+        chosen = [
+            (f, k) for f, (_, n) in FAMILIES.items() for k in range(count or n)
+        ]
     return [t for t in chosen if family is None or t[0] == family]
 
 
@@ -356,6 +362,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="a small subset (dev seeds)")
     parser.add_argument("--family", choices=list(FAMILIES), default=None)
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    parser.add_argument(
+        "--count", type=int, default=None, help="problems per family (default: its own)"
+    )
     parser.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     parser.add_argument("--de", action="store_true", help="also run differential_evolution")
     parser.add_argument(
@@ -365,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     seeds = "dev" if args.quick else args.seeds
-    todo = tasks(seeds, args.quick, args.family)
+    todo = tasks(seeds, args.quick, args.family, args.count)
     t0 = time.perf_counter()
     rows = run_all(todo, seeds, args.workers, args.de)
     wall = time.perf_counter() - t0

@@ -2,8 +2,8 @@
 
 Start points are scored; a stalling Taguchi stage hands over to the refinement; an
 answer beyond the first ranges is reached (ranges are extended to the bounds); a poor
-fit sends the search back to the arrays and to restarts; exit status 0 only where a
-stationarity test holds. Each test fails when its rule is removed.
+fit sends the search back to the arrays, over growing horizons and to restarts; exit
+status 0 only where a stationarity test holds. Each test fails when its rule is removed.
 """
 
 from __future__ import annotations
@@ -58,6 +58,9 @@ class Evaluators:
 
     def get(self, parameters, experiments, fixed):
         return self.ev
+
+    def shortened(self, parameters, experiments, fraction):
+        return None  # a given evaluator cannot be shortened: no horizons
 
 
 def _study(levels: dict[str, list[float]], bounds=None, **method) -> Study:
@@ -337,3 +340,100 @@ def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatc
     monkeypatch.setattr(pipeline, "_collapsed", lambda stage: None)
     alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     assert "resumed" not in alone[0].extra and len(alone[0].records) < len(first.records)
+
+
+# -- growing horizons -----------------------------------------------------------------------
+
+LONG = np.linspace(0.0, 20.0, 800)  # 9.5 periods of the true sine
+
+
+def _long(w: float, a: float) -> np.ndarray:
+    return a * np.sin(w * LONG)
+
+
+LONG_Y = _long(3.0, 1.0) + np.random.default_rng(8).normal(0.0, SIGMA, LONG.size)
+
+
+class Shortening(Evaluators):
+    """Evaluators that also score the first part of the record (as identify's do)."""
+
+    def __init__(self, measured: np.ndarray) -> None:
+        super().__init__(FloorEvaluator(_long, measured, SIGMA))
+        self.fractions: list[float] = []
+        self.measured = measured
+
+    def shortened(self, parameters, experiments, fraction):
+        self.fractions.append(fraction)
+        k = math.ceil(fraction * LONG.size)
+        return FloorEvaluator(lambda w, a: _long(w, a)[:k], self.measured[:k], SIGMA)
+
+
+def _horizon_run(start: dict[str, float], measured: np.ndarray = LONG_Y):
+    data = pd.DataFrame({"time": LONG, "y": np.zeros_like(LONG)})
+    params = [Parameter("w", [2.0, 2.5, 3.2], 0.5, 8.0), Parameter("a", [0.5, 1.0, 2.0], 0.0)]
+    study = Study(
+        fmu=ROOT / "no-such.fmu",
+        parameters=params,
+        experiments=[Experiment(data, inputs={}, outputs={"y": "y"}, noise={"y": SIGMA})],
+        method=Method(cost="sse", weighting="noise", replicates=1),
+    )
+    evaluators = Shortening(measured)
+    ctx = pipeline._Context(study, evaluators, NullStore(), None, pipeline.Control())
+    exps = [e.name for e in study.experiments]
+    cost = evaluators.ev.cost(**start)
+    arrays = pipeline.StageResult("taguchi", "taguchi", dict(start), cost, 0, "given")
+    stages = [arrays, pipeline._refinement(ctx, start, exps)]
+    evaluators.restart = pipeline._horizons(ctx, stages, float(LONG.size), exps)
+    return stages, evaluators
+
+
+def test_a_local_minimum_is_left_by_following_the_data_from_its_first_part(monkeypatch):
+    # w = 2.4 lies two valleys of the full record's cost away from the truth (w = 3)
+    stages, evaluators = _horizon_run({"w": 2.4, "a": 1.0})
+    assert stages[1].cost > 100 * LONG.size  # the refinement alone: a local minimum
+    assert [s.kind for s in stages[2:]] == ["horizon"] * 3 + ["refinement"]
+    assert evaluators.fractions == list(adaptive.HORIZONS)
+    assert [s.extra["fraction"] for s in stages[2:5]] == list(adaptive.HORIZONS)
+    assert stages[2].extra["start"] == pytest.approx({"w": 2.4, "a": 1.0})  # the arrays' best
+    answer = adaptive.answer_stage(stages)
+    assert answer is stages[-1] and answer.x["w"] == pytest.approx(3.0, rel=1e-3)
+    assert answer.cost < 2 * LONG.size
+    assert "agrees" not in answer.extra and evaluators.restart  # a new answer: no agreement
+    # the horizons' costs, over part of the data, never compete with the full cost
+    assert all(s.cost < answer.cost for s in stages[2:5])
+    # without the short horizons, the same refinement stays in the local minimum
+    monkeypatch.setattr(pipeline, "HORIZONS", ())
+    alone, _ = _horizon_run({"w": 2.4, "a": 1.0})
+    assert adaptive.answer_stage(alone).cost > 100 * LONG.size
+
+
+def test_a_settled_answer_runs_no_horizon():
+    stages, evaluators = _horizon_run({"w": 2.98, "a": 1.0})  # the truth's own valley
+    assert [s.kind for s in stages] == ["taguchi", "refinement"]
+    assert evaluators.fractions == []
+
+
+def test_a_poor_fit_that_the_horizons_reach_again_needs_no_restart(monkeypatch):
+    # an offset the model cannot make: the best fit is poor, but it is the only valley
+    offset = LONG_Y + 0.5
+    stages, evaluators = _horizon_run({"w": 2.98, "a": 1.0}, offset)
+    assert stages[1].cost > 100 * LONG.size  # a poor fit: the horizons run
+    assert evaluators.fractions == list(adaptive.HORIZONS)
+    last = stages[-1]
+    assert last.extra["agrees"] == "refinement"
+    assert last.cost == pytest.approx(stages[1].cost, rel=adaptive.AGREE)
+    assert evaluators.restart is False  # so no restart follows
+    monkeypatch.setattr(pipeline, "AGREE", -1.0)  # without the rule: restarts
+    again, ev2 = _horizon_run({"w": 2.98, "a": 1.0}, offset)
+    assert ev2.restart is True and "agrees" not in again[-1].extra
+
+
+def test_the_poor_fit_warning_says_which_search_found_no_lower_basin():
+    from tsid_fmu.identify import _poor_fit
+
+    stage = pipeline.StageResult("refinement", "refinement", {"w": 3.0}, 1e6, 10, "")
+    assert _poor_fit(stage) == []
+    stage.extra["poor_fit"] = {"floor": 800.0, "ratio": 1250.0, "restarts": 2}
+    assert "1.25e+03 times the noise floor, and 2 restart(s)" in _poor_fit(stage)[0]
+    stage.extra["poor_fit"].update(restarts=0, horizons_agree=True)
+    assert "from their first part reached the same answer" in _poor_fit(stage)[0]

@@ -70,8 +70,10 @@ class _Evaluators:
         self.interface = interface
         self.specs = {k: dataclasses.replace(s, interface=interface) for k, s in self.specs.items()}
 
-    def _key(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> tuple:
-        return (tuple(params), tuple(exps), tuple(sorted(fixed.items())))
+    def _key(
+        self, params: list[str], exps: list[str], fixed: Mapping[str, float], fraction: float = 1.0
+    ) -> tuple:
+        return (tuple(params), tuple(exps), tuple(sorted(fixed.items())), fraction)
 
     def spec(
         self, params: list[str], exps: list[str], fixed: Mapping[str, float]
@@ -91,6 +93,19 @@ class _Evaluators:
         key = self._key(params, exps, fixed)
         if key not in self.pool:
             self.pool[key] = make_evaluator(self.spec(params, exps, fixed), **self.runner)
+        return self.pool[key]
+
+    def shortened(self, params: list[str], exps: list[str], fraction: float) -> Evaluator | None:
+        """Return an evaluator of the first ``fraction`` of each experiment's samples.
+
+        None where the study was given an evaluator (it cannot be shortened).
+        """
+        if self.given is not None:
+            return None
+        key = self._key(params, exps, {}, fraction)
+        if key not in self.pool:
+            spec = self.spec(params, exps, {}).head(fraction)
+            self.pool[key] = make_evaluator(spec, **self.runner)
         return self.pool[key]
 
     @property
@@ -161,9 +176,13 @@ def _poor_fit(answer: StageResult) -> list[str]:
     poor = answer.extra.get("poor_fit")
     if not poor:
         return []
+    if poor.get("horizons_agree"):
+        searched = "following the data from their first part reached the same answer"
+    else:
+        searched = f"{poor['restarts']} restart(s) found no lower basin"
     return [
         f"the answer's cost is {poor['ratio']:.3g} times the noise floor, and "
-        f"{poor['restarts']} restart(s) found no lower basin: the model may not explain "
+        f"{searched}: the model may not explain "
         "these data, the noise may be strongly coloured, or the answer is a local minimum "
         "the search did not leave (try wider first levels, or other start values)"
     ]

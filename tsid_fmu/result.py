@@ -336,7 +336,9 @@ class IdentificationResult:
 
         rows, before = [], math.inf
         for s in self.stages:
+            partial = s.kind == "horizon"  # its cost is over part of the data
             gain = (before - s.cost) / before if math.isfinite(before) and before else math.nan
+            gain = math.nan if partial else gain
             rows.append(
                 {
                     "stage": s.name,
@@ -347,7 +349,7 @@ class IdentificationResult:
                     "message": s.message,
                 }
             )
-            before = s.cost if s.kind != "contribution" else before
+            before = s.cost if s.kind not in ("contribution", "horizon") else before
         return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
 
     def parameters_frame(self) -> pd.DataFrame:

@@ -11,6 +11,7 @@ Replicate 1 of every experiment is its measured input itself; replicates 2..R us
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -280,6 +281,32 @@ class EvaluationSpec:
         fixed = [*self.start_values, *self.parameter_names]
         for e in self.experiments:  # delay(<input>): an input of every experiment
             check_delays([*fixed, *e.start_values], e.input_names, f"experiment {e.name!r}")
+
+    def head(self, fraction: float, min_samples: int = 20) -> EvaluationSpec:
+        """Return this spec with each experiment cut to the first ``fraction`` of its samples.
+
+        Every experiment keeps at least ``min_samples`` samples (all, if it has fewer), and
+        its weights and noise scales: the cost of a shortened spec is the same sum over
+        fewer samples. The adaptive search scores such "horizons" to follow a minimum
+        from short data, where an oscillating model's cost has few valleys, to the full
+        record (:mod:`tsid_fmu.search.adaptive`).
+        """
+        if not 0 < fraction <= 1:
+            raise StudyError(f"fraction must be in (0, 1], got {fraction}")
+        cut = []
+        for e in self.experiments:
+            n = len(e.time)
+            k = min(n, max(min_samples, math.ceil(fraction * n)))
+            cut.append(
+                dataclasses.replace(
+                    e,
+                    time=e.time[:k],
+                    inputs=None if e.inputs is None else e.inputs[:k],
+                    measured=e.measured[:k],
+                    noisy_inputs=tuple(a[:k] for a in e.noisy_inputs),
+                )
+            )
+        return dataclasses.replace(self, experiments=tuple(cut))
 
     @property
     def n_replicates(self) -> int:

@@ -14,11 +14,17 @@ sequence of stages:
    as on dry friction's rough cost), the refinement may sit in a local minimum: the
    Taguchi stage goes on from where it handed over, to its own end (Case 3 or a limit),
    and its best set is refined again;
-4. while that still holds, the refinement restarts, up to ``max_reruns`` times: from the
+4. while that still holds, the refinement follows a minimum over growing horizons: on
+   the first :data:`HORIZONS` fractions of each experiment's samples in turn, from the
+   arrays' best set, then on all of them (a model that swings or rings has few valleys
+   in its cost over a short record, where the simulation cannot drift whole periods
+   from the data); where that route ends at the same stationary answer, a poor fit is
+   the model's or the noise's and no restart follows;
+5. while that still holds, the refinement restarts, up to ``max_reruns`` times: from the
    start points first (where a local method alone would start), then from the next-best
    run of the arrays that lies away from every start and answer so far (the MISO
    paper's re-run from the next-best run);
-5. the answer is the lowest-cost set of every stage, and the study has converged only
+6. the answer is the lowest-cost set of every stage, and the study has converged only
    where a stationarity test holds there (:mod:`tsid_fmu.search.verdict`). A poor fit
    that no restart improved is a warning, not a verdict: the optima of a model that
    does not quite explain the data, or of strongly coloured noise, are far above the
@@ -37,11 +43,19 @@ import numpy as np
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 
-__all__ = ["RESTART_SEPARATION", "answer_stage", "restart_start", "start_sets", "verdict"]
+__all__ = ["AGREE", "HORIZONS", "RESTART_SEPARATION", "answer_stage", "restart_start", "start_sets", "verdict"]
 
 RESTART_SEPARATION = 0.15
 """A restart's start lies at least this far (in first ranges, along some parameter) from
 every start and answer of the refinements before it."""
+
+HORIZONS = (1 / 8, 1 / 4, 1 / 2)
+"""Fractions of each experiment's samples the refinement follows a minimum over, in turn,
+before it refines on all of them (a stage of kind ``"horizon"`` each)."""
+
+AGREE = 1e-4
+"""Relative cost difference within which the refinement after the horizons reaches "the
+same answer" as the search before them; it then needs no restart."""
 
 _ANSWERS = ("taguchi", "refinement", "check")
 

@@ -46,6 +46,10 @@ class Evaluators(Protocol):
         self, parameters: list[str], experiments: list[str], fixed: Mapping[str, float]
     ) -> Evaluator: ...
 
+    def shortened(
+        self, parameters: list[str], experiments: list[str], fraction: float
+    ) -> Evaluator | None: ...
+
 
 def centre_values(study: Study) -> dict[str, float]:
     """Centre value of each parameter: its middle one-at-a-time value."""

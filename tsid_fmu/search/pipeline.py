@@ -5,7 +5,7 @@ A single-group study runs one ``taguchi`` stage over all parameters. A phased st
 analyses, one ``phase`` stage per parameter group, and a joint phase over all
 parameters on all identification experiments. Then, by ``[method] refine``: the
 adaptive local search of :mod:`tsid_fmu.search.adaptive` (``"auto"`` with the ``sse``
-cost: refinement, back to the arrays, restarts), the ``refinement`` alone
+cost: refinement, back to the arrays, horizons, restarts), the ``refinement`` alone
 (``"least_squares"``), or the ``check`` stage's local probes (otherwise). Every stage
 gets its own evaluator spec (its parameters, its experiments, the others held at their
 current values) and reports its answer, its cost on its measured inputs, its
@@ -15,13 +15,14 @@ simulations and why it stopped.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.adaptive import answer_stage, restart_start
+from tsid_fmu.search.adaptive import AGREE, HORIZONS, answer_stage, restart_start
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.phases import Evaluators, centre_values, joint_levels, plan_phases
@@ -381,15 +382,88 @@ def _local_search(ctx: _Context, stages: list[StageResult], adaptive: bool) -> l
         if stages[0].cost < stages[-1].cost:
             name = "refinement after the Taguchi stage went on"
             stages.append(_refinement(ctx, stages[0].x, exps, "refinement_02", name))
-    _restarts(ctx, stages, floor, exps)
+    restarts = _restarts(ctx, stages, floor, exps) if _horizons(ctx, stages, floor, exps) else 0
+    answer = answer_stage(stages)
+    if floor > 0 and answer.cost > POOR_FIT * floor:
+        ratio = answer.cost / floor
+        agreed = any(s.extra.get("agrees") for s in stages)
+        answer.extra["poor_fit"] = {
+            "floor": floor,
+            "ratio": ratio,
+            "restarts": restarts,
+            "horizons_agree": agreed,
+        }
     return stages
 
 
-def _restarts(ctx: _Context, stages: list[StageResult], floor: float, exps: list[str]) -> None:
+def _horizons(ctx: _Context, stages: list[StageResult], floor: float, exps: list[str]) -> bool:
+    """Follow a minimum from the first part of the data to all of it, while unsettled.
+
+    The refinement runs on the first :data:`HORIZONS` fractions of each experiment's
+    samples in turn, each from the last one's answer, starting at the arrays' best set;
+    then on the full data. Over a short horizon the simulated and measured signals
+    cannot drift a whole period apart, so a lightly damped or swinging model's cost has
+    few valleys there: the classic continuation for oscillators.
+
+    Returns whether restarts may still help: False when the answer was settled, or when
+    the horizons, a second route, ended at the same stationary answer (within
+    :data:`AGREE` of its cost): a poor fit that both routes reach is the model's or the
+    noise's, not a local minimum's.
+    """
+    why = _unsettled(stages, floor)
+    if why is None:
+        return False
+    before = answer_stage(stages)
+    study = ctx.study
+    names = study.parameter_names
+    arrays = [s for s in stages if s.kind == "taguchi" and math.isfinite(s.cost)]
+    x = dict((min(arrays, key=lambda s: s.cost) if arrays else answer_stage(stages)).x)
+    _note(ctx, f"{why}: the refinement follows the data's first part to its end")
+    samples = sum(len(e.measured) for e in ctx.evaluators.spec(names, exps, {}).experiments)
+    for k, fraction in enumerate(HORIZONS, 1):
+        evaluator = ctx.evaluators.shortened(names, exps, fraction)
+        if evaluator is None:
+            return True
+        if sum(len(e.measured) for e in evaluator.spec.experiments) >= samples:
+            break
+        stage = _horizon_stage(ctx, evaluator, x, f"horizon_{k:02d}", fraction)
+        stage.experiments = list(exps)
+        stages.append(stage)
+        x = {n: float(stage.x[n]) for n in names}
+    last = _refinement(ctx, x, exps, "horizon_full", "refinement after the horizons")
+    stages.append(last)
+    held = (last.extra.get("stationarity") or {}).get("holds", False)
+    if held and abs(last.cost - before.cost) <= AGREE * before.cost:
+        _note(ctx, "the horizons reached the same answer: no restart")
+        last.extra["agrees"] = before.name
+        return False
+    return True
+
+
+def _horizon_stage(
+    ctx: _Context, evaluator: Evaluator, start: Mapping[str, float], key: str, fraction: float
+) -> StageResult:
+    """The refinement on a shortened record (a finished one from the same start is read back)."""
+    start = {n: float(start[n]) for n in ctx.study.parameter_names}
+    done = ctx.store.stage(key)
+    if done is not None and done.extra.get("start") == start:
+        return done
+    share = f"{100 * fraction:.3g} %"
+    name = f"refinement on the first {share} of the data"
+    result = _polish(name, ctx.study, start, evaluator, ctx.progress)
+    result.kind = "horizon"
+    result.message = f"cost over the first {share} of each experiment's samples; {result.message}"
+    result.extra.update(start=start, fraction=fraction)
+    ctx.store.write_stage(key, result)
+    return result
+
+
+def _restarts(ctx: _Context, stages: list[StageResult], floor: float, exps: list[str]) -> int:
     """Refine from the start points, then from the next-best runs, while unsettled.
 
-    At most ``max_reruns`` restarts. An answer still a poor fit after them is recorded
-    (``extra["poor_fit"]``): the warnings then say that the search found no better basin.
+    At most ``max_reruns`` restarts; returns how many ran. An answer still a poor fit
+    after the search is recorded (``extra["poor_fit"]``): the warnings then say that
+    the search found no better basin.
     """
     study = ctx.study
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
@@ -407,9 +481,7 @@ def _restarts(ctx: _Context, stages: list[StageResult], floor: float, exps: list
         _note(ctx, f"{why}: restart {k} from {found[2]} (cost {found[1]:.6g})")
         name = f"restart {k} from {found[2]}"
         stages.append(_refinement(ctx, found[0], exps, f"restart_{k:02d}", name))
-    answer = answer_stage(stages)
-    if floor > 0 and answer.cost > POOR_FIT * floor:
-        answer.extra["poor_fit"] = {"floor": floor, "ratio": answer.cost / floor, "restarts": k}
+    return k
 
 
 def _note(ctx: _Context, message: str) -> None:

@@ -7,7 +7,9 @@ stage's answer, within the parameters' bounds, in the same search coordinates
 (:mod:`tsid_fmu.search.space`). Its Jacobians are forward differences whose ``p``
 simulations go to the evaluator as one batch, so they run in parallel. It stops at
 SciPy's tolerances or at ``refine_max_nfev`` simulations, and its answer is the best set
-it evaluated, so it never ends worse than it started.
+it evaluated, so it never ends worse than it started. Its variables are scaled by the
+Jacobian's columns (SciPy's ``x_scale="jac"``), as first ranges typed by hand can be
+off by a factor that the search coordinates alone do not undo.
 
 Two simulations SciPy would spend are not: the start's residuals come from the caller,
 which has just scored it; and SciPy's own ``ftol``/``xtol`` tests on an accepted step are
@@ -34,8 +36,12 @@ from tsid_fmu.study.schema import Method
 
 __all__ = ["FD_STEP", "refine_stage"]
 
-FD_STEP = 1e-3
-"""Forward-difference step in search coordinates (0.1 % of a first range's width)."""
+FD_STEP = 1e-5
+"""Forward-difference step in search coordinates (1e-5 of a first range's width).
+
+Small enough for a sharply curved valley (a swinging pendulum's cost over seconds of
+data: 1e-3 gave secants whose steps kept failing), large against the integrators' error
+(the own Model Exchange solver's rtol is 1e-8)."""
 
 _FAILED = 1e10
 """Residual value given to every sample of a failed simulation (its cost is then huge)."""
@@ -238,6 +244,7 @@ def refine_stage(
             xtol=_XTOL,
             gtol=_GTOL,
             max_nfev=10_000,
+            x_scale="jac",
         )
         status, message = 0, f"least squares: {out.message}"
         extra["stop"] = {1: "gtol", 2: "ftol", 3: "xtol", 4: "xtol"}.get(int(out.status), "")

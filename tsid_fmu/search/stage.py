@@ -10,7 +10,7 @@ from tsid_fmu.search.record import IterationRecord, json_float, unjson_float
 
 __all__ = ["KINDS", "StageResult"]
 
-KINDS = ("taguchi", "refinement", "phase", "contribution", "check")
+KINDS = ("taguchi", "refinement", "phase", "contribution", "check", "horizon")
 """Kinds of stage: the papers' Taguchi procedure; an optional local least-squares polish;
 a phase of a phased (MISO) study, itself a Taguchi procedure on a parameter group; the
 MISO paper's one-at-a-time contribution runs; the local probe test of an answer that no
