@@ -232,26 +232,28 @@ def test_read_only_arrays_checked_once_writeable_ones_every_time(fmus, monkeypat
             s.simulate(t_ro, view, {})
 
 
-def test_tempdir_removed_on_close_and_on_error(fmus, grid, tmp_path):
+def test_extraction_folder_is_lent_per_session_and_kept_for_the_next(fmus, grid, tmp_path):
+    """A closed session gives its folder back; the next session of the file reuses it."""
     t, u = grid
     s = FMUSession(fmus["fmi2"], ["u"], ["y"], parameters=["tau", "t_fail"])
     tmp = s.tempdir
     assert tmp is not None and tmp.is_dir()
     with pytest.raises(SimulationError), s:
         s.simulate(t, u, {"t_fail": 0.1})
-    assert not tmp.exists()
-    assert s.closed
+    assert s.closed and s.tempdir is None
+    assert tmp.is_dir()  # kept for the next session, removed at the process's exit
     s.close()  # idempotent
     with pytest.raises(SimulationError, match="closed"):
         s.simulate(t, u, {})
 
-    # failure inside the constructor: no temp folder left behind
-    import tempfile
-
-    before = set(Path(tempfile.gettempdir()).glob("tsid-fmu-*"))
+    # failure inside the constructor: the folder is given back, none is added
     with pytest.raises(FMUError):
         FMUSession(fmus["fmi2"], ["u"], ["nope"])
-    assert set(Path(tempfile.gettempdir()).glob("tsid-fmu-*")) == before
+    with FMUSession(fmus["fmi2"], ["u"], ["y"]) as again:
+        assert again.tempdir == tmp  # the same folder, so the same library file
+        with FMUSession(fmus["fmi2"], ["u"], ["y"]) as both:  # open at the same time
+            assert both.tempdir not in (None, tmp)
+            np.testing.assert_array_equal(again.simulate(t, u, {}), both.simulate(t, u, {}))
 
 
 def test_logger_receives_messages(fmus, grid):

@@ -20,6 +20,7 @@ Each test here failed on the code before its fix (checked by reverting the fix).
 from __future__ import annotations
 
 import re
+import shutil
 from pathlib import Path
 
 import pytest
@@ -277,7 +278,12 @@ def test_a_full_temporary_folder_is_an_environment_error(lag, tmp_path, capsys, 
     with pytest.raises(TsidError, match=r"it needs [\d,]+ bytes but only 100 are free") as info:
         safe_extract(lag, tmp_path / "x")
     assert not isinstance(info.value, FMUError)
-    err = run(tmp_path, study_text(lag), capsys, status=4)
+    # a copy this process has not extracted yet (each FMU file is extracted once)
+    fresh = tmp_path / "fresh" / lag.name
+    fresh.parent.mkdir()
+    shutil.copy(lag, fresh)
+    shutil.copy(lag.parent / "good.csv", fresh.parent)
+    err = run(tmp_path, study_text(fresh), capsys, status=4)
     assert re.fullmatch(
         r"tsid: error: cannot extract Lag\.fmu: .*only 100 are free.*TMPDIR.*\n", err
     )

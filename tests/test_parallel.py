@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 from spec_helpers import experiment, lag_frame, make_spec
 
+import tsid_fmu.fmu.extraction as extraction
 from tsid_fmu.errors import FMUError, StudyError
 from tsid_fmu.evaluate import (
     DaskEvaluator,
@@ -144,8 +145,10 @@ def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_spec, own_tmp):
     np.testing.assert_array_equal(after.costs, later.costs)
     # a crashed set counts the simulation that crashed, as a failed one would
     assert got.nfev == good.nfev + 2 and after.nfev == later.nfev == 2
-    # crashed workers' extracted FMUs are removed as well as the stopped ones'
-    assert not list(own_tmp.glob("tsid-*"))
+    # crashed workers' extracted FMUs are removed as well as the stopped ones'; what is
+    # left is this process's own extraction, kept for its next session of the FMU
+    assert not list(own_tmp.glob("tsid-worker-*"))
+    assert set(own_tmp.glob("tsid-*")) <= set(extraction.folders())
 
 
 def test_hanging_row_is_stopped_by_the_time_limit(crash_spec, own_tmp):

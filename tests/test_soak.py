@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from fmu_factory import build_c_fmu, lag_response
 
+import tsid_fmu.fmu.extraction as extraction
 from tsid_fmu.errors import SimulationError
 from tsid_fmu.fmu import FMUSession
 
@@ -97,4 +98,6 @@ def test_many_sessions_opened_and_closed_leave_nothing_behind(lag, tmp_path, mon
     gc.collect()
     assert open_fds() == fds, "file descriptors leak per session"
     assert rss() - mem < 8 * MIB, f"RSS grew by {(rss() - mem) / MIB:.2f} MiB over 300 sessions"
-    assert not list(tmp_path.iterdir()), "extraction folders left behind"
+    # one extraction for all 320 sessions, kept for the next one until the process exits
+    left = set(tmp_path.iterdir())
+    assert len(left) <= 1 and left <= set(extraction.folders()), "extraction folders leak"

@@ -7,6 +7,7 @@
 - :func:`safe_extract`: extract an untrusted FMU archive.
 
 Modules, in the order of the data flow: :mod:`~tsid_fmu.fmu.archive` (extraction),
+:mod:`~tsid_fmu.fmu.extraction` (one extraction per FMU file and process),
 :mod:`~tsid_fmu.fmu.variables` and :mod:`~tsid_fmu.fmu.info` (model description),
 :mod:`~tsid_fmu.fmu.library` (shared library), :mod:`~tsid_fmu.fmu.logs` (FMU log
 messages), :mod:`~tsid_fmu.fmu.grid` (input hold, communication points),

@@ -4,20 +4,33 @@ Loading goes through FMPy's ``FMU2Slave``/``FMU2Model``/``FMU3Slave``/``FMU3Mode
 wrappers (their FMI status checks are used for setup).  Before that the library is
 opened once with :mod:`ctypes`, so that a missing dependency is reported by name
 instead of FMPy's bare exception.
+
+Libraries made by pythonfmu export ``finalizePythonInterpreter``, which their own
+destructor calls at ``exit()`` -- after a C++ static destructor has already destroyed
+the object it resets, a double free that aborts the process (``corrupted double-linked
+list``, exit status 134) after the study's results are written.  Such a library is kept
+loaded and its ``finalizePythonInterpreter`` is called once at Python's exit
+(:mod:`atexit` runs before the C++ static destructors, while the process is whole), so
+that the destructors find nothing left to free.  Other libraries are not touched.
 """
 
 from __future__ import annotations
 
+import atexit
 import ctypes
 import os
 import re
+import threading
 from pathlib import Path
 from typing import Any
 
 import tsid_fmu.fmu.steploop as steploop
 from tsid_fmu.errors import FMUError
 
-__all__ = ["load_fmu", "loop_functions"]
+__all__ = ["FINALIZE", "finalize_libraries", "load_fmu", "loop_functions"]
+
+#: the function pythonfmu's libraries export to release their interpreter state
+FINALIZE = "finalizePythonInterpreter"
 
 _DEP_RE = re.compile(r"([^\s:]+\.(?:so|dylib|dll)(?:\.[0-9.]+)?): cannot open shared object")
 
@@ -29,6 +42,41 @@ def _missing_dependency(message: str, library: Path) -> str | None:
         if Path(name).name != library.name:
             return name
     return None
+
+
+_finalizers: dict[str, ctypes.CDLL] = {}
+_finalizers_lock = threading.Lock()
+
+
+def _keep_for_exit(probe: ctypes.CDLL) -> bool:
+    """Keep ``probe`` loaded, to call its :data:`FINALIZE` at exit, if it exports one.
+
+    Returns True if it does (the caller must then not free it).  A library already kept
+    (the same file, so the same handle) is kept once.
+    """
+    if not hasattr(probe, FINALIZE):  # ctypes looks the symbol up with dlsym
+        return False
+    with _finalizers_lock:
+        if not _finalizers:
+            atexit.register(finalize_libraries)
+        if probe._name in _finalizers:
+            return False  # the handle kept already holds it loaded: free this one
+        _finalizers[probe._name] = probe
+    return True
+
+
+def finalize_libraries() -> None:
+    """Call :data:`FINALIZE` of every library that exports it, once (at Python's exit).
+
+    Runs before the C++ static destructors of ``exit()``, so a pythonfmu library's own
+    destructor finds its interpreter state already released instead of freeing it a
+    second time.  Safe to call again: each library is called once.
+    """
+    with _finalizers_lock:
+        libraries = list(_finalizers.values())
+        _finalizers.clear()
+    for library in libraries:
+        getattr(library, FINALIZE)()
 
 
 def _fmpy_class(major: int, interface: str) -> type:
@@ -98,6 +146,7 @@ def load_fmu(fmu: str, unzipdir: Path, md: Any, interface: str, major: int) -> A
             else str(exc)
         )
         raise FMUError(f"{fmu}: cannot load {where}: {reason}") from exc
+    keep = _keep_for_exit(probe)
     cwd = os.getcwd()
     try:
         return _fmpy_class(major, interface)(
@@ -110,9 +159,10 @@ def load_fmu(fmu: str, unzipdir: Path, md: Any, interface: str, major: int) -> A
         raise FMUError(f"{fmu}: cannot load {where}: {exc}") from exc
     finally:
         os.chdir(cwd)
-        from fmpy import freeLibrary
+        if not keep:
+            from fmpy import freeLibrary
 
-        freeLibrary(probe._handle)
+            freeLibrary(probe._handle)
 
 
 def _not_available(*args: Any) -> int:

@@ -29,9 +29,6 @@ Examples
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
-import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
@@ -39,9 +36,9 @@ from typing import Any, Literal
 import numpy as np
 
 import tsid_fmu.fmu.exchange as exchange
+import tsid_fmu.fmu.extraction as extraction
 import tsid_fmu.fmu.grid as grid
-from tsid_fmu.errors import FMUError, ResourceError, SimulationError
-from tsid_fmu.fmu.archive import safe_extract
+from tsid_fmu.errors import FMUError, SimulationError
 from tsid_fmu.fmu.compiled import cs_loop
 from tsid_fmu.fmu.instance import Instance, Values
 from tsid_fmu.fmu.library import load_fmu, loop_functions
@@ -252,20 +249,9 @@ class FMUSession:
     def _extract(self) -> Path:
         if self.path.is_dir():
             return self.path
-        if not self.path.is_file():
-            raise FMUError(f"FMU file not found: {self.path}")
-        if not zipfile.is_zipfile(self.path):
-            raise FMUError(f"{self.path}: not an FMU (an FMU is a ZIP archive)")
-        try:
-            self._tempdir = Path(tempfile.mkdtemp(prefix="tsid-fmu-"))
-        except OSError as exc:  # no usable temporary folder: the machine's, not the FMU's
-            raise ResourceError(
-                f"cannot create a folder to extract {self.path.name} in the temporary "
-                f"folder (TMPDIR={os.environ.get('TMPDIR', 'not set')}): "
-                f"{exc.strerror or exc}; point TMPDIR at a writable folder with room"
-            ) from None
-        # checks member names, types and sizes; FMUError names the member at fault
-        safe_extract(self.path, self._tempdir)
+        # this process's extraction of the file, shared with the sessions before and
+        # after this one (see tsid_fmu.fmu.extraction for why)
+        self._tempdir = extraction.borrow(self.path)
         return self._tempdir
 
     def _setter(self, name: str, role: str) -> tuple[str, int]:
@@ -442,7 +428,11 @@ class FMUSession:
     # -- closing ---------------------------------------------------------------------------
 
     def close(self) -> None:
-        """Terminate and free the instance, unload the library, delete the temp folder."""
+        """Terminate and free the instance, unload the library, give the folder back.
+
+        The extraction folder is kept for the next session of the same FMU file and
+        removed when the process exits (:mod:`tsid_fmu.fmu.extraction`).
+        """
         try:
             if self._inst is not None:
                 inst, self._inst = self._inst, None
@@ -450,7 +440,7 @@ class FMUSession:
         finally:
             self._log.release()
             if self._tempdir is not None:
-                shutil.rmtree(self._tempdir, ignore_errors=True)
+                extraction.give_back(self._tempdir)
                 self._tempdir = None
 
     @property
@@ -465,7 +455,12 @@ class FMUSession:
 
     @property
     def tempdir(self) -> Path | None:
-        """The folder the FMU was extracted to (removed on close), if the session owns one."""
+        """The folder the FMU was extracted to, while the session holds one (else None).
+
+        It is this process's extraction of the FMU file, lent to the session until
+        :meth:`close`, then to the next session of the same file; it is removed when the
+        process exits.
+        """
         return self._tempdir
 
     def __enter__(self) -> FMUSession:

@@ -1,0 +1,148 @@
+"""Each FMU file is extracted once per process and its folder lent to one session at a time.
+
+Issue 25: every session used to extract the FMU into a new folder and so load one more
+copy of its library; pythonfmu's copies are never unloaded and abort the process at
+exit.  Here: sessions opened one after the other share one folder (one library file),
+sessions open at the same time get one each, a changed file is extracted afresh, the
+folders go at the process's exit, and a forked child neither reuses nor removes its
+parent's folders.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmu_factory import build_c_fmu
+
+import tsid_fmu.fmu.extraction as extraction
+from tsid_fmu.errors import FMUError
+from tsid_fmu.fmu import FMUSession
+
+REPO = Path(__file__).resolve().parents[1]
+T = np.linspace(0.0, 0.1, 11)
+
+
+@pytest.fixture(scope="module")
+def lag(tmp_path_factory) -> Path:
+    return build_c_fmu(tmp_path_factory.mktemp("lag"), "Lag", interfaces=("cs",))
+
+
+@pytest.fixture
+def own_tmp(tmp_path, monkeypatch) -> Path:
+    d = tmp_path / "tmp"
+    d.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(d))
+    return d
+
+
+def _run(fmu: Path, tau: float = 0.3) -> tuple[Path, np.ndarray]:
+    with FMUSession(fmu, ["u"], ["y"], parameters=["tau"]) as s:
+        assert s.tempdir is not None
+        return s.tempdir, s.simulate(T, np.ones(T.size), {"tau": tau})
+
+
+def test_sessions_one_after_the_other_share_one_folder(lag, tmp_path, own_tmp):
+    fmu = tmp_path / "a.fmu"
+    fmu.write_bytes(lag.read_bytes())
+    first, y1 = _run(fmu)
+    second, y2 = _run(fmu)
+    assert first == second and first.parent == own_tmp and first in extraction.folders()
+    np.testing.assert_array_equal(y1, y2)
+    # the same file under another spelling of its path is the same file
+    third, _ = _run(tmp_path / "." / "a.fmu")
+    assert third == first
+    assert [p.name for p in own_tmp.iterdir()] == [first.name]
+
+
+def test_sessions_open_together_get_a_folder_each(lag, tmp_path, own_tmp):
+    fmu = tmp_path / "b.fmu"
+    fmu.write_bytes(lag.read_bytes())
+    with (
+        FMUSession(fmu, ["u"], ["y"]) as a,
+        FMUSession(fmu, ["u"], ["y"]) as b,
+    ):
+        assert a.tempdir != b.tempdir  # an FMU may allow one instance per library copy
+        ya, yb = a.simulate(T, np.ones(11), {}), b.simulate(T, np.ones(11), {})
+        np.testing.assert_array_equal(ya, yb)
+        held = {a.tempdir, b.tempdir}
+    later = {_run(fmu)[0], _run(fmu)[0]}
+    assert later <= held and len(list(own_tmp.iterdir())) == 2
+
+
+def test_a_changed_file_is_extracted_afresh(lag, tmp_path, own_tmp):
+    fmu = tmp_path / "c.fmu"
+    fmu.write_bytes(lag.read_bytes())
+    before, _ = _run(fmu)
+    data = fmu.read_bytes()
+    fmu.write_bytes(data)  # same bytes, but written again: a new modification time
+    st = fmu.stat()
+    os.utime(fmu, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+    after, _ = _run(fmu)
+    assert after != before and before.is_dir()  # the old one stays until exit
+
+
+def test_a_refused_or_missing_file_leaves_no_folder(tmp_path, own_tmp):
+    bad = tmp_path / "bad.fmu"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(FMUError, match="not an FMU"):
+        FMUSession(bad, ["u"], ["y"])
+    with pytest.raises(FMUError, match="FMU file not found"):
+        FMUSession(tmp_path / "missing.fmu", ["u"], ["y"])
+    assert not list(own_tmp.iterdir())
+
+
+_CHILD = """
+import os, sys, tempfile
+from pathlib import Path
+import numpy as np
+from tsid_fmu.fmu import FMUSession
+import tsid_fmu.fmu.extraction as extraction
+
+fmu, report = Path(sys.argv[1]), Path(sys.argv[2])
+def run():
+    with FMUSession(fmu, ["u"], ["y"], parameters=["tau"]) as s:
+        s.simulate(np.linspace(0, 0.1, 11), np.ones(11), {"tau": 0.3})
+        return s.tempdir
+parent = run()
+pid = os.fork()
+if pid == 0:  # the child opens the FMU too, then exits through Python's atexit
+    child = run()
+    (report.parent / "child.txt").write_text(str(child))
+    sys.exit(0)
+_, status = os.waitpid(pid, 0)
+child = Path((report.parent / "child.txt").read_text())
+report.write_text(
+    f"{os.waitstatus_to_exitcode(status)} {parent.is_dir()} {child != parent} "
+    f"{child.exists()} {parent}"
+)
+"""
+
+
+def test_folders_go_at_exit_and_a_forked_child_leaves_the_parents(lag, tmp_path):
+    """The creating process removes its folders at exit; a forked child only its own."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    report = tmp_path / "report.txt"
+    proc = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(_CHILD), str(lag), str(report)],
+        cwd=REPO,
+        env={**os.environ, "TMPDIR": str(tmp), "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    code, parent_kept, own, child_left, parent = report.read_text().split()
+    # the child exited 0, the parent's folder survived the child's exit, the child
+    # extracted into a folder of its own and removed it at its exit
+    assert (code, parent_kept, own, child_left) == ("0", "True", "True", "False")
+    assert not Path(parent).exists()  # and the parent removed its own at its exit
+    assert not list(tmp.iterdir())
