@@ -332,9 +332,7 @@ def tasks(
     if quick:
         chosen = list(QUICK)
     else:
-        chosen = [
-            (f, k) for f, (_, n) in FAMILIES.items() for k in range(count or n)
-        ]
+        chosen = [(f, k) for f, (_, n) in FAMILIES.items() for k in range(count or n)]
     return [t for t in chosen if family is None or t[0] == family]
 
 

@@ -19,10 +19,11 @@ from spec_helpers import CurveEvaluator
 
 from tsid_fmu import Experiment, Method, Parameter, Study
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search import adaptive, pipeline, taguchi, verdict
+from tsid_fmu.search import adaptive, context, local, taguchi, verdict
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.pipeline import run_stages
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.start import start_points
 from tsid_fmu.search.taguchi import TaguchiRun, taguchi_stage
 from tsid_fmu.trail.folder import NullStore
@@ -237,7 +238,7 @@ def test_a_poor_fit_after_the_refinement_sends_the_search_back_until_the_global_
     assert answer.cost < verdict.POOR_FIT * W.size
     assert adaptive.verdict(stages)[0] == 0
     # without the rule, the local minimum would be the answer
-    monkeypatch.setattr(pipeline, "POOR_FIT", math.inf)
+    monkeypatch.setattr(local, "POOR_FIT", math.inf)
     alone = run_stages(_ring_study(), Evaluators(FloorEvaluator(_ring, RING, SIGMA)), NullStore())
     assert adaptive.answer_stage(alone).cost > 100 * answer.cost
 
@@ -322,7 +323,7 @@ def test_refine_none_ends_with_a_check_stage_that_decides_the_verdict():
 
 
 def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatch):
-    polish = pipeline._polish
+    polish = context.polish
 
     def collapsing(name, *args, **kwargs):
         stage = polish(name, *args, **kwargs)
@@ -331,13 +332,13 @@ def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatc
             stage.extra["stop"] = "xtol"
         return stage
 
-    monkeypatch.setattr(pipeline, "_polish", collapsing)
+    monkeypatch.setattr(context, "polish", collapsing)
     study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     first = stages[0]
     assert "trust region collapsed" in first.extra["resumed"]
     assert first.records[-1].extra.get("handover") is None  # it went on past the hand-over
-    monkeypatch.setattr(pipeline, "_collapsed", lambda stage: None)
+    monkeypatch.setattr(local, "_collapsed", lambda stage: None)
     alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     assert "resumed" not in alone[0].extra and len(alone[0].records) < len(first.records)
 
@@ -378,12 +379,12 @@ def _horizon_run(start: dict[str, float], measured: np.ndarray = LONG_Y):
         method=Method(cost="sse", weighting="noise", replicates=1),
     )
     evaluators = Shortening(measured)
-    ctx = pipeline._Context(study, evaluators, NullStore(), None, pipeline.Control())
+    ctx = context.Context(study, evaluators, NullStore(), None, context.Control())
     exps = [e.name for e in study.experiments]
     cost = evaluators.ev.cost(**start)
-    arrays = pipeline.StageResult("taguchi", "taguchi", dict(start), cost, 0, "given")
-    stages = [arrays, pipeline._refinement(ctx, start, exps)]
-    evaluators.restart = pipeline._horizons(ctx, stages, float(LONG.size), exps)
+    arrays = StageResult("taguchi", "taguchi", dict(start), cost, 0, "given")
+    stages = [arrays, context.refinement(ctx, start, exps)]
+    evaluators.restart = local._horizons(ctx, stages, float(LONG.size), exps)
     return stages, evaluators
 
 
@@ -402,7 +403,7 @@ def test_a_local_minimum_is_left_by_following_the_data_from_its_first_part(monke
     # the horizons' costs, over part of the data, never compete with the full cost
     assert all(s.cost < answer.cost for s in stages[2:5])
     # without the short horizons, the same refinement stays in the local minimum
-    monkeypatch.setattr(pipeline, "HORIZONS", ())
+    monkeypatch.setattr(local, "HORIZONS", ())
     alone, _ = _horizon_run({"w": 2.4, "a": 1.0})
     assert adaptive.answer_stage(alone).cost > 100 * LONG.size
 
@@ -423,7 +424,7 @@ def test_a_poor_fit_that_the_horizons_reach_again_needs_no_restart(monkeypatch):
     assert last.extra["agrees"] == "refinement"
     assert last.cost == pytest.approx(stages[1].cost, rel=adaptive.AGREE)
     assert evaluators.restart is False  # so no restart follows
-    monkeypatch.setattr(pipeline, "AGREE", -1.0)  # without the rule: restarts
+    monkeypatch.setattr(local, "AGREE", -1.0)  # without the rule: restarts
     again, ev2 = _horizon_run({"w": 2.98, "a": 1.0}, offset)
     assert ev2.restart is True and "agrees" not in again[-1].extra
 
@@ -431,7 +432,7 @@ def test_a_poor_fit_that_the_horizons_reach_again_needs_no_restart(monkeypatch):
 def test_the_poor_fit_warning_says_which_search_found_no_lower_basin():
     from tsid_fmu.identify import _poor_fit
 
-    stage = pipeline.StageResult("refinement", "refinement", {"w": 3.0}, 1e6, 10, "")
+    stage = StageResult("refinement", "refinement", {"w": 3.0}, 1e6, 10, "")
     assert _poor_fit(stage) == []
     stage.extra["poor_fit"] = {"floor": 800.0, "ratio": 1250.0, "restarts": 2}
     assert "1.25e+03 times the noise floor, and 2 restart(s)" in _poor_fit(stage)[0]

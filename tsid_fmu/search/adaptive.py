@@ -43,7 +43,15 @@ import numpy as np
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 
-__all__ = ["AGREE", "HORIZONS", "RESTART_SEPARATION", "answer_stage", "restart_start", "start_sets", "verdict"]
+__all__ = [
+    "AGREE",
+    "HORIZONS",
+    "RESTART_SEPARATION",
+    "answer_stage",
+    "restart_start",
+    "start_sets",
+    "verdict",
+]
 
 RESTART_SEPARATION = 0.15
 """A restart's start lies at least this far (in first ranges, along some parameter) from

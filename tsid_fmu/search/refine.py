@@ -7,9 +7,7 @@ stage's answer, within the parameters' bounds, in the same search coordinates
 (:mod:`tsid_fmu.search.space`). Its Jacobians are forward differences whose ``p``
 simulations go to the evaluator as one batch, so they run in parallel. It stops at
 SciPy's tolerances or at ``refine_max_nfev`` simulations, and its answer is the best set
-it evaluated, so it never ends worse than it started. Its variables are scaled by the
-Jacobian's columns (SciPy's ``x_scale="jac"``), as first ranges typed by hand can be
-off by a factor that the search coordinates alone do not undo.
+it evaluated, so it never ends worse than it started.
 
 Two simulations SciPy would spend are not: the start's residuals come from the caller,
 which has just scored it; and SciPy's own ``ftol``/``xtol`` tests on an accepted step are
@@ -244,7 +242,6 @@ def refine_stage(
             xtol=_XTOL,
             gtol=_GTOL,
             max_nfev=10_000,
-            x_scale="jac",
         )
         status, message = 0, f"least squares: {out.message}"
         extra["stop"] = {1: "gtol", 2: "ftol", 3: "xtol", 4: "xtol"}.get(int(out.status), "")

@@ -1,0 +1,206 @@
+"""The local search after the arrays: refinement, back to the arrays, horizons, restarts.
+
+The order of the steps and why each is taken are in :mod:`tsid_fmu.search.adaptive`;
+with ``refine = "none"`` (or a cost other than ``sse``) :func:`check` runs the local
+probe test at the arrays' answer instead.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+
+from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.adaptive import AGREE, HORIZONS, answer_stage, restart_start
+from tsid_fmu.search.context import Context, note, polish, refinement
+from tsid_fmu.search.record import IterationRecord
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.verdict import POOR_FIT, noise_floor, probe_test
+
+__all__ = ["check", "local_search"]
+
+#: Continues the handed-over Taguchi stage from its records, to its own end.
+Resume = Callable[[list[IterationRecord]], StageResult]
+
+
+def _unsettled(stages: list[StageResult], floor: float) -> str | None:
+    """Why the answer so far needs more search: no stationarity shown, or a poor fit."""
+    answer = answer_stage(stages)
+    test = answer.extra.get("stationarity") or {}
+    if not test.get("holds", False):
+        return f"the refined answer is not shown to be an optimum ({test.get('detail', '')})"
+    if answer.cost > POOR_FIT * floor:
+        return (
+            f"the refined answer is a poor fit (cost {answer.cost:.6g}, "
+            f"{answer.cost / floor:.3g} times the noise floor)"
+        )
+    return None
+
+
+def _collapsed(refined: StageResult) -> str | None:
+    """Whether the refinement stopped because its trust region collapsed (SciPy's xtol).
+
+    A collapsed trust region means the steps its Jacobian proposed kept failing: on a
+    rough cost (dry friction's stick-slip) or in a sharply curved valley the local model
+    does not hold, and the arrays, which need no derivative, are the better judge.
+    """
+    if refined.kind == "refinement" and refined.extra.get("stop") == "xtol":
+        return "the refinement's trust region collapsed (xtol): its local model did not hold"
+    return None
+
+
+def local_search(
+    ctx: Context, stages: list[StageResult], adaptive: bool, resume: Resume
+) -> list[StageResult]:
+    """Refine the best set; with ``adaptive``, go on where it is not settled.
+
+    See :mod:`tsid_fmu.search.adaptive` for the order of the steps; ``resume`` continues
+    the handed-over Taguchi stage (``stages[0]``) from its records to its own end.
+    """
+    study = ctx.study
+    exps = [e.name for e in study.identify_experiments()]
+    stages.append(refinement(ctx, answer_stage(stages).x, exps))
+    if not adaptive:
+        return stages
+    evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
+    floor = noise_floor(evaluator, study.method.weighting == "noise")
+    first = stages[0]
+    why = _unsettled(stages, floor) or _collapsed(stages[-1])
+    if why and first.kind == "taguchi" and first.records[-1].extra.get("handover"):
+        note(ctx, f"{why}: the Taguchi stage goes on")
+        stages[0] = resume(first.records)
+        stages[0].extra["resumed"] = why
+        if stages[0].status == 2:
+            return stages
+        if stages[0].cost < stages[-1].cost:
+            name = "refinement after the Taguchi stage went on"
+            stages.append(refinement(ctx, stages[0].x, exps, "refinement_02", name))
+    restarts = _restarts(ctx, stages, floor, exps) if _horizons(ctx, stages, floor, exps) else 0
+    answer = answer_stage(stages)
+    if floor > 0 and answer.cost > POOR_FIT * floor:
+        ratio = answer.cost / floor
+        agreed = any(s.extra.get("agrees") for s in stages)
+        answer.extra["poor_fit"] = {
+            "floor": floor,
+            "ratio": ratio,
+            "restarts": restarts,
+            "horizons_agree": agreed,
+        }
+    return stages
+
+
+def _horizons(ctx: Context, stages: list[StageResult], floor: float, exps: list[str]) -> bool:
+    """Follow a minimum from the first part of the data to all of it, while unsettled.
+
+    The refinement runs on the first :data:`HORIZONS` fractions of each experiment's
+    samples in turn, each from the last one's answer, starting at the arrays' best set;
+    then on the full data. Over a short horizon the simulated and measured signals
+    cannot drift a whole period apart, so a lightly damped or swinging model's cost has
+    few valleys there: the classic continuation for oscillators.
+
+    Returns whether restarts may still help: False when the answer was settled, or when
+    the horizons, a second route, ended at the same stationary answer (within
+    :data:`AGREE` of its cost): a poor fit that both routes reach is the model's or the
+    noise's, not a local minimum's.
+    """
+    why = _unsettled(stages, floor)
+    if why is None:
+        return False
+    before = answer_stage(stages)
+    study = ctx.study
+    names = study.parameter_names
+    arrays = [s for s in stages if s.kind == "taguchi" and math.isfinite(s.cost)]
+    x = dict((min(arrays, key=lambda s: s.cost) if arrays else answer_stage(stages)).x)
+    note(ctx, f"{why}: the refinement follows the data's first part to its end")
+    samples = sum(len(e.measured) for e in ctx.evaluators.spec(names, exps, {}).experiments)
+    for k, fraction in enumerate(HORIZONS, 1):
+        evaluator = ctx.evaluators.shortened(names, exps, fraction)
+        if evaluator is None:
+            return True
+        if sum(len(e.measured) for e in evaluator.spec.experiments) >= samples:
+            break
+        stage = _horizon_stage(ctx, evaluator, x, f"horizon_{k:02d}", fraction)
+        stage.experiments = list(exps)
+        stages.append(stage)
+        x = {n: float(stage.x[n]) for n in names}
+    last = refinement(ctx, x, exps, "horizon_full", "refinement after the horizons")
+    stages.append(last)
+    held = (last.extra.get("stationarity") or {}).get("holds", False)
+    if held and abs(last.cost - before.cost) <= AGREE * before.cost:
+        note(ctx, "the horizons reached the same answer: no restart")
+        last.extra["agrees"] = before.name
+        return False
+    return True
+
+
+def _horizon_stage(
+    ctx: Context, evaluator: Evaluator, start: Mapping[str, float], key: str, fraction: float
+) -> StageResult:
+    """Refine on a shortened record (a finished one from the same start is read back)."""
+    start = {n: float(start[n]) for n in ctx.study.parameter_names}
+    done = ctx.store.stage(key)
+    if done is not None and done.extra.get("start") == start:
+        return done
+    share = f"{100 * fraction:.3g} %"
+    name = f"refinement on the first {share} of the data"
+    result = polish(name, ctx.study, start, evaluator, ctx.progress)
+    result.kind = "horizon"
+    result.message = f"cost over the first {share} of each experiment's samples; {result.message}"
+    result.extra.update(start=start, fraction=fraction)
+    ctx.store.write_stage(key, result)
+    return result
+
+
+def _restarts(ctx: Context, stages: list[StageResult], floor: float, exps: list[str]) -> int:
+    """Refine from the start points, then from the next-best runs, while unsettled.
+
+    At most ``max_reruns`` restarts; returns how many ran. An answer still a poor fit
+    after the search is recorded (``extra["poor_fit"]``): the warnings then say that
+    the search found no better basin.
+    """
+    study = ctx.study
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    k = 0
+    while k < study.method.max_reruns:
+        why = _unsettled(stages, floor)
+        if why is None:
+            break
+        explored = [s.extra["start"] for s in stages if "start" in s.extra]
+        explored += [s.x for s in stages if s.kind == "refinement"]
+        found = restart_start(stages, space, explored, starts_first=True)
+        if found is None:
+            break
+        k += 1
+        note(ctx, f"{why}: restart {k} from {found[2]} (cost {found[1]:.6g})")
+        name = f"restart {k} from {found[2]}"
+        stages.append(refinement(ctx, found[0], exps, f"restart_{k:02d}", name))
+    return k
+
+
+def check(ctx: Context, last: StageResult) -> StageResult:
+    """Run the local probe test at an answer no refinement tested (a ``check`` stage)."""
+    study = ctx.study
+    exps = [e.name for e in study.identify_experiments()]
+    done = ctx.store.stage("check")
+    x = {n: float(last.x[n]) for n in study.parameter_names}
+    if done is not None and done.extra.get("start") == x:
+        return done
+    evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    n0 = evaluator.nfev
+    step = study.method.leveling.tolerance
+    test, best, cost = probe_test(evaluator, space, x, last.cost, step)
+    result = StageResult(
+        name="stationarity check",
+        kind="check",
+        x=best,
+        cost=cost,
+        nfev=evaluator.nfev - n0,
+        message=test.detail,
+        status=0 if test.holds else 1,
+        experiments=exps,
+        extra={"start": x, "stationarity": test.to_dict()},
+    )
+    ctx.store.write_stage("check", result)
+    return result
