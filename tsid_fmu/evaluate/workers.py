@@ -21,23 +21,25 @@ not crash would have reported up to there.
 
 from __future__ import annotations
 
-import contextlib
-import multiprocessing as mp
 import os
-import pickle
 import shutil
 import signal
-import sys
 import tempfile
 import time
-import types
 import warnings
 from collections import deque
-from collections.abc import Iterator
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from tsid_fmu.errors import FMUError, TsidError
+from tsid_fmu.errors import FMUError
+from tsid_fmu.evaluate.processes import (
+    children_allowed,
+    error_reason,
+    exit_reason,
+    main_module_hidden,
+    portable_error,
+    worker_context,
+)
 from tsid_fmu.evaluate.runner import (
     Job,
     OnResult,
@@ -97,7 +99,7 @@ def _worker_main(conn: Connection, spec: EvaluationSpec, state: Any, scratch: st
         runner = SetRunner(spec, monitor)
         warm_up()  # load the compiled loop now, not in the first (timed) simulation
     except BaseException as exc:
-        conn.send(("init_error", _portable_error(exc)))
+        conn.send(("init_error", portable_error(exc)))
         return
     conn.send(("ready", os.getpid()))
     try:
@@ -115,74 +117,12 @@ def _worker_main(conn: Connection, spec: EvaluationSpec, state: Any, scratch: st
                 result = runner.run_job(tuple(job))  # type: ignore[arg-type]
             except Exception as exc:  # never lose the reason of a failed set
                 where = monitor.where()
-                result = failed_result(spec, job[0], _reason(exc), nfev=runner.started, where=where)
+                result = failed_result(
+                    spec, job[0], error_reason(exc), nfev=runner.started, where=where
+                )
             conn.send(("done", seq, result))
     finally:
         runner.close()
-
-
-def _reason(exc: BaseException) -> str:
-    """Text of an exception for a set's error (type named unless it is our own)."""
-    return str(exc) if isinstance(exc, TsidError) else f"{type(exc).__name__}: {exc}"
-
-
-def _portable_error(exc: BaseException) -> TsidError:
-    """Turn an exception into a picklable TsidError of the same kind, message kept."""
-    if isinstance(exc, TsidError):
-        try:
-            pickle.loads(pickle.dumps(exc))
-            return exc
-        except Exception:
-            return (
-                type(exc)(str(exc))
-                if type(exc).__module__ == "tsid_fmu.errors"
-                else FMUError(str(exc))
-            )
-    return FMUError(f"the worker could not start: {type(exc).__name__}: {exc}")
-
-
-def exit_reason(code: int | None) -> str:
-    """Describe how a worker process ended (``"worker crashed (signal 11 SIGSEGV)"``)."""
-    if code is None:
-        return "worker stopped responding"
-    if code < 0:
-        try:
-            name = signal.Signals(-code).name
-        except ValueError:
-            name = "unknown signal"
-        return f"worker crashed (signal {-code} {name})"
-    return f"worker exited with status {code}"
-
-
-@contextlib.contextmanager
-def _main_module_hidden() -> Iterator[None]:
-    """Start a process without it re-importing the ``__main__`` script.
-
-    ``spawn``/``forkserver`` children normally re-run the parent's main script, which
-    starts the study again in a script without an ``if __name__ == "__main__":``
-    guard. Workers need nothing from ``__main__`` (their target and arguments are
-    tsid-fmu objects), so the main module is hidden while the process starts.
-    """
-    main = sys.modules.get("__main__")
-    sys.modules["__main__"] = types.ModuleType("__tsid_worker_main__")
-    try:
-        yield
-    finally:
-        if main is not None:
-            sys.modules["__main__"] = main
-
-
-@contextlib.contextmanager
-def children_allowed() -> Iterator[None]:
-    """Let a daemonic process (a Dask worker) start worker processes of its own."""
-    config = mp.current_process()._config  # type: ignore[attr-defined]
-    daemon = config.get("daemon")
-    config["daemon"] = False
-    try:
-        yield
-    finally:
-        if daemon is not None:
-            config["daemon"] = daemon
 
 
 class _Worker:
@@ -198,7 +138,7 @@ class _Worker:
             name=f"tsid-worker-{number}",
             daemon=True,
         )
-        with _main_module_hidden():
+        with main_module_hidden():
             self.process.start()
         child.close()
         self.ready = False
@@ -273,11 +213,7 @@ class LocalPool:
         recycle_after: int | None = None,
         start_method: str | None = None,
     ) -> None:
-        if start_method is None:
-            start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        self.ctx = mp.get_context(start_method)
-        if start_method == "forkserver":
-            self.ctx.set_forkserver_preload(["tsid_fmu.evaluate._preload"])
+        self.ctx = worker_context(start_method)
         self.spec = spec
         self.limit = limit
         self.recycle_after = recycle_after
