@@ -17,9 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import StudyError
-from tsid_fmu.evaluate.factory import make_evaluator
+from tsid_fmu.evaluate.factory import in_process, make_evaluator
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.evaluate.timelimit import TimeLimit
 from tsid_fmu.fmu.compiled import CompileNotice, warm_up
 from tsid_fmu.report.console import COMPILING, ConsoleProgress
 from tsid_fmu.report.files import write_result_files
@@ -86,6 +87,24 @@ class _Evaluators:
                 base, start_values=start, interface=self.interface or base.interface
             )
         return self.specs[key]
+
+    def key(self, study: Study, exps: list[str]) -> tuple:
+        """Return the key of the evaluator of every parameter on ``exps``."""
+        return self._key(study.parameter_names, exps, {})
+
+    def check_limit(self, ev: Evaluator | None) -> dict[str, Any]:
+        """How a check outside the evaluators simulates: isolated, under which limit.
+
+        In a child process under the study's time limit per simulation (``ev``'s, once
+        it has one; else the limit before any simulation), unless the study runs in
+        this process (one worker with ``timeout=0``).
+        """
+        if in_process(self.runner["workers"], self.runner["timeout"], self.runner["scheduler"]):
+            return {"isolate": False, "time_limit": None}
+        limit = getattr(ev, "time_limit", None) if ev is not None else None
+        if limit is None:
+            limit = TimeLimit(self.runner["timeout"]).seconds()
+        return {"isolate": True, "time_limit": limit}
 
     def get(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> Evaluator:
         if self.given is not None:
@@ -231,7 +250,14 @@ def _fidelity(
         return None
     exps = [e.name for e in study.identify_experiments()]
     spec = evaluators.spec(study.parameter_names, exps, {})
-    check = check_fidelity(spec, x, where=where, noise=study_noise(study), sensitivities=sens)
+    check = check_fidelity(
+        spec,
+        x,
+        where=where,
+        noise=study_noise(study),
+        sensitivities=sens,
+        **evaluators.check_limit(evaluators.pool.get(evaluators.key(study, exps))),
+    )
     evaluators.use(check.interface)
     if callback:
         callback("fidelity", {"message": check.message, "check": check})
