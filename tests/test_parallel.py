@@ -146,6 +146,8 @@ def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_spec, own_tmp):
     assert np.all(np.isinf(got.costs[[1, 3]]))
     assert "worker crashed (signal 6 SIGABRT)" in got.errors[1]
     assert "worker crashed (signal 11 SIGSEGV)" in got.errors[3]
+    # retried once in a fresh worker before it is scored as failed; both attempts named
+    assert got.errors[3].count("SIGSEGV") == 2 and "on the retry in a fresh worker" in got.errors[3]
     assert got.errors[1].startswith("experiment: replicate 1: ")  # the measured input first
     assert got.errors[0] is None and got.errors[2] is None and got.errors[4] is None
     assert got.residuals[1] is None and got.residuals[3] is None

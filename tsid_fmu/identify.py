@@ -127,6 +127,16 @@ class _Evaluators:
             self.pool[key] = make_evaluator(spec, **self.runner)
         return self.pool[key]
 
+    def retried(self) -> list[str]:
+        """Return one warning for the sets that crashed a worker, then passed in a fresh one."""
+        notes = [n for ev in self.pool.values() for n in getattr(ev, "retried", [])]
+        if not notes:
+            return []
+        return [
+            f"{len(notes)} parameter set(s) crashed their worker process and succeeded when "
+            f"run again in a fresh one (the FMU crashes now and then); first: {notes[0]}"
+        ]
+
     @property
     def nfev(self) -> int:
         """Simulations run so far by the evaluators of the study."""
@@ -369,6 +379,7 @@ def _finish(
         + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
         + result.warnings
     )
+    result.warnings += evaluators.retried()
     checked = _fidelity(study, evaluators, x, "answer", callback, found.sensitivities)
     _record(result, start, checked)
     result.weak = _weak(result)

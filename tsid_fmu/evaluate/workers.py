@@ -4,10 +4,14 @@
 :class:`~tsid_fmu.evaluate.runner.SetRunner` when it starts (extracts the FMU,
 instantiates it once) and reuses it for every job. One job is one parameter set.
 
-* A worker that dies (``abort()``, segmentation fault, ``exit()``) fails only the set it
-  was running -- ``inf`` costs, reason ``"<experiment>: worker crashed (signal 11
-  SIGSEGV); the worker was replaced"`` -- and is replaced; the jobs queued behind it go
-  to other workers.
+* A worker that dies (``abort()``, segmentation fault, ``exit()``) is replaced, and the
+  set it was running is run once more, in a worker that has run nothing else (a crash
+  can be the worker's state, not the parameters'). A set that crashes that worker too
+  fails -- ``inf`` costs, reason ``"<experiment>: worker crashed (signal 11 SIGSEGV);
+  the worker was replaced (on the retry in a fresh worker; first attempt: ...)"``, both
+  attempts named -- and one that succeeds there is noted in :attr:`LocalPool.retried`.
+  Either way the set's costs and count are those of its last attempt alone. The jobs
+  queued behind it go to other workers.
 * A simulation that runs past the :class:`~tsid_fmu.evaluate.timelimit.TimeLimit` is
   stopped: its worker is killed and replaced, and the set fails with the reason.
 * With ``recycle_after``, a worker is replaced after that many jobs (FMUs that leak).
@@ -219,6 +223,9 @@ class LocalPool:
         self.recycle_after = recycle_after
         self._count = 0
         self._seq = 0
+        self._retries: deque[int] = deque()  # crashed jobs of this call, for a fresh worker
+        self._first: dict[int, str] = {}  # job index -> why its first attempt failed
+        self.retried: list[str] = []  # crashed jobs that a fresh worker then ran through
         self.n_workers = n_workers
         self.workers: list[_Worker] = []
         for _ in range(n_workers):
@@ -282,13 +289,15 @@ class LocalPool:
         are replaced, so that no late reply reaches a later call.
         """
         pending: deque[int] = deque(range(len(jobs)))
+        self._retries.clear()
+        self._first.clear()
         while len(self.workers) < self.n_workers:  # replacements after an interruption
             self._spawn()
         try:
-            while pending or any(w.inflight for w in self.workers):
+            while pending or self._retries or any(w.inflight for w in self.workers):
                 self._dispatch(pending, jobs)
                 if not self.workers:
-                    for i in pending:
+                    for i in [*self._retries, *pending]:
                         reason = "no worker process is left"
                         on_result(i, failed_result(self.spec, jobs[i][0], reason))
                     return
@@ -311,6 +320,15 @@ class LocalPool:
     def _dispatch(self, pending: deque[int], jobs: list[Job]) -> None:
         quota = self.recycle_after
         n_ready = sum(w.ready for w in self.workers)
+        for w in list(self.workers):  # a crashed job's retry: a worker that ran nothing
+            if self._retries and w.ready and not w.sent:
+                self._seq += 1
+                index = self._retries.popleft()
+                try:
+                    w.send(self._seq, index, jobs[index])
+                except (OSError, BrokenPipeError):
+                    self._retries.appendleft(index)
+                    self._replace(w)
         for w in list(self.workers):
             while (
                 w.ready
@@ -362,6 +380,11 @@ class LocalPool:
                 break
             _seq, index = w.inflight.popleft()
             self.limit.observe(reply[2].durations)
+            if index in self._first and getattr(reply[2], "error", None) is None:
+                self.retried.append(
+                    f"{_describe(jobs[index])}: {self._first[index]}; the retry in a fresh "
+                    "worker succeeded"
+                )
             on_result(index, reply[2])
         quota = self.recycle_after
         if not w.inflight and quota is not None and w.sent >= quota:
@@ -400,6 +423,15 @@ class LocalPool:
         if not begun:  # it died between jobs (killed from outside): nothing was lost
             return
         index = pending.popleft()
+        if dead and index not in self._first:
+            # a crash may be the worker's, not the parameters': once more, in a fresh one
+            self._first[index] = reason
+            self._retries.append(index)
+            return
+        if index in self._first:
+            reason = (
+                f"{reason} (on the retry in a fresh worker; first attempt: {self._first[index]})"
+            )
         on_result(
             index, failed_result(self.spec, jobs[index][0], reason, nfev=started, where=where)
         )
@@ -408,6 +440,11 @@ class LocalPool:
         """Stop the workers (they free their FMU instances and extracted folders)."""
         workers, self.workers = self.workers, []
         _stop_all(workers)
+
+
+def _describe(job: Job) -> str:
+    """Return the parameter set of a job, for a note (``"gain=1.5, bias=0"``)."""
+    return ", ".join(f"{k}={v:.6g}" for k, v in job[1].items())
 
 
 def _stop_all(workers: list[_Worker]) -> None:
