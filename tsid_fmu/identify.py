@@ -421,10 +421,13 @@ def identify(
         Continue the study already in ``out`` (after an interruption, or after a person
         edited the last ``next_levels.toml``).
     workers : int, optional
-        Worker processes for the runs (default: the available cores; 1 runs in this
-        process). The result is the same for any number.
+        Worker processes for the runs (default: the available cores). One worker is one
+        worker process, under the time limit, so that a crashing FMU fails only its
+        row; with ``timeout=0`` one worker runs in this process instead. The result is
+        the same for any number.
     timeout : float, optional
-        Time limit per simulation in seconds (default: derived from the first runs).
+        Time limit per simulation in seconds (default: derived from the first runs; 0:
+        none). The solver-fidelity checks simulate in a child process under it too.
     scheduler : str or distributed.Client, optional
         A ``dask.distributed`` scheduler to send the runs to.
     progress : bool or callable
