@@ -87,8 +87,13 @@ class IsolatedCalls:
             self._process = self._ctx.Process(
                 target=_child_main, args=(child, self._scratch), name="tsid-check", daemon=True
             )
-            with main_module_hidden():
-                self._process.start()
+            try:
+                with main_module_hidden():
+                    self._process.start()
+            except BaseException:  # Ctrl-C while it starts: nothing is left behind
+                child.close()
+                self.close(kill=True)
+                raise
             child.close()
         return self._conn
 
@@ -133,6 +138,8 @@ class IsolatedCalls:
         """Stop the child (kill it with ``kill``) and remove its temporary folder."""
         conn, process, scratch = self._conn, self._process, self._scratch
         self._conn = self._process = self._scratch = None
+        if process is not None and process.pid is None:  # never started
+            process = None
         if process is not None:
             if not kill and conn is not None:
                 try:
