@@ -283,7 +283,8 @@ def test_a_full_temporary_folder_is_an_environment_error(lag, tmp_path, capsys, 
     fresh.parent.mkdir()
     shutil.copy(lag, fresh)
     shutil.copy(lag.parent / "good.csv", fresh.parent)
-    err = run(tmp_path, study_text(fresh), capsys, status=4)
+    # in this process (--workers 1 --timeout 0), where the patched disk_usage holds
+    err = run(tmp_path, study_text(fresh), capsys, "--workers", "1", "--timeout", "0", status=4)
     assert re.fullmatch(
         r"tsid: error: cannot extract Lag\.fmu: .*only 100 are free.*TMPDIR.*\n", err
     )

@@ -97,10 +97,17 @@ def test_simulate_and_recycling_match_serial(lag_spec, serial):
         np.testing.assert_array_equal(s1.outputs, s2.outputs)
 
 
-def test_make_evaluator_chooses_serial_or_parallel(lag_spec):
-    with make_evaluator(lag_spec, workers=1) as ev:
+def test_make_evaluator_chooses_serial_or_parallel(lag_spec, monkeypatch):
+    """One worker is still a worker process (time limit, crash isolation); only
+    ``timeout=0`` with one worker runs in this process."""
+    with make_evaluator(lag_spec, workers=1, timeout=0) as ev:
         assert type(ev) is SerialEvaluator
+    with make_evaluator(lag_spec, workers=1) as ev:
+        assert isinstance(ev, PoolEvaluator) and ev.workers == 1 and ev.time_limit == 300
     with make_evaluator(lag_spec, workers=1, timeout=5.0) as ev:
+        assert isinstance(ev, PoolEvaluator) and ev.workers == 1
+    monkeypatch.setattr("tsid_fmu.evaluate.factory.available_cores", lambda: 1)
+    with make_evaluator(lag_spec) as ev:  # one usable core
         assert isinstance(ev, PoolEvaluator) and ev.workers == 1
     assert available_cores() >= 1
 
@@ -139,6 +146,8 @@ def test_crashing_rows_fail_alone_and_workers_are_replaced(crash_spec, own_tmp):
     assert np.all(np.isinf(got.costs[[1, 3]]))
     assert "worker crashed (signal 6 SIGABRT)" in got.errors[1]
     assert "worker crashed (signal 11 SIGSEGV)" in got.errors[3]
+    # retried once in a fresh worker before it is scored as failed; both attempts named
+    assert got.errors[3].count("SIGSEGV") == 2 and "on the retry in a fresh worker" in got.errors[3]
     assert got.errors[1].startswith("experiment: replicate 1: ")  # the measured input first
     assert got.errors[0] is None and got.errors[2] is None and got.errors[4] is None
     assert got.residuals[1] is None and got.residuals[3] is None

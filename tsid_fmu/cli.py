@@ -40,7 +40,8 @@ exit status:
   0    converged
   1    stopped at a limit (iterations, simulations) with a valid result
   2    bad input: a study, data or FMU file, or an output folder that holds another
-       study or is in use (one line on stderr naming the file, key or folder)
+       study or is in use (one line on stderr naming the file, key or folder); also
+       an FMU that finishes no simulation at the start points within --timeout
   3    paused for review (--pause-after): edit next_levels.toml, then --resume
   4    environment error: disk full, folder read-only, no permission (one line
        naming the path)
@@ -271,14 +272,15 @@ def _identify_parser(sub: Any) -> None:
         "--workers",
         type=worker_count,
         metavar="N",
-        help="worker processes (default: all cores; 1 = serial)",
+        help="worker processes (default: all cores; 1 = one worker process, or this process "
+        "with --timeout 0)",
     )
     p.add_argument(
         "--timeout",
         type=timeout_seconds,
         metavar="SECONDS",
-        help="time limit per simulation (0: none; default: automatic, from the first runs); "
-        "a run past it fails and the study goes on",
+        help="time limit per simulation, checks included (0: none; default: automatic, from "
+        "the first runs); a run past it fails and the study goes on",
     )
     p.add_argument(
         "--scheduler",

@@ -17,9 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import StudyError
-from tsid_fmu.evaluate.factory import make_evaluator
+from tsid_fmu.evaluate.factory import in_process, make_evaluator
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.evaluate.timelimit import TimeLimit
 from tsid_fmu.fmu.compiled import CompileNotice, warm_up
 from tsid_fmu.report.console import COMPILING, ConsoleProgress
 from tsid_fmu.report.files import write_result_files
@@ -87,6 +88,24 @@ class _Evaluators:
             )
         return self.specs[key]
 
+    def key(self, study: Study, exps: list[str]) -> tuple:
+        """Return the key of the evaluator of every parameter on ``exps``."""
+        return self._key(study.parameter_names, exps, {})
+
+    def check_limit(self, ev: Evaluator | None) -> dict[str, Any]:
+        """How a check outside the evaluators simulates: isolated, under which limit.
+
+        In a child process under the study's time limit per simulation (``ev``'s, once
+        it has one; else the limit before any simulation), unless the study runs in
+        this process (one worker with ``timeout=0``).
+        """
+        if in_process(self.runner["workers"], self.runner["timeout"], self.runner["scheduler"]):
+            return {"isolate": False, "time_limit": None}
+        limit = getattr(ev, "time_limit", None) if ev is not None else None
+        if limit is None:
+            limit = TimeLimit(self.runner["timeout"]).seconds()
+        return {"isolate": True, "time_limit": limit}
+
     def get(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> Evaluator:
         if self.given is not None:
             return self.given
@@ -107,6 +126,16 @@ class _Evaluators:
             spec = self.spec(params, exps, {}).head(fraction)
             self.pool[key] = make_evaluator(spec, **self.runner)
         return self.pool[key]
+
+    def retried(self) -> list[str]:
+        """Return one warning for the sets that crashed a worker, then passed in a fresh one."""
+        notes = [n for ev in self.pool.values() for n in getattr(ev, "retried", [])]
+        if not notes:
+            return []
+        return [
+            f"{len(notes)} parameter set(s) crashed their worker process and succeeded when "
+            f"run again in a fresh one (the FMU crashes now and then); first: {notes[0]}"
+        ]
 
     @property
     def nfev(self) -> int:
@@ -231,7 +260,14 @@ def _fidelity(
         return None
     exps = [e.name for e in study.identify_experiments()]
     spec = evaluators.spec(study.parameter_names, exps, {})
-    check = check_fidelity(spec, x, where=where, noise=study_noise(study), sensitivities=sens)
+    check = check_fidelity(
+        spec,
+        x,
+        where=where,
+        noise=study_noise(study),
+        sensitivities=sens,
+        **evaluators.check_limit(evaluators.pool.get(evaluators.key(study, exps))),
+    )
     evaluators.use(check.interface)
     if callback:
         callback("fidelity", {"message": check.message, "check": check})
@@ -343,6 +379,7 @@ def _finish(
         + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
         + result.warnings
     )
+    result.warnings += evaluators.retried()
     checked = _fidelity(study, evaluators, x, "answer", callback, found.sensitivities)
     _record(result, start, checked)
     result.weak = _weak(result)
@@ -384,10 +421,13 @@ def identify(
         Continue the study already in ``out`` (after an interruption, or after a person
         edited the last ``next_levels.toml``).
     workers : int, optional
-        Worker processes for the runs (default: the available cores; 1 runs in this
-        process). The result is the same for any number.
+        Worker processes for the runs (default: the available cores). One worker is one
+        worker process, under the time limit, so that a crashing FMU fails only its
+        row; with ``timeout=0`` one worker runs in this process instead. The result is
+        the same for any number.
     timeout : float, optional
-        Time limit per simulation in seconds (default: derived from the first runs).
+        Time limit per simulation in seconds (default: derived from the first runs; 0:
+        none). The solver-fidelity checks simulate in a child process under it too.
     scheduler : str or distributed.Client, optional
         A ``dask.distributed`` scheduler to send the runs to.
     progress : bool or callable

@@ -6,7 +6,8 @@ experiments) and returns costs per parameter set and replicate, residuals and si
 outputs, through one interface (:class:`~tsid_fmu.evaluate.protocol.Evaluator`) with
 three implementations:
 
-* :class:`SerialEvaluator` -- in this process;
+* :class:`SerialEvaluator` -- in this process (no time limit, no crash isolation: what
+  :func:`make_evaluator` gives only for one worker with ``timeout=0``);
 * :class:`PoolEvaluator` -- local worker processes, with crash isolation and a time limit
   per simulation;
 * :class:`DaskEvaluator` -- a ``dask.distributed`` cluster (optional dependency).

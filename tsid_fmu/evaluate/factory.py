@@ -10,7 +10,7 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 
-__all__ = ["available_cores", "make_evaluator"]
+__all__ = ["available_cores", "in_process", "make_evaluator"]
 
 
 def make_evaluator(
@@ -34,8 +34,7 @@ def make_evaluator(
         (:func:`available_cores`). Ignored with ``scheduler``.
     timeout : float, optional
         Time limit per simulation: ``None`` (default) automatic, ``0`` none, else
-        seconds (see :mod:`tsid_fmu.evaluate.timelimit`). Only worker processes can
-        apply it.
+        seconds (see :mod:`tsid_fmu.evaluate.timelimit`).
     scheduler : str or distributed.Client, optional
         A Dask scheduler address (``"tcp://host:8786"``) or client.
 
@@ -43,14 +42,29 @@ def make_evaluator(
     -------
     Evaluator
         A :class:`~tsid_fmu.evaluate.dask.DaskEvaluator` with ``scheduler``; else a
-        :class:`~tsid_fmu.evaluate.serial.SerialEvaluator` (in this process, **no time
-        limit**) when one worker is asked for, or only one core is available, and no
-        positive ``timeout`` is given; else a
-        :class:`~tsid_fmu.evaluate.pool.PoolEvaluator`.
+        :class:`~tsid_fmu.evaluate.serial.SerialEvaluator` (in this process: no time
+        limit, and a crash of the FMU ends the process) only for one worker with
+        ``timeout=0`` (:func:`in_process`); else a
+        :class:`~tsid_fmu.evaluate.pool.PoolEvaluator` -- with one worker process when
+        one worker is asked for or only one core is available, so that the time limit
+        holds and a crash fails only its parameter set there too.
     """
     if scheduler is not None:
         return DaskEvaluator(spec, scheduler, timeout=timeout)
     n = available_cores() if workers is None else int(workers)
-    if n == 1 and not (timeout is not None and timeout > 0):
+    if in_process(workers, timeout, scheduler):
         return SerialEvaluator(spec)
     return PoolEvaluator(spec, workers=n, timeout=timeout)
+
+
+def in_process(workers: int | None, timeout: float | None, scheduler: Any = None) -> bool:
+    """Return True if :func:`make_evaluator` simulates in the calling process.
+
+    Only for one worker (asked for, or the only available core) with ``timeout=0``:
+    no time limit, no worker process to start -- the explicit choice of a script that
+    wants the FMU in its own process. Everything else runs in worker processes.
+    """
+    if scheduler is not None:
+        return False
+    n = available_cores() if workers is None else int(workers)
+    return n == 1 and timeout is not None and float(timeout) == 0

@@ -101,6 +101,11 @@ class PoolEvaluator(MemoEvaluator):
         """The time limit per simulation now, in seconds (None: no limit)."""
         return self.limit.seconds()
 
+    @property
+    def retried(self) -> list[str]:
+        """Sets that crashed a worker and then succeeded in a fresh one, with the reason."""
+        return list(self._pool.retried) if self._pool is not None else []
+
     def _run_jobs(self, jobs: list[Job], on_result: OnResult) -> None:
         if self._pool is None:
             raise SimulationError(f"{self.spec.fmu.name}: the evaluator is closed")

@@ -5,7 +5,9 @@ The simplest :class:`~tsid_fmu.evaluate.protocol.Evaluator`: one
 calling process. It cannot protect the study from the FMU's native code: a simulation
 that crashes ends the process, and one that hangs is never stopped -- there is **no time
 limit** here. Use :class:`~tsid_fmu.evaluate.pool.PoolEvaluator` (even with one worker)
-for either.
+for either; :func:`~tsid_fmu.evaluate.factory.make_evaluator` chooses this evaluator only
+for one worker with ``timeout=0`` (the opt-out of scripts that want the FMU in their own
+process; ``benchmarks/isolation.py`` measures what the worker process costs).
 """
 
 from __future__ import annotations

@@ -15,8 +15,11 @@
 * a positive number: that many seconds per simulation.
 
 A simulation over the limit is stopped by killing its worker process (which is
-replaced); its parameter set fails with the reason. The serial in-process evaluator
-cannot stop a simulation and has no limit.
+replaced); its parameter set fails with the reason. The checks that simulate outside the
+evaluators (the solver-fidelity check) run in a child process under the same limit
+(:mod:`tsid_fmu.evaluate.isolated`). Only the serial in-process evaluator, which
+:func:`~tsid_fmu.evaluate.factory.make_evaluator` chooses for one worker with
+``timeout=0``, cannot stop a simulation.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from collections.abc import Iterable
 
 from tsid_fmu.errors import StudyError
 
-__all__ = ["AUTO_FACTOR", "AUTO_FIRST_S", "AUTO_MIN_S", "TimeLimit"]
+__all__ = ["AUTO_FACTOR", "AUTO_FIRST_S", "AUTO_MIN_S", "EXCEEDED", "TimeLimit", "timed_out"]
 
 AUTO_FACTOR = 20.0
 """Automatic limit: this many times the median duration of the first simulations."""
@@ -35,6 +38,13 @@ AUTO_MIN_S = 5.0
 """Automatic limit: never below this many seconds."""
 AUTO_FIRST_S = 300.0
 """Automatic limit before any simulation has succeeded."""
+EXCEEDED = "per simulation exceeded"
+"""The words every reason of a simulation stopped at the time limit holds."""
+
+
+def timed_out(reason: str | None) -> bool:
+    """Return True if ``reason`` (a parameter set's error) is the time limit's."""
+    return reason is not None and EXCEEDED in reason
 
 
 class TimeLimit:
@@ -91,7 +101,7 @@ class TimeLimit:
 
     def exceeded(self) -> str:
         """Return the reason given to a parameter set stopped by the limit."""
-        text = f"time limit of {self.seconds():g} s per simulation exceeded"
+        text = f"time limit of {self.seconds():g} s {EXCEEDED}"
         if self.auto:
             text += (
                 f" (automatic: {AUTO_FACTOR:g}x the median of the first simulations, at "

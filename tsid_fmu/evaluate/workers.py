@@ -4,10 +4,14 @@
 :class:`~tsid_fmu.evaluate.runner.SetRunner` when it starts (extracts the FMU,
 instantiates it once) and reuses it for every job. One job is one parameter set.
 
-* A worker that dies (``abort()``, segmentation fault, ``exit()``) fails only the set it
-  was running -- ``inf`` costs, reason ``"<experiment>: worker crashed (signal 11
-  SIGSEGV); the worker was replaced"`` -- and is replaced; the jobs queued behind it go
-  to other workers.
+* A worker that dies (``abort()``, segmentation fault, ``exit()``) is replaced, and the
+  set it was running is run once more, in a worker that has run nothing else (a crash
+  can be the worker's state, not the parameters'). A set that crashes that worker too
+  fails -- ``inf`` costs, reason ``"<experiment>: worker crashed (signal 11 SIGSEGV);
+  the worker was replaced (on the retry in a fresh worker; first attempt: ...)"``, both
+  attempts named -- and one that succeeds there is noted in :attr:`LocalPool.retried`.
+  Either way the set's costs and count are those of its last attempt alone. The jobs
+  queued behind it go to other workers.
 * A simulation that runs past the :class:`~tsid_fmu.evaluate.timelimit.TimeLimit` is
   stopped: its worker is killed and replaced, and the set fails with the reason.
 * With ``recycle_after``, a worker is replaced after that many jobs (FMUs that leak).
@@ -21,23 +25,25 @@ not crash would have reported up to there.
 
 from __future__ import annotations
 
-import contextlib
-import multiprocessing as mp
 import os
-import pickle
 import shutil
 import signal
-import sys
 import tempfile
 import time
-import types
 import warnings
 from collections import deque
-from collections.abc import Iterator
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from tsid_fmu.errors import FMUError, TsidError
+from tsid_fmu.errors import FMUError
+from tsid_fmu.evaluate.processes import (
+    children_allowed,
+    error_reason,
+    exit_reason,
+    main_module_hidden,
+    portable_error,
+    worker_context,
+)
 from tsid_fmu.evaluate.runner import (
     Job,
     OnResult,
@@ -97,7 +103,7 @@ def _worker_main(conn: Connection, spec: EvaluationSpec, state: Any, scratch: st
         runner = SetRunner(spec, monitor)
         warm_up()  # load the compiled loop now, not in the first (timed) simulation
     except BaseException as exc:
-        conn.send(("init_error", _portable_error(exc)))
+        conn.send(("init_error", portable_error(exc)))
         return
     conn.send(("ready", os.getpid()))
     try:
@@ -115,74 +121,12 @@ def _worker_main(conn: Connection, spec: EvaluationSpec, state: Any, scratch: st
                 result = runner.run_job(tuple(job))  # type: ignore[arg-type]
             except Exception as exc:  # never lose the reason of a failed set
                 where = monitor.where()
-                result = failed_result(spec, job[0], _reason(exc), nfev=runner.started, where=where)
+                result = failed_result(
+                    spec, job[0], error_reason(exc), nfev=runner.started, where=where
+                )
             conn.send(("done", seq, result))
     finally:
         runner.close()
-
-
-def _reason(exc: BaseException) -> str:
-    """Text of an exception for a set's error (type named unless it is our own)."""
-    return str(exc) if isinstance(exc, TsidError) else f"{type(exc).__name__}: {exc}"
-
-
-def _portable_error(exc: BaseException) -> TsidError:
-    """Turn an exception into a picklable TsidError of the same kind, message kept."""
-    if isinstance(exc, TsidError):
-        try:
-            pickle.loads(pickle.dumps(exc))
-            return exc
-        except Exception:
-            return (
-                type(exc)(str(exc))
-                if type(exc).__module__ == "tsid_fmu.errors"
-                else FMUError(str(exc))
-            )
-    return FMUError(f"the worker could not start: {type(exc).__name__}: {exc}")
-
-
-def exit_reason(code: int | None) -> str:
-    """Describe how a worker process ended (``"worker crashed (signal 11 SIGSEGV)"``)."""
-    if code is None:
-        return "worker stopped responding"
-    if code < 0:
-        try:
-            name = signal.Signals(-code).name
-        except ValueError:
-            name = "unknown signal"
-        return f"worker crashed (signal {-code} {name})"
-    return f"worker exited with status {code}"
-
-
-@contextlib.contextmanager
-def _main_module_hidden() -> Iterator[None]:
-    """Start a process without it re-importing the ``__main__`` script.
-
-    ``spawn``/``forkserver`` children normally re-run the parent's main script, which
-    starts the study again in a script without an ``if __name__ == "__main__":``
-    guard. Workers need nothing from ``__main__`` (their target and arguments are
-    tsid-fmu objects), so the main module is hidden while the process starts.
-    """
-    main = sys.modules.get("__main__")
-    sys.modules["__main__"] = types.ModuleType("__tsid_worker_main__")
-    try:
-        yield
-    finally:
-        if main is not None:
-            sys.modules["__main__"] = main
-
-
-@contextlib.contextmanager
-def children_allowed() -> Iterator[None]:
-    """Let a daemonic process (a Dask worker) start worker processes of its own."""
-    config = mp.current_process()._config  # type: ignore[attr-defined]
-    daemon = config.get("daemon")
-    config["daemon"] = False
-    try:
-        yield
-    finally:
-        if daemon is not None:
-            config["daemon"] = daemon
 
 
 class _Worker:
@@ -198,7 +142,7 @@ class _Worker:
             name=f"tsid-worker-{number}",
             daemon=True,
         )
-        with _main_module_hidden():
+        with main_module_hidden():
             self.process.start()
         child.close()
         self.ready = False
@@ -273,16 +217,15 @@ class LocalPool:
         recycle_after: int | None = None,
         start_method: str | None = None,
     ) -> None:
-        if start_method is None:
-            start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-        self.ctx = mp.get_context(start_method)
-        if start_method == "forkserver":
-            self.ctx.set_forkserver_preload(["tsid_fmu.evaluate._preload"])
+        self.ctx = worker_context(start_method)
         self.spec = spec
         self.limit = limit
         self.recycle_after = recycle_after
         self._count = 0
         self._seq = 0
+        self._retries: deque[int] = deque()  # crashed jobs of this call, for a fresh worker
+        self._first: dict[int, str] = {}  # job index -> why its first attempt failed
+        self.retried: list[str] = []  # crashed jobs that a fresh worker then ran through
         self.n_workers = n_workers
         self.workers: list[_Worker] = []
         for _ in range(n_workers):
@@ -346,13 +289,15 @@ class LocalPool:
         are replaced, so that no late reply reaches a later call.
         """
         pending: deque[int] = deque(range(len(jobs)))
+        self._retries.clear()
+        self._first.clear()
         while len(self.workers) < self.n_workers:  # replacements after an interruption
             self._spawn()
         try:
-            while pending or any(w.inflight for w in self.workers):
+            while pending or self._retries or any(w.inflight for w in self.workers):
                 self._dispatch(pending, jobs)
                 if not self.workers:
-                    for i in pending:
+                    for i in [*self._retries, *pending]:
                         reason = "no worker process is left"
                         on_result(i, failed_result(self.spec, jobs[i][0], reason))
                     return
@@ -375,6 +320,15 @@ class LocalPool:
     def _dispatch(self, pending: deque[int], jobs: list[Job]) -> None:
         quota = self.recycle_after
         n_ready = sum(w.ready for w in self.workers)
+        for w in list(self.workers):  # a crashed job's retry: a worker that ran nothing
+            if self._retries and w.ready and not w.sent:
+                self._seq += 1
+                index = self._retries.popleft()
+                try:
+                    w.send(self._seq, index, jobs[index])
+                except (OSError, BrokenPipeError):
+                    self._retries.appendleft(index)
+                    self._replace(w)
         for w in list(self.workers):
             while (
                 w.ready
@@ -426,6 +380,11 @@ class LocalPool:
                 break
             _seq, index = w.inflight.popleft()
             self.limit.observe(reply[2].durations)
+            if index in self._first and getattr(reply[2], "error", None) is None:
+                self.retried.append(
+                    f"{_describe(jobs[index])}: {self._first[index]}; the retry in a fresh "
+                    "worker succeeded"
+                )
             on_result(index, reply[2])
         quota = self.recycle_after
         if not w.inflight and quota is not None and w.sent >= quota:
@@ -464,6 +423,15 @@ class LocalPool:
         if not begun:  # it died between jobs (killed from outside): nothing was lost
             return
         index = pending.popleft()
+        if dead and index not in self._first:
+            # a crash may be the worker's, not the parameters': once more, in a fresh one
+            self._first[index] = reason
+            self._retries.append(index)
+            return
+        if index in self._first:
+            reason = (
+                f"{reason} (on the retry in a fresh worker; first attempt: {self._first[index]})"
+            )
         on_result(
             index, failed_result(self.spec, jobs[index][0], reason, nfev=started, where=where)
         )
@@ -472,6 +440,11 @@ class LocalPool:
         """Stop the workers (they free their FMU instances and extracted folders)."""
         workers, self.workers = self.workers, []
         _stop_all(workers)
+
+
+def _describe(job: Job) -> str:
+    """Return the parameter set of a job, for a note (``"gain=1.5, bias=0"``)."""
+    return ", ".join(f"{k}={v:.6g}" for k, v in job[1].items())
 
 
 def _stop_all(workers: list[_Worker]) -> None:

@@ -17,7 +17,9 @@ from typing import Protocol
 
 import numpy as np
 
+from tsid_fmu.errors import SimulationError
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.evaluate.timelimit import timed_out
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import Best, ProgressCallback, run_iteration
 from tsid_fmu.search.nextlevels import next_frame
@@ -170,6 +172,14 @@ def _evaluate_starts(
     if not run.starts:
         return None, []
     ev = evaluator.evaluate([dict(x) for x, _ in run.starts])
+    if all(timed_out(e) for e in ev.errors):
+        # an FMU that finishes no simulation would take the limit on every row too
+        raise SimulationError(
+            f"{run.name}: no start point finished a simulation within the time limit "
+            f"({len(ev.errors)} tried: {', '.join(s for _, s in run.starts)}); first "
+            f"reason: {ev.errors[0]}; check the FMU at these values, or give a longer "
+            "--timeout"
+        )
     kept, best = [], None
     for (x, source), cost in zip(run.starts, ev.costs[:, 0], strict=True):
         cost = float(cost) if np.isfinite(cost) else math.inf

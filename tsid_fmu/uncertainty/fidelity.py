@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.errors import SimulationError, TsidError
+from tsid_fmu.evaluate.isolated import IsolatedCalls
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.definition import Study
@@ -263,6 +264,8 @@ def check_fidelity(
     noise: Mapping[str, Mapping[str, float]] | None = None,
     sensitivities: Sensitivities | None = None,
     threshold: float = THRESHOLD,
+    isolate: bool = False,
+    time_limit: float | None = None,
 ) -> Fidelity:
     """Compare the study's solver with a reference at ``x`` and choose the interface.
 
@@ -284,6 +287,12 @@ def check_fidelity(
         projected on them (:attr:`Fidelity.bias`).
     threshold : float
         Fraction of the noise above which a difference matters.
+    isolate : bool
+        Run the simulations in a child process (:class:`~tsid_fmu.evaluate.isolated.
+        IsolatedCalls`), each under ``time_limit``: an FMU that hangs or crashes then
+        leaves the check undone, with the reason, instead of stopping the caller.
+    time_limit : float, optional
+        With ``isolate``: seconds per simulation (None: no limit).
 
     Returns
     -------
@@ -302,7 +311,8 @@ def check_fidelity(
     out = Fidelity(where, dict(x), spec.interface, used.interface, threshold=threshold)
     out.step = spec.step_size
     sigma = [output_noise(e, (noise or {}).get(e.name)) for e in spec.experiments]
-    runs = SolverRuns(spec, x)
+    calls = IsolatedCalls(time_limit, spec.fmu.name) if isolate else None
+    runs = SolverRuns(spec, x, calls)
     try:
         out.used = compare(runs, used, reference, sigma, threshold)
         out.reference = reference
@@ -318,6 +328,8 @@ def check_fidelity(
         out.reference, out.used, out.matters = None, None, False
         out.message = f"solver fidelity ({where}): not checked, a simulation failed: {exc}"
     finally:
+        if calls is not None:
+            calls.close()
         out.simulations, out.seconds = runs.count, time.perf_counter() - t0
     return out
 

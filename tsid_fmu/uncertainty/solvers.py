@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.errors import SimulationError
+from tsid_fmu.evaluate.isolated import IsolatedCalls
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.fmu.delay import delayed_inputs, split_delays
 from tsid_fmu.fmu.info import read_fmu_description
@@ -30,6 +32,7 @@ __all__ = [
     "available_interfaces",
     "compare",
     "output_noise",
+    "simulate_solver",
     "solver_bias",
 ]
 
@@ -144,6 +147,33 @@ def _finer_grid(
     return fine, held
 
 
+def simulate_solver(
+    spec: EvaluationSpec, x: Mapping[str, float], solver: Solver, index: int, k: int, held: bool
+) -> np.ndarray:
+    """Return experiment ``index``'s outputs at ``x`` with ``solver`` (see SolverRuns.run).
+
+    Module-level, so that it can run in a child process (:class:`SolverRuns` with a
+    time limit).
+    """
+    e = spec.experiments[index]
+    start, fixed = split_delays({**spec.start_values, **e.start_values})
+    values, delays = split_delays(dict(x))
+    u = delayed_inputs(e.time, e.inputs, e.input_names, {**fixed, **delays})
+    t, u = (e.time, u) if k == 1 else _finer_grid(e, u, k)
+    with FMUSession(
+        spec.fmu,
+        e.input_names,
+        e.output_names,
+        parameters=list(values),
+        interface=solver.interface,  # type: ignore[arg-type]
+        step_size=solver.step,
+        start_values=start,
+        hold={} if held else dict(e.hold),
+        tolerance=solver.tolerance,
+    ) as session:
+        return session.simulate(t, u, values)[::k]
+
+
 class SolverRuns:
     """Simulate a spec's experiments at one parameter set, by solver; count and remember.
 
@@ -153,10 +183,17 @@ class SolverRuns:
         The FMU, experiments and fixed values.
     x : mapping of str to float
         The parameter set.
+    calls : IsolatedCalls, optional
+        Run each simulation in this child process, under its time limit (a simulation
+        that hangs or crashes raises :class:`~tsid_fmu.errors.SimulationError`); default
+        in this process, without a limit.
     """
 
-    def __init__(self, spec: EvaluationSpec, x: Mapping[str, float]) -> None:
+    def __init__(
+        self, spec: EvaluationSpec, x: Mapping[str, float], calls: IsolatedCalls | None = None
+    ) -> None:
         self.spec, self.x = spec, dict(x)
+        self.calls = calls
         self.count = 0
         self.cache: dict[tuple[Solver, int, int, bool], np.ndarray] = {}
 
@@ -168,24 +205,16 @@ class SolverRuns:
         """
         key = (solver, index, k, held)
         if key not in self.cache:
-            e = self.spec.experiments[index]
-            start, fixed = split_delays({**self.spec.start_values, **e.start_values})
-            values, delays = split_delays(self.x)
-            u = delayed_inputs(e.time, e.inputs, e.input_names, {**fixed, **delays})
-            t, u = (e.time, u) if k == 1 else _finer_grid(e, u, k)
-            with FMUSession(
-                self.spec.fmu,
-                e.input_names,
-                e.output_names,
-                parameters=list(values),
-                interface=solver.interface,  # type: ignore[arg-type]
-                step_size=solver.step,
-                start_values=start,
-                hold={} if held else dict(e.hold),
-                tolerance=solver.tolerance,
-            ) as session:
+            args = (self.spec, self.x, solver, index, k, held)
+            try:
+                if self.calls is None:
+                    self.cache[key] = simulate_solver(*args)
+                else:
+                    self.cache[key] = self.calls.call(simulate_solver, *args)
+            except SimulationError:  # it ran (an FMU that cannot be opened did not)
                 self.count += 1
-                self.cache[key] = session.simulate(t, u, values)[::k]
+                raise
+            self.count += 1
         return self.cache[key]
 
 
