@@ -201,7 +201,7 @@ def run_tsid(study: Study, truth, workers: int | None):
         ),
         _row(
             "tsid: whole study",
-            res.x,
+            res.params,
             res.fun,
             res.nfev,
             seconds,
@@ -251,7 +251,7 @@ def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
 def peer_line(res, rows: list[dict]) -> str:
     """tsid's answer against the lowest-cost least_squares answer, parameter by parameter."""
     ls = min((r for r in rows if r["method"].startswith("least_squares")), key=lambda r: r["cost"])
-    diffs = "; ".join(f"{n} {100 * (res.x[n] / v - 1):+.3f} %" for n, v in ls["x"].items())
+    diffs = "; ".join(f"{n} {100 * (res.params[n] / v - 1):+.3f} %" for n, v in ls["x"].items())
     return (
         f"tsid (whole study) against {ls['method']} (its lowest-cost start): cost "
         f"{100 * (res.fun / ls['cost'] - 1):+.4f} %; {diffs}"
@@ -266,7 +266,8 @@ def intervals_line(res, truth: dict[str, float]) -> str:
         ok = (low is None or low <= v) and (high is None or v <= high)
         inside += ok
         show = "..".join("open" if b is None else f"{b:.4g}" for b in (low, high))
-        parts.append(f"{n} {100 * (res.x[n] / v - 1):+.2f} % [{show}]{'' if ok else ' MISSES'}")
+        err = 100 * (res.params[n] / v - 1)
+        parts.append(f"{n} {err:+.2f} % [{show}]{'' if ok else ' MISSES'}")
     return f"tsid errors and 95 % intervals ({inside}/{len(truth)} hold the truth): " + "; ".join(
         parts
     )

@@ -44,7 +44,7 @@ def run(label: str, example: str, workers: int) -> tuple[float, object]:
 
 def same_runs(a: object, b: object) -> bool:
     """Whether two results ran the same parameter sets with bit-identical costs."""
-    if a.x != b.x or a.nfev != b.nfev or len(a.iterations) != len(b.iterations):
+    if a.params != b.params or a.nfev != b.nfev or len(a.iterations) != len(b.iterations):
         return False
     return all(
         np.array_equal(ra.runs_frame().to_numpy(), rb.runs_frame().to_numpy())

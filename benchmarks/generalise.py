@@ -263,7 +263,7 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
     truth = {**gp.problem.start_values, **gp.problem.truth}
     rows = {
         "tsid": {
-            "cost": scorer.cost_x(res.x),
+            "cost": scorer.cost_x(res.params),
             "nfev": int(res.nfev),
             "time": tsid_time,
             "status": int(res.status),
@@ -277,7 +277,7 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
         rows["DE"] = run_de(scorer, gp.seed)
     best = min(r["cost"] for r in rows.values())
     # the noise floor: residuals in noise units, one per sample and output
-    floor = float(scorer.residuals(scorer.to_s(res.x)).size)
+    floor = float(scorer.residuals(scorer.to_s(res.params)).size)
     for r in rows.values():
         r["ratio"] = r["cost"] / best if best > 0 else (1.0 if r["cost"] == best else math.inf)
         r["ok"] = r["cost"] <= TOLERANCE * best

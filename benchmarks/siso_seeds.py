@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> None:
         t0 = time.perf_counter()
         res = identify(study_of(prob, METHOD), workers=args.workers, plots=False)
         took = time.perf_counter() - t0
-        err = {k: 100 * (res.x[k] / v - 1) for k, v in prob.truth.items()}
+        err = {k: 100 * (res.params[k] / v - 1) for k, v in prob.truth.items()}
         u = res.uncertainty
         lo, hi = u.intervals["B_s"] if u.intervals.get("B_s") else (None, None)
         truth = prob.truth["B_s"]

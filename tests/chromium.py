@@ -2,7 +2,9 @@
 
 ``load(path)`` opens the file, waits for its load event and returns what the page did:
 the console messages and exceptions, the log entries, every URL it requested, and the
-value of a JavaScript expression evaluated in the loaded page. Chromium talks the
+value of a JavaScript expression evaluated in the loaded page; ``width`` emulates a
+window that wide (a phone's with touch and the page's viewport tag below 600 px). Chromium
+talks the
 protocol over file descriptors 3 (commands in) and 4 (events out), one JSON message per
 NUL-terminated chunk (``--remote-debugging-pipe``).
 """
@@ -103,8 +105,11 @@ class _Pipe:
         os.close(self.r_out)
 
 
-def load(path: Path, expression: str, binary: str | None = None) -> Page:
-    """Open ``path`` in headless Chromium; return what the page did and ``expression``."""
+def load(path: Path, expression: str, binary: str | None = None, width: int | None = None) -> Page:
+    """Open ``path`` in headless Chromium; return what the page did and ``expression``.
+
+    ``width``: the window's width in CSS pixels (default Chromium's own, 800).
+    """
     binary = binary or find()
     if binary is None:
         raise FileNotFoundError("no chromium binary")
@@ -116,6 +121,10 @@ def load(path: Path, expression: str, binary: str | None = None) -> Page:
             session = pipe.call("Target.attachToTarget", attach)["sessionId"]
             for method in ("Runtime.enable", "Log.enable", "Network.enable", "Page.enable"):
                 pipe.call(method, session=session)
+            if width is not None:
+                metrics = {"width": width, "height": 900, "deviceScaleFactor": 1}
+                metrics["mobile"] = width < 600  # honours <meta name="viewport">
+                pipe.call("Emulation.setDeviceMetricsOverride", metrics, session)
             pipe.call("Page.navigate", {"url": Path(path).resolve().as_uri()}, session)
             pipe.wait(lambda m: m.get("method") == "Page.loadEventFired")
             result = pipe.call(

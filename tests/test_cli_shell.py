@@ -118,7 +118,7 @@ def test_the_summary_of_a_result_without_intervals_still_fits_the_schema():
     from tsid_fmu import IdentificationResult
 
     res = IdentificationResult(
-        x={"a": math.nan, "b": 2.0}, fun=math.inf, nfev=0, success=False, status=1, message="m"
+        params={"a": math.nan, "b": 2.0}, fun=math.inf, nfev=0, success=False, status=1, message="m"
     )
     summary = res.summary()
     json.dumps(summary, allow_nan=False)

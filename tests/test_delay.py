@@ -89,8 +89,8 @@ def test_a_sub_sample_input_delay_is_identified(lag, delayed_data):
     )
     res = identify(study, plots=False, workers=1)
     assert res.status in (0, 1), res.message
-    assert res.x["delay(u)"] == pytest.approx(DELAY, abs=0.3e-3)  # 0.03 of a sample
-    assert res.x["tau"] == pytest.approx(TAU, rel=0.01)
+    assert res.params["delay(u)"] == pytest.approx(DELAY, abs=0.3e-3)  # 0.03 of a sample
+    assert res.params["tau"] == pytest.approx(TAU, rel=0.01)
     for name, truth in (("tau", TAU), ("delay(u)", DELAY)):
         low, high = res.intervals[name]
         assert low is not None and high is not None and low <= truth <= high, (name, low, high)
@@ -98,13 +98,13 @@ def test_a_sub_sample_input_delay_is_identified(lag, delayed_data):
     zero = tsid_fmu.simulate(
         lag,
         pd.read_csv(delayed_data)[["time", "u"]],
-        parameters={"tau": res.x["tau"], "x0": res.x["x0"]},
+        parameters={"tau": res.params["tau"], "x0": res.params["x0"]},
         hold={"u": "linear"},
     )
     shifted = tsid_fmu.simulate(
         lag,
         pd.read_csv(delayed_data)[["time", "u"]],
-        parameters={n: res.x[n] for n in ("tau", "x0", "delay(u)")},
+        parameters={n: res.params[n] for n in ("tau", "x0", "delay(u)")},
         hold={"u": "linear"},
     )
     y = pd.read_csv(delayed_data)["y"].to_numpy()
@@ -148,6 +148,6 @@ def test_an_initial_state_is_identified_like_a_parameter(tmp_path):
         replicates=1,
     )
     res = identify(study, plots=False, workers=1)
-    assert res.x["x_m"] == pytest.approx(0.0012, rel=2e-3)
+    assert res.params["x_m"] == pytest.approx(0.0012, rel=2e-3)
     with pytest.raises(FMUError, match=r"'der\(x_m\)' .*cannot be"):
         tsid_fmu.simulate(fmu, frame[["time", "F_m"]], parameters={"der(x_m)": 0.1})

@@ -39,8 +39,8 @@ def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
     out = tmp_path / "out"
     res = identify(make_study(lag), out, plots=True)
     assert res.success and res.status == 0, res.message
-    assert res.x["tau"] == pytest.approx(TAU, rel=0.01)
-    assert res.x["x0"] == pytest.approx(X0, rel=0.05)
+    assert res.params["tau"] == pytest.approx(TAU, rel=0.01)
+    assert res.params["x0"] == pytest.approx(X0, rel=0.05)
     # 13, not 12 as before start points were scored: the centre of the first levels costs
     # less than every run of the first array, and the iterations go on from there
     assert res.nit <= 13 and res.nfev > 9 * res.nit
@@ -57,7 +57,7 @@ def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
               "fit.png", "report.html", "convergence.png", "parameters.png"):  # fmt: skip
         assert (out / f).is_file(), f
     summary = json.loads((out / "result.json").read_text())
-    assert summary["x"] == res.x
+    assert summary["x"] == res.params
     assert "tau" in (out / "parameters.ssv").read_text()
     assert res.fit["lag"]["y"]["fit_percent"] > 98
     # the noise in the data is estimated and reported beside the fit it limits
@@ -74,7 +74,7 @@ def test_failed_rows_are_reported_and_do_not_stop_the_study(lag, tmp_path):
     failed = [e for e in first.errors if e]
     assert len(failed) == 3 and all("tau" in e or "Error" in e or "error" in e for e in failed)
     assert np.isinf(first.costs[[e is not None for e in first.errors]]).all()
-    assert res.x["tau"] == pytest.approx(TAU, rel=0.02)
+    assert res.params["tau"] == pytest.approx(TAU, rel=0.02)
     assert "error" in pd.read_csv(tmp_path / "o" / "iteration_01" / "runs.csv").columns
     report = (tmp_path / "o" / "report.md").read_text()
     assert "## Failed runs (3," in report and "| 1 |" in report
@@ -92,7 +92,7 @@ def test_pause_edit_resume_matches_uninterrupted(lag, tmp_path):
     (out / "iteration_03").mkdir()
     (out / "iteration_03" / "runs.csv").write_text("partial")
     resumed = identify(make_study(lag), out, resume=True, plots=False)
-    assert resumed.x == full.x and resumed.nit == full.nit and resumed.nfev == full.nfev
+    assert resumed.params == full.params and resumed.nit == full.nit and resumed.nfev == full.nfev
     # plots (one fit simulation per iteration) do not count as simulations used
     drawn = identify(make_study(lag), tmp_path / "drawn", plots=True)
     assert drawn.nfev == full.nfev
@@ -163,7 +163,7 @@ def test_next_best_rerun_is_taken_and_lowers_the_cost(tmp_path, selection):
     before = costs[first.index - 2]
     assert before == pytest.approx(0.5)  # stuck in the trap
     assert first.best_cost < before and res.fun == pytest.approx(0.1, abs=1e-6)
-    assert res.x == pytest.approx({"a": 2.5, "b": 2.5}, abs=1e-3)
+    assert res.params == pytest.approx({"a": 2.5, "b": 2.5}, abs=1e-3)
     # without re-runs the study stays in the trap
     stuck = identify(
         synthetic_study(tmp_path, selection=selection, max_iterations=6, max_reruns=0),
@@ -206,7 +206,7 @@ def test_resume_right_after_a_rerun_decision_continues_the_same_way(tmp_path):
     assert "re-conducted from" in nxt
     resumed = identify(study(), out, resume=True, evaluator=FakeEvaluator(two_basins), plots=False)
     assert [r.best_cost for r in resumed.iterations] == [r.best_cost for r in full.iterations]
-    assert resumed.x == full.x
+    assert resumed.params == full.params
     assert "rerun" in resumed.iterations[first_rerun - 1].extra
 
 

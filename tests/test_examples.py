@@ -46,7 +46,7 @@ def test_siso_force_alone_hardly_sees_the_scale():
 def test_siso_example_identifies_the_parameters(tmp_path):
     study = load_study(EXAMPLES / "lsea_siso" / "study.toml")
     res = identify(study, tmp_path / "out", plots=False)
-    err = rel_err(res.x, SISO_TRUTH)
+    err = rel_err(res.params, SISO_TRUTH)
     assert res.success, res.message
     assert [s.kind for s in res.stages] == ["taguchi", "refinement"]
     for name in ("F_cm", "F_vm", "M_m", "K_s"):
@@ -80,7 +80,7 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     # the superposition check on both inputs together is reported
     assert np.isfinite(res.validation["both inputs"]["cost"])
     # the force-only data fix only ratios to K_s; together the experiments fix them well
-    x = res.x
+    x = res.params
     assert abs((x["m1"] / x["K_s"]) / (0.45 / 5000.0) - 1) < 0.02
     assert abs((x["C_1"] / x["K_s"]) / (20.0 / 5000.0) - 1) < 0.02
     report = (tmp_path / "out" / "report.md").read_text()

@@ -65,7 +65,7 @@ def test_cs_study_warns_of_solver_error_and_names_the_fix(vdp, tmp_path):
         progress=lambda event, info: events.append((event, info)),
     )
     # the silent failure of the issue: 4 % off, the truth far outside the interval
-    assert res.x["mu"] == pytest.approx(1.6288, rel=2e-3)
+    assert res.params["mu"] == pytest.approx(1.6288, rel=2e-3)
     low, high = res.intervals["mu"]
     assert not low <= MU <= high
     # ... is no longer silent: the first warning is the solver's, with figures and fix
@@ -105,7 +105,7 @@ def test_auto_switches_to_model_exchange_and_finds_mu(vdp, tmp_path):
     assert 'interface = "auto" uses Model Exchange instead' in record["start"]["message"]
     assert record["answer"]["used"]["interface"] == "me"
     assert not record["answer"]["matters"]
-    assert abs(res.x["mu"] / MU - 1) < 0.005
+    assert abs(res.params["mu"] / MU - 1) < 0.005
     low, high = res.intervals["mu"]
     assert low <= MU <= high
     assert not any("solver" in w for w in res.warnings), res.warnings
@@ -123,7 +123,7 @@ def test_fidelity_false_skips_both_checks_and_says_so(vdp, tmp_path):
     assert "fidelity" not in events
     assert res.extra["fidelity"] == {"checked": False, "reason": "[method] fidelity = false"}
     assert not any("solver fidelity" in w for w in res.warnings)
-    assert res.x["mu"] == pytest.approx(1.6288, rel=2e-3)  # the Euler-biased answer
+    assert res.params["mu"] == pytest.approx(1.6288, rel=2e-3)  # the Euler-biased answer
     again = Study.from_toml(study.to_toml(tmp_path / "study.toml"))
     assert again.method.fidelity is False
     with pytest.raises(StudyError, match="fidelity must be true or false"):

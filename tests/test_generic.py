@@ -53,8 +53,8 @@ def test_damping_ratio_and_natural_frequency_of_a_second_order_fmu(tmp_path):
         seed=4,
     )
     res = identify(study, tmp_path / "out", plots=False)
-    assert res.x["zeta"] == pytest.approx(truth["zeta"], rel=0.02)
-    assert res.x["omega"] == pytest.approx(truth["omega"], rel=0.01)
+    assert res.params["zeta"] == pytest.approx(truth["zeta"], rel=0.02)
+    assert res.params["omega"] == pytest.approx(truth["omega"], rel=0.01)
 
 
 @pytest.mark.skipif(not pythonfmu_available(), reason="pythonfmu cannot build FMUs here")
@@ -75,4 +75,4 @@ def test_an_fmu_exported_by_another_tool(tmp_path):
         max_iterations=10,
     )
     res = identify(study, tmp_path / "out", plots=False, workers=1)
-    assert res.x["tau"] == pytest.approx(0.35, rel=0.02)
+    assert res.params["tau"] == pytest.approx(0.35, rel=0.02)

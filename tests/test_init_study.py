@@ -49,7 +49,7 @@ def test_the_init_study_of_the_siso_example_converges_at_the_least_squares_optim
         )
         return ((sim[outputs].to_numpy() - measured) / scale).ravel()
 
-    at_answer = residuals(np.log10([res.x[n] for n in names]))
+    at_answer = residuals(np.log10([res.params[n] for n in names]))
     assert float(at_answer @ at_answer) == pytest.approx(res.fun, rel=1e-3)
     start = np.log10([fmu_start_values(study.fmu, names)[n] for n in names])
     fit = least_squares(residuals, start, method="trf", x_scale="jac")

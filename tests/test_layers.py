@@ -44,7 +44,7 @@ def test_the_reports_register_the_views_of_a_result():
 def test_importing_the_result_alone_registers_the_views():
     code = (
         "from tsid_fmu.result import IdentificationResult as R\n"
-        "r = R(x={'a': 1.0}, fun=0.5, nfev=3, success=True, status=0, message='ok')\n"
+        "r = R(params={'a': 1.0}, fun=0.5, nfev=3, success=True, status=0, message='ok')\n"
         "assert 'a' in r._repr_html_()\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)

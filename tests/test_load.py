@@ -1,5 +1,6 @@
-"""A finished run read back into Python (issue 26): ``tsid_fmu.load``, ``res.params``
-and ``res.x_at(k)``; the checksums of the trail guard what is read."""
+"""A finished run read back into Python (issue 26): ``tsid_fmu.load``, SciPy's ``res.x``
+(an array in the order of ``res.names``) beside lmfit's ``res.params``, ``res.cov`` and
+``res.jac``, and ``res.x_at(k)``; the checksums of the trail guard what is read."""
 
 from __future__ import annotations
 
@@ -7,8 +8,10 @@ import json
 import math
 import shutil
 
+import numpy as np
+import pandas as pd
 import pytest
-from fmu_factory import lag_study
+from fmu_factory import lag_response, lag_study
 
 import tsid_fmu
 from tsid_fmu import StudyError, identify, load
@@ -30,7 +33,11 @@ def test_load_is_at_the_package_root():
 def test_load_gives_back_what_identify_returned(run):
     res, out = run
     back = load(out)
-    assert back.x == res.x and back.fun == res.fun and back.nfev == res.nfev
+    assert back.params == res.params and back.names == res.names
+    np.testing.assert_array_equal(back.x, res.x)
+    np.testing.assert_array_equal(back.cov, res.cov)
+    assert back.jac is None  # not written to the folder
+    assert back.fun == res.fun and back.nfev == res.nfev
     assert (back.status, back.success, back.message, back.nit) == (
         res.status,
         res.success,
@@ -80,25 +87,59 @@ def test_load_without_the_study_files_still_reads_the_numbers(run, tmp_path):
     shutil.copytree(out, copy)
     (copy / "study.toml").unlink()
     back = load(copy)
-    assert back.study is None and back.x == res.x
+    assert back.study is None and back.params == res.params
     assert any("study is not attached" in w for w in back.warnings)
     attached = load(copy, study=res.study)
     assert attached.study is res.study and not set(attached.warnings) - set(res.warnings)
 
 
-def test_params_is_a_plain_dict_and_x_is_unchanged(run):
+def test_x_is_an_array_in_the_order_of_names_and_params_the_dict(run):
     res, _ = run
-    assert type(res.params) is dict and res.params == res.x
-    res.params["tau"] = -1.0  # a copy: the result is not changed through it
-    assert res.x["tau"] != -1.0
-    assert type(res.x) is dict
+    assert res.names == res.study.parameter_names == ["tau", "x0"]
+    assert type(res.params) is dict and list(res.params) == res.names
+    assert isinstance(res.x, np.ndarray) and res.x.shape == (2,) and res.x.dtype == float
+    assert res.x.tolist() == [res.params["tau"], res.params["x0"]]
+    with pytest.raises(ValueError, match="read-only"):
+        res.x[0] = -1.0  # SciPy's array, but not a way to change the result
+    assert "names: ['tau', 'x0']" in repr(res) and "x: array(" in repr(res)
+    # result.json keeps its format: the values by name
+    data = json.loads((res.out_dir / "result.json").read_text())
+    assert data["x"] == res.params
+
+
+def test_cov_is_the_covariance_of_the_reported_standard_errors(run):
+    res, _ = run
+    u = res.uncertainty
+    assert res.cov.shape == (2, 2)
+    np.testing.assert_allclose(res.cov, res.cov.T)
+    se = [u.std_error[n] for n in res.names]  # parameter units
+    np.testing.assert_allclose(np.sqrt(np.diag(res.cov)), se, rtol=1e-12)
+    rho = res.cov[0, 1] / np.sqrt(res.cov[0, 0] * res.cov[1, 1])
+    assert rho == pytest.approx(u.correlation["tau"]["x0"], rel=1e-12)
+    assert np.all(np.linalg.eigvalsh(res.cov) > 0)
+
+
+def test_jac_is_the_residual_jacobian_in_parameter_units(run):
+    res, out = run
+    data = pd.read_csv(out.parent / "lag.csv")
+    t, u = data["time"].to_numpy(), data["u"].to_numpy()
+    assert res.jac.shape == (len(t), 2)  # one output: one residual per sample
+    # against the exact response's derivatives: the same up to the residual scale
+    tau, x0 = res.params["tau"], res.params["x0"]
+    h = 1e-6
+    d_tau = (lag_response(t, u, tau + h, x0) - lag_response(t, u, tau - h, x0)) / (2 * h)
+    d_x0 = (lag_response(t, u, tau, x0 + h) - lag_response(t, u, tau, x0 - h)) / (2 * h)
+    exact = np.column_stack([d_tau, d_x0])
+    scale = np.sum(exact * res.jac) / np.sum(exact * exact)  # 1 / the residual scale
+    assert scale > 0
+    assert np.linalg.norm(res.jac - scale * exact) < 0.02 * np.linalg.norm(res.jac)
 
 
 def test_x_at_gives_each_iterations_best_set(run):
     res, _ = run
     assert res.nit >= 2
     for k, rec in enumerate(res.iterations, start=1):
-        assert res.x_at(k) == {n: rec.best_x[n] for n in res.x}
+        assert res.x_at(k) == {n: rec.best_x[n] for n in res.names}
     assert res.x_at(-1) == res.x_at(res.nit)
     assert res.x_at(-res.nit) == res.x_at(1)
     assert all(math.isfinite(v) for v in res.x_at(1).values())
@@ -117,6 +158,6 @@ def test_a_result_json_of_an_older_version_is_read_with_a_warning(run, tmp_path)
     del data["digest"], data["study_folder"]
     (copy / "result.json").write_text(json.dumps(data))
     back = load(copy)
-    assert back.x == res.x and back.study is None
+    assert back.params == res.params and back.study is None
     assert any("no checksum" in w for w in back.warnings)
     assert any("study is not attached" in w for w in back.warnings)

@@ -3,7 +3,9 @@
 The page must render with no console error and no request other than the file itself
 and its embedded ``data:`` images, and show per iteration the response tables for S/N
 and means with Delta and Rank, the ANOVA table and at least one embedded image that the
-browser decoded. Chromium comes from the system's packages (``.ci/run`` installs it,
+browser decoded. At a phone's width (390 px) and a desktop's (1366 px) the page itself
+must not scroll sideways: a wide table scrolls inside its own box. Chromium comes from the
+system's packages (``.ci/run`` installs it,
 and stops if it cannot); the test is skipped only where no Chromium can be found, and
 fails instead with ``CI`` set (``.ci/run`` sets ``CI=true``).
 """
@@ -16,6 +18,7 @@ from pathlib import Path
 
 import chromium
 import pytest
+from fmu_factory import lag_study
 
 from tsid_fmu import identify
 from tsid_fmu.study import load_study
@@ -45,6 +48,24 @@ PROBE = """
     h2: [...document.querySelectorAll('h2')].map(h => h.textContent)});
 })()
 """
+
+
+WIDTH_PROBE = """
+((width) => {
+  const wide = [...document.body.querySelectorAll('*')]
+    .filter(e => e.getBoundingClientRect().right > width + 0.5)
+    .filter(e => !(e.parentElement && e.parentElement.closest('.scroll')))
+    .map(e => `${e.tagName.toLowerCase()}.${e.className}: ${(e.textContent || '').slice(0, 60)}`);
+  return JSON.stringify({scroll: document.documentElement.scrollWidth,
+                         inner: window.innerWidth, wide});
+})(%d)
+"""
+
+WIDTHS = {"phone": 390, "desktop": 1366}
+"""Window widths in CSS pixels: an iPhone 12-15's portrait width, the most common laptop's.
+
+A phone's browser widens its layout viewport (``innerWidth``) to a page wider than the
+screen and zooms out, so the page is measured against the window's width itself."""
 
 
 @pytest.fixture(scope="module")
@@ -82,6 +103,15 @@ def _check(report: Path, binary: str, parameters: list[str]) -> dict:
     return info
 
 
+def _no_sideways_scroll(report: Path, binary: str) -> None:
+    """Assert that the page fits each of :data:`WIDTHS` (its wide tables scroll inside)."""
+    for device, width in WIDTHS.items():
+        page = chromium.load(report, WIDTH_PROBE % width, binary, width=width)
+        info = json.loads(page.value)
+        assert info["scroll"] <= width, (device, info["scroll"], info["wide"][:8])
+        assert info["inner"] == width, (device, info)  # not zoomed out to fit
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("example", ["lsea_siso", "lsea_miso"])
 def test_example_report_html_renders_offline_with_the_taguchi_tables(example, browser, tmp_path):
@@ -95,6 +125,26 @@ def test_example_report_html_renders_offline_with_the_taguchi_tables(example, br
     assert "https://" not in text
     if example == "lsea_miso":
         assert "Validation experiments" in info["h2"] and "Contribution analyses" in info["h2"]
+    _no_sideways_scroll(report, browser)
+
+
+def test_report_html_fits_a_phone_and_a_desktop_window(browser, tmp_path):
+    study = lag_study(tmp_path, name="a-study-name-long-enough-to-need-wrapping-on-a-phone",
+                      max_iterations=2, replicates=1)  # fmt: skip
+    identify(study, tmp_path / "out", plots=True, workers=1)
+    _no_sideways_scroll(tmp_path / "out" / "report.html", browser)
+
+
+def test_the_width_probe_sees_a_page_wider_than_the_window(browser, tmp_path):
+    page = tmp_path / "wide.html"
+    page.write_text(
+        '<!DOCTYPE html><html><head><meta name="viewport" content="width=device-width">'
+        '</head><body><div class="scroll"><table><tr><td style="min-width:2000px">in its box'
+        '</td></tr></table></div><p style="width:1500px">too wide</p></body></html>'
+    )
+    info = json.loads(chromium.load(page, WIDTH_PROBE % 390, browser, width=390).value)
+    assert info["scroll"] >= 1500 and info["inner"] > 390  # the phone zoomed out
+    assert [w.split(":")[0] for w in info["wide"]] == ["p."]
 
 
 def test_the_browser_probe_sees_errors_and_external_requests(browser, tmp_path):

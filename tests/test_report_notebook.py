@@ -53,14 +53,14 @@ def test_repr_html_holds_every_parameter_with_its_interval_and_the_stages(result
     parser.feed(html)
     header = parser.rows[0]
     assert header[:4] == ["parameter", "value", "unit", "95 % interval"]
-    rows = {r[0]: r for r in parser.rows[1:] if r and r[0] in result.x}
-    assert set(rows) == set(result.x) == {"tau", "x0"}
+    rows = {r[0]: r for r in parser.rows[1:] if r and r[0] in result.params}
+    assert set(rows) == set(result.params) == {"tau", "x0"}
     assert rows["tau"][2] == "s"
-    assert rows["tau"][1] == fmt(result.x["tau"])
+    assert rows["tau"][1] == fmt(result.params["tau"])
     low, high = result.intervals["tau"]
-    assert low < result.x["tau"] < high
+    assert low < result.params["tau"] < high
     lo_txt, hi_txt = rows["tau"][3].split(" .. ")
-    assert float(lo_txt) <= result.x["tau"] <= float(hi_txt) and lo_txt != hi_txt
+    assert float(lo_txt) <= result.params["tau"] <= float(hi_txt) and lo_txt != hi_txt
     stages = [r for r in parser.rows if r and r[0] == "taguchi"]
     assert stages and stages[0][1] == "taguchi"
     assert "report.html" in html

@@ -29,7 +29,7 @@ def study() -> Study:
 def _result(study: Study, status: int = 0, warnings: tuple[str, ...] = ()) -> IdentificationResult:
     x = {n: 1.0 for n in study.parameter_names}
     res = IdentificationResult(
-        x=x, fun=2.5, nfev=40, success=status == 0, status=status, message="done", study=study
+        params=x, fun=2.5, nfev=40, success=status == 0, status=status, message="done", study=study
     )
     res.warnings = list(warnings)
     return res

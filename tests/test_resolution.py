@@ -61,7 +61,7 @@ def test_a_standard_error_at_the_profile_floor_is_a_bound_not_an_estimate():
     assert u.resolution["sharp"] == u.relative["sharp"] > 0
     assert math.isfinite(u.relative["soft"]) and u.relative["soft"] > u.resolution["sharp"]
     res = IdentificationResult(
-        x=dict(X0), fun=100.0, nfev=1, success=True, status=0, message="m", uncertainty=u
+        params=dict(X0), fun=100.0, nfev=1, success=True, status=0, message="m", uncertainty=u
     )
     rows = {r[0]: r for r in parameter_rows(res)}
     assert isinstance(rows["sharp"][4], str)
@@ -80,7 +80,7 @@ def test_report_md_writes_the_bound_too():
     x = {n: 2.0 for n in study.parameter_names}
     u = Uncertainty(values=x, relative={n: 3.0 for n in x}, resolution={"K_s": 0.014685})
     res = IdentificationResult(
-        x=x, fun=1.0, nfev=1, success=True, status=0, message="m", study=study, uncertainty=u
+        params=x, fun=1.0, nfev=1, success=True, status=0, message="m", study=study, uncertainty=u
     )
     rows = [r for r in markdown_report(res).splitlines() if r.startswith("| K_s |")]
     # Markdown cells escape "<" (it renders as "<")

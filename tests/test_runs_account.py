@@ -23,7 +23,13 @@ def test_the_runs_frame_accounts_for_every_simulation_nfev_counts():
     refine = StageResult("refinement", "refinement", {}, 0.5, 30, "done")
     check = StageResult("check", "check", {}, 0.5, 6, "stationary")
     res = IdentificationResult(
-        x={}, fun=0.5, nfev=80, success=True, status=0, message="m", stages=[taguchi, refine, check]
+        params={},
+        fun=0.5,
+        nfev=80,
+        success=True,
+        status=0,
+        message="m",
+        stages=[taguchi, refine, check],
     )
     runs = res.to_pandas()
     assert len(runs) == 18 < res.nfev

@@ -366,7 +366,7 @@ def test_a_deeply_nested_study_file_is_one_line(tmp_path, capsys):
 
 def test_control_characters_are_escaped_in_the_report():
     result = IdentificationResult(
-        x={"tau": 0.3}, fun=0.1, nfev=9, success=True, status=0, message=f"done{ESC}",
+        params={"tau": 0.3}, fun=0.1, nfev=9, success=True, status=0, message=f"done{ESC}",
         warnings=[f"the FMU said {ESC}hello\nnext line"],
         validation={f"exp{ESC}": {"error": f"fmi2DoStep {ESC}failed"}},
         weak={"tau": f"reason{ESC}"},

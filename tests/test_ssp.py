@@ -84,7 +84,7 @@ def _ssp_run(path: Path, frame: pd.DataFrame, inputs: list[str]) -> np.ndarray:
 
 
 def _identified(result) -> dict[str, float]:
-    return {**result.x, **result.study.start_values}
+    return {**result.params, **result.study.start_values}
 
 
 def test_siso_model_ssp_simulates_like_tsid(tmp_path):

@@ -29,7 +29,7 @@ def test_a_study_gives_the_same_answer_and_count_for_any_worker_count(lag_crash_
     assert first.nfev > 0 and len(first.iterations) >= 2
     for n in (2, 3):
         got = results[n]
-        assert got.x == first.x and got.fun == first.fun and got.nfev == first.nfev
+        assert got.params == first.params and got.fun == first.fun and got.nfev == first.nfev
         assert [s.nfev for s in got.stages] == [s.nfev for s in first.stages]
         for a, b in zip(first.iterations, got.iterations, strict=True):
             np.testing.assert_array_equal(a.costs, b.costs)
@@ -49,6 +49,6 @@ def test_a_study_survives_crashing_rows_and_reports_them(lag_crash_fmus, tmp_pat
     first = res.iterations[0]
     crashed = [e for e in first.errors if e]
     assert len(crashed) == 3 and all("SIGSEGV" in e for e in crashed)
-    assert math.isfinite(res.fun) and res.x["gain"] < 20.0
+    assert math.isfinite(res.fun) and res.params["gain"] < 20.0
     report = (tmp_path / "out" / "report.md").read_text()
     assert "## Failed runs" in report and "worker crashed (signal 11 SIGSEGV)" in report

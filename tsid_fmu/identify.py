@@ -48,7 +48,7 @@ from tsid_fmu.uncertainty.fidelity import (
     start_point,
     study_noise,
 )
-from tsid_fmu.uncertainty.sensitivity import Sensitivities
+from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian
 
 __all__ = ["identify"]
 
@@ -237,7 +237,7 @@ def _compare_ungrouped(
     """Run the same study without grouping, to set beside the phased one."""
     alone = run_stages(study, evaluators, store, ungrouped=True)[0]
     return {
-        "phased": {"cost": result.fun, "nfev": result.nfev, "x": dict(result.x)},
+        "phased": {"cost": result.fun, "nfev": result.nfev, "x": dict(result.params)},
         "ungrouped": {
             "cost": alone.cost,
             "nfev": alone.nfev,
@@ -342,7 +342,7 @@ def _finish(
     nit = sum(len(s.records) for s in stages)
     nfev = sum(s.nfev for s in stages)
     result = IdentificationResult(
-        x=x,
+        params=x,
         fun=answer.cost,
         nfev=nfev,
         success=status == 0,
@@ -372,6 +372,9 @@ def _finish(
     found = assess(ev, spec, space, x)
     result.fun, result.fit, result.noise = found.fun, found.fit, found.noise
     result.uncertainty = found.uncertainty
+    if found.uncertainty is not None and found.sensitivities is not None:
+        jac = residual_jacobian(found.sensitivities, spec, space, x)
+        result.jac = jac[:, [found.sensitivities.names.index(n) for n in result.names]]
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
     result.warnings = (
         _poor_fit(answer)

@@ -171,9 +171,10 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
     Returns
     -------
     IdentificationResult
-        ``x``, ``fun``, ``nfev``, ``status``, the stages with their iterations, the
-        intervals and uncertainty, fit, noise, validation and warnings as ``identify``
-        returned them, with ``out_dir`` set.
+        ``params`` (with ``x``, ``names`` and ``cov``), ``fun``, ``nfev``, ``status``,
+        the stages with their iterations, the intervals and uncertainty, fit, noise,
+        validation and warnings as ``identify`` returned them, with ``out_dir`` set;
+        ``jac`` is ``None`` (the results folder does not hold it).
 
     Raises
     ------
@@ -186,7 +187,7 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
     attached, more = _study(out, study, data.get("study_folder"))
     try:
         result = IdentificationResult(
-            x=_numbers(data["x"]),
+            params=_numbers(data["x"]),
             fun=_number(data["fun"]),
             nfev=int(data["nfev"]),
             success=bool(data["success"]),
@@ -211,6 +212,6 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
         result.extra["comparison"] = data["comparison"]
     result.contribution = {
         n: [float(r.anova.contribution[n]) for r in result.iterations if n in r.names]
-        for n in result.x
+        for n in result.params
     }
     return result

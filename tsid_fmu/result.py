@@ -1,7 +1,8 @@
 """The outcome of an identification, in the style of :class:`scipy.optimize.OptimizeResult`.
 
 The schema is the same for every kind of study (one Taguchi stage, phases, with or
-without refinement): ``x``, ``fun`` (always the study's cost on the measured inputs of
+without refinement): ``x`` (an array in the order of ``names``; ``params`` the same
+values by name), ``fun`` (always the study's cost on the measured inputs of
 its identification experiments), ``nfev``, ``success``, ``status``, ``message``, the
 ``stages`` in order, and the ``intervals``.
 """
@@ -66,10 +67,17 @@ def _view(name: str) -> Callable[..., Any]:
 class IdentificationResult:
     """What an identification found, and the evidence for it.
 
+    As in :class:`scipy.optimize.OptimizeResult`, :attr:`x` is an array; :attr:`params`
+    (lmfit's name) holds the same values by name, and is what the constructor takes.
+
     Attributes
     ----------
-    x : dict
-        Identified value of each parameter.
+    x : numpy.ndarray
+        Identified values in the order of ``names`` (read-only; from ``params``).
+    names : list of str
+        The parameters, in the study's order.
+    params : dict
+        Identified value of each parameter, by name, in the study's order.
     fun : float
         The study's cost of ``x`` on the measured inputs of the identification
         experiments (the one objective every stage minimised).
@@ -111,9 +119,18 @@ class IdentificationResult:
         The study identified.
     out_dir : Path or None
         Where the trail and report were written.
+    cov : numpy.ndarray or None
+        Covariance of the parameters the intervals use, ``(n, n)`` in the order of
+        ``names`` (derived from ``uncertainty``; see the property).
+    jac : numpy.ndarray or None
+        Jacobian of the residuals at :attr:`x` with respect to the parameters, in
+        parameter units, shape ``(n_residuals, len(names))``: the one the intervals were
+        computed from (:func:`tsid_fmu.uncertainty.sensitivity.residual_jacobian`).
+        ``None`` where no intervals were computed, and in a result read back by
+        :func:`tsid_fmu.load` (it is not written to the results folder).
     """
 
-    x: dict[str, float]
+    params: dict[str, float]
     fun: float
     nfev: int
     success: bool
@@ -132,16 +149,52 @@ class IdentificationResult:
     extra: dict[str, Any] = field(default_factory=dict)
     study: Study | None = None
     out_dir: Path | None = None
+    jac: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def names(self) -> list[str]:
+        """The parameters, in the order of :attr:`x` (the study's order)."""
+        return list(self.params)
+
+    @property
+    def x(self) -> np.ndarray:
+        """Identified values, a read-only 1-D array in the order of :attr:`names`.
+
+        SciPy's convention; :attr:`params` holds the same values by name.
+        """
+        out = np.array([float(v) for v in self.params.values()], dtype=float)
+        out.flags.writeable = False
+        return out
+
+    @property
+    def cov(self) -> np.ndarray | None:
+        """Covariance of the parameters, shape ``(n, n)`` in the order of :attr:`names`.
+
+        In parameter units (squared), the covariance the intervals were computed from
+        (the HAC sandwich, linearised at :attr:`x`), with each variance the square of the
+        standard error reported (``uncertainty.std_error``), which the profile likelihood
+        may have widened: ``sqrt(diag(cov))`` is the reported standard errors. A
+        parameter the data do not determine has an infinite variance and ``nan``
+        covariances. ``None`` where no intervals were computed.
+        """
+        u = self.uncertainty
+        if u is None or any(n not in u.std_error for n in self.names):
+            return None
+        se = np.array([float(u.std_error[n]) for n in self.names])
+        corr = np.array(
+            [[float(u.correlation.get(a, {}).get(b, 0.0)) for b in self.names] for a in self.names]
+        )
+        finite = np.isfinite(se)
+        with np.errstate(invalid="ignore"):
+            cov = corr * np.outer(se, se)
+        cov[~np.outer(finite, finite)] = np.nan
+        np.fill_diagonal(cov, se**2)
+        return cov
 
     @property
     def iterations(self) -> list[IterationRecord]:
         """Every Taguchi iteration of every stage, in order."""
         return [rec for st in self.stages for rec in st.records]
-
-    @property
-    def params(self) -> dict[str, float]:
-        """Identified value of each parameter by name (lmfit's name; a copy of ``x``)."""
-        return dict(self.x)
 
     def x_at(self, k: int) -> dict[str, float]:
         """Return the best parameter set known after Taguchi iteration ``k``.
@@ -176,10 +229,10 @@ class IdentificationResult:
             if stage.kind != "contribution":
                 known.update(stage.x)
         values = sets[int(k) - 1 if k > 0 else int(k)]
-        return {n: float(values[n]) for n in self.x if n in values}
+        return {n: float(values[n]) for n in self.params if n in values}
 
     def __repr__(self) -> str:
-        keys = ["message", "success", "status", "fun", "x", "nfev", "nit", "intervals"]
+        keys = ["message", "success", "status", "fun", "names", "x", "nfev", "nit", "intervals"]
         width = max(map(len, keys))
         return "\n".join(f"{k.rjust(width)}: {getattr(self, k)!r}" for k in keys)
 
@@ -216,7 +269,7 @@ class IdentificationResult:
         """Return the result as strict-JSON data (the content of ``result.json``)."""
         return strict(
             {
-                "x": self.x,
+                "x": dict(self.params),
                 "fun": self.fun,
                 "nfev": self.nfev,
                 "success": self.success,
@@ -253,7 +306,7 @@ class IdentificationResult:
                 "unit": units.get(name, ""),
                 "weak": self.weak.get(name),
             }
-            for name, value in self.x.items()
+            for name, value in self.params.items()
         }
         stages = [
             {
@@ -364,7 +417,7 @@ class IdentificationResult:
             rows.append(
                 {
                     "parameter": p.name,
-                    "value": self.x[p.name],
+                    "value": self.params[p.name],
                     "unit": p.unit,
                     "95% low": math.nan if low is None else low,
                     "95% high": math.nan if high is None else high,

@@ -57,11 +57,11 @@ def parameter_rows(result: Any) -> list[list[Any]]:
     """Rows of the parameter table: value, unit, 95 % interval, standard error, flags."""
     rows = []
     params = result.study.parameters if result.study else []
-    names = [p.name for p in params] or list(result.x)
+    names = [p.name for p in params] or result.names
     units = {p.name: p.unit for p in params}
     first = {p.name: f"{fmt(min(p.levels))} .. {fmt(max(p.levels))}" for p in params}
     for name in names:
-        value = result.x.get(name, math.nan)
+        value = result.params.get(name, math.nan)
         low, high = result.intervals.get(name, [None, None])
         se = _std_error(result.uncertainty, name)
         rows.append(
@@ -120,7 +120,7 @@ def plot_fit(result: Any) -> Any:
     exps = [e.name for e in study.identify_experiments()]
     spec = prepare(study, exps, study.parameter_names)
     with SerialEvaluator(spec) as ev:
-        sims = ev.simulate([dict(result.x)], count=False)[0]
+        sims = ev.simulate([dict(result.params)], count=False)[0]
     title = f"Identified model against the measured data ({cost_name(study)})"
     return FitFigure(spec.experiments, study_units(study)).draw(sims, title)
 
@@ -162,7 +162,9 @@ def plot_parameters(result: Any) -> Any:
     from tsid_fmu.report.figures import trajectory_figure
     from tsid_fmu.report.units import study_units
 
-    return trajectory_figure(result.iterations, list(result.x), study_units(result.study), result.x)
+    return trajectory_figure(
+        result.iterations, result.names, study_units(result.study), result.params
+    )
 
 
 register_views(

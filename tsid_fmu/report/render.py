@@ -170,8 +170,8 @@ def draw_study(
     if result.iterations:
         writer.put("convergence.png", png_bytes(convergence_figure(result.stages, cost)))
         t = figures.lap("convergence.png", t)
-        names = list(result.x)
-        fig = trajectory_figure(result.iterations, names, units, result.x)
+        names = result.names
+        fig = trajectory_figure(result.iterations, names, units, result.params)
         writer.put("parameters.png", png_bytes(fig))
         figures.lap("parameters.png", t)
     figures.seconds = time.perf_counter() - t0

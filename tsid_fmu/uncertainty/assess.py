@@ -17,7 +17,7 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.study.prepare import data_noise
 from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, scale_groups, uncertainty
 from tsid_fmu.uncertainty.profile import CHI2_95, ProfileProblem, profile_intervals
-from tsid_fmu.uncertainty.sensitivity import Sensitivities, sensitivities
+from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian, sensitivities
 
 __all__ = ["MISMATCH", "Assessment", "assess", "standard_errors", "validate"]
 
@@ -110,10 +110,7 @@ def _widen_by_profile(
 
     ``sens`` holds the Jacobian at the answer ``x``, whose cost is ``cost``.
     """
-    blocks = [
-        jac / e.scale[None, :, None] for e, jac in zip(spec.experiments, sens.jacobian, strict=True)
-    ]
-    jacobian = np.vstack([b.reshape(-1, b.shape[-1]) for b in blocks])
+    jacobian = residual_jacobian(sens, spec)
     n, p = jacobian.shape
     threshold = CHI2_95 * max(cost / max(n - p, 1), 1e-300) * u.inflation**2
     # linear coordinates with the same local scale: a valley along a sum of parameters is

@@ -18,7 +18,7 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
 
-__all__ = ["STEP", "Sensitivities", "sensitivities"]
+__all__ = ["STEP", "Sensitivities", "residual_jacobian", "sensitivities"]
 
 STEP = 2e-3
 """Half-step of the central differences in search coordinates: 0.2 % of each parameter's
@@ -94,3 +94,45 @@ def sensitivities(
         experiments=[e.name for e in spec.experiments],
         output_names=[list(e.output_names) for e in spec.experiments],
     )
+
+
+def residual_jacobian(
+    sens: Sensitivities,
+    spec: EvaluationSpec,
+    space: Space | None = None,
+    x: Mapping[str, float] | None = None,
+) -> np.ndarray:
+    """Return the Jacobian of the least-squares residuals, one row per residual.
+
+    The residuals are those the evaluator gives and the refinement minimises:
+    ``(simulated - measured) / scale`` of every experiment of ``spec`` on its measured
+    inputs, each experiment's ``(n, outputs)`` block flattened row by row (sample after
+    sample, the outputs of a sample side by side), the experiments one after another.
+
+    Parameters
+    ----------
+    sens : Sensitivities
+        The output sensitivities at ``x`` (central differences, :func:`sensitivities`).
+    spec : EvaluationSpec
+        The experiments of ``sens``, for their residual scales.
+    space : Space, optional
+        With ``x``: convert the columns from search coordinates to parameter units,
+        dividing each by :meth:`~tsid_fmu.search.space.Space.local_scale` at ``x`` (the
+        linearisation the standard errors use).
+    x : mapping, optional
+        The parameter set ``sens`` was computed at.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``(n_residuals, len(sens.names))``, columns in the order of ``sens.names``;
+        in search coordinates unless ``space`` and ``x`` are given.
+    """
+    blocks = [
+        jac / e.scale[None, :, None] for e, jac in zip(spec.experiments, sens.jacobian, strict=True)
+    ]
+    out = np.vstack([b.reshape(-1, b.shape[-1]) for b in blocks])
+    if space is not None and x is not None:
+        scale = [space.local_scale(space.names.index(n), float(x[n])) for n in sens.names]
+        out = out / np.asarray(scale)[None, :]
+    return out
