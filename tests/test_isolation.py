@@ -119,7 +119,7 @@ def test_a_check_past_the_time_limit_says_so_and_the_result_is_written(crashy, t
     answer = saved["extra"]["fidelity"]["answer"]["message"]
     assert answer.startswith("solver fidelity (answer): not checked")
     assert "time limit of 1.2 s per simulation exceeded" in answer
-    assert answer in res.warnings and saved["x"] == res.x
+    assert answer in res.warnings and saved["x"] == res.params
 
 
 def test_a_crashed_row_is_retried_once_in_a_fresh_worker(crashy):
