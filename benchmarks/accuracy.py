@@ -20,6 +20,7 @@ found, worst parameter error against the truth, and (tsid) how far the Taguchi s
 alone got. Run::
 
     python benchmarks/accuracy.py                 # every problem
+    python benchmarks/accuracy.py --de-budget 1000 --markdown   # and the README's table
     python benchmarks/accuracy.py siso_encoder dc_motor --workers 1
 """
 
@@ -212,7 +213,56 @@ def run_tsid(study: Study, truth, workers: int | None):
     return rows, res
 
 
-def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
+#: The README's label of each problem (``--markdown``).
+LABELS = {
+    "siso_encoder": "SISO, load cells + encoder, Table I",
+    "siso_loadcells": "SISO, load cells only",
+    "miso": "MISO, one experiment, rough ranges",
+    "dc_motor": "DC motor (pythonfmu FMU), one decade per parameter",
+    "local_minima": "lightly damped resonance (local minima)",
+}
+
+
+def _ratio(c: float) -> str:
+    return f"{c:.6f}" if c < 10 else f"{c:.3g}"
+
+
+def _error(e: float) -> str:
+    return f"{e:.3g} %"
+
+
+def markdown_rows(name: str, rows: list[dict], best: float) -> list[str]:
+    """The README's table rows of one problem (``--markdown``)."""
+    by = {r["method"]: r for r in rows}
+
+    def cells(*methods: str) -> str:
+        rs = [by[m] for m in methods]
+        sims = " / ".join(str(r["nfev"]) for r in rs)
+        ratios = " / ".join(_ratio(r["cost"] / best) for r in rs)
+        errors = " / ".join(_error(r["error"]) for r in rs)
+        return f"{sims} | {ratios} | {errors} |"
+
+    de = next(r["method"] for r in rows if r["method"].startswith("differential"))
+    return [
+        f"| {LABELS.get(name, name)} | tsid: Taguchi stage alone | "
+        + cells("tsid: Taguchi stage(s) alone"),
+        "| | tsid: whole study | " + cells("tsid: whole study"),
+        '| | tsid: refine = "least_squares" (the arrays to their end) | '
+        + cells('tsid: refine = "least_squares" (arrays to their end)'),
+        "| | least_squares from the centre | " + cells("least_squares from the centre"),
+        "| | least_squares from level 1 / level 5 | "
+        + cells("least_squares from level 1", "least_squares from level 5"),
+        "| | differential_evolution | " + cells(de),
+    ]
+
+
+MARKDOWN_HEADER = [
+    "| problem | method | simulations | cost / best | worst error |",
+    "|---|---|---:|---:|---:|",
+]
+
+
+def benchmark(name: str, workers: int | None, de_budget: int) -> tuple[list[dict], float]:
     prob = PROBLEMS[name]()
     study = study_of(prob, METHOD)
     rows, res = run_tsid(study, prob.truth, workers)
@@ -245,7 +295,7 @@ def benchmark(name: str, workers: int | None, de_budget: int) -> list[dict]:
         )
     print(intervals_line(res, prob.truth))
     print(peer_line(res, rows))
-    return rows
+    return rows, best
 
 
 def peer_line(res, rows: list[dict]) -> str:
@@ -278,12 +328,21 @@ def main() -> None:
     parser.add_argument("problems", nargs="*", help=f"any of {', '.join(PROBLEMS)} (default all)")
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--de-budget", type=int, default=1500)
+    parser.add_argument(
+        "--markdown", action="store_true", help="end with the README's table of these problems"
+    )
     args = parser.parse_args()
     unknown = sorted(set(args.problems) - set(PROBLEMS))
     if unknown:
         parser.error(f"unknown problem(s) {unknown}; choose from {', '.join(PROBLEMS)}")
+    table = list(MARKDOWN_HEADER)
     for name in args.problems or list(PROBLEMS):
-        benchmark(name, args.workers, args.de_budget)
+        rows, best = benchmark(name, args.workers, args.de_budget)
+        table += markdown_rows(name, rows, best)
+    if args.markdown:
+        command = " ".join(["python benchmarks/accuracy.py", *sys.argv[1:]])
+        print(f"\n<!-- {command}, {time.strftime('%Y-%m-%d')} -->")
+        print("\n".join(table))
 
 
 if __name__ == "__main__":
