@@ -93,3 +93,46 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     assert "Why grouping: the same study without it" in report
     assert res.extra["fidelity"]["interface"] == "cs"
     assert not any(w.startswith("solver fidelity") for w in res.warnings), res.warnings
+    _miso_matches_the_readme(res)
+
+
+def _miso_claims() -> dict[str, float]:
+    """The MISO example's figures, as README.md states them."""
+    import re
+
+    text = " ".join((EXAMPLES.parent / "README.md").read_text(encoding="utf-8").split())
+    para = text[text.index("SISO as above; MISO") :]
+    para = para[: para.index("grouping does not pay")]
+    rms = re.search(r"residual RMS ends within ([\d.]+) %", para)
+    ratios = re.search(r"m1/K_s and C_1/K_s come within ([\d.]+) % and ([\d.]+) %", para)
+    sims = re.search(r"exit status 0, (\d+) simulations in phases", para)
+    ungrouped = re.search(r"reaches the same cost in (\d+) simulations", para)
+    assert rms and ratios and sims and ungrouped, para
+    assert "every 95 % interval holds the truth" in para
+    return {
+        "rms": float(rms[1]) / 100,
+        "m1/K_s": float(ratios[1]) / 100,
+        "C_1/K_s": float(ratios[2]) / 100,
+        "nfev": float(sims[1]),
+        "ungrouped": float(ungrouped[1]),
+    }
+
+
+def _miso_matches_the_readme(res) -> None:
+    """What the README says of the MISO example, to its precision (issue 27)."""
+    claims = _miso_claims()
+    assert res.status == 0 and res.success, res.message
+    x = res.params
+    assert abs((x["m1"] / x["K_s"]) / (0.45 / 5000.0) - 1) < claims["m1/K_s"]
+    assert abs((x["C_1"] / x["K_s"]) / (20.0 / 5000.0) - 1) < claims["C_1/K_s"]
+    for name, value in MISO_TRUTH.items():  # an open bound holds the truth
+        low, high = res.intervals[name]
+        assert (low is None or low <= value) and (high is None or value <= high), name
+    for exp, outputs in res.fit.items():
+        for out, fit in outputs.items():
+            assert abs(fit["rmse"] / res.noise[exp][out] - 1) < claims["rms"], (exp, out)
+    # simulation counts to within 10 %; the ungrouped comparison at the same cost
+    assert abs(res.nfev / claims["nfev"] - 1) <= 0.10, res.nfev
+    comp = res.extra["comparison"]
+    assert abs(comp["ungrouped"]["nfev"] / claims["ungrouped"] - 1) <= 0.10, comp
+    assert comp["ungrouped"]["cost"] == pytest.approx(comp["phased"]["cost"], rel=1e-4)
