@@ -230,6 +230,20 @@ def test_a_frame_with_a_column_named_twice_is_refused():
         MeasuredData.from_frame(frame)
 
 
+def test_a_spreadsheet_with_a_column_named_twice_is_refused(tmp_path):
+    import pandas as pd
+
+    pytest.importorskip("openpyxl")  # the test extra installs it
+    frame = pd.DataFrame([[0.0, 1.0, 2.0, 3.0], [0.1, 1.0, 2.0, 3.0]])
+    frame.columns = ["time", "F_m", "y", "F_m"]  # pandas would read it as F_m, F_m.1
+    frame.to_excel(tmp_path / "d.xlsx", index=False)
+    with pytest.raises(DataError, match=r"d\.xlsx: columns 2 and 4 are both named 'F_m'"):
+        load_data(tmp_path / "d.xlsx")
+    frame.columns = ["time", "F_m", "y", "F_o"]
+    frame.to_excel(tmp_path / "ok.xlsx", index=False)
+    assert list(load_data(tmp_path / "ok.xlsx").frame.columns)[:2] == ["time", "F_m"]
+
+
 def test_a_byte_order_mark_is_not_part_of_the_header(lag, tmp_path, capsys):
     good = (lag.parent / "good.csv").read_text()
     (tmp_path / "excel.csv").write_bytes(b"\xef\xbb\xbf" + good.encode())

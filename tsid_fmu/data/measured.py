@@ -298,6 +298,22 @@ def _text_options(path: Path, suffix: str, options: dict[str, Any]) -> dict[str,
     return merged
 
 
+def _read_excel(path: Path, options: dict[str, Any]) -> pd.DataFrame:
+    """Read a spreadsheet, refusing a header row that names a column twice.
+
+    pandas renames a repeated name (``F_m.1``), so the header row is read as it is
+    written first (:func:`check_duplicates` names both positions).
+    """
+    import pandas as pd
+
+    if options.get("header", 0) == 0:
+        sheet = {k: v for k, v in options.items() if k == "sheet_name"}
+        head = pd.read_excel(path, header=None, nrows=1, **sheet)
+        if head.shape[0]:
+            check_duplicates([v for v in head.iloc[0].tolist() if v == v], str(path))
+    return pd.read_excel(path, **options)
+
+
 def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) -> pd.DataFrame:
     import pandas as pd
 
@@ -312,7 +328,7 @@ def _read(path: Path, columns: Sequence[str] | None, options: dict[str, Any]) ->
         elif suffix == ".feather":
             frame = pd.read_feather(path, **options)
         elif suffix in (".xlsx", ".xls"):
-            frame = pd.read_excel(path, **options)
+            frame = _read_excel(path, options)
         else:
             frame = _read_mat(path, options)
     except ImportError as exc:
