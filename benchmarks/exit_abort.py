@@ -31,20 +31,6 @@ import numpy as np
 import pandas as pd
 from _common import REPO
 
-LAG_TOML = """\
-[study]
-fmu = "{fmu}"
-[data]
-file = "d.csv"
-inputs = {{ u = "u" }}
-outputs = {{ y = "y" }}
-[method]
-seed = 7
-max_iterations = 4
-[parameters]
-tau = {{ levels = [0.05, 0.5, 2.0], min = 0.001 }}
-"""
-
 MOTOR_TOML = """\
 [study]
 fmu = "{fmu}"
@@ -62,7 +48,7 @@ max_iterations = 2
 
 def _lag_case(folder: Path) -> Path:
     """A pythonfmu lag and 2 s of noisy data from it; return the study file."""
-    from fmu_factory import build_pythonfmu
+    from fmu_factory import PYLAG_TOML, build_pythonfmu
 
     import tsid_fmu
 
@@ -72,7 +58,7 @@ def _lag_case(folder: Path) -> Path:
     y = tsid_fmu.simulate(fmu, pd.DataFrame({"time": t, "u": u}), parameters={"tau": 0.37})
     y = y["y"].to_numpy() + np.random.default_rng(0).normal(0, 0.003, t.size)
     pd.DataFrame({"time": t, "u": u, "y": y}).to_csv(folder / "d.csv", index=False)
-    (folder / "study.toml").write_text(LAG_TOML.format(fmu=fmu.name))
+    (folder / "study.toml").write_text(PYLAG_TOML.format(fmu=fmu.name))
     return folder / "study.toml"
 
 

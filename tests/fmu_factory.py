@@ -698,6 +698,23 @@ x0 = { levels = [-1.0, 0.0, 2.0] }
 """A lag study on ``Lag.fmu`` and ``d.csv`` in its folder, for the signal and resume tests."""
 
 
+PYLAG_TOML = """\
+[study]
+fmu = "{fmu}"
+[data]
+file = "d.csv"
+inputs = {{ u = "u" }}
+outputs = {{ y = "y" }}
+[method]
+seed = 7
+max_iterations = 4
+[parameters]
+tau = {{ levels = [0.05, 0.5, 2.0], min = 0.001 }}
+"""
+"""A lag study of a pythonfmu FMU (``{fmu}``, :func:`build_pythonfmu`) on ``d.csv``: the
+vendor-exit test and ``benchmarks/exit_abort.py``."""
+
+
 _PYTHONFMU_SLAVE = '''
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 

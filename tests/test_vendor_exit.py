@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from fmu_factory import build_pythonfmu, pythonfmu_available
+from fmu_factory import PYLAG_TOML, build_pythonfmu, pythonfmu_available
 
 REPO = Path(__file__).resolve().parents[1]
 VALGRIND = shutil.which("valgrind")
@@ -118,20 +118,6 @@ def test_simulate_exits_without_an_invalid_access_under_valgrind(pylag, fix, tmp
     assert not list(tmp_path.glob("tsid-fmu-*"))  # the extraction folders went at exit
 
 
-_STUDY = """\
-[study]
-fmu = "{fmu}"
-[data]
-file = "d.csv"
-inputs = {{ u = "u" }}
-outputs = {{ y = "y" }}
-[method]
-seed = 7
-max_iterations = 4
-[parameters]
-tau = {{ levels = [0.05, 0.5, 2.0], min = 0.001 }}
-"""
-
 #: result.json entries that say where or how fast a run was, not what it found
 _WHERE = ("study_folder", "digest", "seconds")
 
@@ -155,7 +141,7 @@ def test_three_identical_studies_at_once_exit_cleanly_with_identical_results(pyl
     y = tsid_fmu.simulate(pylag, pd.DataFrame({"time": t, "u": u}), parameters={"tau": 0.37})
     y = y["y"].to_numpy() + np.random.default_rng(0).normal(0, 0.003, t.size)
     pd.DataFrame({"time": t, "u": u, "y": y}).to_csv(tmp_path / "d.csv", index=False)
-    (tmp_path / "study.toml").write_text(_STUDY.format(fmu=pylag))
+    (tmp_path / "study.toml").write_text(PYLAG_TOML.format(fmu=pylag))
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     cmd = [sys.executable, "-m", "tsid_fmu", "identify", "study.toml", "--no-plots", "-q"]
     procs = [
