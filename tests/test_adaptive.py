@@ -8,6 +8,7 @@ status 0 only where a stationarity test holds. Each test fails when its rule is 
 
 from __future__ import annotations
 
+import itertools
 import math
 from types import SimpleNamespace
 
@@ -341,6 +342,44 @@ def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatc
     monkeypatch.setattr(local, "_collapsed", lambda stage: None)
     alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     assert "resumed" not in alone[0].extra and len(alone[0].records) < len(first.records)
+
+
+def test_a_continued_stage_hands_back_once_below_the_refinement_and_stalled():
+    levels = {"a": [1.0, 2.5, 4.0], "k": [0.5, 1.5, 2.5]}
+    first = taguchi_stage(
+        _stage_run(levels, handover=True, floor=float(T.size)), _decay_evaluator()
+    )
+    below = first.cost * 0.95  # a refinement's answer a little below the arrays' best
+    run = {"prior": first.records, "max_iterations": 30}
+    on = taguchi_stage(_stage_run(levels, hand_back_below=below, **run), _decay_evaluator())
+    off = taguchi_stage(_stage_run(levels, **run), _decay_evaluator())
+    assert on.message.startswith("handed back to the refinement") and on.status == 0
+    rtol = LevelingOptions().stall_rtol
+    costs = [r.best_cost for r in on.records[len(first.records) - 1 :]]
+    falls = [(b < below) and (a - b < rtol * b) for a, b in itertools.pairwise(costs)]
+    assert falls[-1] and not any(falls[:-1])  # at the first iteration where both hold
+    assert len(off.records) > len(on.records) and "handed back" not in off.message
+    ev = _decay_evaluator()  # read back from the trail: finished, nothing simulated
+    again = taguchi_stage(_stage_run(levels, handover=True, prior=on.records), ev)
+    assert ev.nfev == 0 and again.message == on.message
+
+
+def test_the_pipeline_continues_the_arrays_only_to_below_the_refinements_answer(monkeypatch):
+    polish = context.polish
+
+    def collapsing_high(name, *args, **kwargs):
+        stage = polish(name, *args, **kwargs)
+        if name == "refinement":  # collapsed, and well above the arrays' best
+            stage.extra["stop"] = "xtol"
+            stage.cost *= 1.5
+        return stage
+
+    monkeypatch.setattr(context, "polish", collapsing_high)
+    study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
+    stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
+    assert "trust region collapsed" in stages[0].extra["resumed"]
+    assert stages[0].message.startswith("handed back to the refinement")
+    assert stages[0].cost < stages[1].cost
 
 
 # -- growing horizons -----------------------------------------------------------------------

@@ -12,8 +12,9 @@ sequence of stages:
    (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the noise floor), or the
    refinement's trust region collapsed (SciPy's ``xtol``: its local model did not hold,
    as on dry friction's rough cost), the refinement may sit in a local minimum: the
-   Taguchi stage goes on from where it handed over, to its own end (Case 3 or a limit),
-   and its best set is refined again;
+   Taguchi stage goes on from where it handed over, to its own end (Case 3 or a limit)
+   or until its best set lies below the refinement's answer and an iteration stops
+   lowering it (it hands back), and its best set is refined again;
 4. while that still holds, the refinement follows a minimum over growing horizons: on
    the first :data:`HORIZONS` fractions of each experiment's samples in turn, from the
    arrays' best set, then on all of them (a model that swings or rings has few valleys

@@ -20,8 +20,9 @@ from tsid_fmu.search.verdict import POOR_FIT, noise_floor, probe_test
 
 __all__ = ["check", "local_search"]
 
-#: Continues the handed-over Taguchi stage from its records, to its own end.
-Resume = Callable[[list[IterationRecord]], StageResult]
+#: Continues the handed-over Taguchi stage from its records, until it ends or hands back
+#: below the given cost (the refinement's answer).
+Resume = Callable[[list[IterationRecord], float], StageResult]
 
 
 def _unsettled(stages: list[StageResult], floor: float) -> str | None:
@@ -67,9 +68,9 @@ def local_search(
     floor = noise_floor(evaluator, study.method.weighting == "noise")
     first = stages[0]
     why = _unsettled(stages, floor) or _collapsed(stages[-1])
-    if why and first.kind == "taguchi" and first.records[-1].extra.get("handover"):
+    if why and first.kind == "taguchi" and any("handover" in r.extra for r in first.records):
         note(ctx, f"{why}: the Taguchi stage goes on")
-        stages[0] = resume(first.records)
+        stages[0] = resume(first.records, stages[-1].cost)
         stages[0].extra["resumed"] = why
         if stages[0].status == 2:
             return stages

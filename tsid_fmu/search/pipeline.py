@@ -56,6 +56,7 @@ def _taguchi(
     max_iterations: int | None,
     handover: bool = False,
     records: list[IterationRecord] | None = None,
+    hand_back_below: float | None = None,
 ) -> StageResult:
     """Run (or continue) one Taguchi-kind stage of ``params`` on ``exps``.
 
@@ -96,6 +97,7 @@ def _taguchi(
             current if set(names) <= set(current) else None,
         ),
         handover=handover,
+        hand_back_below=hand_back_below,
     )
     evaluator = ctx.evaluators.get(names, list(exps), fixed)
     if handover:
@@ -231,15 +233,18 @@ def run_stages(
         return stages
     if adaptive or study.method.refine == "least_squares":
 
-        def resume(records: list[IterationRecord]) -> StageResult:
-            return _single(ctx, handover=False, records=records)
+        def resume(records: list[IterationRecord], below: float) -> StageResult:
+            return _single(ctx, handover=False, records=records, below=below)
 
         return local_search(ctx, stages, adaptive, resume)
     return [*stages, check(ctx, answer_stage(stages))]
 
 
 def _single(
-    ctx: Context, handover: bool, records: list[IterationRecord] | None = None
+    ctx: Context,
+    handover: bool,
+    records: list[IterationRecord] | None = None,
+    below: float | None = None,
 ) -> StageResult:
     """Run the one Taguchi stage of an ungrouped study (continued from the trail, if any).
 
@@ -249,7 +254,9 @@ def _single(
     exps = [e.name for e in ctx.study.identify_experiments()]
     params = list(ctx.study.parameters)
     limit = ctx.control.max_iterations
-    return _taguchi(ctx, "", "taguchi", "taguchi", params, exps, {}, 0, limit, handover, records)
+    return _taguchi(
+        ctx, "", "taguchi", "taguchi", params, exps, {}, 0, limit, handover, records, below
+    )
 
 
 def _run_ungrouped(ctx: Context) -> StageResult:

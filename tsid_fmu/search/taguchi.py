@@ -43,6 +43,29 @@ HANDOVER_FIT = 100.0
 a local method from the best run too often ends in another basin."""
 
 
+def _hand_back(records: list[IterationRecord], run: TaguchiRun) -> str | None:
+    """Whether a continued stage hands back to the refinement (``run.hand_back_below``).
+
+    A stage continued because the refinement's answer was unsettled has done its job
+    once its best set lies below that answer and an iteration has stopped lowering it
+    (by less than ``stall_rtol`` of itself, the stall of Case 3): a lower basin's point
+    is then in hand, and the refinement finishes from it faster than more arrays.
+    """
+    below = run.hand_back_below
+    if below is None or len(records) < 2:
+        return None
+    before, now = records[-2].best_cost, records[-1].best_cost
+    if not (math.isfinite(now) and now < below):
+        return None
+    if before - now >= run.method.leveling.stall_rtol * abs(now):
+        return None
+    return (
+        f"handed back to the refinement: the best cost {now:.6g} is below the refinement's "
+        f"{below:.6g} and iteration {records[-1].index} lowered it by less than "
+        f"{run.method.leveling.stall_rtol:g} of itself"
+    )
+
+
 class Recorder(Protocol):
     """Receives each finished iteration (the audit trail writes it to disk)."""
 
@@ -69,6 +92,7 @@ class TaguchiRun:
     starts: list[tuple[dict[str, float], str]] = field(default_factory=list)
     handover: bool = False
     floor: float | None = None
+    hand_back_below: float | None = None
 
 
 def _next_best(
@@ -236,6 +260,8 @@ def _finished(
         return 0, records[-1].decision.message
     if run.handover and records[-1].extra.get("handover"):
         return 0, str(records[-1].extra["handover"])
+    if records[-1].extra.get("handback"):
+        return 0, str(records[-1].extra["handback"])
     return None
 
 
@@ -314,6 +340,10 @@ def _decide(
     if handed:
         rec.extra["handover"] = handed
         return rec.next_frame, None, handed
+    back = None if handover else _hand_back(records, run)
+    if back:
+        rec.extra["handback"] = back
+        return rec.next_frame, None, back
     alt = _decide_rerun(records, run, reruns, progress)
     if alt is None:
         return rec.next_frame, None, None
