@@ -142,7 +142,7 @@ def test_on_these_seeds_the_exact_sandwich_covers_the_truth_95_percent_of_the_ti
     """The benchmark's AR(1) data and fits are sound: the sandwich with the noise's true
     covariance holds the truth on 94.5 / 94.75 % of the seeds; the HAC shortfall is the
     estimate's."""
-    found = bench.coverage(coloured, lambda f: bench.reference(f, exact=True))
+    found = bench.coverage(coloured, lambda f: bench.reference(f, "exact"))
     assert all(bench.in_band(share) for share in found.values()), found
 
 
