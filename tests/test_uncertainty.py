@@ -7,8 +7,7 @@ from fmu_factory import build_c_fmu, lag_response
 
 from tsid_fmu import Experiment, Parameter, Study, identify
 from tsid_fmu.data import derivative
-from tsid_fmu.uncertainty import ljung_box, long_run_covariance
-from tsid_fmu.uncertainty.residuals import bartlett_bandwidth
+from tsid_fmu.uncertainty import ljung_box
 
 TAU, X0 = 0.37, 0.8
 
@@ -35,15 +34,6 @@ def test_ljung_box_tells_white_from_coloured():
     assert ljung_box(rng.normal(size=5000)).white
     coloured = ljung_box(ar1(rng, 5000, 0.5, 1.0))
     assert not coloured.white and coloured.rho1 == pytest.approx(0.5, abs=0.05)
-
-
-def test_long_run_variance_of_an_ar1_series_matches_theory():
-    rng = np.random.default_rng(2)
-    rho, n = 0.8, 200_000
-    x = ar1(rng, n, rho, 1.0)
-    bandwidth = bartlett_bandwidth(x)
-    lrv = long_run_covariance(x[:, None], bandwidth)[0, 0] / n
-    assert lrv == pytest.approx((1 + rho) / (1 - rho), rel=0.1)
 
 
 @pytest.fixture(scope="module")

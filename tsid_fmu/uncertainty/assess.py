@@ -15,8 +15,8 @@ from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.prepare import data_noise
-from tsid_fmu.uncertainty.intervals import Z95, Uncertainty, scale_groups, uncertainty
-from tsid_fmu.uncertainty.profile import CHI2_95, ProfileProblem, profile_intervals
+from tsid_fmu.uncertainty.intervals import Uncertainty, quantile, scale_groups, uncertainty
+from tsid_fmu.uncertainty.profile import ProfileProblem, profile_intervals
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian, sensitivities
 
 __all__ = ["MISMATCH", "Assessment", "assess", "standard_errors", "validate"]
@@ -108,15 +108,23 @@ def _widen_by_profile(
 ) -> None:
     """Make every interval of ``u`` at least as wide as the parameter's profile one.
 
-    ``sens`` holds the Jacobian at the answer ``x``, whose cost is ``cost``.
+    ``sens`` holds the Jacobian at the answer ``x``, whose cost is ``cost``. Each
+    parameter's threshold carries its own HAC inflation and degrees of freedom.
     """
     jacobian = residual_jacobian(sens, spec)
     n, p = jacobian.shape
-    threshold = CHI2_95 * max(cost / max(n - p, 1), 1e-300) * u.inflation**2
+    variance = max(cost / max(n - p, 1), 1e-300)
+    thresholds = {
+        name: quantile(u.dof.get(name, n - p)) ** 2 * variance * _inflation(u, name) ** 2
+        for name in space.names
+    }
     # linear coordinates with the same local scale: a valley along a sum of parameters is
     # straight there, so the chord re-fit follows it (the Jacobian is the same at x)
     line = space.anchored(x)
-    problem = ProfileProblem(evaluator, line, line.to_s(x), cost, jacobian, threshold)
+    threshold = quantile(n - p) ** 2 * variance * u.inflation**2
+    problem = ProfileProblem(
+        evaluator, line, line.to_s(x), cost, jacobian, threshold, thresholds=thresholds
+    )
     steps = {
         name: u.std_error[name] / space.local_scale(j, x[name])
         for j, name in enumerate(space.names)
@@ -132,7 +140,7 @@ def _widen_by_profile(
         if low is None or high is None:
             u.std_error[name] = u.relative[name] = math.inf
         else:
-            profiled = 0.5 * (high - low) / Z95
+            profiled = 0.5 * (high - low) / quantile(u.dof.get(name, n - p))
             floor = name in problem.unresolved and profiled > u.std_error[name]
             u.std_error[name] = max(u.std_error[name], profiled)
             if x[name]:
@@ -140,9 +148,18 @@ def _widen_by_profile(
                 if floor:  # the profile's resolution, not an estimate: a bound
                     u.resolution[name] = u.relative[name]
     u.method = (
-        "the wider of a HAC sandwich (Newey-West, at least the Cramer-Rao bound) and the "
-        "profile likelihood"
+        "the wider of a HAC sandwich (AR(p) long-run covariance, at least the Cramer-Rao "
+        "bound) and the profile likelihood, both with Student t quantiles of Satterthwaite "
+        "degrees of freedom"
     )
+
+
+def _inflation(u: Uncertainty, name: str) -> float:
+    """HAC over Cramer-Rao standard error of ``name`` (the median one where unknown)."""
+    hac, crb = u.relative.get(name, math.nan), u.cramer_rao.get(name, math.nan)
+    if 0 < crb < math.inf and 0 < hac < math.inf:
+        return hac / crb
+    return u.inflation
 
 
 def validate(evaluator: Evaluator, spec: EvaluationSpec, x: Mapping[str, float]) -> dict[str, Any]:

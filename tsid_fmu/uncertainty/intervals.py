@@ -5,16 +5,19 @@ output is whitened by its residual RMS at the answer (its noise as the fit sees 
 The Fisher matrix ``F = J^T J`` of the search coordinates gives the Cramer-Rao
 covariance ``F^-1``, which holds for white residuals. Residuals that are correlated in
 time (a model that misses something, a quantised sensor) make it too small, so the
-covariance used is the HAC sandwich ``F^-1 S F^-1``, ``S`` the Newey-West long-run
-covariance of the score contributions ``J_t r_t`` of every output series
-(:mod:`tsid_fmu.uncertainty.residuals`), and never less than the Cramer-Rao one. For
-white residuals the two agree.
+covariance used is the HAC sandwich ``F^-1 S F^-1``, ``S`` the long-run covariance of
+the score from an AR(p) model of every output series, corrected for what the fit
+absorbs (:mod:`tsid_fmu.uncertainty.longrun`), and never less than the Cramer-Rao one.
+For white residuals the two agree.
 
-The 95 % interval of each parameter is its coordinate +/- 1.96 standard errors, mapped
-back to parameter units (asymmetric for parameters in log10). The eigenvectors of ``F``
-name the combinations of parameters the data determine and those they do not; a
-parameter dominated by an undetermined combination gets an open interval (``None``)
-rather than a small, false one.
+The 95 % interval of each parameter is its coordinate +/- ``t`` standard errors, mapped
+back to parameter units (asymmetric for parameters in log10); ``t`` is the Student
+quantile with the Satterthwaite degrees of freedom of the parameter's variance (how
+well the residuals determine it: ``n - p`` for white residuals, far fewer for strongly
+correlated ones), 1.96 for many. The eigenvectors of ``F`` name the combinations of
+parameters the data determine and those they do not; a parameter dominated by an
+undetermined combination gets an open interval (``None``) rather than a small, false
+one.
 """
 
 from __future__ import annotations
@@ -25,15 +28,21 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from tsid_fmu.search.space import Space
-from tsid_fmu.uncertainty.residuals import bartlett_bandwidth, ljung_box, long_run_covariance
+from tsid_fmu.uncertainty.longrun import long_run_covariance
+from tsid_fmu.uncertainty.residuals import ljung_box
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
 
-__all__ = ["UNDETERMINED", "Z95", "Uncertainty", "uncertainty"]
+__all__ = ["LEVEL", "UNDETERMINED", "Z95", "Uncertainty", "quantile", "uncertainty"]
+
+LEVEL = 0.95
+"""Confidence level of the intervals."""
 
 Z95 = 1.959963984540054
-"""Two-sided 95 % quantile of the standard normal distribution."""
+"""Two-sided 95 % quantile of the standard normal distribution: :func:`quantile` for
+many degrees of freedom."""
 
 UNDETERMINED = 0.5
 """A combination whose standard error exceeds this many search units (half of a first
@@ -69,12 +78,15 @@ class Uncertainty:
         Residual RMS of each experiment's outputs at the answer.
     whiteness : dict
         Per experiment and output: Ljung-Box p-value, lag-1 autocorrelation, whether
-        white, and the HAC bandwidth.
+        white, and the order of the AR model of the HAC covariance.
     inflation : float
         Median over the parameters of the HAC standard error over the Cramer-Rao one: how
         optimistic white-residual standard errors would be.
     method : str
         How the intervals were computed.
+    dof : dict
+        Degrees of freedom of each parameter's variance (Satterthwaite); its interval
+        is +/- :func:`quantile` ``(dof)`` standard errors.
     resolution : dict
         Parameters whose standard error lies below what the profile likelihood resolves
         (:data:`tsid_fmu.uncertainty.profile.RESOLUTION`): the bound, in percent of the
@@ -94,8 +106,12 @@ class Uncertainty:
     inflation: float = 1.0
     profile: dict[str, list[float | None]] = field(default_factory=dict)
     scale_groups: list[dict[str, Any]] = field(default_factory=list)
-    method: str = "HAC sandwich (Newey-West), at least the Cramer-Rao bound"
+    method: str = (
+        "HAC sandwich (AR(p) long-run covariance, BIC order, corrected for the fit), at "
+        "least the Cramer-Rao bound; Student t with Satterthwaite degrees of freedom"
+    )
     resolution: dict[str, float] = field(default_factory=dict)
+    dof: dict[str, float] = field(default_factory=dict)
 
     @property
     def sigma(self) -> dict[str, list[float]]:
@@ -140,8 +156,14 @@ class Uncertainty:
             "scale_groups",
             "method",
             "resolution",
+            "dof",
         )
         return clean({k: getattr(self, k) for k in keys})
+
+
+def quantile(dof: float) -> float:
+    """Two-sided :data:`LEVEL` quantile of Student's t with ``dof`` degrees of freedom."""
+    return float(stats.t.ppf(0.5 + LEVEL / 2, max(dof, 1.0)))
 
 
 def _series(
@@ -163,34 +185,38 @@ def _series(
 
 def _covariances(
     fisher: np.ndarray, series: list[tuple[str, str, np.ndarray, np.ndarray]], out: Uncertainty
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Cramer-Rao and HAC covariances, and the eigen-decomposition of the Fisher matrix."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cramer-Rao and HAC covariances, Fisher eigen-decomposition, degrees of freedom."""
     values, vectors = np.linalg.eigh(fisher)
     top = max(float(values.max()), 1e-300)
     keep = values > 1e-14 * top
     inv = np.where(keep, 1.0 / np.maximum(values, 1e-300), 0.0)
     pinv = (vectors * inv) @ vectors.T
-    middle = np.zeros_like(fisher)
-    for name, output, r, jac in series:
-        bandwidth = bartlett_bandwidth(r)
-        middle += long_run_covariance(jac * r[:, None], bandwidth)
+    found = long_run_covariance([(r, jac) for _, _, r, jac in series], pinv)
+    for (name, output, r, _), model in zip(series, found.models, strict=True):
         test = ljung_box(r)
         out.whiteness.setdefault(name, {})[output] = {
             "p_value": test.p_value,
             "rho1": test.rho1,
             "white": test.white,
-            "bandwidth": bandwidth,
+            "ar_order": model.order,
         }
     crb = pinv
-    hac = pinv @ middle @ pinv
+    hac = pinv @ found.middle @ pinv
     # never below the Cramer-Rao bound on the diagonal (HAC estimates are noisy too)
+    floored = np.diag(hac) <= np.diag(crb)
     cov = hac + np.diag(np.maximum(np.diag(crb) - np.diag(hac), 0.0))
+    # Satterthwaite: a variance known from nu degrees of freedom has variance 2 V^2 / nu
+    white = max(sum(r.size for _, _, r, _ in series) - int(keep.sum()), 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nu = np.where(found.variance > 0, 2 * np.diag(hac) ** 2 / found.variance, white)
+    dof = np.clip(np.where(floored | ~np.isfinite(nu), white, nu), 1.0, white)
     if not keep.all():  # directions the data do not see at all: infinite variance
         unseen = (vectors[:, ~keep] ** 2).sum(axis=1) > 1e-6
         cov = cov + np.diag(np.where(unseen, np.inf, 0.0))
         crb = crb + np.diag(np.where(unseen, np.inf, 0.0))
     out.condition = float(top / max(float(values.min()), 1e-300))
-    return crb, cov, values, vectors
+    return crb, cov, values, vectors, dof
 
 
 def _interval(space: Space, j: int, s: float, half: float) -> list[float | None]:
@@ -237,7 +263,7 @@ def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Un
     out = Uncertainty(values={n: float(x[n]) for n in space.names})
     for name, r in zip(sens.experiments, sens.residuals, strict=True):
         out.noise[name] = [float(v) for v in np.sqrt(np.mean(r**2, axis=0))]
-    crb, cov, values, vectors = _covariances(fisher, series, out)
+    crb, cov, values, vectors, dof = _covariances(fisher, series, out)
     se, se_crb = np.sqrt(np.clip(np.diag(cov), 0, None)), np.sqrt(np.clip(np.diag(crb), 0, None))
     s0 = space.to_s(x)
     ratios = []
@@ -246,7 +272,8 @@ def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Un
         out.relative[n] = float(100 * out.std_error[n] / abs(x[n])) if x[n] else math.inf
         crb_n = float(space.local_scale(j, x[n]) * se_crb[j])
         out.cramer_rao[n] = float(100 * crb_n / abs(x[n])) if x[n] else math.inf
-        out.intervals[n] = _interval(space, j, float(s0[j]), Z95 * float(se[j]))
+        out.dof[n] = float(dof[j])
+        out.intervals[n] = _interval(space, j, float(s0[j]), quantile(dof[j]) * float(se[j]))
         if 0 < se_crb[j] < math.inf and math.isfinite(se[j]):
             ratios.append(se[j] / se_crb[j])
     out.inflation = float(np.median(ratios)) if ratios else 1.0

@@ -8,11 +8,14 @@ the data do not have. The profile of a parameter does not rely on that curvature
 moves the parameter away from the answer, re-fits the others, and finds where the cost
 has risen by the threshold of a 95 % interval,
 
-    profile(theta_j) - cost_min = chi2_1(0.95) * s^2 * inflation^2,
+    profile(theta_j) - cost_min = t_nu(0.975)^2 * s^2 * inflation_j^2,
 
 ``s^2 = cost_min / (n - p)`` the residual variance of the weighted fit (1 when the
-residuals are at the noise level) and ``inflation`` how much time-correlated residuals
-widen the standard errors (:mod:`tsid_fmu.uncertainty.intervals`). The re-fit is a
+residuals are at the noise level), ``inflation_j`` how much time-correlated residuals
+widen the parameter's standard error and ``nu`` the degrees of freedom of its variance
+(:mod:`tsid_fmu.uncertainty.intervals`; ``t_nu^2`` is the F(1, nu) quantile, the
+threshold of Bates and Watts' profile t, and ``chi2_1(0.95)`` = :data:`CHI2_95` for
+many degrees of freedom). The re-fit is a
 chord Gauss-Newton iteration with the Jacobian of the answer, which follows the stiff
 directions cheaply; each profile point costs a few simulations. Only for the ``sse``
 cost (for which the cost is a log-likelihood).
@@ -72,6 +75,8 @@ class ProfileProblem:
         ``(n, p)`` derivative of the cost residuals with respect to the coordinates.
     threshold : float
         Rise of the cost that bounds the 95 % interval.
+    thresholds : dict
+        The rise for some parameters, where it differs from ``threshold``.
     unresolved : set of str
         Filled by :func:`profile_intervals`: the parameters whose ends both lie within
         the last bisection of the first step (within :data:`RESOLUTION` for the smallest
@@ -84,6 +89,7 @@ class ProfileProblem:
     cost0: float
     jacobian: np.ndarray
     threshold: float
+    thresholds: dict[str, float] = field(default_factory=dict)
     unresolved: set[str] = field(default_factory=set)
 
     def cost(self, s: np.ndarray) -> tuple[float, np.ndarray | None]:
@@ -93,8 +99,11 @@ class ProfileProblem:
         return float(ev.costs[0, 0]), r
 
 
-def _refit(problem: ProfileProblem, j: int, delta: float, pinv: np.ndarray) -> float:
-    """Lowest cost found with coordinate ``j`` moved by ``delta``, the others re-fitted."""
+def _refit(problem: ProfileProblem, j: int, delta: float, pinv: np.ndarray, limit: float) -> float:
+    """Lowest cost found with coordinate ``j`` moved by ``delta``, the others re-fitted.
+
+    The re-fit stops once a step gains less than 1 % of the threshold ``limit``.
+    """
     others = [k for k in range(problem.s0.size) if k != j]
     s = problem.s0.copy()
     s[j] += delta
@@ -103,7 +112,7 @@ def _refit(problem: ProfileProblem, j: int, delta: float, pinv: np.ndarray) -> f
     for _ in range(CHORD_STEPS + 1):
         s = np.clip(s, problem.space.s_lower, problem.space.s_upper)
         cost, r = problem.cost(s)
-        if r is None or not math.isfinite(cost) or best - cost < 0.01 * problem.threshold:
+        if r is None or not math.isfinite(cost) or best - cost < 0.01 * limit:
             best = min(best, cost)
             break
         best = cost
@@ -112,12 +121,13 @@ def _refit(problem: ProfileProblem, j: int, delta: float, pinv: np.ndarray) -> f
 
 
 def _end(
-    problem: ProfileProblem, j: int, sign: float, step: float, pinv: np.ndarray
+    problem: ProfileProblem, j: int, sign: float, step: float, pinv: np.ndarray, limit: float
 ) -> tuple[float, bool]:
     """Coordinate offset of the interval's end on one side (``inf``: not reached).
 
-    The flag is False where no point inside the interval was found: the end is then
-    only known to lie within the offset returned.
+    The end is where the cost has risen by ``limit``. The flag is False where no point
+    inside the interval was found: the end is then only known to lie within the offset
+    returned.
     """
     inside, rise = 0.0, 0.0
     delta = step
@@ -125,8 +135,8 @@ def _end(
         target = problem.s0[j] + sign * delta
         if not problem.space.s_lower[j] - 1.0 <= target <= problem.space.s_upper[j] + 1.0:
             return math.inf, True
-        rise = _refit(problem, j, sign * delta, pinv) - problem.cost0
-        if rise > problem.threshold:
+        rise = _refit(problem, j, sign * delta, pinv, limit) - problem.cost0
+        if rise > limit:
             break
         inside, delta = delta, 2 * delta
     else:
@@ -134,7 +144,7 @@ def _end(
     outside = delta
     for _ in range(BISECTIONS):
         mid = 0.5 * (inside + outside)
-        if _refit(problem, j, sign * mid, pinv) - problem.cost0 > problem.threshold:
+        if _refit(problem, j, sign * mid, pinv, limit) - problem.cost0 > limit:
             outside = mid
         else:
             inside = mid
@@ -170,8 +180,9 @@ def profile_intervals(
         step = steps.get(name, MIN_STEP)
         step = max(step, MIN_STEP) if math.isfinite(step) else MIN_STEP
         ends, resolved = [], []
+        limit = problem.thresholds.get(name, problem.threshold)
         for sign in (-1.0, 1.0):
-            off, found = _end(problem, j, sign, step, pinv)
+            off, found = _end(problem, j, sign, step, pinv, limit)
             s = problem.s0[j] + sign * off
             ends.append(None if not math.isfinite(off) else problem.space.value(j, s))
             resolved.append(found)
