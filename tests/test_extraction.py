@@ -146,3 +146,60 @@ def test_folders_go_at_exit_and_a_forked_child_leaves_the_parents(lag, tmp_path)
     assert (code, parent_kept, own, child_left) == ("0", "True", "True", "False")
     assert not Path(parent).exists()  # and the parent removed its own at its exit
     assert not list(tmp.iterdir())
+
+
+def _with_ballast(src: Path, dst: Path, members: dict[str, bytes]) -> Path:
+    import zipfile
+
+    with zipfile.ZipFile(src) as a, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as b:
+        for info in a.infolist():
+            b.writestr(info, a.read(info))
+        for name, data in members.items():
+            b.writestr(name, data)
+    return dst
+
+
+def test_only_what_a_simulation_reads_is_written(lag, tmp_path, own_tmp):
+    # issue 25: a 1.9 GiB member took 80 s and 4.7 GB of temporary disk; documentation,
+    # icons, other platforms' binaries and stray root files are checked but not written
+    big = bytes(8 * 1024**2)  # compresses to a few kB
+    fmu = _with_ballast(
+        lag,
+        tmp_path / "ballast.fmu",
+        {
+            "documentation/manual.bin": big,
+            "terminalsAndIcons/icon.bin": big,
+            "binaries/win64/Lag.dll": big,
+            "sources/big.c": big,
+            "zero.bin": big,
+            "resources/table.txt": b"1 2 3\n",
+            "extra/org.example/meta.txt": b"x",
+        },
+    )
+    folder, y = _run(fmu)
+    written = {p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()}
+    assert "resources/table.txt" in written and "extra/org.example/meta.txt" in written
+    assert "modelDescription.xml" in written and any(w.startswith("binaries/") for w in written)
+    for skipped in ("documentation/", "terminalsAndIcons/", "binaries/win64/", "sources/", "zero"):
+        assert not any(w.startswith(skipped) for w in written), skipped
+    assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) < len(big)
+    _, plain = _run(lag)
+    np.testing.assert_array_equal(y, plain)
+
+
+def test_an_fmu_without_a_binary_here_keeps_its_sources_and_every_binary(tmp_path):
+    from tsid_fmu.fmu.archive import safe_extract
+
+    fmu = tmp_path / "src.fmu"
+    import zipfile
+
+    with zipfile.ZipFile(fmu, "w") as z:
+        z.writestr("modelDescription.xml", "<fmiModelDescription/>")
+        z.writestr("sources/model.c", "int x;")
+        z.writestr("binaries/win64/M.dll", b"MZ")
+        z.writestr("documentation/index.html", "<p/>")
+    out = safe_extract(fmu, tmp_path / "out", running=True)
+    assert (out / "sources/model.c").is_file() and (out / "binaries/win64/M.dll").is_file()
+    assert not (out / "documentation").exists()
+    full = safe_extract(fmu, tmp_path / "all")
+    assert (full / "documentation/index.html").is_file()

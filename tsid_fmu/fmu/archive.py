@@ -28,7 +28,7 @@ from pathlib import Path, PurePosixPath
 
 from tsid_fmu.errors import FMUError, ResourceError
 
-__all__ = ["MAX_BYTES", "MAX_MEMBERS", "safe_extract"]
+__all__ = ["MAX_BYTES", "MAX_MEMBERS", "NOT_RUN", "safe_extract"]
 
 #: default limit on the total uncompressed size of an FMU (bytes)
 MAX_BYTES = 2 * 1024**3
@@ -225,12 +225,52 @@ def _no_room(fmu: Path, where: Path, reason: str) -> ResourceError:
     )
 
 
+#: top folders of an FMU that no simulation reads (FMI 2 and FMI 3)
+NOT_RUN = ("documentation", "terminalsAndIcons")
+
+
+def _for_running(
+    plan: list[tuple[zipfile.ZipInfo, PurePosixPath]],
+) -> list[tuple[zipfile.ZipInfo, PurePosixPath]]:
+    """Keep the members a simulation on this machine reads.
+
+    ``modelDescription.xml``, ``resources/`` and ``extra/``; the binaries of this platform
+    (FMI 2's ``linux64``, FMI 3's ``x86_64-linux``, ...) where the FMU has them, else
+    every binary and the sources (to compile, or to name what is there). Documentation,
+    icons, other platforms' binaries and stray files at the root are checked but not
+    written: a vendor's manuals or a 2 GB member there cost no disk.
+    """
+    import fmpy  # the platform names, as FMPy loads the binaries
+
+    mine = {fmpy.platform, fmpy.platform_tuple}
+
+    def binary_here(rel: PurePosixPath) -> bool:
+        return len(rel.parts) > 2 and rel.parts[0] == "binaries" and rel.parts[1] in mine
+
+    has_binary = any(binary_here(rel) for _, rel in plan)
+    keep = []
+    for info, rel in plan:
+        head = rel.parts[0]
+        if len(rel.parts) == 1:
+            wanted = head == "modelDescription.xml"
+        elif head == "binaries":
+            wanted = binary_here(rel) or not has_binary
+        elif head == "sources":
+            wanted = not has_binary
+        else:
+            wanted = head not in NOT_RUN
+        if wanted:
+            keep.append((info, rel))
+    return keep
+
+
 def safe_extract(
     fmu_path: str | os.PathLike[str],
     dest: str | os.PathLike[str],
     *,
     max_bytes: int | None = None,
     max_members: int | None = None,
+    running: bool = False,
 ) -> Path:
     """Extract an FMU archive into ``dest`` after checking every member.
 
@@ -244,6 +284,10 @@ def safe_extract(
         Limit on the total uncompressed size; default :data:`MAX_BYTES` (2 GiB).
     max_members : int, optional
         Limit on the number of members; default :data:`MAX_MEMBERS`.
+    running : bool, optional
+        Write only what a simulation on this machine reads (every member is still
+        checked): no documentation, icons or other platforms' binaries, and the sources
+        only where this platform has no binary.
 
     Returns
     -------
@@ -271,6 +315,9 @@ def safe_extract(
     with _open(fmu) as archive:
         # 1. check everything before writing anything
         plan, total = _plan(fmu, archive, limit, member_limit)
+        if running:
+            plan = _for_running(plan)
+            total = sum(info.file_size for info, _ in plan)
         root = Path(dest)
         root.mkdir(parents=True, exist_ok=True)
         root = root.resolve()

@@ -98,7 +98,7 @@ def _extract(fmu: Path) -> Path:
         ) from None
     try:
         # checks member names, types and sizes; FMUError names the member at fault
-        safe_extract(fmu, folder)
+        safe_extract(fmu, folder, running=True)
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise
