@@ -103,6 +103,9 @@ def _print_result(result: Any, out: Path, code: int) -> None:
     print()
     for st in result.stages:
         print(f"stage {st.name} ({st.kind}): cost {fmt(st.cost)}, {st.nfev} simulations")
+    structure = result.extra.get("structure")
+    if structure:
+        print(f"structure: {structure['chosen']}: {structure['why']}")
     print()
     print(f"{STATUS[result.status]} (exit status {code}): {result.message}")
     cost = cost_name(result.study)
