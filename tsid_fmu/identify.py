@@ -340,7 +340,7 @@ def _stages(
 
     found = run_structure(Context(study, evaluators, store, callback, control), make)
     final = dataclasses.replace(
-        study, choices=[], start_values={**study.start_values, **found.values}, source=None
+        study, choices=[], start_values={**study.start_values, **found.values}
     )
     return final, found.stages, found.evaluators, found
 

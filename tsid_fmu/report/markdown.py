@@ -247,6 +247,16 @@ def markdown_report(result: IdentificationResult) -> str:
     if result.warnings:
         lines += ["## Warnings", "", *[f"- {escape(w)}" for w in result.warnings], ""]
     lines += ["## Identified parameters", "", markdown_table(_parameters(result)), ""]
+    found = result.extra.get("structure")
+    if found:
+        lines += [
+            "## Structure",
+            "",
+            f"Chosen: **{escape(found['chosen'])}**: {escape(found['why'])}",
+            "",
+            markdown_table(result.structures_frame()),
+            "",
+        ]
     if result.weak:
         lines += [
             "## Weakly determined parameters",

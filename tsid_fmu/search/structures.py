@@ -390,7 +390,7 @@ def _summary(cand: Candidate, stages: list[StageResult]) -> StageResult:
         cost=cand.cost,
         nfev=cand.nfev,
         message=f"{cand.origin}; {cand.why}",
-        status=0 if all(s.status == 0 for s in stages) else 1,
+        status=0,  # a structure not chosen: its stages' limits are not the answer's
         experiments=list(stages[-1].experiments),
         extra={"structure": cand.values, "stages": [s.name for s in stages]},
     )
