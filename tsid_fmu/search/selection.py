@@ -200,6 +200,14 @@ def decide(
         if step is None:
             break
         pick, why = step
+    for s, r in sorted(nested):
+        p = _lrt(cands[s], cands[r])
+        if s == pick and not p < LRT_ALPHA and "nested" not in why:
+            extra = ", ".join(sorted(set(cands[r].active) - set(cands[s].active)))
+            why += (
+                f"; nested in {cands[r].label}, whose extra parameter(s) {extra} the data "
+                f"do not support (LRT p = {p:.3g} >= {LRT_ALPHA:g})"
+            )
     decided = {
         a if b == pick else b
         for a, b in nested
