@@ -179,6 +179,8 @@ def _fidelity(result: IdentificationResult) -> list[str]:
     record = result.extra.get("fidelity")
     if not record:
         return []
+    if record.get("checked") is False:  # [method] fidelity = false
+        return ["## Solver fidelity", "", f"Not checked: {record.get('reason', '')}.", ""]
     names = {"cs": "Co-Simulation", "me": "Model Exchange"}
     lines = [
         "## Solver fidelity",
