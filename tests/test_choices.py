@@ -4,6 +4,7 @@ session giving a run whose structure changed a fresh instance."""
 
 from __future__ import annotations
 
+import dataclasses
 import string
 import tempfile
 import zipfile
@@ -199,3 +200,31 @@ def test_a_study_of_choices_sets_the_chosen_values_through_start_values(tmp_path
         y = s.simulate(t, u[:, None], {})[:, 0]
     assert np.allclose(y, lag_response(t, u, 1.0, 0.0, 3, 1.0), atol=1e-12)
     assert pd.Series(y).notna().all()
+
+
+def test_init_writes_discrete_parameters_commented_out_with_their_choices(tmp_path):
+    from tsid_fmu.scaffold import init_study
+
+    fmu = build_c_fmu(tmp_path, "Lag", interfaces=("cs",))
+    t = np.arange(0, 1.0 + 1e-9, 0.01)
+    u = np.where(t < 0.5, 1.0, 0.0)
+    frame = pd.DataFrame({"time": t, "u": u, "y": lag_response(t, u, 0.3)})
+    frame.to_csv(tmp_path / "d.csv", index=False)
+    text = init_study(fmu, tmp_path / "d.csv", tmp_path / "study.toml")
+    assert "# gain = { choices = [1, 2] }  # Integer (start 1)" in text
+    assert "# offset_on = { choices = [false, true] }  # Boolean (start false)" in text
+    written = (tmp_path / "study.toml").read_text()
+    opened = written.replace("# offset_on = {", "offset_on = {").replace('"L25"', '"L50"')
+    (tmp_path / "opened.toml").write_text(opened)
+    study = Study.from_toml(tmp_path / "opened.toml")  # uncommented, a hint runs as written
+    assert {c.name: c.values for c in study.choices} == {"offset_on": [0.0, 1.0]}
+    assert 'array = "L50" for one 2-level choice' in text  # as the hint says
+
+
+def test_init_offers_an_enumeration_its_items():
+    from tsid_fmu.fmu.variables import VariableInfo
+    from tsid_fmu.scaffold import _choice_line
+
+    v = VariableInfo("friction", 0, "Enumeration", "parameter", "fixed", "exact", "2", "", "")
+    line = _choice_line(dataclasses.replace(v, items=("coulomb", "viscous", "stribeck")))
+    assert line.startswith('# friction = { choices = ["coulomb", "viscous", "stribeck"] }')

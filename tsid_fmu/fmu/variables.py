@@ -59,6 +59,8 @@ class VariableInfo:
     min, max : float or None
         The bounds the model description declares for the value (on the variable or
         its declared type), or None.
+    items : tuple of str
+        An Enumeration's item names, in declared order (empty for other types).
     """
 
     name: str
@@ -72,6 +74,7 @@ class VariableInfo:
     description: str | None
     min: float | None = None
     max: float | None = None
+    items: tuple[str, ...] = ()
 
 
 def _declared_unit(variable: Any) -> str | None:
@@ -107,6 +110,10 @@ def variable_info(variable: Any) -> VariableInfo:
         description=variable.description,
         min=_declared_bound(variable, "min"),
         max=_declared_bound(variable, "max"),
+        items=tuple(
+            str(i.name)
+            for i in getattr(getattr(variable, "declaredType", None), "items", None) or ()
+        ),
     )
 
 
