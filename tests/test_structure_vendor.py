@@ -16,6 +16,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pandas as pd
 import pytest
@@ -118,6 +119,8 @@ def test_the_cli_chooses_the_integer_switch_of_a_vendor_fmu(tmp_path):
     )  # fmt: skip
     assert run.returncode in (0, 1), run.stderr
     summary = json.loads(run.stdout)
+    schema = json.loads((ROOT / "tsid_fmu" / "schemas" / "result-summary.schema.json").read_text())
+    jsonschema.validate(summary, schema)  # the structure entry as the schema describes it
     structure = summary["structure"]
     assert structure["chosen"] == "law=1" and structure["choices"] == {"law": "1"}
     assert summary["parameters"]["law"]["value"] == 1.0
@@ -128,3 +131,8 @@ def test_the_cli_chooses_the_integer_switch_of_a_vendor_fmu(tmp_path):
     assert rows["law=1"]["BIC"] < rows["law=0"]["BIC"] and rows["law=1"]["chosen"]
     text = (out / "report.html").read_text(encoding="utf-8")
     assert "Discrete factors: response per level" in text and "law=0" in text
+    from tsid_fmu import load
+
+    back = load(out)  # result.json read back with its structures
+    assert back.params["law"] == 1.0 and back.structures == structure["table"]
+    assert back.extra["structure"]["chosen"] == "law=1" and not back.warnings
