@@ -5,7 +5,8 @@ The flat public API, over the layers of the data flow (see ``docs/architecture.m
 - :func:`simulate`: one FMU simulation against a DataFrame of inputs;
 - :func:`identify`: a whole study, returning an :class:`IdentificationResult`;
 - :func:`load`: the :class:`IdentificationResult` of a finished study's results folder;
-- :class:`Study` with :class:`Parameter`, :class:`Experiment` and :class:`Method`,
+- :class:`Study` with :class:`Parameter`, :class:`Choice` (a discrete factor),
+  :class:`Experiment` and :class:`Method`,
   built in Python or read with :meth:`Study.from_toml`;
 - the error types, all derived from :class:`TsidError`.
 """
@@ -28,13 +29,22 @@ from tsid_fmu.fmu import simulate
 from tsid_fmu.identify import identify
 from tsid_fmu.load import load
 from tsid_fmu.result import IdentificationResult
-from tsid_fmu.study import ContributionOptions, Experiment, Method, Parameter, Phase, Study
+from tsid_fmu.study import (
+    Choice,
+    ContributionOptions,
+    Experiment,
+    Method,
+    Parameter,
+    Phase,
+    Study,
+)
 
 __version__ = "0.2.0"
 
 __all__ = [
     "ArrayError",
     "BuildError",
+    "Choice",
     "ContributionOptions",
     "DataError",
     "Experiment",

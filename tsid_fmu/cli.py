@@ -103,6 +103,9 @@ def _print_result(result: Any, out: Path, code: int) -> None:
     print()
     for st in result.stages:
         print(f"stage {st.name} ({st.kind}): cost {fmt(st.cost)}, {st.nfev} simulations")
+    structure = result.extra.get("structure")
+    if structure:
+        print(f"structure: {structure['chosen']}: {structure['why']}")
     print()
     print(f"{STATUS[result.status]} (exit status {code}): {result.message}")
     cost = cost_name(result.study)
@@ -138,11 +141,12 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             values[name] = float(text)
         except ValueError:
             raise StudyError(f"--set {name}={text}: not a number") from None
-    unknown = sorted(set(values) - set(study.parameter_names))
+    names = [*study.parameter_names, *study.choice_names]  # a structure's choices too
+    unknown = sorted(set(values) - set(names))
     if unknown:
-        raise StudyError(not_parameters(unknown, study.parameter_names))
+        raise StudyError(not_parameters(unknown, names))
     # parameters not given keep the FMU's start values
-    spec = prepare(study, None, [n for n in study.parameter_names if n in values])
+    spec = prepare(study, None, [n for n in names if n in values])
     if interface is not None:
         spec = dataclasses.replace(spec, interface=interface)
     with SerialEvaluator(spec) as ev:

@@ -17,10 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import StudyError
-from tsid_fmu.evaluate.factory import in_process, make_evaluator
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
-from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.evaluate.timelimit import TimeLimit
+from tsid_fmu.evaluators import StudyEvaluators
 from tsid_fmu.fmu.compiled import CompileNotice, warm_up
 from tsid_fmu.report.console import COMPILING, ConsoleProgress
 from tsid_fmu.report.files import write_result_files
@@ -31,13 +29,14 @@ from tsid_fmu.report.ssp import write_model_ssp
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.search.adaptive import answer_stage, verdict
+from tsid_fmu.search.context import Context
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.pipeline import Control, run_stages
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.structures import StructureResult, run_structure
 from tsid_fmu.study.definition import Study
-from tsid_fmu.study.prepare import prepare
 from tsid_fmu.trail.folder import NullStore, Trail
 from tsid_fmu.uncertainty.assess import assess, validate
 from tsid_fmu.uncertainty.fidelity import (
@@ -57,101 +56,8 @@ WEAK_STD_ERROR = 5.0
 determined by the data."""
 
 
-class _Evaluators:
-    """One evaluator per sub-problem (parameters, experiments, fixed values), shared."""
-
-    def __init__(self, study: Study, runner: dict[str, Any], given: Evaluator | None) -> None:
-        self.study, self.runner, self.given = study, runner, given
-        self.pool: dict[tuple, Evaluator] = {}
-        self.specs: dict[tuple, EvaluationSpec] = {}
-        self.interface: str | None = None  # chosen by the fidelity check
-
-    def use(self, interface: str) -> None:
-        """Simulate every sub-problem with ``interface`` from now on."""
-        self.interface = interface
-        self.specs = {k: dataclasses.replace(s, interface=interface) for k, s in self.specs.items()}
-
-    def _key(
-        self, params: list[str], exps: list[str], fixed: Mapping[str, float], fraction: float = 1.0
-    ) -> tuple:
-        return (tuple(params), tuple(exps), tuple(sorted(fixed.items())), fraction)
-
-    def spec(
-        self, params: list[str], exps: list[str], fixed: Mapping[str, float]
-    ) -> EvaluationSpec:
-        key = self._key(params, exps, fixed)
-        if key not in self.specs:
-            base = prepare(self.study, exps, params)
-            start = {**base.start_values, **{k: v for k, v in fixed.items() if k not in params}}
-            self.specs[key] = dataclasses.replace(
-                base, start_values=start, interface=self.interface or base.interface
-            )
-        return self.specs[key]
-
-    def key(self, study: Study, exps: list[str]) -> tuple:
-        """Return the key of the evaluator of every parameter on ``exps``."""
-        return self._key(study.parameter_names, exps, {})
-
-    def check_limit(self, ev: Evaluator | None) -> dict[str, Any]:
-        """How a check outside the evaluators simulates: isolated, under which limit.
-
-        In a child process under the study's time limit per simulation (``ev``'s, once
-        it has one; else the limit before any simulation), unless the study runs in
-        this process (one worker with ``timeout=0``).
-        """
-        if in_process(self.runner["workers"], self.runner["timeout"], self.runner["scheduler"]):
-            return {"isolate": False, "time_limit": None}
-        limit = getattr(ev, "time_limit", None) if ev is not None else None
-        if limit is None:
-            limit = TimeLimit(self.runner["timeout"]).seconds()
-        return {"isolate": True, "time_limit": limit}
-
-    def get(self, params: list[str], exps: list[str], fixed: Mapping[str, float]) -> Evaluator:
-        if self.given is not None:
-            return self.given
-        key = self._key(params, exps, fixed)
-        if key not in self.pool:
-            self.pool[key] = make_evaluator(self.spec(params, exps, fixed), **self.runner)
-        return self.pool[key]
-
-    def shortened(self, params: list[str], exps: list[str], fraction: float) -> Evaluator | None:
-        """Return an evaluator of the first ``fraction`` of each experiment's samples.
-
-        None where the study was given an evaluator (it cannot be shortened).
-        """
-        if self.given is not None:
-            return None
-        key = self._key(params, exps, {}, fraction)
-        if key not in self.pool:
-            spec = self.spec(params, exps, {}).head(fraction)
-            self.pool[key] = make_evaluator(spec, **self.runner)
-        return self.pool[key]
-
-    def retried(self) -> list[str]:
-        """Return one warning for the sets that crashed a worker, then passed in a fresh one."""
-        notes = [n for ev in self.pool.values() for n in getattr(ev, "retried", [])]
-        if not notes:
-            return []
-        return [
-            f"{len(notes)} parameter set(s) crashed their worker process and succeeded when "
-            f"run again in a fresh one (the FMU crashes now and then); first: {notes[0]}"
-        ]
-
-    @property
-    def nfev(self) -> int:
-        """Simulations run so far by the evaluators of the study."""
-        if self.given is not None:
-            return int(self.given.nfev)
-        return sum(int(ev.nfev) for ev in self.pool.values())
-
-    def close(self) -> None:
-        for ev in self.pool.values():
-            ev.close()
-        self.pool.clear()
-
-
 def _progress(
-    progress: bool | ProgressCallback, evaluators: _Evaluators
+    progress: bool | ProgressCallback, evaluators: StudyEvaluators
 ) -> tuple[ProgressCallback | None, CompileNotice | None]:
     """Return the study's progress callback and, with one, the compile notice (to close).
 
@@ -232,7 +138,10 @@ def _weak(result: IdentificationResult) -> dict[str, str]:
 
 
 def _compare_ungrouped(
-    study: Study, evaluators: _Evaluators, store: Trail | NullStore, result: IdentificationResult
+    study: Study,
+    evaluators: StudyEvaluators,
+    store: Trail | NullStore,
+    result: IdentificationResult,
 ) -> dict[str, Any]:
     """Run the same study without grouping, to set beside the phased one."""
     alone = run_stages(study, evaluators, store, ungrouped=True)[0]
@@ -249,7 +158,7 @@ def _compare_ungrouped(
 
 def _fidelity(
     study: Study,
-    evaluators: _Evaluators,
+    evaluators: StudyEvaluators,
     x: Mapping[str, float],
     where: str,
     callback: ProgressCallback | None,
@@ -289,7 +198,7 @@ def _record(
 def _report(
     result: IdentificationResult,
     store: Trail,
-    evaluators: _Evaluators,
+    evaluators: StudyEvaluators,
     plots: bool,
     simulated: list[Simulated] | None,
     callback: ProgressCallback | None,
@@ -331,10 +240,11 @@ def _report(
 def _finish(
     study: Study,
     stages: list[StageResult],
-    evaluators: _Evaluators,
+    evaluators: StudyEvaluators,
     store: Trail | NullStore,
     plots: bool,
     fidelity: tuple[Fidelity | None, ProgressCallback | None] = (None, None),
+    structure: StructureResult | None = None,
 ) -> IdentificationResult:
     status, message = _status(stages)
     answer = answer_stage(stages)
@@ -359,6 +269,7 @@ def _finish(
     }
     start, callback = fidelity
     if status == 2 or evaluators.given is not None:
+        _with_structure(result, structure)
         if isinstance(store, Trail) and status == 2 and evaluators.given is None:
             _report(result, store, evaluators, plots, None, callback)  # for the review
         return _record(result, start, None)
@@ -392,9 +303,46 @@ def _finish(
     if checks:
         vspec = evaluators.spec(study.parameter_names, checks, {})
         result.validation = validate(evaluators.get(study.parameter_names, checks, {}), vspec, x)
+    _with_structure(result, structure)
     if isinstance(store, Trail):
         _report(result, store, evaluators, plots, found.simulated, callback)
     return result
+
+
+def _with_structure(result: IdentificationResult, structure: StructureResult | None) -> None:
+    """Put the chosen structure into the result: its values, the structures table."""
+    if structure is None:
+        return
+    result.params.update(structure.values)
+    result.structures = structure.table()
+    result.extra["structure"] = structure.summary()
+    if structure.tied:
+        result.warnings.insert(0, f"structure: {structure.summary()['why']}")
+
+
+def _stages(
+    study: Study,
+    evaluators: StudyEvaluators,
+    store: Trail | NullStore,
+    callback: ProgressCallback | None,
+    control: Control,
+) -> tuple[Study, list[StageResult], StudyEvaluators, StructureResult | None]:
+    """Run the stages; with choices, structure identification (its chosen study)."""
+    if not study.choices:
+        return study, run_stages(study, evaluators, store, callback, control), evaluators, None
+
+    def make(sub: Study) -> StudyEvaluators:
+        made = StudyEvaluators(sub, evaluators.runner, evaluators.given)
+        if evaluators.interface is not None:
+            made.use(evaluators.interface)
+        evaluators.children.append(made)
+        return made
+
+    found = run_structure(Context(study, evaluators, store, callback, control), make)
+    final = dataclasses.replace(
+        study, choices=[], start_values={**study.start_values, **found.values}
+    )
+    return final, found.stages, found.evaluators, found
 
 
 def identify(
@@ -464,7 +412,7 @@ def identify(
         raise StudyError("resume needs the output folder of the study (out=...)")
     if continue_from_run is not None and not resume:
         raise StudyError("continue_from_run needs resume=True and the study's folder")
-    evaluators = _Evaluators(
+    evaluators = StudyEvaluators(
         study, {"workers": workers, "timeout": timeout, "scheduler": scheduler}, evaluator
     )
     callback, notice = _progress(progress, evaluators)
@@ -474,8 +422,9 @@ def identify(
             store = Trail(out, study, resume=resume, on_iteration=_annotate)
         control = Control(pause_after, max_iterations, continue_from_run)
         start = _fidelity(study, evaluators, start_point(study), "start point", callback)
-        stages = run_stages(study, evaluators, store, callback, control)
-        result = _finish(study, stages, evaluators, store, plots, (start, callback))
+        final, stages, used, found = _stages(study, evaluators, store, callback, control)
+        result = _finish(final, stages, used, store, plots, (start, callback), found)
+        result.study = study
         result.out_dir = Path(out) if out is not None else None
     finally:
         evaluators.close()

@@ -68,7 +68,7 @@ def _stage_dirs(out: Path, summaries: list[Mapping[str, Any]]) -> list[Path]:
         folder = (s.get("extra") or {}).get("folder")
         if kind == "phase":
             phases += 1
-        if isinstance(folder, str) and Path(folder).name == folder:  # written by the trail
+        if isinstance(folder, str) and _inside(folder):  # written by the trail
             dirs.append(out / folder if folder else out)
         elif kind == "phase":
             dirs.append(out / f"phase_{phases:02d}")
@@ -77,6 +77,12 @@ def _stage_dirs(out: Path, summaries: list[Mapping[str, Any]]) -> list[Path]:
         else:
             dirs.append(out)
     return dirs
+
+
+def _inside(folder: str) -> bool:
+    """Whether a stage's folder is a plain relative path inside the results folder."""
+    parts = Path(folder).parts
+    return not Path(folder).is_absolute() and all(p not in ("..", ".") for p in parts)
 
 
 def _stages(out: Path, summaries: list[Mapping[str, Any]]) -> list[StageResult]:
@@ -205,6 +211,7 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
             extra=dict(data.get("extra") or {}),
             study=attached,
             out_dir=out,
+            structures=[dict(r) for r in data.get("structures") or []],
         )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise StudyError(f"{out / 'result.json'}: damaged result ({exc!r})") from None

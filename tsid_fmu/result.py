@@ -42,6 +42,9 @@ RUNS_NOTE = (
 
 _VIEWS: dict[str, Callable[..., Any]] = {}
 
+_WRITTEN = ("fidelity", "structure")
+"""Keys of :attr:`IdentificationResult.extra` written to ``result.json``."""
+
 
 def register_views(**views: Callable[..., Any]) -> None:
     """Provide the notebook view and the ``plot_*`` figures of a result.
@@ -114,7 +117,14 @@ class IdentificationResult:
         Stage-specific analyses (contribution tables, the ungrouped comparison), and
         ``"fidelity"``: the interface used and the solver checks at the start point
         and the answer (:func:`tsid_fmu.uncertainty.fidelity.fidelity_record`); only
-        this one is written to ``result.json``.
+        this one is written to ``result.json``; and, in structure identification,
+        ``"structure"``: the chosen structure (``chosen``, ``choices`` by factor, ``why``,
+        those ``indistinguishable`` from it), also written there.
+    structures : list of dict
+        Structure identification: one row per candidate structure refined to its own
+        optimum (structure, cost, k, AIC, BIC, LRT p, validation cost, chosen, why);
+        :meth:`structures_frame` as a DataFrame. Empty for a study without choices. The
+        discrete factors' chosen values are in ``params`` too, after the Real ones.
     study : Study or None
         The study identified.
     out_dir : Path or None
@@ -149,6 +159,7 @@ class IdentificationResult:
     extra: dict[str, Any] = field(default_factory=dict)
     study: Study | None = None
     out_dir: Path | None = None
+    structures: list[dict[str, Any]] = field(default_factory=list)
     jac: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
@@ -178,11 +189,13 @@ class IdentificationResult:
         covariances. ``None`` where no intervals were computed.
         """
         u = self.uncertainty
-        if u is None or any(n not in u.std_error for n in self.names):
+        chosen = (self.extra.get("structure") or {}).get("values") or {}
+        names = [n for n in self.names if n not in chosen]  # discrete choices: no variance
+        if u is None or any(n not in u.std_error for n in names):
             return None
-        se = np.array([float(u.std_error[n]) for n in self.names])
+        se = np.array([float(u.std_error[n]) for n in names])
         corr = np.array(
-            [[float(u.correlation.get(a, {}).get(b, 0.0)) for b in self.names] for a in self.names]
+            [[float(u.correlation.get(a, {}).get(b, 0.0)) for b in names] for a in names]
         )
         finite = np.isfinite(se)
         with np.errstate(invalid="ignore"):
@@ -285,9 +298,22 @@ class IdentificationResult:
                 "weak": self.weak,
                 "warnings": self.warnings,
                 "comparison": self.extra.get("comparison"),
-                "extra": {k: self.extra[k] for k in ("fidelity",) if k in self.extra},
+                "extra": {k: self.extra[k] for k in _WRITTEN if k in self.extra},
+                **({"structures": self.structures} if self.structures else {}),
             }
         )
+
+    def structures_frame(self) -> pd.DataFrame:
+        """Return the structures table (structure identification), one row per structure.
+
+        Columns: ``cost``, ``k`` (free Real parameters), ``AIC``, ``BIC``, ``LRT p`` and
+        ``LRT against`` (nested structures), ``validation cost``, ``simulations``,
+        ``chosen`` and ``why``; the formulas are in :mod:`tsid_fmu.search.selection`.
+        """
+        import pandas as pd
+
+        rows = self.structures
+        return pd.DataFrame(list(rows)).set_index("structure") if rows else pd.DataFrame()
 
     def summary(self) -> dict[str, Any]:
         """Return the answer in brief, as strict JSON data (``tsid identify --json``).
@@ -333,8 +359,17 @@ class IdentificationResult:
                 "stages": stages,
                 "warnings": list(self.warnings),
                 "out_dir": None if self.out_dir is None else str(self.out_dir),
+                **self._structure_summary(),
             }
         )
+
+    def _structure_summary(self) -> dict[str, Any]:
+        """Return the ``structure`` entry of :meth:`summary` (structure identification only)."""
+        found = self.extra.get("structure")
+        if not found:
+            return {}
+        keys = ("chosen", "choices", "why", "indistinguishable")
+        return {"structure": {**{k: found.get(k) for k in keys}, "table": self.structures}}
 
     def to_pandas(self) -> pd.DataFrame:
         """Return every run of every Taguchi iteration as one DataFrame.

@@ -116,13 +116,32 @@ def _entry(v: VariableInfo) -> tuple[str, bool]:
     return entry, levels != decade_levels(start)
 
 
+def _choice_line(v: VariableInfo) -> str:
+    """Return a discrete parameter, commented out, with the ``choices`` it could take."""
+    start = (v.start or "").strip()
+    if v.type == "Boolean":
+        hint, what = "[false, true]", "choose true or false from the data"
+    elif v.items:
+        hint = "[" + ", ".join(f'"{i}"' for i in v.items) + "]"
+        what = "choose among its items from the data"
+    else:
+        first = int(float(start)) if start.lstrip("-").replace(".", "", 1).isdigit() else 0
+        hint, what = f"[{first}, {first + 1}]", "list the values to compare"
+    return (
+        f"# {_key(v.name)} = {{ choices = {hint} }}  # {v.type} (start {start or 'none'}): "
+        f"{what} (structure identification); uncomment to identify it, with [method] array "
+        '= "L50" for one 2-level choice beside 5-level parameters (more choices: parameters '
+        'of 3 levels and "L18" or "L36")'
+    )
+
+
 def _parameter_lines(variables: Sequence[VariableInfo]) -> tuple[list[str], int]:
     lines, count = [], 0
     for v in variables:
         if v.causality != "parameter" or v.variability not in ("fixed", "tunable"):
             continue
         if v.type not in REAL_TYPES:
-            lines.append(f"# {v.name}: {v.type} parameter, not identified (levels are real)")
+            lines.append(_choice_line(v))
             continue
         entry, bounded = _entry(v)
         reason = numerical_setting(v)

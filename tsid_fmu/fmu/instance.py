@@ -21,6 +21,7 @@ from tsid_fmu.fmu.variables import VariableInfo
 __all__ = ["CallFailed", "Instance", "Values"]
 
 _FMI_DISCARD = 2
+STRUCTURAL = "structuralParameter"
 _FMI_FATAL = 4
 
 #: ``(name, kind, value_reference, value)`` of the values set before initialization
@@ -66,6 +67,10 @@ class Instance:
         self.component: Any = None
         self.address = 0
         self._callbacks: Any = None
+        #: instances made so far (a fresh one per run whose structure changed)
+        self.instantiations = 0
+        #: the values of the last run that choose the structure (see :meth:`renew`)
+        self.structure: tuple[tuple[str, float], ...] = ()
 
     def instantiate(self) -> None:
         """Make a new instance; FMUError if the FMU refuses."""
@@ -82,6 +87,7 @@ class Instance:
             raise FMUError(f"{self.name}: instantiation failed.{self.log.text()}")
         self.component = fmu.component
         self.address = int(getattr(fmu.component, "value", fmu.component) or 0)
+        self.instantiations += 1
 
     def free(self) -> None:
         """Free the instance (if any)."""
@@ -104,6 +110,20 @@ class Instance:
                 pass
         self.free()
         self.instantiate()
+
+    def renew(self, structure: tuple[tuple[str, float], ...]) -> None:
+        """Make ready for the next run: reset, or a fresh instance if the structure changed.
+
+        ``structure`` holds the run's values of discrete ``fixed`` variables and FMI 3
+        structural parameters (:func:`~tsid_fmu.fmu.variables.restarts_instance`): where
+        one differs from the last run's, the instance is freed and made anew, so that an
+        FMU that fixes its structure when it is instantiated honours the new value.
+        """
+        if structure != self.structure:
+            self.free()
+            self.instantiate()
+        else:
+            self.reset()
 
     def unload(self) -> None:
         """Free the instance and unload the library."""
@@ -191,7 +211,12 @@ class Instance:
                 if u0.size:
                     fmu.setReal(list(vr_in), list(u0))
             else:
-                self.apply(values, variables, t0)
+                config = [v for v in values if variables[v[0]].causality == STRUCTURAL]
+                if config:  # FMI 3: structural parameters only in Configuration Mode
+                    fmu.enterConfigurationMode()
+                    self.apply(config, variables, t0)
+                    fmu.exitConfigurationMode()
+                self.apply([v for v in values if v not in config], variables, t0)
                 fmu.enterInitializationMode(startTime=t0, stopTime=t_end)
                 if u0.size:
                     fmu.setFloat64(list(vr_in), list(u0))

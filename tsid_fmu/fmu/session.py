@@ -50,6 +50,7 @@ from tsid_fmu.fmu.variables import (
     parse_start,
     read_description,
     real_reference,
+    restarts_instance,
     setter_kind,
     suggest,
     variable_info,
@@ -342,8 +343,14 @@ class FMUSession:
             (name, *self._setter(name, "parameter"), value)
             for name, value in {**self._start_values, **parameters}.items()
         ]
+        structure = tuple(
+            (name, float(value))
+            for name, _kind, _vr, value in values
+            if restarts_instance(self.variables[name])
+        )
         if self._needs_reset:
-            inst.reset()
+            inst.renew(structure)
+        inst.structure = structure
         self._log.messages.clear()
         self.nfev += 1
         self._needs_reset = True
@@ -442,6 +449,11 @@ class FMUSession:
             if self._tempdir is not None:
                 extraction.give_back(self._tempdir)
                 self._tempdir = None
+
+    @property
+    def instantiations(self) -> int:
+        """Instances made so far (:meth:`~tsid_fmu.fmu.instance.Instance.renew`)."""
+        return 0 if self._inst is None else self._inst.instantiations
 
     @property
     def me_stats(self) -> dict[str, int] | None:

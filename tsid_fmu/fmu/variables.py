@@ -31,6 +31,7 @@ __all__ = [
     "parse_start",
     "read_description",
     "real_reference",
+    "restarts_instance",
     "setter_kind",
     "suggest",
     "variable_info",
@@ -58,6 +59,8 @@ class VariableInfo:
     min, max : float or None
         The bounds the model description declares for the value (on the variable or
         its declared type), or None.
+    items : tuple of str
+        An Enumeration's item names, in declared order (empty for other types).
     """
 
     name: str
@@ -71,6 +74,7 @@ class VariableInfo:
     description: str | None
     min: float | None = None
     max: float | None = None
+    items: tuple[str, ...] = ()
 
 
 def _declared_unit(variable: Any) -> str | None:
@@ -106,6 +110,10 @@ def variable_info(variable: Any) -> VariableInfo:
         description=variable.description,
         min=_declared_bound(variable, "min"),
         max=_declared_bound(variable, "max"),
+        items=tuple(
+            str(i.name)
+            for i in getattr(getattr(variable, "declaredType", None), "items", None) or ()
+        ),
     )
 
 
@@ -246,7 +254,8 @@ def setter_kind(
     info = find_variable(variables, fmu, name, role)
     if info.variability == "constant":
         raise FMUError(f"{fmu}: {role} {name!r} is a constant and cannot be set")
-    if role == "parameter" and info.causality != "parameter" and not initial_state(info):
+    settable = ("parameter", "structuralParameter")
+    if role == "parameter" and info.causality not in settable and not initial_state(info):
         hint = (
             " (a calculated parameter is computed by the FMU)"
             if info.causality == "calculatedParameter"
@@ -274,6 +283,22 @@ def setter_kind(
         f"{fmu}: {role} {name!r} is of type {info.type}; only "
         "Real, Integer and Boolean variables can be set"
     )
+
+
+def restarts_instance(info: VariableInfo) -> bool:
+    """Whether a changed value of this variable gets a fresh instance rather than a reset.
+
+    A discrete (Integer, Boolean, Enumeration) variable with ``variability="fixed"``, or
+    an FMI 3 ``structuralParameter``: such switches choose a model's structure, which
+    vendors' FMUs often fix when they are instantiated. FMI allows setting ``fixed``
+    values again after ``fmi2Reset``/``fmi3Reset``, but an FMU that evaluated them at
+    instantiation would silently keep the old structure; a fresh instance honours the
+    new value whatever the FMU does (structural parameters are then set in FMI 3's
+    Configuration Mode, :meth:`tsid_fmu.fmu.instance.Instance.initialize`). A Real
+    ``fixed`` parameter keeps the cheaper reset, as the standard allows.
+    """
+    discrete = info.type in INT_TYPES or info.type in BOOL_TYPES
+    return info.causality == "structuralParameter" or (discrete and info.variability == "fixed")
 
 
 def choose_interface(md: Any, interface: str, fmu: Path) -> str:

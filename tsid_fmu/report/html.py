@@ -32,6 +32,17 @@ FIT_NOTE = (
     "unit (IAE: integral of |error| over time, unit × s); the noise is estimated from the "
     "data's second differences."
 )
+STRUCTURES_NOTE = (
+    "Each candidate structure refined to its own optimum. k: the Real parameters that "
+    "change the outputs in it. AIC = n ln(chi2/n) + 2(k+1), BIC = n ln(chi2/n) + (k+1) ln n, "
+    "with chi2 the sum of squares of the noise-weighted residuals (as the cost weights "
+    "them) over n residuals, from a Gaussian likelihood with one unknown common noise "
+    "scale. LRT p: likelihood-ratio test n ln(chi2_simple/chi2_rich) against chi-square "
+    "with the difference of k as degrees of freedom, for nested structures (the richer "
+    "reproduces the simpler's fit). A richer structure wins only where the data support "
+    "it: the lowest BIC, or for nested structures LRT p < 0.05."
+)
+
 STAGES_NOTE = (
     "Cost: the study's cost on the measured inputs of the stage's experiments. "
     "Cost fall: the share by which the stage lowered the cost of the stage before it "
@@ -177,6 +188,31 @@ def _contribution(result: IdentificationResult) -> str:
     return "\n".join(parts)
 
 
+def _structure(result: IdentificationResult) -> str:
+    """Return the structures side by side, the choice and why, the discrete factors' responses."""
+    found = result.extra.get("structure") or {}
+    frame = result.structures_frame()
+    parts = [
+        f"<p><b>Chosen: {esc(found.get('chosen', ''))}</b>: {esc(found.get('why', ''))}</p>",
+        table_from_frame(frame) if len(frame) else "",
+        f'<p class="note">{esc(STRUCTURES_NOTE)}</p>',
+    ]
+    rows = []
+    for rec in result.iterations:
+        for name, t in (rec.extra.get("discrete") or {}).items():
+            for level, label in enumerate(t["labels"]):
+                rows.append([rec.index, name, label, t["sn"][level], t["cost"][level],
+                             t["f"], t["p"], "yes" if t["significant"] else "no",
+                             "best" if level == t["best"] else ""])  # fmt: skip
+    if rows:
+        head = ["iteration", "factor", "level", "mean S/N [dB]", "mean cost", "F", "p"]
+        parts.append(
+            "<h3>Discrete factors: response per level (structure stage)</h3>"
+            + table([*head, "significant", ""], rows)
+        )
+    return "\n".join(parts)
+
+
 def _failed(result: IdentificationResult) -> str:
     rows = [
         [rec.stage, rec.index, run + 1, err]
@@ -214,6 +250,11 @@ def html_report(result: IdentificationResult, figures: Figures | None = None) ->
         f"<h1>Identification report: {esc(study.name if study else 'study')}</h1>",
         _headline(result, cost),
         _section("Identified parameters", _parameters(result, images), "parameters"),
+        *(
+            [_section("Structure", _structure(result), "structure")]
+            if result.extra.get("structure")
+            else []
+        ),
         _section(
             "Stages",
             (table_from_frame(stages) if len(stages) else "")

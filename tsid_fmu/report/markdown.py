@@ -179,6 +179,8 @@ def _fidelity(result: IdentificationResult) -> list[str]:
     record = result.extra.get("fidelity")
     if not record:
         return []
+    if record.get("checked") is False:  # [method] fidelity = false
+        return ["## Solver fidelity", "", f"Not checked: {record.get('reason', '')}.", ""]
     names = {"cs": "Co-Simulation", "me": "Model Exchange"}
     lines = [
         "## Solver fidelity",
@@ -247,6 +249,16 @@ def markdown_report(result: IdentificationResult) -> str:
     if result.warnings:
         lines += ["## Warnings", "", *[f"- {escape(w)}" for w in result.warnings], ""]
     lines += ["## Identified parameters", "", markdown_table(_parameters(result)), ""]
+    found = result.extra.get("structure")
+    if found:
+        lines += [
+            "## Structure",
+            "",
+            f"Chosen: **{escape(found['chosen'])}**: {escape(found['why'])}",
+            "",
+            markdown_table(result.structures_frame()),
+            "",
+        ]
     if result.weak:
         lines += [
             "## Weakly determined parameters",

@@ -75,6 +75,12 @@ def parameter_rows(result: Any) -> list[list[Any]]:
                 result.weak.get(name, ""),
             ]
         )
+    structure = result.extra.get("structure") or {}
+    for f in structure.get("factors", []):  # discrete factors: the chosen choice
+        chosen = structure.get("choices", {}).get(f["name"], "")
+        rows.append(
+            [f["name"], chosen, "", "chosen structure", math.nan, " | ".join(f["labels"]), ""]
+        )
     return rows
 
 

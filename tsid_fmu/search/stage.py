@@ -10,11 +10,23 @@ from tsid_fmu.search.record import IterationRecord, json_float, unjson_float
 
 __all__ = ["KINDS", "StageResult"]
 
-KINDS = ("taguchi", "refinement", "phase", "contribution", "check", "horizon")
+KINDS = (
+    "taguchi",
+    "refinement",
+    "phase",
+    "contribution",
+    "check",
+    "horizon",
+    "structure",
+    "candidate",
+    "comparison",
+)
 """Kinds of stage: the papers' Taguchi procedure; an optional local least-squares polish;
 a phase of a phased (MISO) study, itself a Taguchi procedure on a parameter group; the
 MISO paper's one-at-a-time contribution runs; the local probe test of an answer that no
-refinement tested (:mod:`tsid_fmu.search.verdict`)."""
+refinement tested (:mod:`tsid_fmu.search.verdict`); in structure identification, the mixed
+arrays of Real and discrete factors, one stage per candidate structure not chosen, and
+the comparison of the structures (:mod:`tsid_fmu.search.structures`)."""
 
 
 @dataclass

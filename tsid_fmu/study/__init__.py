@@ -7,8 +7,17 @@
 """
 
 from tsid_fmu.study import schema
+from tsid_fmu.study.choice import Choice
 from tsid_fmu.study.definition import Study, load_study
 from tsid_fmu.study.prepare import load_experiment, prepare, serial_evaluator
 from tsid_fmu.study.schema import *  # noqa: F403 (the parts, listed once in schema.__all__)
 
-__all__ = [*schema.__all__, "Study", "load_experiment", "load_study", "prepare", "serial_evaluator"]
+__all__ = [
+    *schema.__all__,
+    "Choice",
+    "Study",
+    "load_experiment",
+    "load_study",
+    "prepare",
+    "serial_evaluator",
+]

@@ -32,6 +32,7 @@ from typing import Any
 from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.errors import ArrayError, StudyError
 from tsid_fmu.study.checks import check_choice, check_number, check_text
+from tsid_fmu.study.choice import Choice, resolve_choices
 from tsid_fmu.study.schema import (
     ContributionOptions,
     Experiment,
@@ -82,6 +83,11 @@ class Study:
         Explicit phases (parameter groups identified in turn; MISO paper).
     contribution : ContributionOptions
         Plan the phases from the MISO paper's contribution analyses.
+    choices : list of Choice
+        Discrete factors (FMU Integer, Boolean or Enumeration variables) whose value is
+        chosen from the data with the Real parameters (structure identification,
+        :mod:`tsid_fmu.search.structure`). A :class:`Choice` given among ``parameters``
+        is moved here.
     **method_options
         Method settings given directly (``cost="sse"``, ``replicates=2``, ...) replace
         those of ``method``; they read back as properties (``study.cost``). An unknown
@@ -99,6 +105,7 @@ class Study:
     source: Path | None = field(default=None, compare=False)  # where it was read, not what
     phases: list[Phase] = field(default_factory=list)
     contribution: ContributionOptions = field(default_factory=ContributionOptions)
+    choices: list[Choice] = field(default_factory=list)
 
     def __init__(
         self,
@@ -113,6 +120,7 @@ class Study:
         source: Path | None = None,
         phases: list[Phase] | None = None,
         contribution: ContributionOptions | None = None,
+        choices: list[Choice] | None = None,
         **method_options: Any,
     ) -> None:
         unknown = sorted(set(method_options) - _METHOD_FIELDS)
@@ -126,7 +134,12 @@ class Study:
                 where = f"{source}: " if source else ""
                 raise StudyError(f"{where}{exc}") from None
         self.fmu = Path(fmu)
-        self.parameters = parameters
+        given = list(parameters) if isinstance(parameters, list | tuple) else parameters
+        self.parameters = (
+            [p for p in given if not isinstance(p, Choice)] if isinstance(given, list) else given
+        )
+        moved = [p for p in given if isinstance(p, Choice)] if isinstance(given, list) else []
+        self.choices = [*moved, *(choices or [])]
         self.experiments = experiments
         self.method = method
         self.start_values = dict(start_values or {})
@@ -189,7 +202,39 @@ class Study:
         if clash:
             raise StudyError(f"{', '.join(clash)} both identified and fixed in start_values")
         self._check_phases(names, exp_names)
-        select_array([len(p.levels) for p in self.parameters], name=self.method.array)
+        self._check_choices(names)
+        select_array(
+            [len(p.levels) for p in self.parameters] + [len(c.choices) for c in self.choices],
+            name=self.method.array,
+        )
+
+    def _check_choices(self, names: list[str]) -> None:
+        if not self.choices:
+            return
+        if not all(isinstance(c, Choice) for c in self.choices):
+            raise StudyError("choices must be Choice objects")
+        chosen = [c.name for c in self.choices]
+        twice = sorted({n for n in chosen if chosen.count(n) > 1} | (set(chosen) & set(names)))
+        if twice:
+            raise StudyError(f"parameter(s) listed twice: {', '.join(twice)}")
+        clash = sorted(set(chosen) & set(self.start_values))
+        if clash:
+            raise StudyError(f"{', '.join(clash)} both chosen (choices) and fixed in start_values")
+        if self.phases or self.contribution.enabled:
+            raise StudyError(
+                "choices (structure identification) cannot be combined with [[phases]] or "
+                "[contribution] yet: identify the structure first, then fix it in start_values"
+            )
+        resolve_choices(self.fmu, self.choices)
+        try:
+            select_array(
+                [len(p.levels) for p in self.parameters] + [len(c.choices) for c in self.choices]
+            )
+        except ArrayError as exc:
+            raise ArrayError(
+                f"{exc}; with choices, give the Real parameters 3 levels (L18 and L36 take "
+                "2- and 3-level columns together, L50 one 2-level column beside 5-level ones)"
+            ) from None
 
     def _check_phases(self, names: list[str], exp_names: list[str]) -> None:
         for i, ph in enumerate(self.phases):
@@ -214,8 +259,13 @@ class Study:
 
     @property
     def parameter_names(self) -> list[str]:
-        """Names of the identified parameters, in study order."""
+        """Names of the identified (Real) parameters, in study order."""
         return [p.name for p in self.parameters]
+
+    @property
+    def choice_names(self) -> list[str]:
+        """Names of the discrete factors (:attr:`choices`), in study order."""
+        return [c.name for c in self.choices]
 
     def first_levels(self) -> dict[str, list[float]]:
         """Levels of the first iteration by parameter name."""

@@ -21,6 +21,7 @@ from typing import Any
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import StudyError
 from tsid_fmu.study.checks import parse_toml
+from tsid_fmu.study.choice import Choice
 from tsid_fmu.study.schema import ContributionOptions, Experiment, Method, Parameter, Phase
 
 __all__ = ["read_study_file", "study_from_document", "write_study_file"]
@@ -53,7 +54,7 @@ _DATA = {
     "hold",
     "noise",
 }
-_PARAM = {"levels", "min", "max", "unit"}
+_PARAM = {"levels", "min", "max", "unit", "choices"}
 _PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
 _METHOD_TYPES: dict[str, type] = {
     "array": str,
@@ -220,8 +221,17 @@ def _experiments(doc: Mapping[str, Any], base: Path, where: _Where) -> list[Expe
     return [_experiment(e, base, where, f"[[experiments]] #{i + 1}", i) for i, e in enumerate(raw)]
 
 
-def _parameters(doc: Mapping[str, Any], where: _Where) -> list[Parameter]:
-    out = []
+def _choice(name: str, spec: Mapping[str, Any], where: _Where, label: str) -> Choice:
+    extra = sorted(set(spec) - {"choices"})
+    if extra:
+        raise where.error(
+            label, f"gives choices and {', '.join(extra)}: a discrete factor has choices only"
+        )
+    return _build(where, "", Choice, name=name, choices=_get(spec, "choices", list, where, label))
+
+
+def _parameters(doc: Mapping[str, Any], where: _Where) -> list[Parameter | Choice]:
+    out: list[Parameter | Choice] = []
     for name, spec in _table(doc, "parameters", where, True).items():
         label = f"[parameters] {name}"
         if not isinstance(spec, dict):
@@ -229,6 +239,9 @@ def _parameters(doc: Mapping[str, Any], where: _Where) -> list[Parameter]:
                 label, f"must be a table such as {{ levels = [1, 2, 3] }}, got {spec!r}"
             )
         _check_keys(spec, _PARAM, where, label)
+        if "choices" in spec:
+            out.append(_choice(name, spec, where, label))
+            continue
         levels = _get(spec, "levels", list, where, label)
         if levels is None:
             raise where.error(label, "is missing the key 'levels'")
@@ -420,6 +433,8 @@ def _document(fields: Mapping[str, Any], base: Path, stem: str) -> dict[str, Any
         if p.unit:
             spec["unit"] = p.unit
         params[p.name] = spec
+    for c in fields.get("choices") or []:
+        params[c.name] = {"choices": list(c.choices)}
     doc: dict[str, Any] = {"study": study, "method": method}
     if leveling:
         doc["leveling"] = leveling

@@ -182,7 +182,7 @@ class Trail:
             self.notes.append(note)
 
     def _parameters(self, record: IterationRecord) -> list[str]:
-        names = set(self.study.parameter_names)
+        names = set(self.study.parameter_names) | set(self.study.choice_names)
         return record.parameters if set(record.parameters) <= names else sorted(names)
 
     def override(self, key: str, record: IterationRecord, space: Space) -> Frame | None:

@@ -128,6 +128,8 @@ def fingerprint(study: Study) -> dict[str, Any]:
         _flatten(f"experiments.{e.name}", fields, items)
     _flatten("phases", {str(i + 1): _plain(ph) for i, ph in enumerate(study.phases)}, items)
     _flatten("contribution", _plain(study.contribution), items)
+    if study.choices:  # only where there are some: older folders keep their fingerprint
+        items["choices"] = {c.name: [str(v) for v in c.choices] for c in study.choices}
     return items
 
 

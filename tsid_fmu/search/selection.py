@@ -1,0 +1,246 @@
+"""Choosing among candidate structures, each refined to its own optimum.
+
+Each structure ``s`` has its noise-weighted residuals at its optimum, ``r_i = e_i /
+sigma_i`` (the residuals the study's cost already uses: each output divided by its
+noise, or by its weight's scale), their sum of squares ``chi2_s`` over ``n`` residuals,
+and ``k_s`` free Real parameters (those that change the outputs in that structure).
+
+The likelihood is Gaussian with those relative weights and one common, unknown scale
+``s^2`` (the noise levels may be off by a common factor; its estimate is ``chi2/n``)::
+
+    -2 ln L = n ln(chi2 / n) + n (1 + ln 2 pi) + 2 sum ln sigma_i
+
+The last two terms are the same for every structure and are left out:
+
+    AIC = n ln(chi2 / n) + 2 (k + 1)
+    BIC = n ln(chi2 / n) + (k + 1) ln n
+
+For a structure ``S`` nested in a richer ``R`` (``R`` reproduces ``S`` with its extra
+parameters at some value), the likelihood-ratio statistic is ``n ln(chi2_S / chi2_R)``,
+chi-square with ``k_R - k_S`` degrees of freedom under ``S``.
+
+The decision (:func:`decide`): the structure with the lowest BIC, except that between
+nested structures the likelihood-ratio test decides (the richer one only where ``p <``
+:data:`LRT_ALPHA`). Two structures whose BIC differ by less than :data:`BIC_CLOSE` and
+whose ``chi2`` differ by less than their noise (``sqrt(2 n)`` in units of ``chi2 / n``)
+are **indistinguishable**: the result says so, and reports the simpler one.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = [
+    "BIC_CLOSE",
+    "LRT_ALPHA",
+    "Candidate",
+    "decide",
+    "information",
+    "likelihood_ratio",
+]
+
+LRT_ALPHA = 0.05
+"""A richer nested structure wins only where the likelihood-ratio test gives p below this."""
+
+BIC_CLOSE = 2.0
+"""BIC difference below which two structures (costs within noise) are indistinguishable."""
+
+
+def information(chi2: float, n: int, k: int) -> tuple[float, float]:
+    """Return (AIC, BIC) of a fit with ``chi2`` over ``n`` residuals and ``k`` parameters."""
+    if n <= 0 or not chi2 > 0 or not math.isfinite(chi2):
+        return math.inf, math.inf
+    base = n * math.log(chi2 / n)
+    return base + 2 * (k + 1), base + (k + 1) * math.log(n)
+
+
+def likelihood_ratio(chi2_small: float, chi2_big: float, n: int, dof: int) -> tuple[float, float]:
+    """Return the statistic and p-value of the LRT of a nested structure against a richer."""
+    from scipy import stats
+
+    if dof <= 0 or not (chi2_small > 0 and chi2_big > 0):
+        return math.nan, math.nan
+    stat = max(n * math.log(chi2_small / chi2_big), 0.0)
+    return stat, float(stats.chi2.sf(stat, dof))
+
+
+@dataclass
+class Candidate:
+    """One candidate structure at its own optimum.
+
+    Attributes
+    ----------
+    label : str
+        The structure, e.g. ``"friction=stribeck, damping=true"``.
+    values : dict
+        The number of each discrete factor.
+    x : dict
+        Its Real parameters at its optimum.
+    cost : float
+        The study's cost there.
+    chi2, n, k : float, int, int
+        Sum of squares of the noise-weighted residuals, their number, and the free
+        Real parameters (``active``).
+    active : list of str
+        The Real parameters that change the outputs in this structure.
+    nfev : int
+        Simulations spent on it (its stages and the checks).
+    origin : str
+        Why it is a candidate (the arrays' choice, a runner-up, an open combination).
+    validation : float or None
+        Its cost on the validation experiments, where the study has some.
+    """
+
+    label: str
+    values: dict[str, float]
+    x: dict[str, float]
+    cost: float
+    chi2: float
+    n: int
+    k: int
+    active: list[str]
+    nfev: int = 0
+    origin: str = ""
+    validation: float | None = None
+    aic: float = math.nan
+    bic: float = math.nan
+    lrt_p: float = math.nan
+    lrt_against: str = ""
+    chosen: bool = False
+    why: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def row(self) -> dict[str, Any]:
+        """Return the row of the structures table."""
+        return {
+            "structure": self.label,
+            "cost": self.cost,
+            "k": self.k,
+            "AIC": self.aic,
+            "BIC": self.bic,
+            "LRT p": self.lrt_p,
+            "LRT against": self.lrt_against,
+            "validation cost": math.nan if self.validation is None else self.validation,
+            "simulations": self.nfev,
+            "chosen": self.chosen,
+            "why": self.why,
+        }
+
+
+def _close(a: Candidate, b: Candidate) -> bool:
+    """Whether two structures are indistinguishable: BIC within 2, costs within noise."""
+    n = max(a.n, b.n, 1)
+    noise = math.sqrt(2.0 * n) * min(a.chi2, b.chi2) / n
+    return abs(a.bic - b.bic) < BIC_CLOSE and abs(a.chi2 - b.chi2) <= noise
+
+
+def _lrt(small: Candidate, big: Candidate) -> float:
+    return likelihood_ratio(small.chi2, big.chi2, small.n, big.k - small.k)[1]
+
+
+def _nested_step(
+    pick: int, cands: Sequence[Candidate], nested: set[tuple[int, int]]
+) -> tuple[int, str] | None:
+    """One application of the LRT rule to the current pick; None when it stands."""
+    for s, r in sorted(nested):
+        small, big = cands[s], cands[r]
+        p = _lrt(small, big)
+        extra = ", ".join(sorted(set(big.active) - set(small.active)))
+        if pick == r and not p < LRT_ALPHA:
+            return s, (
+                f"nested in {big.label}, whose extra parameter(s) {extra} the data do not "
+                f"support (LRT p = {p:.3g} >= {LRT_ALPHA:g})"
+            )
+        if pick == s and p < LRT_ALPHA:
+            return r, (
+                f"the data support its extra parameter(s) {extra} over {small.label}, which "
+                f"it nests (LRT p = {p:.3g} < {LRT_ALPHA:g})"
+            )
+    return None
+
+
+def decide(
+    cands: Sequence[Candidate], nested: set[tuple[int, int]] | None = None
+) -> tuple[int, list[int]]:
+    """Choose a structure; fill each candidate's AIC, BIC, LRT and ``why``.
+
+    Parameters
+    ----------
+    cands : sequence of Candidate
+        The candidates (``chi2``, ``n``, ``k`` filled).
+    nested : set of (int, int)
+        Pairs ``(s, r)``: structure ``s`` is nested in the richer ``r``.
+
+    Returns
+    -------
+    chosen : int
+        Index of the chosen structure.
+    tied : list of int
+        The structures indistinguishable from it (BIC within :data:`BIC_CLOSE`, costs
+        within noise).
+    """
+    nested = set(nested or ())
+    for c in cands:
+        c.aic, c.bic = information(c.chi2, c.n, c.k)
+    for s, r in nested:
+        p = _lrt(cands[s], cands[r])
+        for c, other in ((cands[s], cands[r]), (cands[r], cands[s])):
+            if math.isnan(c.lrt_p) or p < c.lrt_p:
+                c.lrt_p, c.lrt_against = p, other.label
+    pick = min(range(len(cands)), key=lambda i: (cands[i].bic, cands[i].k))
+    others = sorted(c.bic for i, c in enumerate(cands) if i != pick)
+    why = "the lowest BIC" + (
+        f" ({others[0] - cands[pick].bic:.3g} below the next)" if others else ""
+    )
+    for _ in range(len(cands) * len(cands) + 1):
+        step = _nested_step(pick, cands, nested)
+        if step is None:
+            break
+        pick, why = step
+    for s, r in sorted(nested):
+        p = _lrt(cands[s], cands[r])
+        if s == pick and not p < LRT_ALPHA and "nested" not in why:
+            extra = ", ".join(sorted(set(cands[r].active) - set(cands[s].active)))
+            why += (
+                f"; nested in {cands[r].label}, whose extra parameter(s) {extra} the data "
+                f"do not support (LRT p = {p:.3g} >= {LRT_ALPHA:g})"
+            )
+    decided = {
+        a if b == pick else b
+        for a, b in nested
+        if pick in (a, b) and _lrt(cands[a], cands[b]) < LRT_ALPHA
+    }
+    tied = [
+        i for i, c in enumerate(cands) if i != pick and i not in decided and _close(c, cands[pick])
+    ]
+    simpler = min([pick, *tied], key=lambda i: (cands[i].k, cands[i].bic))
+    if tied and simpler != pick:
+        pick = simpler
+    for i, c in enumerate(cands):
+        c.chosen = i == pick
+        if i == pick:
+            c.why = (
+                why
+                if not tied
+                else (
+                    "indistinguishable from "
+                    + ", ".join(cands[j].label for j in tied)
+                    + f" (BIC within {BIC_CLOSE:g}, costs within noise): the data do not decide; "
+                    "the simpler is reported"
+                )
+            )
+        elif i in tied:
+            c.why = f"indistinguishable from {cands[pick].label}: the data do not decide"
+        else:
+            c.why = f"BIC {c.bic - cands[pick].bic:+.4g} against {cands[pick].label}"
+    return pick, tied
+
+
+def structures_frame(rows: Sequence[Mapping[str, Any]]) -> Any:
+    """Return the structures table as a :class:`pandas.DataFrame` indexed by structure."""
+    import pandas as pd
+
+    return pd.DataFrame(list(rows)).set_index("structure") if rows else pd.DataFrame()

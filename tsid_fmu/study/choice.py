@@ -1,0 +1,190 @@
+"""Discrete factors: an FMU Integer, Boolean or Enumeration variable with its candidates.
+
+A :class:`Choice` is written in a study's ``[parameters]`` table as::
+
+    friction = { choices = ["coulomb", "stribeck"] }   # Enumeration item names
+    damping_on = { choices = [true, false] }            # a Boolean
+    n_masses = { choices = [1, 2] }                     # an Integer
+
+Its choices are the levels of its column in the orthogonal arrays (never re-leveled
+numerically: a choice stays one of the candidates until the structure procedure of
+:mod:`tsid_fmu.search.structure` fixes it). :func:`resolve_choices` checks each against
+the FMU's model description and turns the choices into the numbers the FMU is set to
+(Booleans 0/1, Enumeration items their declared integer values).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.errors import FMUError, StudyError
+
+__all__ = ["Choice", "resolve_choices"]
+
+_SETTABLE = ("parameter", "structuralParameter")
+
+
+def _kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, int):
+        return "int"
+    if isinstance(value, float) and math.isfinite(value) and value == round(value):
+        return "int"
+    if isinstance(value, str):
+        return "str"
+    return "other"
+
+
+@dataclass
+class Choice:
+    """A discrete factor: an FMU Integer/Boolean/Enumeration variable and its candidates.
+
+    Parameters
+    ----------
+    name : str
+        The FMU variable (causality ``parameter``, or an FMI 3 ``structuralParameter``).
+    choices : list of int, bool or str
+        At least two distinct candidates, all of one kind: integers (an Integer or
+        Enumeration variable), ``True``/``False`` (a Boolean), or item names of the
+        variable's Enumeration type.
+
+    Attributes
+    ----------
+    values : list of float
+        The number each choice sets the FMU variable to, filled by
+        :func:`resolve_choices` (when the study is made); not compared.
+    """
+
+    name: str
+    choices: list[Any]
+    values: list[float] = field(default_factory=list, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name or not self.name.isprintable():
+            raise StudyError(f"parameter name must be a non-empty printable string: {self.name!r}")
+        where = f"parameter {self.name!r}"
+        if isinstance(self.choices, str | bytes) or not hasattr(self.choices, "__iter__"):
+            raise StudyError(f"{where}: choices must be a list, got {self.choices!r}")
+        self.choices = [
+            int(c) if _kind(c) == "int" and not isinstance(c, bool) else c for c in self.choices
+        ]
+        kinds = {_kind(c) for c in self.choices}
+        if "other" in kinds or len(kinds) > 1:
+            raise StudyError(
+                f"{where}: choices must be all integers, all true/false or all Enumeration "
+                f"item names, got {self.choices!r}"
+            )
+        if len(self.choices) < 2:
+            raise StudyError(
+                f"{where}: needs at least 2 choices (a single one is a fixed value: put it "
+                f"in [study] start_values), got {self.choices!r}"
+            )
+        if len(set(map(repr, self.choices))) != len(self.choices):
+            raise StudyError(f"{where}: choices must be distinct, got {self.choices!r}")
+        if len(self.choices) > 5:
+            raise StudyError(
+                f"{where}: at most 5 choices fit an orthogonal array's column, got "
+                f"{len(self.choices)}"
+            )
+
+    @property
+    def labels(self) -> list[str]:
+        """The choices as a person reads them (``true``, ``2``, ``stribeck``)."""
+        return [label(c) for c in self.choices]
+
+    def label_of(self, value: float) -> str:
+        """Return the choice whose number is ``value`` (as :attr:`labels` writes it)."""
+        for c, v in zip(self.choices, self.values, strict=False):
+            if v == value:
+                return label(c)
+        return f"{value:g}"
+
+
+def label(choice: Any) -> str:
+    """Return a choice as a study file writes it, without quotes."""
+    if isinstance(choice, bool):
+        return "true" if choice else "false"
+    return str(choice)
+
+
+def _items(info: Any) -> dict[str, int]:
+    declared = getattr(info, "declaredType", None)
+    return {str(i.name): int(i.value) for i in getattr(declared, "items", None) or []}
+
+
+def _number(choice: Any, variable: Any, where: str) -> float:
+    vtype = variable.type
+    if vtype == "Boolean":
+        if not isinstance(choice, bool) and choice not in (0, 1):
+            raise StudyError(f"{where}: a Boolean takes true or false, got {choice!r}")
+        return float(bool(choice))
+    if vtype == "Enumeration":
+        items = _items(variable)
+        if isinstance(choice, str):
+            if choice not in items:
+                tname = getattr(getattr(variable, "declaredType", None), "name", "")
+                raise StudyError(
+                    f"{where}: {choice!r} is not an item of its Enumeration type {tname} "
+                    f"(items: {', '.join(items) or 'none declared'})"
+                )
+            return float(items[choice])
+        if isinstance(choice, bool) or (items and choice not in items.values()):
+            raise StudyError(
+                f"{where}: {choice!r} is not a value of its Enumeration type (items: "
+                + ", ".join(f"{k} = {v}" for k, v in items.items())
+                + ")"
+            )
+        return float(choice)
+    if isinstance(choice, bool | str):
+        raise StudyError(f"{where}: an {vtype} variable takes integers, got {choice!r}")
+    return float(choice)
+
+
+def resolve_choices(fmu: Path, choices: list[Choice]) -> None:
+    """Check each choice against the FMU's model description; fill its ``values``.
+
+    Raises
+    ------
+    StudyError
+        The FMU has no such variable, it is a Real (give levels), it cannot be set, or
+        a choice is not a value of its type (the message names the parameter).
+    """
+    if not choices:
+        return
+    from tsid_fmu.fmu.info import read_fmu_description
+    from tsid_fmu.fmu.variables import suggest
+
+    try:
+        md = read_fmu_description(Path(fmu))
+    except FMUError as exc:
+        raise StudyError(f"choices need the FMU's model description: {exc}") from None
+    variables = {v.name: v for v in md.modelVariables}
+    for c in choices:
+        where = f"parameter {c.name!r}"
+        v = variables.get(c.name)
+        if v is None:
+            raise StudyError(
+                f"{where}: the FMU has no variable of that name.{suggest(c.name, list(variables))}"
+            )
+        if v.type in ("Real", "Float64", "Float32"):
+            raise StudyError(
+                f"{where} is a Real variable: give it levels = [...] (choices are for "
+                "Integer, Boolean and Enumeration variables)"
+            )
+        if v.type not in ("Boolean", "Enumeration") and not v.type.startswith(("Int", "UInt")):
+            raise StudyError(
+                f"{where} is of type {v.type}; choices need an Integer, Boolean or "
+                "Enumeration variable"
+            )
+        if v.causality not in _SETTABLE or v.variability == "constant":
+            raise StudyError(
+                f"{where} has causality {v.causality!r} and variability {v.variability!r}; "
+                "only a parameter (or an FMI 3 structural parameter) can be a choice"
+            )
+        c.values = [_number(x, v, where) for x in c.choices]
+        if len(set(c.values)) != len(c.values):
+            raise StudyError(f"{where}: two choices set the same value {c.values}")
