@@ -188,6 +188,18 @@ def _header(fmu: Path, data: Path, m: _Match, time: str, derived: Mapping[str, s
     return lines
 
 
+def _window_hint(first: float, last: float) -> list[str]:
+    """Commented keys that score only parts of the record (README, "Time windows")."""
+    start = first + 0.1 * (last - first)
+    return [
+        "# to score only parts of the record (skip a start-up the model does not describe),",
+        "# uncomment; the whole record is still simulated from its start:",
+        f"# windows = [[{start:.6g}, {last:.6g}]]  # seconds; in time order, not overlapping",
+        "# warmup = 0.0            # seconds at each window's start simulated, not scored",
+        "# window_weights = [1.0]  # one weight per window",
+    ]
+
+
 def init_study(
     fmu: str | os.PathLike[str],
     data: str | os.PathLike[str],
@@ -227,6 +239,7 @@ def init_study(
     base = out.resolve().parent
     rel = {p: Path(os.path.relpath(p.resolve(), base)) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
+    lines += _window_hint(float(probe.time[0]), float(probe.time[-1]))
     lines += hints
     lines += [
         "",

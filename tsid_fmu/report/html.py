@@ -19,6 +19,7 @@ from tsid_fmu.report.html_tables import CSS, esc, generic, image, table, table_f
 from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
+from tsid_fmu.report.scored import windows_note
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import STATUS, IdentificationResult
@@ -124,10 +125,15 @@ def _fit(result: IdentificationResult, units: Mapping[str, str], images: Mapping
                 ]
             )
     cols = ["experiment / output", "unit", "fit %", "RMSE", "noise", "RMSE / noise", "IAE"]
-    body = table(cols, rows) + f'<p class="note">{esc(FIT_NOTE)}</p>'
+    body = table(cols, rows) + f'<p class="note">{esc(FIT_NOTE)}</p>' + _windows(result)
     if "fit.png" in images:
         body += image(images["fit.png"], "identified model against the measured data")
     return body
+
+
+def _windows(result: IdentificationResult) -> str:
+    note = windows_note(result)
+    return f'<p class="note">{esc(note)}</p>' if note else ""
 
 
 def _diagnostics(result: IdentificationResult) -> str:

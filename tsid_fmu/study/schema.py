@@ -131,6 +131,16 @@ class Experiment:
         Known noise standard deviation of an output's sensor (e.g. an encoder's
         quantisation, ``step / sqrt(12)``), in the output's units; outputs not listed
         get an estimate from the data (:func:`tsid_fmu.evaluate.cost.noise_level`).
+    windows : list of [t0, t1]
+        Time spans (seconds) that are scored, in time order and disjoint; default the
+        whole record. The whole record is still simulated from its start: a window only
+        chooses the samples that the cost, the residuals, the noise estimate and every
+        diagnostic see (:mod:`tsid_fmu.evaluate.windows`).
+    warmup : float or list of float
+        Seconds at the start of each window (of the record, without windows) that are
+        simulated but not scored; one value for every window or one per window.
+    window_weights : list of float, optional
+        Weight of each window's cost (default 1 each).
     """
 
     data: Any
@@ -145,6 +155,9 @@ class Experiment:
     role: str = "identify"
     hold: dict[str, str] = field(default_factory=dict)
     noise: dict[str, float] = field(default_factory=dict)
+    windows: list[list[float]] = field(default_factory=list)
+    warmup: float | list[float] = 0.0
+    window_weights: list[float] | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.data, str | os.PathLike):
@@ -188,6 +201,48 @@ class Experiment:
             if name not in self.inputs:
                 raise StudyError(f"{where}: hold given for {name!r}, which is not an input")
             check_choice(how, f"{where}: hold of {name}", ("previous", "linear"))
+        self._check_windows(where)
+
+    def _check_windows(self, where: str) -> None:
+        """Check the windows as far as they can be checked without the data."""
+        if isinstance(self.windows, str | bytes) or not hasattr(self.windows, "__iter__"):
+            raise StudyError(f"{where}: windows must be a list of [start, end] pairs")
+        spans = []
+        for k, span in enumerate(self.windows):
+            label = f"{where}: window {k + 1}"
+            if isinstance(span, str | bytes) or not hasattr(span, "__len__") or len(span) != 2:
+                raise StudyError(f"{label} must be a pair [start, end] in seconds, got {span!r}")
+            t0, t1 = (check_number(v, label) for v in span)
+            if not t1 > t0:
+                raise StudyError(f"{label} [{t0:g}, {t1:g}] is reversed or empty")
+            if spans and t0 < spans[-1][1]:
+                raise StudyError(
+                    f"{label} [{t0:g}, {t1:g}] overlaps window {k} (windows must be in time "
+                    "order and must not overlap)"
+                )
+            spans.append([t0, t1])
+        self.windows = spans
+        if isinstance(self.warmup, list | tuple):
+            if len(self.warmup) != len(spans):
+                raise StudyError(
+                    f"{where}: warmup has {len(self.warmup)} values for {len(spans)} windows"
+                )
+            self.warmup = [check_number(v, f"{where}: warmup") for v in self.warmup]
+            warm = self.warmup
+        else:
+            self.warmup = check_number(self.warmup, f"{where}: warmup")
+            warm = [self.warmup]
+        if any(w < 0 for w in warm):
+            raise StudyError(f"{where}: warmup must be >= 0 seconds, got {self.warmup}")
+        if self.window_weights is not None:
+            weights = [check_number(v, f"{where}: window_weights") for v in self.window_weights]
+            if len(weights) != len(spans):
+                raise StudyError(
+                    f"{where}: window_weights has {len(weights)} values for {len(spans)} windows"
+                )
+            if any(w < 0 for w in weights) or not any(weights):
+                raise StudyError(f"{where}: window_weights must be >= 0 and not all 0")
+            self.window_weights = weights
 
 
 @dataclass
