@@ -76,6 +76,10 @@ def experiments(draw, folder: Path):
                 derived=draw(st.dictionaries(NAME, st.sampled_from(["a - b", "der(x)"]))),
                 weights=weights,
                 start_values=draw(st.dictionaries(NAME, NUMBER, max_size=2)),
+                # ":" is in no NAME: these never clash with a parameter or start value
+                initial={
+                    f"s:{k}": "from_data:" + draw(NAME) for k in draw(st.lists(NAME, max_size=2))
+                },
                 sample_time=draw(MAYBE),
                 role="identify" if i == 0 else draw(st.sampled_from(["identify", "validate"])),
                 hold={k: draw(st.sampled_from(["previous", "linear"])) for k in ins[:1]},

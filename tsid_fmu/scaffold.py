@@ -39,7 +39,13 @@ from tsid_fmu.data.measured import load_data
 from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.errors import StudyError
 from tsid_fmu.fmu.info import read_fmu_description
-from tsid_fmu.fmu.variables import REAL_TYPES, VariableInfo, parse_start, variable_info
+from tsid_fmu.fmu.variables import (
+    REAL_TYPES,
+    VariableInfo,
+    initial_state,
+    parse_start,
+    variable_info,
+)
 from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, numerical_setting
 
 __all__ = ["decade_levels", "init_study"]
@@ -200,6 +206,21 @@ def _window_hint(first: float, last: float) -> list[str]:
     ]
 
 
+def _initial_hint(states: list[str], outputs: Mapping[str, str]) -> list[str]:
+    """Commented ``initial`` key: states set from the data's first sample (README)."""
+    compared = [s for s in states if s in outputs]
+    value = (
+        ", ".join(f'{s} = "from_data"' for s in compared)
+        if compared
+        else 'STATE = "from_data:COLUMN"'
+    )
+    return [
+        "# to start a state (or the parameter that sets it, such as x0) at the data's first",
+        '# sample, uncomment ("from_data": the column the state is compared with):',
+        f"# initial = {{ {value} }}",
+    ]
+
+
 def init_study(
     fmu: str | os.PathLike[str],
     data: str | os.PathLike[str],
@@ -240,6 +261,7 @@ def init_study(
     rel = {p: Path(os.path.relpath(p.resolve(), base)) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
     lines += _window_hint(float(probe.time[0]), float(probe.time[-1]))
+    lines += _initial_hint([v.name for v in variables if initial_state(v)], match.outputs)
     lines += hints
     lines += [
         "",

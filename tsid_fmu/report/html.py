@@ -19,7 +19,7 @@ from tsid_fmu.report.html_tables import CSS, esc, generic, image, table, table_f
 from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
-from tsid_fmu.report.scored import windows_note
+from tsid_fmu.report.scored import experiment_notes
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import STATUS, IdentificationResult
@@ -132,8 +132,7 @@ def _fit(result: IdentificationResult, units: Mapping[str, str], images: Mapping
 
 
 def _windows(result: IdentificationResult) -> str:
-    note = windows_note(result)
-    return f'<p class="note">{esc(note)}</p>' if note else ""
+    return "".join(f'<p class="note">{esc(note)}</p>' for note in experiment_notes(result))
 
 
 def _diagnostics(result: IdentificationResult) -> str:

@@ -1,10 +1,10 @@
-"""What a study scores, in words: the time windows of its experiments."""
+"""What a study scores and starts from, in words: its experiments' windows and initial states."""
 
 from __future__ import annotations
 
 from tsid_fmu.result import IdentificationResult
 
-__all__ = ["windows_note"]
+__all__ = ["experiment_notes", "initial_note", "windows_note"]
 
 
 def windows_note(result: IdentificationResult) -> str:
@@ -28,3 +28,20 @@ def windows_note(result: IdentificationResult) -> str:
         + "; ".join(parts)
         + "."
     )
+
+
+def initial_note(result: IdentificationResult) -> str:
+    """Return a sentence naming the initial states set from the data ("" if none)."""
+    parts = [
+        f"{e.name}: " + ", ".join(f"{k} ({v})" for k, v in e.initial.items())
+        for e in (result.study.experiments if result.study is not None else ())
+        if e.initial
+    ]
+    if not parts:
+        return ""
+    return "Initial states set from the record's first sample: " + "; ".join(parts) + "."
+
+
+def experiment_notes(result: IdentificationResult) -> list[str]:
+    """Return the notes on the experiments' windows and initial states (none if neither)."""
+    return [n for n in (windows_note(result), initial_note(result)) if n]

@@ -13,6 +13,7 @@ from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.evaluate.windows import select, window_ranges
 from tsid_fmu.study.definition import Study
+from tsid_fmu.study.initial import initial_values
 from tsid_fmu.study.schema import Experiment
 
 __all__ = [
@@ -142,7 +143,8 @@ def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
         weights=weights,
         scale=scale,
         noisy_inputs=_noisy_inputs(study, index, inputs),
-        start_values=dict(experiment.start_values),
+        # initial states from the data (study/initial.py), over the experiment's own
+        start_values={**experiment.start_values, **initial_values(study.fmu, experiment, data)},
         hold=dict(experiment.hold),
         windows=windows,
         window_weights=tuple(experiment.window_weights or ()),

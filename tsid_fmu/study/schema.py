@@ -16,15 +16,24 @@ from typing import Any
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import COSTS
-from tsid_fmu.study.checks import check_bound, check_choice, check_number, check_text, check_whole
+from tsid_fmu.study.checks import (
+    check_bound,
+    check_choice,
+    check_number,
+    check_text,
+    check_whole,
+    check_windows,
+)
 
 __all__ = [
+    "FROM_DATA",
     "MAX_REPLICATES",
     "ContributionOptions",
     "Experiment",
     "Method",
     "Parameter",
     "Phase",
+    "initial_column",
 ]
 
 MAX_REPLICATES = 1000
@@ -141,6 +150,13 @@ class Experiment:
         simulated but not scored; one value for every window or one per window.
     window_weights : list of float, optional
         Weight of each window's cost (default 1 each).
+    initial : mapping of str to str
+        Initial states set from the data: FMU variable -> ``"from_data:<column>"`` (the
+        column's, or derived channel's, value at the record's first sample) or
+        ``"from_data"`` (the column this experiment compares that variable with, when
+        it is one of its outputs). The variable must be settable before initialisation:
+        a parameter (such as a state's ``x0``) or a state whose start value is its
+        initial value (``initial="exact"``).
     """
 
     data: Any
@@ -158,6 +174,7 @@ class Experiment:
     windows: list[list[float]] = field(default_factory=list)
     warmup: float | list[float] = 0.0
     window_weights: list[float] | None = None
+    initial: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if isinstance(self.data, str | os.PathLike):
@@ -201,48 +218,46 @@ class Experiment:
             if name not in self.inputs:
                 raise StudyError(f"{where}: hold given for {name!r}, which is not an input")
             check_choice(how, f"{where}: hold of {name}", ("previous", "linear"))
-        self._check_windows(where)
+        self.windows, self.warmup, self.window_weights = check_windows(
+            self.windows, self.warmup, self.window_weights, where
+        )
+        self._check_initial(where)
 
-    def _check_windows(self, where: str) -> None:
-        """Check the windows as far as they can be checked without the data."""
-        if isinstance(self.windows, str | bytes) or not hasattr(self.windows, "__iter__"):
-            raise StudyError(f"{where}: windows must be a list of [start, end] pairs")
-        spans = []
-        for k, span in enumerate(self.windows):
-            label = f"{where}: window {k + 1}"
-            if isinstance(span, str | bytes) or not hasattr(span, "__len__") or len(span) != 2:
-                raise StudyError(f"{label} must be a pair [start, end] in seconds, got {span!r}")
-            t0, t1 = (check_number(v, label) for v in span)
-            if not t1 > t0:
-                raise StudyError(f"{label} [{t0:g}, {t1:g}] is reversed or empty")
-            if spans and t0 < spans[-1][1]:
+    def _check_initial(self, where: str) -> None:
+        for name, how in self.initial.items():
+            label = f"{where}: initial {name!r}"
+            column = initial_column(self, name)
+            if column is None:
                 raise StudyError(
-                    f"{label} [{t0:g}, {t1:g}] overlaps window {k} (windows must be in time "
-                    "order and must not overlap)"
+                    f'{label} must be "from_data:<column>" or "from_data" (for an output), '
+                    f"got {how!r}"
                 )
-            spans.append([t0, t1])
-        self.windows = spans
-        if isinstance(self.warmup, list | tuple):
-            if len(self.warmup) != len(spans):
+            if not column:
                 raise StudyError(
-                    f"{where}: warmup has {len(self.warmup)} values for {len(spans)} windows"
+                    f'{label} = "from_data": {name!r} is not an output of this experiment; '
+                    'name the column: "from_data:<column>"'
                 )
-            self.warmup = [check_number(v, f"{where}: warmup") for v in self.warmup]
-            warm = self.warmup
-        else:
-            self.warmup = check_number(self.warmup, f"{where}: warmup")
-            warm = [self.warmup]
-        if any(w < 0 for w in warm):
-            raise StudyError(f"{where}: warmup must be >= 0 seconds, got {self.warmup}")
-        if self.window_weights is not None:
-            weights = [check_number(v, f"{where}: window_weights") for v in self.window_weights]
-            if len(weights) != len(spans):
-                raise StudyError(
-                    f"{where}: window_weights has {len(weights)} values for {len(spans)} windows"
-                )
-            if any(w < 0 for w in weights) or not any(weights):
-                raise StudyError(f"{where}: window_weights must be >= 0 and not all 0")
-            self.window_weights = weights
+            if name in self.start_values:
+                raise StudyError(f"{label} is also fixed in start_values; give one of them")
+
+
+FROM_DATA = "from_data"
+"""An experiment's ``initial`` value that sets a state from the data's first sample."""
+
+
+def initial_column(experiment: Experiment, name: str) -> str | None:
+    """Return the data column that sets the initial value ``name`` of ``experiment``.
+
+    ``""`` for a plain ``"from_data"`` on a variable that is no output of the experiment;
+    None for a value that is not ``from_data`` at all.
+    """
+    how = experiment.initial.get(name)
+    if not isinstance(how, str):
+        return None
+    if how == FROM_DATA:
+        return experiment.outputs.get(name, "")
+    head, colon, column = how.partition(":")
+    return column.strip() if head == FROM_DATA and colon and column.strip() else None
 
 
 @dataclass

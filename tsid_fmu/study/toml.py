@@ -55,6 +55,7 @@ _DATA = {
     "windows",
     "warmup",
     "window_weights",
+    "initial",
 }
 _PARAM = {"levels", "min", "max", "unit"}
 _PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
@@ -213,6 +214,7 @@ def _experiment(e: Mapping[str, Any], base: Path, where: _Where, label: str, i: 
         windows=e.get("windows", []),
         warmup=e.get("warmup", 0.0),
         window_weights=e.get("window_weights"),
+        initial=_map(e, "initial", str, where, label),
     )
 
 
@@ -410,6 +412,7 @@ def _experiment_table(e: Experiment, base: Path, stem: str) -> dict[str, Any]:
         ("windows", "windows"),
         ("warmup", "warmup"),
         ("window_weights", "window_weights"),
+        ("initial", "initial"),
     ):
         if key in fields:
             table[out] = fields[key]
