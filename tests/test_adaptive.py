@@ -45,7 +45,12 @@ class FloorEvaluator(CurveEvaluator):
 
     def __init__(self, model, measured: np.ndarray, scale: float) -> None:
         super().__init__(model, measured, scale)
-        exp = SimpleNamespace(measured=measured[:, None], scale=np.array([scale]))
+        exp = SimpleNamespace(
+            measured=measured[:, None],
+            scale=np.array([scale]),
+            weighted_samples=float(len(measured)),  # no windows: every sample scored
+            scored=lambda a: a,
+        )
         self.spec = SimpleNamespace(experiments=[exp])
 
 

@@ -40,6 +40,20 @@ def parameters(draw):
 
 
 @st.composite
+def windows(draw):
+    """No windows, or 1-3 disjoint spans in time order, a warm-up and maybe weights."""
+    ends = sorted(draw(st.lists(st.floats(0, 1e4), min_size=0, max_size=6, unique=True)))
+    spans = [ends[i : i + 2] for i in range(0, len(ends) - 1, 2)]
+    if not spans:
+        return {"warmup": draw(st.sampled_from([0.0, 0.5]))}
+    warmup = draw(
+        st.floats(0, 10) | st.lists(st.floats(0, 10), min_size=len(spans), max_size=len(spans))
+    )
+    weights = draw(st.none() | st.lists(POSITIVE, min_size=len(spans), max_size=len(spans)))
+    return {"windows": spans, "warmup": warmup, "window_weights": weights}
+
+
+@st.composite
 def experiments(draw, folder: Path):
     count = draw(st.integers(1, 2))
     names = draw(st.lists(NAME.filter(str.strip), min_size=count, max_size=count, unique=True))
@@ -62,10 +76,15 @@ def experiments(draw, folder: Path):
                 derived=draw(st.dictionaries(NAME, st.sampled_from(["a - b", "der(x)"]))),
                 weights=weights,
                 start_values=draw(st.dictionaries(NAME, NUMBER, max_size=2)),
+                # ":" is in no NAME: these never clash with a parameter or start value
+                initial={
+                    f"s:{k}": "from_data:" + draw(NAME) for k in draw(st.lists(NAME, max_size=2))
+                },
                 sample_time=draw(MAYBE),
                 role="identify" if i == 0 else draw(st.sampled_from(["identify", "validate"])),
                 hold={k: draw(st.sampled_from(["previous", "linear"])) for k in ins[:1]},
                 noise={k: draw(POSITIVE) for k in outs[:1]} if draw(st.booleans()) else {},
+                **draw(windows()),
             )
         )
     return out

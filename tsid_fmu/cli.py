@@ -123,7 +123,6 @@ def _print_result(result: Any, out: Path, code: int) -> None:
 def _cmd_simulate(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from tsid_fmu.evaluate.cost import metrics
     from tsid_fmu.evaluate.serial import SerialEvaluator
     from tsid_fmu.report.plots import fit_plot
     from tsid_fmu.report.units import study_units
@@ -159,7 +158,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if sim.outputs is None:
             print(f"{e.name}: simulation failed: {sim.error}")
             continue
-        for out_name, m in metrics(e.time, e.measured, sim.outputs, list(e.output_names)).items():
+        for out_name, m in e.fit_metrics(sim.outputs).items():  # the scored windows
             print(
                 f"{e.name} / {out_name}: fit {m['fit_percent']:.3f} %, IAE {m['iae']:.6g}, "
                 f"SSE {m['sse']:.6g}, RMSE {m['rmse']:.6g}"

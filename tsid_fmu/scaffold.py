@@ -39,7 +39,13 @@ from tsid_fmu.data.measured import load_data
 from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.errors import StudyError
 from tsid_fmu.fmu.info import read_fmu_description
-from tsid_fmu.fmu.variables import REAL_TYPES, VariableInfo, parse_start, variable_info
+from tsid_fmu.fmu.variables import (
+    REAL_TYPES,
+    VariableInfo,
+    initial_state,
+    parse_start,
+    variable_info,
+)
 from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, numerical_setting
 
 __all__ = ["decade_levels", "init_study"]
@@ -207,6 +213,33 @@ def _header(fmu: Path, data: Path, m: _Match, time: str, derived: Mapping[str, s
     return lines
 
 
+def _window_hint(first: float, last: float) -> list[str]:
+    """Commented keys that score only parts of the record (README, "Time windows")."""
+    start = first + 0.1 * (last - first)
+    return [
+        "# to score only parts of the record (skip a start-up the model does not describe),",
+        "# uncomment; the whole record is still simulated from its start:",
+        f"# windows = [[{start:.6g}, {last:.6g}]]  # seconds; in time order, not overlapping",
+        "# warmup = 0.0            # seconds at each window's start simulated, not scored",
+        "# window_weights = [1.0]  # one weight per window",
+    ]
+
+
+def _initial_hint(states: list[str], outputs: Mapping[str, str]) -> list[str]:
+    """Commented ``initial`` key: states set from the data's first sample (README)."""
+    compared = [s for s in states if s in outputs]
+    value = (
+        ", ".join(f'{s} = "from_data"' for s in compared)
+        if compared
+        else 'STATE = "from_data:COLUMN"'
+    )
+    return [
+        "# to start a state (or the parameter that sets it, such as x0) at the data's first",
+        '# sample, uncomment ("from_data": the column the state is compared with):',
+        f"# initial = {{ {value} }}",
+    ]
+
+
 def init_study(
     fmu: str | os.PathLike[str],
     data: str | os.PathLike[str],
@@ -246,6 +279,8 @@ def init_study(
     base = out.resolve().parent
     rel = {p: Path(os.path.relpath(p.resolve(), base)) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
+    lines += _window_hint(float(probe.time[0]), float(probe.time[-1]))
+    lines += _initial_hint([v.name for v in variables if initial_state(v)], match.outputs)
     lines += hints
     lines += [
         "",

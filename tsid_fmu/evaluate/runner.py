@@ -191,13 +191,13 @@ class SetRunner:
                     costs[:] = math.inf
                     return SetResult(costs, f"{experiment.name}: {exc}", None, self.started)
                 durations.append(time.monotonic() - t0)
-                per_output = self.cost.per_output(experiment.time, experiment.measured, y)
+                per_output = experiment.output_costs(self.cost, y)
                 value = float(np.dot(per_output, experiment.weights))
                 values.append(value if math.isfinite(value) else math.inf)
                 if r == 0:  # y is this run's own array: scaled in place, no copy
                     np.subtract(y, experiment.measured, out=y)
                     np.divide(y, experiment.scale, out=y)
-                    residuals.append(y.reshape(-1))
+                    residuals.append(experiment.weighted(y).reshape(-1))
             costs[: len(values)] += values
         out = residuals[0] if len(residuals) == 1 else np.concatenate(residuals)
         out.flags.writeable = False

@@ -21,6 +21,15 @@ import numpy as np
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import Cost
+from tsid_fmu.evaluate.windows import (
+    Ranges,
+    check_ranges,
+    head_ranges,
+    scored_metrics,
+    select,
+    weighted_rows,
+    window_cost,
+)
 from tsid_fmu.fmu.delay import check_delays
 
 __all__ = ["EvaluationSpec", "PreparedExperiment", "frozen_array"]
@@ -96,6 +105,12 @@ class PreparedExperiment:
         FMU values fixed for this experiment (over the spec's ``start_values``).
     hold : mapping of str to str, optional
         Per input: ``"previous"`` (zero-order hold, the default) or ``"linear"``.
+    windows : tuple of (int, int), optional
+        The sample ranges ``[start, stop)`` that are scored, increasing and disjoint
+        (:mod:`tsid_fmu.evaluate.windows`); empty (the default): every sample. The
+        whole record is simulated either way.
+    window_weights : tuple of float, optional
+        Weight of each window's cost (default 1 each).
 
     Raises
     ------
@@ -119,10 +134,15 @@ class PreparedExperiment:
     noisy_inputs: tuple[np.ndarray, ...] = ()
     start_values: Mapping[str, float] = field(default_factory=dict)
     hold: Mapping[str, str] = field(default_factory=dict)
+    windows: Ranges = ()
+    window_weights: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         put = object.__setattr__
         put(self, "name", str(self.name))
+        put(self, "windows", tuple((int(a), int(b)) for a, b in self.windows))
+        weights = self.window_weights or (1.0,) * len(self.windows)
+        put(self, "window_weights", tuple(float(w) for w in weights))
         put(self, "input_names", tuple(str(n) for n in self.input_names))
         put(self, "output_names", tuple(str(n) for n in self.output_names))
         put(self, "time", frozen_array(self.time))
@@ -136,6 +156,9 @@ class PreparedExperiment:
         put(self, "hold", {str(k): str(v) for k, v in self.hold.items()})
         self._check_shapes()
         self._check_weights()
+        wrong = check_ranges(self.windows, self.window_weights, len(self.time))
+        if wrong:
+            raise self._fail(wrong)
 
     def __setstate__(self, state: dict) -> None:
         # numpy arrays come out of a pickle writeable: make them read-only again, so that
@@ -187,6 +210,43 @@ class PreparedExperiment:
             raise self._fail(f"weights must be {n_out} finite values >= 0, got {w.tolist()}")
         if s.shape != (n_out,) or not np.all(np.isfinite(s)) or not np.all(s > 0):
             raise self._fail(f"scale must be {n_out} finite values > 0, got {s.tolist()}")
+
+    def scored(self, a: np.ndarray) -> np.ndarray:
+        """Return the rows of ``a`` (one per sample) that the windows score."""
+        return select(self.windows, a)
+
+    def weighted(self, a: np.ndarray) -> np.ndarray:
+        """Return the scored rows of ``a``, each times the square root of its window's weight.
+
+        Applied to residuals and to their derivatives alike, it makes their sum of
+        squares the windows' weighted cost (the rows of an evaluator's residuals).
+        """
+        return weighted_rows(self.windows, self.window_weights, a)
+
+    def output_costs(self, cost: Cost, simulated: np.ndarray) -> np.ndarray:
+        """Return the cost of each output on the scored samples (unweighted by output)."""
+        return window_cost(
+            self.windows, self.window_weights, cost, self.time, self.measured, simulated
+        )
+
+    def fit_metrics(self, simulated: np.ndarray) -> dict[str, dict[str, float]]:
+        """Return :func:`~tsid_fmu.evaluate.cost.metrics` of each output on the scored samples."""
+        return scored_metrics(
+            self.windows, self.time, self.measured, simulated, list(self.output_names)
+        )
+
+    @property
+    def n_scored(self) -> int:
+        """Samples the windows score (every sample without windows)."""
+        return sum(b - a for a, b in self.windows) if self.windows else len(self.time)
+
+    @property
+    def weighted_samples(self) -> float:
+        """Scored samples, each counted with its window's weight."""
+        if not self.windows:
+            return float(len(self.time))
+        pairs = zip(self.windows, self.window_weights, strict=True)
+        return float(sum(w * (b - a) for (a, b), w in pairs))
 
     @property
     def n_replicates(self) -> int:
@@ -297,9 +357,14 @@ class EvaluationSpec:
         for e in self.experiments:
             n = len(e.time)
             k = min(n, max(min_samples, math.ceil(fraction * n)))
+            windows = e.windows
+            if windows:  # the first fraction of the scored samples
+                k, windows = head_ranges(windows, n, fraction, min_samples)
             cut.append(
                 dataclasses.replace(
                     e,
+                    windows=windows,
+                    window_weights=e.window_weights[: len(windows)],
                     time=e.time[:k],
                     inputs=None if e.inputs is None else e.inputs[:k],
                     measured=e.measured[:k],

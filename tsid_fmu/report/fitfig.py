@@ -22,6 +22,7 @@ from tsid_fmu.report.style import (
     new_figure,
     with_unit,
 )
+from tsid_fmu.report.svg import WINDOW_FILL
 
 __all__ = ["BINS", "FitFigure", "envelope"]
 
@@ -79,6 +80,10 @@ class FitFigure:
             name = e.output_names[j]
             unit = self.units.get(name)
             t, y = envelope(e.time, e.measured[:, j])
+            for k, (start, stop) in enumerate(e.windows):  # the samples that are scored
+                span = (float(e.time[start]), float(e.time[stop - 1]))
+                ax.axvspan(*span, color=WINDOW_FILL, lw=0, label=None if k else "scored")
+                ax_r.axvspan(*span, color=WINDOW_FILL, lw=0)
             ax.plot(t, y, color="0.45", lw=0.8, label="measured")
             (sim,) = ax.plot([], [], color=COLORS[1], lw=0.9, label="simulated")
             (res,) = ax_r.plot([], [], color=COLORS[1], lw=0.6)
@@ -114,7 +119,7 @@ class FitFigure:
             residual = sim.outputs[:, j] - e.measured[:, j]
             sim_line.set_data(*envelope(e.time, sim.outputs[:, j]))
             res_line.set_data(*envelope(e.time, residual))
-            rms = float(np.sqrt(np.mean(residual**2)))
+            rms = float(np.sqrt(np.mean(e.scored(residual) ** 2)))
             note.set_text(f"residual RMS {fmt(rms, 4)} {self.units.get(name, '')}".rstrip())
             lo, hi = np.nanmin(residual), np.nanmax(residual)
             pad = 0.05 * (hi - lo) if hi > lo else 1.0

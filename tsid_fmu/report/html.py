@@ -19,6 +19,7 @@ from tsid_fmu.report.html_tables import CSS, esc, generic, image, table, table_f
 from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
+from tsid_fmu.report.scored import experiment_notes
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import STATUS, IdentificationResult
@@ -135,10 +136,14 @@ def _fit(result: IdentificationResult, units: Mapping[str, str], images: Mapping
                 ]
             )
     cols = ["experiment / output", "unit", "fit %", "RMSE", "noise", "RMSE / noise", "IAE"]
-    body = table(cols, rows) + f'<p class="note">{esc(FIT_NOTE)}</p>'
+    body = table(cols, rows) + f'<p class="note">{esc(FIT_NOTE)}</p>' + _windows(result)
     if "fit.png" in images:
         body += image(images["fit.png"], "identified model against the measured data")
     return body
+
+
+def _windows(result: IdentificationResult) -> str:
+    return "".join(f'<p class="note">{esc(note)}</p>' for note in experiment_notes(result))
 
 
 def _diagnostics(result: IdentificationResult) -> str:

@@ -6,6 +6,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from tsid_fmu.report.provenance import fmu_label
+from tsid_fmu.report.scored import experiment_notes
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
@@ -119,7 +120,8 @@ def _fit(result: IdentificationResult) -> list[str]:
                 f"- {escape(exp)} / {escape(output)}: fit {fmt(m['fit_percent'])} %, RMSE "
                 f"{fmt(m['rmse'])}{beside}, IAE {fmt(m['iae'])}"
             )
-    return [*lines, ""]
+    notes = [line for note in experiment_notes(result) for line in ("", note)]
+    return [*lines, *notes, ""]
 
 
 def _failed_runs(records: Sequence[IterationRecord]) -> list[str]:

@@ -20,6 +20,8 @@ from tsid_fmu.report.style import SVG_TICK_PX, fmt
 
 __all__ = ["Canvas", "Panel", "nice_ticks"]
 
+WINDOW_FILL = "#fff3c4"
+"""Fill of the time windows a study scores (:meth:`Panel.band`)."""
 FONT = 'font-family="DejaVu Sans, Helvetica, Arial, sans-serif"'
 
 
@@ -150,6 +152,14 @@ class Panel:
                     f'<rect x="{_num(px - 7)}" y="{_num(py - 7)}" width="14" height="14" '
                     f'fill="none" stroke="{color}" stroke-width="2"/>'
                 )
+
+    def band(self, x0: float, x1: float, color: str = WINDOW_FILL) -> None:
+        """Shade the panel's full height from data ``x0`` to ``x1`` (a scored window)."""
+        left, right = self.sx(x0), self.sx(x1)
+        self.parts.append(
+            f'<rect class="window" x="{_num(left)}" y="{_num(self.y)}" '
+            f'width="{_num(max(right - left, 0.5))}" height="{_num(self.h)}" fill="{color}"/>'
+        )
 
     def title(self, lines: Sequence[str], size: float = 11) -> None:
         """Write title lines above the panel (the last line just above the box)."""

@@ -96,6 +96,12 @@ def main_effects_svg(
     return canvas.svg(panels)
 
 
+def _shade(panel: Panel, e: PreparedExperiment) -> None:
+    """Shade the spans of ``e`` that are scored (nothing when the whole record is)."""
+    for start, stop in e.windows:
+        panel.band(float(e.time[start]), float(e.time[stop - 1]))
+
+
 def _fit_panels(
     canvas: Canvas, e: PreparedExperiment, j: int, sim: Simulated, top: float, units: Mapping
 ) -> list[Panel]:
@@ -110,6 +116,7 @@ def _fit_panels(
         [float(np.nanmin(np.concatenate(values))), float(np.nanmax(np.concatenate(values)))]
     )
     main = Panel(80, top, 760, 170, (t0, t1), ylim)
+    _shade(main, e)
     main.frame(nice_ticks(*ylim, 5))
     main.line(tm, ym, "#777", 1.0)
     main.title([f"{e.name}: {name}"], 12)
@@ -122,9 +129,11 @@ def _fit_panels(
     ts, ys = envelope(e.time, sim.outputs[:, j], 500)
     main.line(ts, ys, COLORS[1], 1.1)
     r = sim.outputs[:, j] - e.measured[:, j]
-    rms = float(np.sqrt(np.nanmean(r**2)))
-    main.label(f"residual RMS {fmt(rms, 4)} {unit or ''}".rstrip())
+    rms = float(np.sqrt(np.nanmean(e.scored(r) ** 2)))
+    where = " (shaded: the scored windows)" if e.windows else ""
+    main.label(f"residual RMS {fmt(rms, 4)} {unit or ''}".rstrip() + where)
     res.ylim = _limits([float(np.nanmin(r)), float(np.nanmax(r))])
+    _shade(res, e)
     res.frame(nice_ticks(*res.ylim, 4))
     tr, yr = envelope(e.time, r, 500)
     res.line(tr, yr, COLORS[1], 0.8)

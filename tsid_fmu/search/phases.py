@@ -93,7 +93,7 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
     if len(ident) > 1:
         spec = evaluators.spec(study.parameter_names, ident, centre)
         inc = input_contribution(
-            {e.name: e.measured for e in spec.experiments}, _active_inputs(spec)
+            {e.name: e.scored(e.measured) for e in spec.experiments}, _active_inputs(spec)
         )
         extra["input"] = dataclasses.asdict(inc)
         order = inc.experiments

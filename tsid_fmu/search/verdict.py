@@ -227,10 +227,10 @@ def noise_floor(evaluator: Evaluator, weighted: bool) -> float:
     total = 0.0
     spec = getattr(evaluator, "spec", None)
     for e in spec.experiments if spec is not None else ():
-        n = e.measured.shape[0]
+        n = e.weighted_samples  # the samples the windows score, with their weights
         if weighted:
             total += n * e.measured.shape[1]
         else:
-            sigma = noise_level(e.measured)
+            sigma = noise_level(e.scored(e.measured))
             total += n * float(np.sum((sigma / e.scale) ** 2))
     return total

@@ -19,6 +19,7 @@ __all__ = [
     "check_number",
     "check_text",
     "check_whole",
+    "check_windows",
     "parse_toml",
 ]
 
@@ -134,3 +135,51 @@ def check_choice(value: Any, what: str, allowed: tuple[str, ...]) -> str:
         choices = ", ".join(map(repr, allowed[:-1])) + f" or {allowed[-1]!r}"
         raise StudyError(f"{what} must be {choices}, got {value!r}")
     return str(value)
+
+
+def check_windows(
+    windows: Any, warmup: Any, weights: Any, where: str
+) -> tuple[list[list[float]], float | list[float], list[float] | None]:
+    """Return an experiment's windows, warm-up and window weights, checked.
+
+    What can be checked without the data: pairs of numbers, each ending after it starts,
+    in time order without overlap; a warm-up >= 0 (one, or one per window); one weight
+    >= 0 per window, not all 0. The record's span is checked when the data are loaded
+    (:func:`tsid_fmu.evaluate.windows.window_ranges`).
+    """
+    if isinstance(windows, str | bytes) or not hasattr(windows, "__iter__"):
+        raise StudyError(f"{where}: windows must be a list of [start, end] pairs")
+    spans: list[list[float]] = []
+    for k, span in enumerate(windows):
+        label = f"{where}: window {k + 1}"
+        if isinstance(span, str | bytes) or not hasattr(span, "__len__") or len(span) != 2:
+            raise StudyError(f"{label} must be a pair [start, end] in seconds, got {span!r}")
+        t0, t1 = (check_number(v, label) for v in span)
+        if not t1 > t0:
+            raise StudyError(f"{label} [{t0:g}, {t1:g}] is reversed or empty")
+        if spans and t0 < spans[-1][1]:
+            raise StudyError(
+                f"{label} [{t0:g}, {t1:g}] overlaps window {k} (windows must be in time "
+                "order and must not overlap)"
+            )
+        spans.append([t0, t1])
+    if isinstance(warmup, list | tuple):
+        if len(warmup) != len(spans):
+            raise StudyError(f"{where}: warmup has {len(warmup)} values for {len(spans)} windows")
+        warm: float | list[float] = [check_number(v, f"{where}: warmup") for v in warmup]
+    else:
+        warm = check_number(warmup, f"{where}: warmup")
+    if any(w < 0 for w in (warm if isinstance(warm, list) else [warm])):
+        raise StudyError(f"{where}: warmup must be >= 0 seconds, got {warmup}")
+    if weights is None:
+        return spans, warm, None
+    if isinstance(weights, str | bytes) or not hasattr(weights, "__iter__"):
+        raise StudyError(f"{where}: window_weights must be a list of numbers")
+    checked = [check_number(v, f"{where}: window_weights") for v in weights]
+    if len(checked) != len(spans):
+        raise StudyError(
+            f"{where}: window_weights has {len(checked)} values for {len(spans)} windows"
+        )
+    if any(w < 0 for w in checked) or not any(checked):
+        raise StudyError(f"{where}: window_weights must be >= 0 and not all 0")
+    return spans, warm, checked

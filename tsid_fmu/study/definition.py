@@ -201,6 +201,13 @@ class Study:
         clash = sorted(set(names) & set(self.start_values))
         if clash:
             raise StudyError(f"{', '.join(clash)} both identified and fixed in start_values")
+        for e in self.experiments:
+            clash = sorted(set(e.initial) & set(names))
+            if clash:
+                raise StudyError(
+                    f"experiment {e.name!r}: initial {', '.join(map(repr, clash))} is set from "
+                    "the data and also identified; give one of them"
+                )
         self._check_phases(names, exp_names)
         self._check_choices(names)
         select_array(

@@ -11,7 +11,9 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import NOISE_POWER, noise_level
 from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
+from tsid_fmu.evaluate.windows import select, window_ranges
 from tsid_fmu.study.definition import Study
+from tsid_fmu.study.initial import initial_values
 from tsid_fmu.study.schema import Experiment
 
 __all__ = [
@@ -126,7 +128,11 @@ def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
     data = load_experiment(experiment)
     inputs = data.columns(list(experiment.inputs.values())) if experiment.inputs else None
     measured = data.columns(list(experiment.outputs.values()))
-    weights, scale = _weights_and_scale(study, experiment, measured)
+    windows: tuple[tuple[int, int], ...] = ()
+    if experiment.windows or experiment.warmup:
+        windows = window_ranges(experiment.name, data.time, experiment.windows, experiment.warmup)
+    # the noise, the weights and the residual scales come from the scored samples only
+    weights, scale = _weights_and_scale(study, experiment, select(windows, measured))
     return PreparedExperiment(
         name=experiment.name,
         time=_frozen(data.time),
@@ -137,8 +143,11 @@ def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
         weights=weights,
         scale=scale,
         noisy_inputs=_noisy_inputs(study, index, inputs),
-        start_values=dict(experiment.start_values),
+        # initial states from the data (study/initial.py), over the experiment's own
+        start_values={**experiment.start_values, **initial_values(study.fmu, experiment, data)},
         hold=dict(experiment.hold),
+        windows=windows,
+        window_weights=tuple(experiment.window_weights or ()),
     )
 
 

@@ -16,15 +16,24 @@ from typing import Any
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import COSTS
-from tsid_fmu.study.checks import check_bound, check_choice, check_number, check_text, check_whole
+from tsid_fmu.study.checks import (
+    check_bound,
+    check_choice,
+    check_number,
+    check_text,
+    check_whole,
+    check_windows,
+)
 
 __all__ = [
+    "FROM_DATA",
     "MAX_REPLICATES",
     "ContributionOptions",
     "Experiment",
     "Method",
     "Parameter",
     "Phase",
+    "initial_column",
 ]
 
 MAX_REPLICATES = 1000
@@ -131,6 +140,23 @@ class Experiment:
         Known noise standard deviation of an output's sensor (e.g. an encoder's
         quantisation, ``step / sqrt(12)``), in the output's units; outputs not listed
         get an estimate from the data (:func:`tsid_fmu.evaluate.cost.noise_level`).
+    windows : list of [t0, t1]
+        Time spans (seconds) that are scored, in time order and disjoint; default the
+        whole record. The whole record is still simulated from its start: a window only
+        chooses the samples that the cost, the residuals, the noise estimate and every
+        diagnostic see (:mod:`tsid_fmu.evaluate.windows`).
+    warmup : float or list of float
+        Seconds at the start of each window (of the record, without windows) that are
+        simulated but not scored; one value for every window or one per window.
+    window_weights : list of float, optional
+        Weight of each window's cost (default 1 each).
+    initial : mapping of str to str
+        Initial states set from the data: FMU variable -> ``"from_data:<column>"`` (the
+        column's, or derived channel's, value at the record's first sample) or
+        ``"from_data"`` (the column this experiment compares that variable with, when
+        it is one of its outputs). The variable must be settable before initialisation:
+        a parameter (such as a state's ``x0``) or a state whose start value is its
+        initial value (``initial="exact"``).
     """
 
     data: Any
@@ -145,6 +171,10 @@ class Experiment:
     role: str = "identify"
     hold: dict[str, str] = field(default_factory=dict)
     noise: dict[str, float] = field(default_factory=dict)
+    windows: list[list[float]] = field(default_factory=list)
+    warmup: float | list[float] = 0.0
+    window_weights: list[float] | None = None
+    initial: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if isinstance(self.data, str | os.PathLike):
@@ -188,6 +218,46 @@ class Experiment:
             if name not in self.inputs:
                 raise StudyError(f"{where}: hold given for {name!r}, which is not an input")
             check_choice(how, f"{where}: hold of {name}", ("previous", "linear"))
+        self.windows, self.warmup, self.window_weights = check_windows(
+            self.windows, self.warmup, self.window_weights, where
+        )
+        self._check_initial(where)
+
+    def _check_initial(self, where: str) -> None:
+        for name, how in self.initial.items():
+            label = f"{where}: initial {name!r}"
+            column = initial_column(self, name)
+            if column is None:
+                raise StudyError(
+                    f'{label} must be "from_data:<column>" or "from_data" (for an output), '
+                    f"got {how!r}"
+                )
+            if not column:
+                raise StudyError(
+                    f'{label} = "from_data": {name!r} is not an output of this experiment; '
+                    'name the column: "from_data:<column>"'
+                )
+            if name in self.start_values:
+                raise StudyError(f"{label} is also fixed in start_values; give one of them")
+
+
+FROM_DATA = "from_data"
+"""An experiment's ``initial`` value that sets a state from the data's first sample."""
+
+
+def initial_column(experiment: Experiment, name: str) -> str | None:
+    """Return the data column that sets the initial value ``name`` of ``experiment``.
+
+    ``""`` for a plain ``"from_data"`` on a variable that is no output of the experiment;
+    None for a value that is not ``from_data`` at all.
+    """
+    how = experiment.initial.get(name)
+    if not isinstance(how, str):
+        return None
+    if how == FROM_DATA:
+        return experiment.outputs.get(name, "")
+    head, colon, column = how.partition(":")
+    return column.strip() if head == FROM_DATA and colon and column.strip() else None
 
 
 @dataclass

@@ -53,6 +53,10 @@ _DATA = {
     "role",
     "hold",
     "noise",
+    "windows",
+    "warmup",
+    "window_weights",
+    "initial",
 }
 _PARAM = {"levels", "min", "max", "unit", "choices"}
 _PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
@@ -207,6 +211,11 @@ def _experiment(e: Mapping[str, Any], base: Path, where: _Where, label: str, i: 
         role=_get(e, "role", str, where, label, "identify"),
         hold=_map(e, "hold", str, where, label),
         noise=_map(e, "noise", float, where, label),
+        # checked by Experiment (numbers, pairs, order), whose messages name the key
+        windows=e.get("windows", []),
+        warmup=e.get("warmup", 0.0),
+        window_weights=e.get("window_weights"),
+        initial=_map(e, "initial", str, where, label),
     )
 
 
@@ -413,6 +422,10 @@ def _experiment_table(e: Experiment, base: Path, stem: str) -> dict[str, Any]:
         ("sample_time", "sample_time"),
         ("role", "role"),
         ("noise", "noise"),
+        ("windows", "windows"),
+        ("warmup", "warmup"),
+        ("window_weights", "window_weights"),
+        ("initial", "initial"),
     ):
         if key in fields:
             table[out] = fields[key]

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.evaluate.cost import Cost, metrics
+from tsid_fmu.evaluate.cost import Cost
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
@@ -45,12 +45,12 @@ def _fit(spec: EvaluationSpec, sims: list[Simulated]) -> tuple[dict, dict, list[
     noise: dict[str, dict[str, float]] = {}
     warnings = []
     for e, sim in zip(spec.experiments, sims, strict=True):
-        sigma = data_noise(e.measured)
+        sigma = data_noise(e.scored(e.measured))  # the scored samples' noise
         noise[e.name] = dict(zip(e.output_names, map(float, sigma), strict=True))
         if sim.outputs is None:
             fit[e.name] = {"error": sim.error}
             continue
-        fit[e.name] = metrics(e.time, e.measured, sim.outputs, list(e.output_names))
+        fit[e.name] = e.fit_metrics(sim.outputs)
         for name, s in zip(e.output_names, sigma, strict=True):
             rmse = fit[e.name][name]["rmse"]
             if s > 0 and rmse > MISMATCH * s:
@@ -171,10 +171,10 @@ def validate(evaluator: Evaluator, spec: EvaluationSpec, x: Mapping[str, float])
         if sim.outputs is None:
             out[e.name] = {"error": sim.error}
             continue
-        value = float(np.dot(cost.per_output(e.time, e.measured, sim.outputs), e.weights))
+        value = float(np.dot(e.output_costs(cost, sim.outputs), e.weights))
         out[e.name] = {
             "cost": value,
-            "fit": metrics(e.time, e.measured, sim.outputs, list(e.output_names)),
+            "fit": e.fit_metrics(sim.outputs),
         }
     return out
 

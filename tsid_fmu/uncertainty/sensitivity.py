@@ -81,9 +81,12 @@ def sensitivities(
     base = runs[0]
     residuals, jac = [], []
     for e, exp in enumerate(spec.experiments):
-        residuals.append(base[e].outputs - exp.measured)  # type: ignore[operator]
+        # the scored samples only, weighted as the evaluator's residuals are
+        residuals.append(exp.weighted(base[e].outputs - exp.measured))  # type: ignore[operator]
         cols = [
-            (runs[1 + 2 * j][e].outputs - runs[2 + 2 * j][e].outputs) / (2 * halves[j])  # type: ignore[operator]
+            exp.weighted(
+                (runs[1 + 2 * j][e].outputs - runs[2 + 2 * j][e].outputs) / (2 * halves[j])  # type: ignore[operator]
+            )
             for j in range(space.dim)
         ]
         jac.append(np.stack(cols, axis=-1))

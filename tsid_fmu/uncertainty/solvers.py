@@ -122,7 +122,7 @@ def output_noise(
     An output that shows no noise gets :data:`~tsid_fmu.study.prepare.NOISE_FLOOR` times
     its RMS value, as the residual scales of a study do.
     """
-    y = experiment.measured
+    y = experiment.scored(experiment.measured)
     given = given or {}
     names, estimate = experiment.output_names, data_noise(y)
     sigma = np.array([given.get(n, s) for n, s in zip(names, estimate, strict=True)])
@@ -261,7 +261,8 @@ def compare(
     """
     out = Deviation(solver)
     for i, e in enumerate(runs.spec.experiments):
-        d = _difference(runs, solver, reference, i, threshold * noise[i])
+        # the samples the windows score, weighted as the residuals are (solver_bias)
+        d = e.weighted(_difference(runs, solver, reference, i, threshold * noise[i]))
         out.differences.append(d)
         out.outputs[e.name] = {
             n: {"rms": float(r), "noise": float(s), "ratio": float(r / s)}
