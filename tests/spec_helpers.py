@@ -115,3 +115,15 @@ class CurveEvaluator:
         return Evaluation(
             costs=costs, errors=[None] * len(sets), nfev=len(sets), residuals=residuals
         )
+
+
+def floor_experiment(measured: np.ndarray, scale: float) -> object:
+    """What ``noise_floor`` reads of a prepared experiment, for a curve with no windows."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(
+        measured=measured[:, None],
+        scale=np.array([scale]),
+        weighted_samples=float(len(measured)),  # no windows: every sample scored
+        scored=lambda a: a,
+    )

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.optimize import least_squares
-from spec_helpers import CurveEvaluator
+from spec_helpers import CurveEvaluator, floor_experiment
 
 from tsid_fmu import Experiment, Method, Parameter, Study
 from tsid_fmu.doe.options import LevelingOptions
@@ -45,13 +45,7 @@ class FloorEvaluator(CurveEvaluator):
 
     def __init__(self, model, measured: np.ndarray, scale: float) -> None:
         super().__init__(model, measured, scale)
-        exp = SimpleNamespace(
-            measured=measured[:, None],
-            scale=np.array([scale]),
-            weighted_samples=float(len(measured)),  # no windows: every sample scored
-            scored=lambda a: a,
-        )
-        self.spec = SimpleNamespace(experiments=[exp])
+        self.spec = SimpleNamespace(experiments=[floor_experiment(measured, scale)])
 
 
 class Evaluators:

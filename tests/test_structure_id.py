@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy import stats
-from spec_helpers import CurveEvaluator
+from spec_helpers import CurveEvaluator, floor_experiment
 
 import tsid_fmu.study.definition as definition
 from tsid_fmu import Choice, Experiment, Method, Parameter, Study
@@ -46,8 +46,7 @@ def _data(seed: int = 1, **truth: float) -> np.ndarray:
 class _Evaluator(CurveEvaluator):
     def __init__(self, model, measured: np.ndarray) -> None:
         super().__init__(model, measured, SIGMA)
-        exp = SimpleNamespace(measured=measured[:, None], scale=np.array([SIGMA]))
-        self.spec = SimpleNamespace(experiments=[exp])
+        self.spec = SimpleNamespace(experiments=[floor_experiment(measured, SIGMA)])
 
     def close(self) -> None:
         pass
