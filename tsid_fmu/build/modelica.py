@@ -8,8 +8,9 @@ in ``modelDescription.xml``) is done here, without pymoca's CasADi back end and 
 Supported subset: one scalar ``model`` with ``Real`` variables and ``Integer`` parameters,
 ``parameter``/``constant`` declarations with literal (or constant-foldable) values,
 ``input``/``output`` prefixes, ``der()``, arithmetic, comparison and Boolean operators,
-``if``-expressions and the usual elementary functions. Anything else raises :class:`~tsid_fmu.errors.BuildError` naming
-the file, the model and the offending declaration or equation.
+``if``-expressions and the usual elementary functions. Anything else raises
+:class:`~tsid_fmu.errors.BuildError` naming the file, the model and the offending
+declaration or equation.
 """
 
 from __future__ import annotations
