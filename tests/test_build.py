@@ -61,11 +61,11 @@ def rebuilt(tmp_path_factory):
 
 
 def test_find_models():
-    assert list(find_models(MODELS)) == ["LSEA_MISO", "LSEA_SISO"]
+    assert list(find_models(MODELS)) == ["LSEA_MISO", "LSEA_SISO", "LSEA_SISO_Friction"]
 
 
 @pytest.mark.parametrize("version", [2, 3])
-@pytest.mark.parametrize("name", ["LSEA_SISO", "LSEA_MISO"])
+@pytest.mark.parametrize("name", ["LSEA_SISO", "LSEA_MISO", "LSEA_SISO_Friction"])
 def test_rebuilt_fmus_simulate_identically_to_committed(rebuilt, name, version):
     sub = "" if version == 2 else "fmi3/"
     new, old = rebuilt / f"{sub}{name}.fmu", FMUS / f"{sub}{name}.fmu"
@@ -83,6 +83,40 @@ def test_rebuilt_fmus_simulate_identically_to_committed(rebuilt, name, version):
     a = simulate_grid(new, 5.0, **kw, **me)
     b = simulate_grid(old, 5.0, **kw, **me)
     np.testing.assert_allclose(a["F_o"], b["F_o"], rtol=1e-12, atol=1e-9)
+
+
+def _square(t: np.ndarray) -> dict:
+    F = np.where((t % 1.0) < 0.5, 1.0, -1.0) * (150 + 50 * np.floor(t))
+    return {"input": input_signal(t, F_m=F)}
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_friction_switch_is_an_integer_parameter_and_law_2_is_lsea_siso(rebuilt, version):
+    """``parameter Integer friction``: an FMI Integer (Int32) parameter that switches the law.
+
+    Law 2 (the default) reproduces LSEA_SISO to solver precision (same equations), law 1
+    is law 2 with F_vm = 0, law 3 with F_sm = F_cm is law 2; law 3 differs otherwise.
+    """
+    sub = "" if version == 2 else "fmi3/"
+    new = rebuilt / f"{sub}LSEA_SISO_Friction.fmu"
+    v = {x.name: x for x in read_model_description(str(new)).modelVariables}
+    assert v["friction"].type == ("Integer" if version == 2 else "Int32")
+    assert v["friction"].causality == "parameter" and int(v["friction"].start) == 2
+    t = grid(5.0)
+    kw = _square(t)
+    ref = simulate_grid(FMUS / f"{sub}LSEA_SISO.fmu", 5.0, **kw)["F_o"]
+    for interface in ({}, {"fmi_type": "ModelExchange", "record_events": False}):
+        law2 = simulate_grid(new, 5.0, **kw, **interface)["F_o"]
+        old = simulate_grid(FMUS / f"{sub}LSEA_SISO.fmu", 5.0, **kw, **interface)["F_o"]
+        np.testing.assert_allclose(law2, old, rtol=1e-12, atol=1e-9)
+
+    def run(**start):
+        return simulate_grid(new, 5.0, start_values=start, **kw)["F_o"]
+
+    np.testing.assert_allclose(run(friction=1), run(friction=2, F_vm=0.0), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(run(friction=3, F_sm=88.5), ref, rtol=1e-12, atol=1e-9)
+    for law in (1, 3):
+        assert np.max(np.abs(run(friction=law) - ref)) > 5.0
 
 
 def test_build_is_byte_reproducible_and_selects_versions(rebuilt, tmp_path):
@@ -187,8 +221,13 @@ def test_algebraic_loop_solved_by_newton(tmp_path):
             "  der(x) = -x;\nend Bad;\n",
             "only Real",
         ),
+        (
+            "model Bad\n  parameter Integer n = 1.5;\n  Real x(start=0, fixed=true);\n"
+            "equation\n  der(x) = -n*x;\nend Bad;\n",
+            "Integer parameter 'n'",
+        ),
     ],
-    ids=["syntax", "unbalanced", "unknown-function", "integer"],
+    ids=["syntax", "unbalanced", "unknown-function", "integer", "integer-value"],
 )
 def test_build_errors_name_the_fault(tmp_path, source, fragment):
     mo = tmp_path / "Bad.mo"

@@ -118,6 +118,8 @@ def _header(model: FlatModel, causal: Causalized, guid: str, nz: int, nrel: int)
 /* Start values (index = value reference) and names, for reset and log messages. */
 extern const double model_start[N_REAL];
 extern const char *const model_names[N_REAL];
+/* 1 where the variable is an Integer parameter (FMI Integer / Int32, stored as a double). */
+extern const unsigned char model_is_integer[N_REAL];
 /* Relations that are discrete states: text and strictness (lo < hi). */
 extern const char *const model_rel_text[NREL + 1];
 extern const int model_rel_strict[NREL + 1];
@@ -236,6 +238,8 @@ def _model_c(
     assert len(all_vars) == lay.n_real
     starts = ",\n    ".join(_c_double(s) for _, s in all_vars)
     names = ",\n    ".join(_c_string(n) for n, _ in all_vars)
+    integer = {v.name for v in lay.parameters if v.integer}
+    is_integer = ", ".join("1" if n in integer else "0" for n, _ in all_vars)
     rel_text = ",\n    ".join([_c_string(r.text) for r in relations] or ['""'])
     rel_strict = ", ".join([str(int(r.strict)) for r in relations] or ["0"])
     ode_args, me_args = ["t", "x", "u", "p"], ["t", "x", "u", "p", "c"]
@@ -260,6 +264,8 @@ const double model_start[N_REAL] = {{
 const char *const model_names[N_REAL] = {{
     {names}
 }};
+
+const unsigned char model_is_integer[N_REAL] = {{{is_integer}}};
 
 const char *const model_rel_text[NREL + 1] = {{
     {rel_text}

@@ -23,6 +23,7 @@ __all__ = [
 ]
 
 FIXED_STEP_NAME = "fixedStepSize"
+TYPE_KEY = "_type"  # in variable_rows' type attributes: an Integer parameter's FMI type
 
 # SI base-unit exponents (kg, m, s, A, K, mol, cd, rad) of the unit symbols we know.
 _BASE: dict[str, dict[str, int]] = {
@@ -311,7 +312,11 @@ def variable_rows(lay: Layout, step_size: float) -> list[tuple[dict[str, str], d
         rows.append((v.name, kind("local", "calculated"), v.description, unit_of(v)))
     fixed = kind("parameter", "exact", "fixed")
     for v in lay.parameters:
-        rows.append((v.name, fixed, v.description, {**unit_of(v), "start": fmt(v.start)}))
+        if getattr(v, "integer", False):  # the writers turn TYPE_KEY into the element's type
+            ints = {TYPE_KEY: "Integer", "start": str(int(v.start))}
+            rows.append((v.name, fixed, v.description, ints))
+        else:
+            rows.append((v.name, fixed, v.description, {**unit_of(v), "start": fmt(v.start)}))
     rows.append(
         (FIXED_STEP_NAME, fixed, FIXED_STEP_DESCRIPTION, {"unit": "s", "start": fmt(step_size)})
     )
@@ -386,7 +391,8 @@ def model_description_xml(
         if "derivative" in real:  # FMI 2.0 refers to the state by its 1-based index
             real = {**real, "derivative": str(int(real["derivative"]) + 1)}
         sv = ET.SubElement(mv, "ScalarVariable", attrs)
-        ET.SubElement(sv, "Real", real)
+        real = dict(real)
+        ET.SubElement(sv, real.pop(TYPE_KEY, "Real"), real)
     _model_structure(root, causal)
     return xml_document(root)
 

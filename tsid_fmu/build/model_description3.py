@@ -19,6 +19,7 @@ import xml.etree.ElementTree as ET
 from .causalize import Causalized, Layout
 from .expressions import Relation
 from .model_description import (
+    TYPE_KEY,
     add_unit_definitions,
     default_experiment,
     dependency_vrs,
@@ -93,7 +94,8 @@ def _model_variables(
         a = {**attrs, **real}
         if attrs["causality"] == "input":
             a["intermediateUpdate"] = "true"
-        ET.SubElement(mv, "Float64", a)
+        kind = a.pop(TYPE_KEY, "Real")
+        ET.SubElement(mv, "Int32" if kind == "Integer" else "Float64", a)
     ET.SubElement(
         mv,
         "Float64",

@@ -5,11 +5,12 @@ classification of variables, the residuals of the equations, the attributes that
 in ``modelDescription.xml``) is done here, without pymoca's CasADi back end and its
 ``simplify`` pass.
 
-Supported subset: one scalar ``model`` with ``Real`` variables, ``parameter``/``constant``
-declarations with literal (or constant-foldable) values, ``input``/``output`` prefixes,
-``der()``, arithmetic, comparison and Boolean operators, ``if``-expressions and the usual
-elementary functions. Anything else raises :class:`~tsid_fmu.errors.BuildError` naming
-the file, the model and the offending declaration or equation.
+Supported subset: one scalar ``model`` with ``Real`` variables and ``Integer`` parameters,
+``parameter``/``constant`` declarations with literal (or constant-foldable) values,
+``input``/``output`` prefixes, ``der()``, arithmetic, comparison and Boolean operators,
+``if``-expressions and the usual elementary functions. Anything else raises
+:class:`~tsid_fmu.errors.BuildError` naming the file, the model and the offending
+declaration or equation.
 """
 
 from __future__ import annotations
@@ -72,6 +73,8 @@ class Variable:
         Start value (parameter value for parameters).
     sym : Any
         The CasADi ``SX`` symbol of the variable.
+    integer : bool
+        An ``Integer`` parameter (a structural switch: FMI ``Integer``/``Int32``).
     """
 
     name: str
@@ -80,6 +83,7 @@ class Variable:
     description: str
     start: float | None
     sym: Any = None
+    integer: bool = False
 
 
 @dataclass
@@ -268,14 +272,18 @@ def _declarations(flat: Any, time: Any, where: str) -> tuple[list[Variable], dic
         if name == "time":
             raise BuildError(f"{where}: a variable must not be called 'time'")
         tname = s.type if isinstance(s.type, str) else getattr(s.type, "name", str(s.type))
-        if tname != "Real":
-            raise BuildError(f"{where}: variable '{name}' has type {tname}; only Real is supported")
+        prefixes = set(s.prefixes or [])
+        is_param = bool(prefixes & {"parameter", "constant"})
+        if tname != "Real" and not (tname == "Integer" and is_param):
+            raise BuildError(
+                f"{where}: variable '{name}' has type {tname}; only Real is supported "
+                "(and Integer parameters)"
+            )
         dims = s.dimensions
         if dims and any(
             d is not None and getattr(d, "value", None) not in (None, 1) for dd in dims for d in dd
         ):
             raise BuildError(f"{where}: variable '{name}' is an array; only scalars are supported")
-        prefixes = set(s.prefixes or [])
         if "discrete" in prefixes:
             raise BuildError(f"{where}: discrete variable '{name}' is not supported")
         unit = _literal(s.unit, ast)
@@ -295,11 +303,14 @@ def _declarations(flat: Any, time: Any, where: str) -> tuple[list[Variable], dic
                     "(bindings to other parameters are not supported)"
                 )
             num = float(ca.evalf(expr))
+            if tname == "Integer" and not (num == int(num) and abs(num) < 2**31):
+                raise BuildError(f"{where}: Integer parameter '{name}' has the value {num}")
             if "constant" in prefixes:
                 constants[name] = ca.SX(num)
                 symbols[name] = ca.SX(num)
                 continue
             var = Variable(name, "parameter", unit, desc, num, ca.SX.sym(name))
+            var.integer = tname == "Integer"
         else:
             st = None
             if start is not None and not isinstance(start, str):

@@ -127,7 +127,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     CHECK("fmi2GetReal", ANY_STATE);
     if (nvr > 0 && (!vr || !value)) return fail(c, "fmi2GetReal", "NULL argument");
     for (i = 0; i < nvr; i++) {
-        if (vr[i] >= N_REAL) return fail(c, "fmi2GetReal", "unknown value reference");
+        if (vr[i] >= N_REAL || model_is_integer[vr[i]])
+            return fail(c, "fmi2GetReal", "unknown value reference");
     }
     s = (fmi2Status)coreRefresh(core, "fmi2GetReal");
     for (i = 0; i < nvr; i++) value[i] = core->d.r[vr[i]];
@@ -136,9 +137,46 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        const fmi2Real value[]) {
+    size_t i;
     CHECK("fmi2SetReal", INIT_PHASE | StateEventMode | StateContinuousTimeMode | StateStepMode);
     if (nvr > 0 && (!vr || !value)) return fail(c, "fmi2SetReal", "NULL argument");
+    for (i = 0; i < nvr; i++) {
+        if (vr[i] < N_REAL && model_is_integer[vr[i]])
+            return fail(c, "fmi2SetReal", "unknown value reference");
+    }
     return (fmi2Status)coreSetReals((Core *)c, vr, nvr, value, "fmi2SetReal");
+}
+
+/* Integer parameters live in the real array (as doubles) under their own references. */
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          fmi2Integer value[]) {
+    Core *core = (Core *)c;
+    size_t i;
+    CHECK("fmi2GetInteger", ANY_STATE);
+    if (nvr > 0 && (!vr || !value)) return fail(c, "fmi2GetInteger", "NULL argument");
+    for (i = 0; i < nvr; i++) {
+        if (vr[i] >= N_REAL || !model_is_integer[vr[i]])
+            return fail(c, "fmi2GetInteger", "unknown value reference");
+    }
+    for (i = 0; i < nvr; i++) value[i] = (fmi2Integer)core->d.r[vr[i]];
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                          const fmi2Integer value[]) {
+    size_t i;
+    double v;
+    CHECK("fmi2SetInteger", INIT_PHASE | StateEventMode | StateContinuousTimeMode | StateStepMode);
+    if (nvr > 0 && (!vr || !value)) return fail(c, "fmi2SetInteger", "NULL argument");
+    for (i = 0; i < nvr; i++) {
+        if (vr[i] >= N_REAL || !model_is_integer[vr[i]])
+            return fail(c, "fmi2SetInteger", "unknown value reference");
+    }
+    for (i = 0; i < nvr; i++) {
+        v = (double)value[i];
+        if (coreSetReals((Core *)c, &vr[i], 1, &v, "fmi2SetInteger") != CoreOK) return fmi2Error;
+    }
+    return fmi2OK;
 }
 
 /* The get and set functions of a type the model has no variables of: nothing to do for
@@ -162,7 +200,6 @@ static fmi2Status noVariables(fmi2Component c, size_t nvr, const char *f, const 
         return noVariables(c, nvr, "fmi2Set" #T, "the model has no " #T " variables"); \
     }
 
-NO_VARIABLES(Integer)
 NO_VARIABLES(Boolean)
 NO_VARIABLES(String)
 

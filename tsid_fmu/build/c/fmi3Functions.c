@@ -217,7 +217,8 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
     if (nValues != nValueReferences) return fail(instance, f, "expected one value per reference");
     for (i = 0; i < nValueReferences; i++) {
         fmi3ValueReference vr = valueReferences[i];
-        if (vr >= VR_EVENT_INDICATOR_OFF + NREL) return fail(instance, f, "unknown value reference");
+        if (vr >= VR_EVENT_INDICATOR_OFF + NREL || (vr < N_REAL && model_is_integer[vr]))
+            return fail(instance, f, "unknown value reference");
         if (vr >= VR_EVENT_INDICATOR_OFF) needE = 1;
     }
     s = (fmi3Status)coreRefresh(core, f);
@@ -234,12 +235,56 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, const fmi3Float64 values[], size_t nValues) {
     const char *f = "fmi3SetFloat64";
+    size_t i;
     CHECK(f, INIT_PHASE | RUNNING | StateIntermediateUpdateMode | StateTerminated);
     if (nValueReferences == 0) return fmi3OK;
     if (!valueReferences || !values) return fail(instance, f, "NULL argument");
     if (nValues != nValueReferences) return fail(instance, f, "expected one value per reference");
+    for (i = 0; i < nValueReferences; i++) {
+        if (valueReferences[i] < N_REAL && model_is_integer[valueReferences[i]])
+            return fail(instance, f, "unknown value reference");
+    }
     return (fmi3Status)coreSetReals((Core *)instance, valueReferences, nValueReferences, values,
                                     f);
+}
+
+/* Int32 parameters live in the real array (as doubles) under their own references. */
+fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, fmi3Int32 values[], size_t nValues) {
+    Core *core = (Core *)instance;
+    const char *f = "fmi3GetInt32";
+    size_t i;
+    CHECK(f, ANY_STATE);
+    if (nValueReferences == 0) return fmi3OK;
+    if (!valueReferences || !values) return fail(instance, f, "NULL argument");
+    if (nValues != nValueReferences) return fail(instance, f, "expected one value per reference");
+    for (i = 0; i < nValueReferences; i++) {
+        if (valueReferences[i] >= N_REAL || !model_is_integer[valueReferences[i]])
+            return fail(instance, f, "unknown value reference");
+    }
+    for (i = 0; i < nValueReferences; i++) values[i] = (fmi3Int32)core->d.r[valueReferences[i]];
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                        size_t nValueReferences, const fmi3Int32 values[], size_t nValues) {
+    const char *f = "fmi3SetInt32";
+    size_t i;
+    double v;
+    CHECK(f, INIT_PHASE | RUNNING | StateTerminated);
+    if (nValueReferences == 0) return fmi3OK;
+    if (!valueReferences || !values) return fail(instance, f, "NULL argument");
+    if (nValues != nValueReferences) return fail(instance, f, "expected one value per reference");
+    for (i = 0; i < nValueReferences; i++) {
+        if (valueReferences[i] >= N_REAL || !model_is_integer[valueReferences[i]])
+            return fail(instance, f, "unknown value reference");
+    }
+    for (i = 0; i < nValueReferences; i++) {
+        v = (double)values[i];
+        if (coreSetReals((Core *)instance, &valueReferences[i], 1, &v, f) != CoreOK)
+            return fmi3Error;
+    }
+    return fmi3OK;
 }
 
 /* The functions of variables the model does not have (of other types than Float64, and
@@ -274,7 +319,6 @@ NO_VARIABLES(Int8)
 NO_VARIABLES(UInt8)
 NO_VARIABLES(Int16)
 NO_VARIABLES(UInt16)
-NO_VARIABLES(Int32)
 NO_VARIABLES(UInt32)
 NO_VARIABLES(Int64)
 NO_VARIABLES(UInt64)

@@ -1,0 +1,233 @@
+"""Structure identification on the SISO plant: the friction law chosen from the data.
+
+    python benchmarks/structure.py [--seeds 10] [--quick] [--workers 1]
+
+Data: ``examples/lsea_siso/friction_laws.py``, an independent simulation (piecewise
+exact for laws 1 and 2, SciPy hybrid ``solve_ivp`` for law 3) of the SISO rig (load
+cells 4 N each, encoder 1 um) under each true friction law (1 Coulomb, 2 Coulomb +
+viscous, 3 Stribeck + viscous), over noise seeds 1..N. Model:
+``fmus/LSEA_SISO_Friction.fmu`` (``parameter Integer friction``).
+
+For each data set:
+
+* **structure**: one study with ``friction = { choices = [1, 2, 3] }`` beside the Real
+  parameters (Table I's ranges at three levels, and levels for F_sm and V_s), the noise-
+  weighted SSE and a least-squares refinement (the example's method);
+* **naive**: the same study with the law fixed (``start_values``) and only that law's
+  parameters, once per law; the law with the lowest BIC (``n ln(chi2/n) + (k+1) ln n``,
+  the project's ``information``) is its choice;
+* **reference**: SciPy ``least_squares`` at the structure's chosen law, from the truth
+  (the chosen law is the true one) or from tsid's answer, in the same cost.
+
+Printed: the confusion matrix (true law against the chosen one, "indist." where tsid
+reports the candidates indistinguishable), and per true law the worst relative error of
+the law's parameters (where the true law was chosen), tsid's cost over the reference's,
+the simulations of the structure study and of the naive route, with their ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))  # this checkout's tsid_fmu
+sys.path.insert(0, str(REPO / "examples" / "lsea_siso"))
+
+import friction_laws as laws  # noqa: E402
+
+from tsid_fmu import Choice, Experiment, Method, Parameter, Study, identify  # noqa: E402
+from tsid_fmu.evaluate import make_evaluator  # noqa: E402
+from tsid_fmu.search.selection import information  # noqa: E402
+from tsid_fmu.study import prepare  # noqa: E402
+
+FMU = REPO / "fmus" / "LSEA_SISO_Friction.fmu"
+ENCODER_SIGMA = laws.base.NOISE["x_m"]
+#: First levels: Table I of the SISO paper's ranges at three levels (a 3-level choice
+#: sits beside 3-level Real factors: L27), and a spread over a decade for law 3's two.
+LEVELS = {
+    "F_cm": ([10.0, 60.0, 110.0], 0.0),
+    "F_vm": ([1.0, 10.0, 80.0], 0.0),
+    "M_m": ([4.0, 8.0, 12.0], 0.01),
+    "K_s": ([1000.0, 5500.0, 10000.0], 1.0),
+    "B_s": ([0.1, 5.0, 20.0], 0.0),
+    "F_sm": ([60.0, 120.0, 180.0], 0.0),
+    "V_s": ([0.005, 0.02, 0.08], 1e-4),
+}
+#: The Real parameters each law has.
+LAW_PARAMS = {
+    1: ["F_cm", "M_m", "K_s", "B_s"],
+    2: ["F_cm", "F_vm", "M_m", "K_s", "B_s"],
+    3: ["F_cm", "F_vm", "M_m", "K_s", "B_s", "F_sm", "V_s"],
+}
+METHOD = Method(cost="sse", weighting="noise", replicates=1, start="centre", refine="least_squares")
+
+
+def study(law: int, seed: int, fixed: int | None = None) -> Study:
+    """The structure study on law ``law``'s data (``fixed``: the naive study of one law)."""
+    data = laws.make_data(law, seed)
+    names = LAW_PARAMS[fixed] if fixed else LAW_PARAMS[3]
+    params: list = [Parameter(n, LEVELS[n][0], min=LEVELS[n][1], max=math.inf) for n in names]
+    start = {"V_z": laws.base.V_Z}
+    if fixed:
+        start["friction"] = fixed
+    else:
+        params.append(Choice("friction", [1, 2, 3]))
+    exp = Experiment(
+        data,
+        inputs={"F_m": "F_m"},
+        outputs={"F_o": "F_o", "x_m": "x_m"},
+        derived={"F_o": "F_of - F_or"},
+        noise={"x_m": ENCODER_SIGMA},
+        name="measured",
+    )
+    return Study(
+        fmu=FMU, parameters=params, experiments=[exp], start_values=start, method=METHOD,
+        name=f"law{law}_seed{seed}" + (f"_fixed{fixed}" if fixed else ""),
+    )  # fmt: skip
+
+
+def residuals_of(st: Study):
+    """Noise-weighted residuals of a study at ``x`` (and the evaluator, to close)."""
+    ev = make_evaluator(prepare(st), workers=1)
+
+    def res(x: dict[str, float]) -> np.ndarray:
+        out = ev.evaluate([x])
+        r = out.residuals[0] if out.residuals else None
+        return np.asarray(r) if r is not None else np.full(1, 1e10)
+
+    return res, ev
+
+
+def reference(law: int, seed: int, chosen: int, start: dict[str, float]) -> tuple[float, int]:
+    """SciPy least_squares at law ``chosen`` from ``start``: its chi2 and simulations."""
+    from scipy.optimize import least_squares
+
+    st = study(law, seed, fixed=chosen)
+    names = LAW_PARAMS[chosen]
+    res, ev = residuals_of(st)
+    lo = np.array([LEVELS[n][1] for n in names])
+    x0 = np.maximum(np.array([start[n] for n in names], dtype=float), lo + 1e-9)
+    scale = np.abs(x0) + 1e-6
+
+    def f(s: np.ndarray) -> np.ndarray:
+        return res(dict(zip(names, s * scale, strict=True)))
+
+    out = least_squares(f, x0 / scale, bounds=(lo / scale, np.inf), method="trf", x_scale="jac")
+    chi2 = float(out.fun @ out.fun)
+    n = ev.nfev
+    ev.close()
+    return chi2, n
+
+
+def chi2_at(st: Study, x: dict[str, float]) -> tuple[float, int]:
+    """chi2 and n of the noise-weighted residuals of ``st`` at ``x``."""
+    res, ev = residuals_of(st)
+    r = res(x)
+    ev.close()
+    return float(r @ r), r.size
+
+
+def one(law: int, seed: int, workers: int) -> dict:
+    """Structure study, naive route and reference on one data set."""
+    t0 = time.perf_counter()
+    st = study(law, seed)
+    out = identify(st, workers=workers, plots=False)
+    s = out.extra["structure"]
+    chosen = int(s["values"]["friction"])
+    tied = bool(s.get("indistinguishable"))
+    x = {k: float(v) for k, v in out.params.items() if k != "friction"}
+    fixed_st = study(law, seed, fixed=chosen)
+    chi2, _ = chi2_at(fixed_st, {n: x[n] for n in LAW_PARAMS[chosen]})
+    truth = laws.TRUTH[law]
+    start = truth if chosen == law else x
+    ref_chi2, ref_nfev = reference(law, seed, chosen, {**x, **start})
+    err = max(abs(x[k] / truth[k] - 1) for k in LAW_PARAMS[law]) if chosen == law else math.nan
+    naive_nfev, bics = 0, {}
+    for cand in (1, 2, 3):
+        nst = study(law, seed, fixed=cand)
+        nout = identify(nst, workers=workers, plots=False)
+        naive_nfev += nout.nfev
+        c2, n = chi2_at(nst, {k: float(nout.params[k]) for k in LAW_PARAMS[cand]})
+        bics[cand] = information(c2, n, len(LAW_PARAMS[cand]))[1]
+    naive = min(bics, key=lambda k: (bics[k], k))
+    return {
+        "law": law, "seed": seed, "chosen": chosen, "tied": tied, "why": s.get("why", ""),
+        "error": err, "ratio": chi2 / ref_chi2, "nfev": out.nfev, "ref_nfev": ref_nfev,
+        "naive_nfev": naive_nfev, "naive": naive, "bics": bics,
+        "seconds": time.perf_counter() - t0,
+    }  # fmt: skip
+
+
+def table(rows: list[dict]) -> list[str]:
+    """The printed (Markdown) tables."""
+    lines = [
+        "| true law | chosen 1 | chosen 2 | chosen 3 | indist. | naive (BIC) chosen 1/2/3 |",
+        "|---|---|---|---|---|---|",
+    ]
+    for law in (1, 2, 3):
+        rs = [r for r in rows if r["law"] == law]
+        if not rs:
+            continue
+        picked = [sum(1 for r in rs if not r["tied"] and r["chosen"] == c) for c in (1, 2, 3)]
+        naive = "/".join(str(sum(1 for r in rs if r["naive"] == c)) for c in (1, 2, 3))
+        tied = sum(1 for r in rs if r["tied"])
+        name = f"{law} {laws.LAWS[law]}"
+        lines.append(f"| {name} | {' | '.join(map(str, picked))} | {tied} | {naive} |")
+    lines += [
+        "",
+        "| true law | seeds | worst error (max over seeds) | cost / least_squares (max) | "
+        "simulations: structure | naive (3 laws) | structure / naive |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for law in (1, 2, 3):
+        rs = [r for r in rows if r["law"] == law]
+        if not rs:
+            continue
+        errs = [r["error"] for r in rs if not math.isnan(r["error"])]
+        err = f"{100 * max(errs):.3g} %" if errs else "n/a"
+        s_n = statistics.mean(r["nfev"] for r in rs)
+        n_n = statistics.mean(r["naive_nfev"] for r in rs)
+        lines.append(
+            f"| {law} | {len(rs)} | {err} | {max(r['ratio'] for r in rs):.6f} | "
+            f"{s_n:.0f} | {n_n:.0f} | {s_n / n_n:.2f} |"
+        )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    """Run the benchmark and print its tables; return the rows."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", type=int, default=10, help="noise seeds per true law")
+    ap.add_argument("--quick", action="store_true", help="one seed per law")
+    ap.add_argument("--laws", type=int, nargs="*", default=[1, 2, 3])
+    ap.add_argument("--workers", type=int, default=1)
+    args = ap.parse_args(argv)
+    seeds = range(1, 2 if args.quick else args.seeds + 1)
+    rows = []
+    for law in args.laws:
+        for seed in seeds:
+            r = one(law, seed, args.workers)
+            rows.append(r)
+            print(
+                f"law {law} seed {seed}: chose {r['chosen']}{' (indist.)' if r['tied'] else ''}"
+                f", naive {r['naive']}, error {100 * r['error']:.3g} %, cost ratio "
+                f"{r['ratio']:.6f}, sims {r['nfev']} vs naive {r['naive_nfev']} "
+                f"({r['seconds']:.0f} s): {r['why']}",
+                flush=True,
+            )
+    print(f"\n{datetime.date.today()}: python benchmarks/structure.py {' '.join(sys.argv[1:])}\n")
+    print("\n".join(table(rows)))
+    return rows
+
+
+if __name__ == "__main__":
+    main()
