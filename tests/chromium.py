@@ -11,10 +11,12 @@ NUL-terminated chunk (``--remote-debugging-pipe``).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import select
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -55,7 +57,7 @@ class _Pipe:
         args = [binary, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
                 "--remote-debugging-pipe", f"--user-data-dir={profile}", "about:blank"]  # fmt: skip
         self.proc = subprocess.Popen(
-            args, pass_fds=(3, 4), preexec_fn=child,
+            args, pass_fds=(3, 4), preexec_fn=child, start_new_session=True,
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         )  # fmt: skip
         os.close(r_in)
@@ -95,12 +97,18 @@ class _Pipe:
         return reply.get("result", {})
 
     def close(self) -> None:
-        self.proc.terminate()
+        # the whole group: Chromium's helper processes still write into the profile
+        # after the browser process has gone (the profile's removal then fails)
+        group = self.proc.pid  # its own session: the group's id is its pid
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(group, signal.SIGTERM)
         try:
             self.proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(group, signal.SIGKILL)
         os.close(self.w_in)
         os.close(self.r_out)
 
@@ -113,7 +121,7 @@ def load(path: Path, expression: str, binary: str | None = None, width: int | No
     binary = binary or find()
     if binary is None:
         raise FileNotFoundError("no chromium binary")
-    with tempfile.TemporaryDirectory() as profile:
+    with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
         pipe = _Pipe(binary, profile)
         try:
             target = pipe.call("Target.createTarget", {"url": "about:blank"})["targetId"]

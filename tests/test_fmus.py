@@ -345,8 +345,10 @@ def test_siso_native_run_time_is_small(siso):
     f.enterInitializationMode()
     f.exitInitializationMode()
     f.setReal([vr["F_m"]], [300.0])
-    t0 = time.perf_counter()
-    f.doStep(0.0, 10.0)  # the same 100 000 internal steps as 10 000 steps of 1 ms
-    elapsed = time.perf_counter() - t0
+    times = []
+    for k in range(5):  # the least of five: a shared machine's other load only adds
+        t0 = time.perf_counter()
+        f.doStep(2.0 * k, 2.0)  # the same 20 000 internal steps as 2 000 steps of 1 ms
+        times.append(time.perf_counter() - t0)
     siso.fresh = False
-    assert elapsed < 0.05
+    assert min(times) < 0.01
