@@ -166,3 +166,52 @@ def test_the_result_round_trips_to_json_and_pandas():
     assert back["set_apart"] == ["c"] and back["ranking"]["cost"][0] == "a"
     frame = res.to_pandas()
     assert frame.loc[("y1", "a"), "mu_star_norm"] == 1.0 and "eq7 %" in frame.columns
+
+
+# -- tsid screen ---------------------------------------------------------------------------
+
+SISO = ROOT / "examples" / "lsea_siso" / "study.toml"
+
+
+@pytest.mark.slow
+def test_tsid_screen_on_the_siso_example_prints_the_table_and_writes_the_files(tmp_path, capsys):
+    from tsid_fmu.cli import main
+
+    out = tmp_path / "screen"
+    assert main(["screen", str(SISO), "--n", "4", "-o", str(out), "--workers", "1"]) == 0
+    text = capsys.readouterr().out
+    header = text.splitlines()[0]
+    assert "mu_star_norm cost" in header and "eq7 % cost" in header
+    assert all(p in text for p in ("F_cm", "F_vm", "M_m", "K_s", "B_s"))
+    assert "set apart (morris):" in text and "simulations" in text
+    frame = pd.read_csv(out / "screening.csv")
+    assert set(frame["quantity"]) == {"cost", "F_o", "x_m"} and len(frame) == 15
+    saved = json.loads((out / "screening.json").read_text())
+    assert saved["nfev"] <= 4 * 6 + 25 and saved["array"] == "L25"
+    assert (out / "screening.png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["screen", "no-such-study.toml"], "no-such-study.toml"),
+        (["screen", str(SISO), "--method", "sobol", "--n", "48"], "power of two"),
+    ],
+)
+def test_tsid_screen_bad_input_is_one_line_and_exit_2(argv, words, tmp_path, capsys):
+    from tsid_fmu.cli import main
+
+    assert main([*argv, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv", [["--n", "1"], ["--method", "fast"], ["--n", "x"]])
+def test_tsid_screen_bad_options_stop_at_parsing(argv, capsys):
+    from tsid_fmu.cli import main
+
+    with pytest.raises(SystemExit) as stop:
+        main(["screen", str(SISO), *argv])
+    assert stop.value.code == 2
+    assert "Traceback" not in capsys.readouterr().err
