@@ -34,7 +34,7 @@ def _widths(study: Study, result) -> tuple[dict[str, float], dict[str, float]]:
     rel, in_s = {}, {}
     for j, name in enumerate(space.names):
         lo, hi = result.intervals.get(name) or (None, None)
-        value = result.x[name]
+        value = result.params[name]
         if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
             rel[name] = in_s[name] = math.inf  # open: the data do not determine it
             continue
