@@ -4,6 +4,9 @@ The flat public API, over the layers of the data flow (see ``docs/architecture.m
 
 - :func:`simulate`: one FMU simulation against a DataFrame of inputs;
 - :func:`identify`: a whole study, returning an :class:`IdentificationResult`;
+- :func:`screen`: a sensitivity screening (Morris or Sobol, through SALib) over a
+  study's first ranges, beside the MISO paper's eq. (7) from an L25
+  (:class:`ScreeningResult`);
 - :func:`load`: the :class:`IdentificationResult` of a finished study's results folder;
 - :class:`Study` with :class:`Parameter`, :class:`Choice` (a discrete factor),
   :class:`Experiment` and :class:`Method`,
@@ -29,6 +32,7 @@ from tsid_fmu.fmu import simulate
 from tsid_fmu.identify import identify
 from tsid_fmu.load import load
 from tsid_fmu.result import IdentificationResult
+from tsid_fmu.screening import ScreeningResult, screen
 from tsid_fmu.study import (
     Choice,
     ContributionOptions,
@@ -54,6 +58,7 @@ __all__ = [
     "Parameter",
     "Phase",
     "ResourceError",
+    "ScreeningResult",
     "SimulationError",
     "Study",
     "StudyError",
@@ -61,5 +66,6 @@ __all__ = [
     "__version__",
     "identify",
     "load",
+    "screen",
     "simulate",
 ]

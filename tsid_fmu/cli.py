@@ -1,4 +1,4 @@
-"""Command line: ``tsid identify | simulate | info | init | build``.
+"""Command line: ``tsid identify | simulate | info | init | build | screen``.
 
 Every ending is one exit status (:data:`EXIT_STATUSES`) and, for an error, one line on
 stderr, never a traceback: errors of the package (:class:`~tsid_fmu.errors.TsidError`,
@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tsid_fmu.cli_screen import add_screen_parser
 from tsid_fmu.cli_values import (
     not_parameters,
     parse_assignments,
@@ -394,6 +395,7 @@ def make_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _identify_parser(sub)
     _other_parsers(sub)
+    add_screen_parser(sub)  # cli_screen.py
     return parser
 
 
