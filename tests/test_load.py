@@ -36,7 +36,8 @@ def test_load_gives_back_what_identify_returned(run):
     assert back.params == res.params and back.names == res.names
     np.testing.assert_array_equal(back.x, res.x)
     np.testing.assert_array_equal(back.cov, res.cov)
-    assert back.jac is None  # not written to the folder
+    np.testing.assert_array_equal(back.jac, res.jac)  # bit for bit, from jacobian.npy
+    assert back.jac.dtype == res.jac.dtype and back.jac.shape == res.jac.shape
     assert back.fun == res.fun and back.nfev == res.nfev
     assert (back.status, back.success, back.message, back.nit) == (
         res.status,
@@ -78,6 +79,22 @@ def test_load_refuses_a_changed_or_missing_file(run, tmp_path):
         load(tmp_path / "nowhere")
     (copy / "result.json").unlink()
     with pytest.raises(StudyError, match=r"no result\.json"):
+        load(copy)
+
+
+def test_load_checks_the_jacobian_against_result_json(run, tmp_path):
+    res, out = run
+    data = json.loads((out / "result.json").read_text())
+    assert data["jac"]["file"] == "jacobian.npy" and data["jac"]["shape"] == list(res.jac.shape)
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    changed = res.jac.copy()
+    changed[0, 0] += 1.0
+    np.save(copy / "jacobian.npy", changed)  # a valid array, not the one the run wrote
+    with pytest.raises(StudyError, match=r"jacobian\.npy: changed or damaged"):
+        load(copy)
+    (copy / "jacobian.npy").unlink()
+    with pytest.raises(StudyError, match=r"jacobian\.npy: missing, but result\.json lists it"):
         load(copy)
 
 

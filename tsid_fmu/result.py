@@ -126,8 +126,9 @@ class IdentificationResult:
         Jacobian of the residuals at :attr:`x` with respect to the parameters, in
         parameter units, shape ``(n_residuals, len(names))``: the one the intervals were
         computed from (:func:`tsid_fmu.uncertainty.sensitivity.residual_jacobian`).
-        ``None`` where no intervals were computed, and in a result read back by
-        :func:`tsid_fmu.load` (it is not written to the results folder).
+        ``None`` where no intervals were computed. The results folder keeps it in
+        ``jacobian.npy`` (its SHA-256 in ``result.json``), so that
+        :func:`tsid_fmu.load` gives the same array back.
     """
 
     params: dict[str, float]
