@@ -467,12 +467,25 @@ def identify(
     evaluators = _Evaluators(
         study, {"workers": workers, "timeout": timeout, "scheduler": scheduler}, evaluator
     )
+    control = Control(pause_after, max_iterations, continue_from_run)
+    return _run(study, out, resume, evaluators, control, progress, plots)
+
+
+def _run(
+    study: Study,
+    out: str | Path | None,
+    resume: bool,
+    evaluators: _Evaluators,
+    control: Control,
+    progress: bool | ProgressCallback,
+    plots: bool,
+) -> IdentificationResult:
+    """Run the stages into ``out`` and assess the answer; close what it opened."""
     callback, notice = _progress(progress, evaluators)
     store: Trail | NullStore = NullStore()
     try:
         if out is not None:
             store = Trail(out, study, resume=resume, on_iteration=_annotate)
-        control = Control(pause_after, max_iterations, continue_from_run)
         start = _fidelity(study, evaluators, start_point(study), "start point", callback)
         stages = run_stages(study, evaluators, store, callback, control)
         result = _finish(study, stages, evaluators, store, plots, (start, callback))
