@@ -178,3 +178,21 @@ def test_a_result_json_of_an_older_version_is_read_with_a_warning(run, tmp_path)
     assert back.params == res.params and back.study is None
     assert any("no checksum" in w for w in back.warnings)
     assert any("study is not attached" in w for w in back.warnings)
+
+
+def test_cov_of_an_undetermined_parameter_is_infinite_on_the_diagonal():
+    from tsid_fmu import IdentificationResult
+    from tsid_fmu.uncertainty.intervals import Uncertainty
+
+    u = Uncertainty(
+        values={"a": 1.0, "b": 2.0},
+        std_error={"a": 0.1, "b": math.inf},
+        correlation={"a": {"a": 1.0, "b": 0.3}, "b": {"a": 0.3, "b": 1.0}},
+    )
+    res = IdentificationResult(
+        params={"a": 1.0, "b": 2.0}, fun=1.0, nfev=1, success=True, status=0, message="m"
+    )
+    res.uncertainty = u
+    cov = res.cov
+    assert cov[0, 0] == pytest.approx(0.01) and cov[1, 1] == math.inf
+    assert math.isnan(cov[0, 1]) and math.isnan(cov[1, 0])
