@@ -237,6 +237,7 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
             uncertainty=_uncertainty(data.get("uncertainty")),
             fit=dict(data.get("fit") or {}),
             noise=dict(data.get("noise") or {}),
+            noise_source=dict(data.get("noise_source") or {}),
             validation=dict(data.get("validation") or {}),
             weak=dict(data.get("weak") or {}),
             warnings=[*map(str, data.get("warnings") or []), *warnings, *more],

@@ -101,7 +101,11 @@ class IdentificationResult:
     fit : dict
         Cost kinds and fit percentage per experiment and output at ``x``.
     noise : dict
-        Noise level of each experiment's measured outputs, estimated from the data.
+        Noise level of each experiment's measured outputs: the one the cost weights by
+        and the fit is compared with (the sensor noise the study states, else the
+        estimate from the measured data).
+    noise_source : dict
+        Where each of those came from: ``"study"`` (stated) or ``"data"`` (estimated).
     validation : dict
         Cost and fit of the validation experiments at ``x`` (MISO superposition check).
     contribution : dict
@@ -143,6 +147,7 @@ class IdentificationResult:
     uncertainty: Uncertainty | None = None
     fit: dict[str, Any] = field(default_factory=dict)
     noise: dict[str, dict[str, float]] = field(default_factory=dict)
+    noise_source: dict[str, dict[str, str]] = field(default_factory=dict)
     validation: dict[str, Any] = field(default_factory=dict)
     contribution: dict[str, list[float]] = field(default_factory=dict)
     weak: dict[str, str] = field(default_factory=dict)
@@ -282,6 +287,7 @@ class IdentificationResult:
                 "uncertainty": self.uncertainty.to_dict() if self.uncertainty else None,
                 "fit": self.fit,
                 "noise": self.noise,
+                "noise_source": self.noise_source,
                 "validation": self.validation,
                 "weak": self.weak,
                 "warnings": self.warnings,
