@@ -64,7 +64,7 @@ def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
     y = pd.read_csv(lag[1])["y_meas"].to_numpy()
     assert res.noise["lag"]["y"] == pytest.approx(0.01 * np.std(y), rel=0.1)
     assert res.fit["lag"]["y"]["rmse"] == pytest.approx(res.noise["lag"]["y"], rel=0.1)
-    assert "(noise in the data: " in (out / "report.md").read_text()
+    assert "(noise, estimated from the data: " in (out / "report.md").read_text()
 
 
 def test_failed_rows_are_reported_and_do_not_stop_the_study(lag, tmp_path):

@@ -2,7 +2,9 @@
 
 The generators must not use any FMU; here they are checked for determinism, the logged
 columns of a real rig, stick-slip in the SISO data, and agreement with the FMUs at the
-truth (which is the check that the two solutions of the same equations agree).
+truth (which is the check that the two solutions of the same equations agree); but the
+rigs of the DC motor and the resonance have, on purpose, effects their models leave out,
+and their data must stay a stated floor away from their FMUs, also after the best fit.
 """
 
 from __future__ import annotations
@@ -203,26 +205,63 @@ def _pythonfmu_ok() -> bool:
     return pythonfmu_available()
 
 
+#: Floors of the mismatch the rig data must keep (issue 27: they matched their FMUs to
+#: 1e-6 and 1e-4 sigma, so these problems compared optimisers, not accuracy under model
+#: mismatch). Measured: DC motor 1.11 / 0.85 sigma at the truth and 0.44 / 0.40 after the
+#: best fit (w / i); resonance 1.35 and 0.49 sigma.
+DC_AT_TRUTH = {"w": 0.8, "i": 0.6}
+DC_AFTER_FIT = {"w": 0.3, "i": 0.3}
+RESONANCE_AT_TRUTH = 1.0
+RESONANCE_AFTER_FIT = 0.35
+
+
 @pytest.mark.skipif(not _pythonfmu_ok(), reason="pythonfmu cannot build here")
-def test_dc_motor_fmu_agrees_with_independent_data(tmp_path, monkeypatch):
+def test_dc_motor_fmu_is_the_model_and_misses_the_rig(tmp_path, monkeypatch):
     monkeypatch.setattr(base, "CACHE", tmp_path)
     problem = dc_motor.dc_motor(seed=1)
-    t = base.sample_times(1.0)
+    t = base.sample_times(dc_motor.DURATION)
     v = dc_motor.voltage(t)
-    ref = dc_motor.simulate(t, v, problem.truth)
+    model = dc_motor.simulate(t, v, problem.truth)
+    rig = dc_motor.simulate_rig(t, v, problem.truth)
     with FMUSession(problem.fmu, ["V"], ["w", "i"], parameters=list(problem.truth)) as fmu:
         y = fmu.simulate(t, v, problem.truth)
     for k, name in enumerate(("w", "i")):
-        assert base.rms_over_sigma(y[:, k], ref[:, k], problem.noise[name])[0] < 1e-6
+        # the FMU solves its equations right; the rig is another plant
+        assert base.rms_over_sigma(y[:, k], model[:, k], problem.noise[name])[0] < 1e-6
+        miss = base.rms_over_sigma(y[:, k], rig[:, k], problem.noise[name])[0]
+        assert miss > DC_AT_TRUTH[name], (name, miss)
+
+
+def test_dc_motor_rig_data_stay_above_the_noise_after_the_best_fit():
+    t = base.sample_times(dc_motor.DURATION)
+    found, left = dc_motor.best_fit(t, dc_motor.voltage(t))
+    for name, floor in DC_AFTER_FIT.items():
+        assert left[name] > floor, (name, left[name])
+    # small enough that the parameters stay sensible
+    assert all(abs(found[n] / v - 1) < 0.15 for n, v in dc_motor.TRUTH.items()), found
+    assert all(r < 0.8 for r in left.values())
+    noisy = dc_motor.make_data(1)
+    clean = dc_motor.simulate_rig(t, dc_motor.voltage(t), dc_motor.TRUTH)
+    assert np.std(noisy["w"] - clean[:, 0]) == pytest.approx(dc_motor.NOISE["w"], rel=0.05)
 
 
 @pytest.mark.skipif(importlib.util.find_spec("pymoca") is None, reason="needs [build]")
-def test_local_minima_fmu_agrees_with_independent_data(tmp_path, monkeypatch):
+def test_resonance_fmu_is_the_model_and_misses_the_rig(tmp_path, monkeypatch):
     monkeypatch.setattr(base, "CACHE", tmp_path)
     problem = local_minima.local_minima(seed=1)
     data = problem.experiments[0].data
     t, u = data["time"].to_numpy(), data["u"].to_numpy()
-    ref = local_minima.simulate(t, u, problem.truth)
+    model = local_minima.simulate(t, u, problem.truth)
+    rig = local_minima.simulate_rig(t, u, problem.truth)
     with FMUSession(problem.fmu, ["u"], ["y"], parameters=list(problem.truth)) as fmu:
         y = fmu.simulate(t, u, problem.truth)
-    assert base.rms_over_sigma(y[:, 0], ref, problem.noise["y"])[0] < 1e-4
+    assert base.rms_over_sigma(y[:, 0], model, problem.noise["y"])[0] < 1e-4
+    miss = base.rms_over_sigma(y[:, 0], rig, problem.noise["y"])[0]
+    assert miss > RESONANCE_AT_TRUTH, miss
+
+
+def test_resonance_rig_data_stay_above_the_noise_after_the_best_fit():
+    t = base.sample_times()
+    found, left = local_minima.best_fit(t, local_minima.input_signal(t))
+    assert RESONANCE_AFTER_FIT < left < 0.8, left
+    assert all(abs(found[n] / v - 1) < 0.05 for n, v in local_minima.TRUTH.items()), found

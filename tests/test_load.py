@@ -36,7 +36,8 @@ def test_load_gives_back_what_identify_returned(run):
     assert back.params == res.params and back.names == res.names
     np.testing.assert_array_equal(back.x, res.x)
     np.testing.assert_array_equal(back.cov, res.cov)
-    assert back.jac is None  # not written to the folder
+    np.testing.assert_array_equal(back.jac, res.jac)  # bit for bit, from jacobian.npy
+    assert back.jac.dtype == res.jac.dtype and back.jac.shape == res.jac.shape
     assert back.fun == res.fun and back.nfev == res.nfev
     assert (back.status, back.success, back.message, back.nit) == (
         res.status,
@@ -78,6 +79,22 @@ def test_load_refuses_a_changed_or_missing_file(run, tmp_path):
         load(tmp_path / "nowhere")
     (copy / "result.json").unlink()
     with pytest.raises(StudyError, match=r"no result\.json"):
+        load(copy)
+
+
+def test_load_checks_the_jacobian_against_result_json(run, tmp_path):
+    res, out = run
+    data = json.loads((out / "result.json").read_text())
+    assert data["jac"]["file"] == "jacobian.npy" and data["jac"]["shape"] == list(res.jac.shape)
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    changed = res.jac.copy()
+    changed[0, 0] += 1.0
+    np.save(copy / "jacobian.npy", changed)  # a valid array, not the one the run wrote
+    with pytest.raises(StudyError, match=r"jacobian\.npy: changed or damaged"):
+        load(copy)
+    (copy / "jacobian.npy").unlink()
+    with pytest.raises(StudyError, match=r"jacobian\.npy: missing, but result\.json lists it"):
         load(copy)
 
 
@@ -161,3 +178,21 @@ def test_a_result_json_of_an_older_version_is_read_with_a_warning(run, tmp_path)
     assert back.params == res.params and back.study is None
     assert any("no checksum" in w for w in back.warnings)
     assert any("study is not attached" in w for w in back.warnings)
+
+
+def test_cov_of_an_undetermined_parameter_is_infinite_on_the_diagonal():
+    from tsid_fmu import IdentificationResult
+    from tsid_fmu.uncertainty.intervals import Uncertainty
+
+    u = Uncertainty(
+        values={"a": 1.0, "b": 2.0},
+        std_error={"a": 0.1, "b": math.inf},
+        correlation={"a": {"a": 1.0, "b": 0.3}, "b": {"a": 0.3, "b": 1.0}},
+    )
+    res = IdentificationResult(
+        params={"a": 1.0, "b": 2.0}, fun=1.0, nfev=1, success=True, status=0, message="m"
+    )
+    res.uncertainty = u
+    cov = res.cov
+    assert cov[0, 0] == pytest.approx(0.01) and cov[1, 1] == math.inf
+    assert math.isnan(cov[0, 1]) and math.isnan(cov[1, 0])

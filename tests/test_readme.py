@@ -107,3 +107,16 @@ def test_python_snippet_runs(workdir):
     assert res.success and (workdir / "results" / "siso" / "report.html").is_file()
     assert len(namespace["figures"]) == 4
     assert os.path.basename(str(res.study.fmu)) == "LSEA_SISO.fmu"
+
+
+def test_every_path_the_readme_names_is_in_the_repository():
+    # issue 26: it cited ../shared/seeds/, which a user of the package does not have
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    assert not re.findall(r"`\.\./[^`]*`|\]\(\.\./", text)
+    for path in re.findall(
+        r"`((?:examples|fmus|models|benchmarks|docs|tests|tsid_fmu)/[^`\s]*)`", text
+    ):
+        clean = path.split("::")[0].rstrip(".,:;)")
+        if "*" in clean or "{" in clean or "NN" in clean:
+            continue
+        assert (REPO / clean).exists(), path

@@ -116,19 +116,17 @@ def _poor_fit(answer: StageResult) -> list[str]:
     else:
         searched = f"{poor['restarts']} restart(s) found no lower basin"
     return [
-        f"the answer's cost is {poor['ratio']:.3g} times the noise floor, and "
-        f"{searched}: the model may not explain "
-        "these data, the noise may be strongly coloured, or the answer is a local minimum "
-        "the search did not leave (try wider first levels, or other start values)"
+        f"the answer's cost is {poor['ratio']:.3g} times the noise floor, and {searched}: the"
+        " model may not explain these data, the noise may be strongly coloured, or the answer"
+        " is a local minimum the search did not leave (try wider first levels, or other start"
+        " values)"
     ]
 
 
 def _weak(result: IdentificationResult) -> dict[str, str]:
-    weak = {}
+    weak: dict[str, str] = {}
     u = result.uncertainty
-    if u is None:
-        return weak
-    for n, rel in u.relative.items():
+    for n, rel in (u.relative if u is not None else {}).items():
         low, high = u.intervals.get(n, [None, None])
         if low is None or high is None:
             weak[n] = "the data do not determine it (open 95 % interval)"
@@ -280,8 +278,9 @@ def _finish(
     # bounds, and combinations that read as products and ratios
     log = dataclasses.replace(study.method.leveling, scale="log")
     space = Space(study.first_levels(), study.bounds(), log)
-    found = assess(ev, spec, space, x)
-    result.fun, result.fit, result.noise = found.fun, found.fit, found.noise
+    found = assess(ev, spec, space, x, study_noise(study))
+    for key in ("fun", "fit", "noise", "noise_source"):  # the noise the cost uses, and whence
+        setattr(result, key, getattr(found, key))
     result.uncertainty = found.uncertainty
     if found.uncertainty is not None and found.sensitivities is not None:
         jac = residual_jacobian(found.sensitivities, spec, space, x)
@@ -415,12 +414,25 @@ def identify(
     evaluators = StudyEvaluators(
         study, {"workers": workers, "timeout": timeout, "scheduler": scheduler}, evaluator
     )
+    control = Control(pause_after, max_iterations, continue_from_run)
+    return _run(study, out, resume, evaluators, control, progress, plots)
+
+
+def _run(
+    study: Study,
+    out: str | Path | None,
+    resume: bool,
+    evaluators: _Evaluators,
+    control: Control,
+    progress: bool | ProgressCallback,
+    plots: bool,
+) -> IdentificationResult:
+    """Run the stages into ``out`` and assess the answer; close what it opened."""
     callback, notice = _progress(progress, evaluators)
     store: Trail | NullStore = NullStore()
     try:
         if out is not None:
             store = Trail(out, study, resume=resume, on_iteration=_annotate)
-        control = Control(pause_after, max_iterations, continue_from_run)
         start = _fidelity(study, evaluators, start_point(study), "start point", callback)
         final, stages, used, found = _stages(study, evaluators, store, callback, control)
         result = _finish(final, stages, used, store, plots, (start, callback), found)

@@ -22,13 +22,15 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from tsid_fmu.errors import StudyError
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.toml import study_from_document
 from tsid_fmu.trail.files import read_json
-from tsid_fmu.trail.integrity import unseal
+from tsid_fmu.trail.integrity import sha256_file, unseal
 from tsid_fmu.trail.owner import FINGERPRINT, differences, fingerprint, read_fingerprint
 from tsid_fmu.trail.reader import read_stage
 from tsid_fmu.uncertainty.intervals import Uncertainty
@@ -124,6 +126,41 @@ def _read(out: Path) -> tuple[dict[str, Any], list[str]]:
     return unseal(data, path, "result", advice), []
 
 
+def _jacobian(out: Path, entry: Any) -> np.ndarray | None:
+    """Return the Jacobian result.json names (``jac``: file, shape, SHA-256), checked.
+
+    Raises
+    ------
+    StudyError
+        The entry is damaged, or the file is missing, changed since tsid-fmu wrote it
+        (its SHA-256 differs) or not the array result.json describes.
+    """
+    if entry is None:
+        return None
+    advice = "restore it from a copy, or run the study again"
+    try:
+        name, shape, digest = str(entry["file"]), [int(n) for n in entry["shape"]], entry["sha256"]
+    except (KeyError, TypeError, ValueError):
+        raise StudyError(f"{out / 'result.json'}: damaged result (its 'jac' entry)") from None
+    path = out / Path(name).name
+    try:
+        same = sha256_file(path) == digest
+    except OSError:
+        raise StudyError(f"{path}: missing, but result.json lists it; {advice}") from None
+    if not same:
+        raise StudyError(
+            f"{path}: changed or damaged since tsid-fmu wrote it (its SHA-256 differs from "
+            f"the one in result.json); {advice}"
+        )
+    try:
+        jac = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise StudyError(f"{path}: damaged Jacobian ({type(exc).__name__}); {advice}") from None
+    if list(jac.shape) != shape or jac.dtype != np.float64:
+        raise StudyError(f"{path}: not the {shape} array of floats result.json describes")
+    return jac
+
+
 def _copied_study(out: Path, folder: Any) -> Study:
     """Return the study of the folder's ``study.toml``, its paths read from ``folder``.
 
@@ -180,7 +217,8 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
         ``params`` (with ``x``, ``names`` and ``cov``), ``fun``, ``nfev``, ``status``,
         the stages with their iterations, the intervals and uncertainty, fit, noise,
         validation and warnings as ``identify`` returned them, with ``out_dir`` set;
-        ``jac`` is ``None`` (the results folder does not hold it).
+        ``jac`` the same array, read from ``jacobian.npy`` (``None`` where the run
+        computed no intervals, and for a folder of a tsid-fmu that did not write it).
 
     Raises
     ------
@@ -205,6 +243,7 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
             uncertainty=_uncertainty(data.get("uncertainty")),
             fit=dict(data.get("fit") or {}),
             noise=dict(data.get("noise") or {}),
+            noise_source=dict(data.get("noise_source") or {}),
             validation=dict(data.get("validation") or {}),
             weak=dict(data.get("weak") or {}),
             warnings=[*map(str, data.get("warnings") or []), *warnings, *more],
@@ -212,6 +251,7 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
             study=attached,
             out_dir=out,
             structures=[dict(r) for r in data.get("structures") or []],
+            jac=_jacobian(out, data.get("jac")),
         )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise StudyError(f"{out / 'result.json'}: damaged result ({exc!r})") from None

@@ -104,7 +104,11 @@ class IdentificationResult:
     fit : dict
         Cost kinds and fit percentage per experiment and output at ``x``.
     noise : dict
-        Noise level of each experiment's measured outputs, estimated from the data.
+        Noise level of each experiment's measured outputs: the one the cost weights by
+        and the fit is compared with (the sensor noise the study states, else the
+        estimate from the measured data).
+    noise_source : dict
+        Where each of those came from: ``"study"`` (stated) or ``"data"`` (estimated).
     validation : dict
         Cost and fit of the validation experiments at ``x`` (MISO superposition check).
     contribution : dict
@@ -136,8 +140,9 @@ class IdentificationResult:
         Jacobian of the residuals at :attr:`x` with respect to the parameters, in
         parameter units, shape ``(n_residuals, len(names))``: the one the intervals were
         computed from (:func:`tsid_fmu.uncertainty.sensitivity.residual_jacobian`).
-        ``None`` where no intervals were computed, and in a result read back by
-        :func:`tsid_fmu.load` (it is not written to the results folder).
+        ``None`` where no intervals were computed. The results folder keeps it in
+        ``jacobian.npy`` (its SHA-256 in ``result.json``), so that
+        :func:`tsid_fmu.load` gives the same array back.
     """
 
     params: dict[str, float]
@@ -152,6 +157,7 @@ class IdentificationResult:
     uncertainty: Uncertainty | None = None
     fit: dict[str, Any] = field(default_factory=dict)
     noise: dict[str, dict[str, float]] = field(default_factory=dict)
+    noise_source: dict[str, dict[str, str]] = field(default_factory=dict)
     validation: dict[str, Any] = field(default_factory=dict)
     contribution: dict[str, list[float]] = field(default_factory=dict)
     weak: dict[str, str] = field(default_factory=dict)
@@ -294,6 +300,7 @@ class IdentificationResult:
                 "uncertainty": self.uncertainty.to_dict() if self.uncertainty else None,
                 "fit": self.fit,
                 "noise": self.noise,
+                "noise_source": self.noise_source,
                 "validation": self.validation,
                 "weak": self.weak,
                 "warnings": self.warnings,

@@ -258,9 +258,13 @@ def anova(
         pooled_idx = _auto_pool(sq.ss, sq.dof, sq.residual_dof, pool_fraction * sq.dof_total)
     else:
         pooled_idx = _pooled(pool, names)
+    return _table(names, sq, pooled_idx)
+
+
+def _table(names: tuple[str, ...], sq: _Squares, pooled_idx: list[int]) -> AnovaTable:
+    """Return the ANOVA table of the sums of squares ``sq`` with ``pooled_idx`` pooled."""
     is_pooled = np.zeros(len(names), dtype=bool)
     is_pooled[pooled_idx] = True
-
     error_ss = sq.residual_ss + float(sq.ss[is_pooled].sum())
     error_dof = sq.residual_dof + int(sq.dof[is_pooled].sum())
     error_ms = error_ss / error_dof if error_dof > 0 else np.nan

@@ -14,8 +14,9 @@ import math
 from collections.abc import Mapping
 from pathlib import Path
 
+from tsid_fmu.report.html_diagnostics import diagnostics_section
 from tsid_fmu.report.html_iteration import iteration_section
-from tsid_fmu.report.html_tables import CSS, esc, generic, image, table, table_from_frame
+from tsid_fmu.report.html_tables import CSS, esc, image, table, table_from_frame
 from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
@@ -24,14 +25,16 @@ from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.report.units import study_units
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.trail.files import atomic_write
+from tsid_fmu.uncertainty.assess import NOISE_SOURCES
 
 __all__ = ["FIT_NOTE", "STAGES_NOTE", "html_report", "verdict_tone", "write_html"]
 
 FIT_NOTE = (
     "fit % = 100 (1 − NRMSE) with NRMSE = ‖simulated − measured‖ / ‖measured − its mean‖ "
     "(100 % is a perfect fit, 0 % no better than the mean). RMSE and IAE in the output's "
-    "unit (IAE: integral of |error| over time, unit × s); the noise is estimated from the "
-    "data's second differences."
+    "unit (IAE: integral of |error| over time, unit × s). Noise: the one the cost weights "
+    "by, the sensor noise the study states (noise = {...}), else the estimate from the "
+    "measured data (tsid_fmu.evaluate.cost.noise_level); the next column says which."
 )
 STRUCTURES_NOTE = (
     "Each candidate structure refined to its own optimum. k: the Real parameters that "
@@ -121,9 +124,10 @@ def _fit(result: IdentificationResult, units: Mapping[str, str], images: Mapping
     for exp, outputs in result.fit.items():
         for name, m in outputs.items():
             if not isinstance(m, dict):
-                rows.append([f"{exp} / {name}", str(m), "", "", "", "", ""])
+                rows.append([f"{exp} / {name}", str(m), "", "", "", "", "", ""])
                 continue
             sigma = result.noise.get(exp, {}).get(name, math.nan)
+            whence = result.noise_source.get(exp, {}).get(name, "")
             rows.append(
                 [
                     f"{exp} / {name}",
@@ -131,11 +135,13 @@ def _fit(result: IdentificationResult, units: Mapping[str, str], images: Mapping
                     m["fit_percent"],
                     m["rmse"],
                     sigma,
+                    NOISE_SOURCES.get(whence, whence),
                     m["rmse"] / sigma if sigma else math.nan,
                     m["iae"],
                 ]
             )
-    cols = ["experiment / output", "unit", "fit %", "RMSE", "noise", "RMSE / noise", "IAE"]
+    cols = ["experiment / output", "unit", "fit %", "RMSE", "noise", "noise from"]
+    cols += ["RMSE / noise", "IAE"]
     body = table(cols, rows) + f'<p class="note">{esc(FIT_NOTE)}</p>' + _windows(result)
     if "fit.png" in images:
         body += image(images["fit.png"], "identified model against the measured data")
@@ -144,16 +150,6 @@ def _fit(result: IdentificationResult, units: Mapping[str, str], images: Mapping
 
 def _windows(result: IdentificationResult) -> str:
     return "".join(f'<p class="note">{esc(note)}</p>' for note in experiment_notes(result))
-
-
-def _diagnostics(result: IdentificationResult) -> str:
-    parts = []
-    if result.uncertainty is not None:
-        parts.append(generic(result.uncertainty.to_dict(), "Uncertainty at the answer"))
-    if result.weak:
-        rows = [[k, v] for k, v in result.weak.items()]
-        parts.append("<h3>Weakly determined parameters</h3>" + table(["parameter", "why"], rows))
-    return "\n".join(parts) or "<p>No diagnostics (the study was not assessed).</p>"
 
 
 def _validation(result: IdentificationResult, cost: str) -> str:
@@ -272,7 +268,7 @@ def html_report(result: IdentificationResult, figures: Figures | None = None) ->
             "stages",
         ),
         _section("Fit and residuals", _fit(result, units, images), "fit"),
-        _section("Residual diagnostics", _diagnostics(result), "diagnostics"),
+        _section("Residual diagnostics", diagnostics_section(result), "diagnostics"),
     ]
     if result.validation:
         body.append(_section("Validation experiments", _validation(result, cost), "validation"))

@@ -9,12 +9,12 @@ from __future__ import annotations
 import base64
 import html
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 from tsid_fmu.report.style import fmt
 
-__all__ = ["CSS", "esc", "generic", "image", "png_size", "table", "table_from_frame"]
+__all__ = ["CSS", "esc", "image", "png_size", "table", "table_from_frame"]
 
 CSS = """
 body { font: 14px/1.45 system-ui, -apple-system, "Segoe UI", sans-serif; margin: 0 auto;
@@ -125,59 +125,3 @@ def image(data: bytes, alt: str, scale: int = 2) -> str:
     kind = "png" if width else "svg+xml"
     b64 = base64.b64encode(data).decode("ascii")
     return f'<img alt="{esc(alt)}"{size} src="data:image/{kind};base64,{b64}">'
-
-
-def _scalar(v: Any) -> bool:
-    return v is None or isinstance(v, int | float | str | bool)
-
-
-def _nested(key: str, value: Mapping[str, Mapping[str, Any]]) -> str:
-    """Render a mapping of mappings: rows the outer keys, columns the inner ones."""
-    cols = list(dict.fromkeys(c for inner in value.values() for c in inner))
-    rows = [[r, *[_flat(value[r].get(c)) for c in cols]] for r in value]
-    return f"<h4>{esc(key)}</h4>" + table(["", *cols], rows)
-
-
-def generic(data: Mapping[str, Any], title: str = "") -> str:
-    """Render any JSON-like mapping as tables: scalars, per-name values, nested mappings.
-
-    Used for diagnostics whose keys this module does not know in advance. Mappings of
-    scalars that share their keys become the columns of one table.
-    """
-    parts, scalars = [], []
-    groups: dict[tuple[str, ...], dict[str, Mapping[str, Any]]] = {}
-    for key, value in data.items():
-        if _scalar(value):
-            scalars.append([str(key), value if not isinstance(value, bool) else str(value)])
-        elif isinstance(value, Mapping) and all(_scalar(v) or _short(v) for v in value.values()):
-            groups.setdefault(tuple(value), {})[str(key)] = value
-        elif isinstance(value, Mapping) and all(isinstance(v, Mapping) for v in value.values()):
-            parts.append(_nested(str(key), value))
-        elif isinstance(value, list) and value and all(isinstance(v, Mapping) for v in value):
-            keys = list(dict.fromkeys(k for v in value for k in v))
-            rows = [[i + 1, *[_flat(v.get(k)) for k in keys]] for i, v in enumerate(value)]
-            parts.append(f"<h4>{esc(key)}</h4>" + table(["#", *keys], rows))
-        else:
-            scalars.append([str(key), _flat(value)])
-    tables = []
-    for names, columns in groups.items():
-        rows = [[n, *[_flat(col.get(n)) for col in columns.values()]] for n in names]
-        tables.append(table(["", *columns], rows))
-    if scalars:
-        tables.insert(0, table(["quantity", "value"], scalars))
-    head = f"<h3>{esc(title)}</h3>" if title else ""
-    return head + "".join(tables + parts)
-
-
-def _short(v: Any) -> bool:
-    return isinstance(v, list | tuple) and len(v) <= 4 and all(_scalar(w) for w in v)
-
-
-def _flat(v: Any) -> Any:
-    if _scalar(v):
-        return v
-    if isinstance(v, Mapping):
-        return ", ".join(f"{k} {fmt(w) if not isinstance(w, str) else w}" for k, w in v.items())
-    if isinstance(v, list | tuple):
-        return " .. ".join(fmt(w) if not isinstance(w, str) else w for w in v)
-    return str(v)

@@ -11,6 +11,7 @@ from tsid_fmu.report.style import cost_name, fmt, input_contribution
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.uncertainty.assess import NOISE_SOURCES
 
 __all__ = ["escape", "markdown_report", "markdown_table"]
 
@@ -113,7 +114,9 @@ def _fit(result: IdentificationResult) -> list[str]:
                 lines.append(f"- {escape(exp)}: {escape(m)}")
                 continue
             sigma = result.noise.get(exp, {}).get(output)
-            beside = f" (noise in the data: {fmt(sigma, 4)})" if sigma is not None else ""
+            whence = NOISE_SOURCES.get(result.noise_source.get(exp, {}).get(output, ""), "")
+            said = f"noise, {whence}" if whence else "noise"
+            beside = f" ({said}: {fmt(sigma, 4)})" if sigma is not None else ""
             if sigma:
                 beside = f"{beside[:-1]}; RMSE {fmt(m['rmse'] / sigma, 2)} x it)"
             lines.append(

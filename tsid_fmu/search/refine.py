@@ -164,6 +164,67 @@ class _Problem:
         return Stationarity(True, "projected Gauss-Newton, step tried", gap, cost, detail)
 
 
+def _problem_at(
+    space: Space,
+    start: Mapping[str, float],
+    start_cost: float,
+    evaluator: Evaluator,
+    limit: int,
+    fixed: Mapping[str, float] | None,
+    start_residuals: np.ndarray | None,
+) -> tuple[_Problem, np.ndarray]:
+    """Return the least-squares problem at ``start`` and its start point, just inside bounds.
+
+    The start's residuals, where the caller has them, are kept, so that it is not
+    simulated again.
+    """
+    problem = _Problem(space, evaluator, limit, fixed or {})
+    problem.best = (float(start_cost), {n: float(start[n]) for n in space.names})
+    width = space.s_upper - space.s_lower
+    s_start = space.to_s(start)
+    s0 = np.clip(
+        s_start,
+        space.s_lower + 1e-9 * np.minimum(width, 1.0),
+        space.s_upper - 1e-9 * np.minimum(width, 1.0),
+    )
+    if start_residuals is not None and np.array_equal(s0, s_start):
+        problem.known = (s0.copy(), start_residuals)
+        problem.size = start_residuals.size
+        problem.best_r = start_residuals
+    return problem, s0
+
+
+def _solve(
+    problem: _Problem, s0: np.ndarray, space: Space, limit: int, extra: dict[str, Any]
+) -> tuple[int, str]:
+    """Run SciPy's trust-region least squares from ``s0``; return status and message.
+
+    Why it stopped (``stop``: gtol, ftol or xtol) and its counts go into ``extra``.
+    """
+    from scipy.optimize import least_squares
+
+    try:
+        out = least_squares(
+            problem.fun,
+            s0,
+            jac=problem.jac,
+            bounds=(space.s_lower, space.s_upper),
+            method="trf",
+            ftol=_FTOL,
+            xtol=_XTOL,
+            gtol=_GTOL,
+            max_nfev=10_000,
+        )
+        extra["stop"] = {1: "gtol", 2: "ftol", 3: "xtol", 4: "xtol"}.get(int(out.status), "")
+        extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
+        return 0, f"least squares: {out.message}"
+    except _Converged as stop:
+        extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
+        return 0, f"least squares: {stop}; stopped before another Jacobian"
+    except _Budget:
+        return 1, f"simulation limit ({limit}) of the refinement reached"
+
+
 def refine_stage(
     name: str,
     space: Space,
@@ -209,49 +270,15 @@ def refine_stage(
     -------
     StageResult
     """
-    from scipy.optimize import least_squares
-
     limit = method.refine_max_nfev or 30 * (space.dim + 1) * len(evaluator.spec.experiments)
-    problem = _Problem(space, evaluator, limit, fixed or {})
-    problem.best = (float(start_cost), {n: float(start[n]) for n in space.names})
-    width = space.s_upper - space.s_lower
-    s_start = space.to_s(start)
-    s0 = np.clip(
-        s_start,
-        space.s_lower + 1e-9 * np.minimum(width, 1.0),
-        space.s_upper - 1e-9 * np.minimum(width, 1.0),
-    )
-    if start_residuals is not None and np.array_equal(s0, s_start):
-        problem.known = (s0.copy(), start_residuals)
-        problem.size = start_residuals.size
-        problem.best_r = start_residuals
+    problem, s0 = _problem_at(space, start, start_cost, evaluator, limit, fixed, start_residuals)
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
     extra: dict[str, Any] = {
         "method": "scipy.optimize.least_squares(method='trf')",
         "start_cost": float(start_cost),
     }
-    try:
-        out = least_squares(
-            problem.fun,
-            s0,
-            jac=problem.jac,
-            bounds=(space.s_lower, space.s_upper),
-            method="trf",
-            ftol=_FTOL,
-            xtol=_XTOL,
-            gtol=_GTOL,
-            max_nfev=10_000,
-        )
-        status, message = 0, f"least squares: {out.message}"
-        extra["stop"] = {1: "gtol", 2: "ftol", 3: "xtol", 4: "xtol"}.get(int(out.status), "")
-        extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
-    except _Converged as stop:
-        status, message = 0, f"least squares: {stop}; stopped before another Jacobian"
-        extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
-    except _Budget:
-        status = 1
-        message = f"simulation limit ({limit}) of the refinement reached"
+    status, message = _solve(problem, s0, space, limit, extra)
     gate = problem.stationarity(floor)
     cost, x = problem.best
     nfev = evaluator.nfev - problem.start

@@ -21,6 +21,7 @@ Layout of the output folder::
     phase_01/ ...              each phase: iteration_NN/ and stage.json
     refinement/stage.json      the refinement stage
     result.json, parameters.csv, parameters.ssv, model.ssp
+    jacobian.npy               the residual Jacobian at the answer (its hash in result.json)
     report.html, report.md, fit.png, convergence.png, parameters.png
 
 Every file is written to a temporary name and renamed into place, so an interrupted

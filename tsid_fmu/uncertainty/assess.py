@@ -19,7 +19,7 @@ from tsid_fmu.uncertainty.intervals import Uncertainty, quantile, scale_groups, 
 from tsid_fmu.uncertainty.profile import ProfileProblem, profile_intervals
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian, sensitivities
 
-__all__ = ["MISMATCH", "Assessment", "assess", "standard_errors", "validate"]
+__all__ = ["MISMATCH", "NOISE_SOURCES", "Assessment", "assess", "standard_errors", "validate"]
 
 MISMATCH = 1.5
 """Residual RMS above this many times an output's noise estimate is reported as model
@@ -33,6 +33,7 @@ class Assessment:
     fun: float
     fit: dict[str, Any] = field(default_factory=dict)
     noise: dict[str, dict[str, float]] = field(default_factory=dict)
+    noise_source: dict[str, dict[str, str]] = field(default_factory=dict)
     simulated: list[Simulated] = field(default_factory=list)
     uncertainty: Uncertainty | None = None
     warnings: list[str] = field(default_factory=list)
@@ -40,42 +41,72 @@ class Assessment:
     sensitivities: Sensitivities | None = None
 
 
-def _fit(spec: EvaluationSpec, sims: list[Simulated]) -> tuple[dict, dict, list[str]]:
-    fit: dict[str, Any] = {}
+NOISE_SOURCES = {"study": "stated in the study", "data": "estimated from the data"}
+"""Where the noise of an output came from (``noise_source`` of a result), in words."""
+
+
+def _noise(
+    spec: EvaluationSpec, stated: Mapping[str, Mapping[str, float]]
+) -> tuple[dict[str, dict[str, float]], dict[str, dict[str, str]]]:
+    """Return the noise of each experiment's outputs that the cost uses, and its source.
+
+    The sensor noise the study states (``noise = {...}``, :attr:`Experiment.noise`),
+    else the estimate from the measured data
+    (:func:`~tsid_fmu.study.prepare.data_noise`), as ``study/prepare.py`` weights them.
+    """
     noise: dict[str, dict[str, float]] = {}
+    source: dict[str, dict[str, str]] = {}
+    for e in spec.experiments:
+        given = stated.get(e.name, {})
+        estimate = data_noise(e.scored(e.measured))  # the scored samples' noise
+        noise[e.name], source[e.name] = {}, {}
+        for name, s in zip(e.output_names, estimate, strict=True):
+            known = name in given
+            noise[e.name][name] = float(given[name]) if known else float(s)
+            source[e.name][name] = "study" if known else "data"
+    return noise, source
+
+
+def _fit(spec: EvaluationSpec, sims: list[Simulated], noise: Mapping) -> tuple[dict, list[str]]:
+    fit: dict[str, Any] = {}
     warnings = []
     for e, sim in zip(spec.experiments, sims, strict=True):
-        sigma = data_noise(e.scored(e.measured))  # the scored samples' noise
-        noise[e.name] = dict(zip(e.output_names, map(float, sigma), strict=True))
         if sim.outputs is None:
             fit[e.name] = {"error": sim.error}
             continue
-        fit[e.name] = e.fit_metrics(sim.outputs)
-        for name, s in zip(e.output_names, sigma, strict=True):
-            rmse = fit[e.name][name]["rmse"]
+        fit[e.name] = e.fit_metrics(sim.outputs)  # the scored samples only
+        for name in e.output_names:
+            s, rmse = noise[e.name][name], fit[e.name][name]["rmse"]
             if s > 0 and rmse > MISMATCH * s:
                 warnings.append(
                     f"{e.name} / {name}: model or solver mismatch: residual RMS {rmse:.3g} is "
-                    f"{rmse / s:.1f} times the noise in the data ({s:.3g}; more than "
+                    f"{rmse / s:.1f} times the noise ({s:.3g}; more than "
                     f"{MISMATCH:g} x): the model or its solver does not explain these data, "
                     "and the intervals assume it does"
                 )
-    return fit, noise, warnings
+    return fit, warnings
 
 
 def assess(
-    evaluator: Evaluator, spec: EvaluationSpec, space: Space, x: Mapping[str, float]
+    evaluator: Evaluator,
+    spec: EvaluationSpec,
+    space: Space,
+    x: Mapping[str, float],
+    stated: Mapping[str, Mapping[str, float]] | None = None,
 ) -> Assessment:
     """Evaluate the answer ``x``: its cost, fit, the noise, intervals and warnings.
 
-    The simulations of the fit and of the sensitivities are counted (``nfev``) but they
-    are not part of any stage.
+    ``stated`` is the sensor noise the study states per experiment and output; the
+    noise reported (and compared with the residuals) is that, else the data's estimate,
+    as the cost weights it. The simulations of the fit and of the sensitivities are
+    counted (``nfev``) but they are not part of any stage.
     """
     start = evaluator.nfev
     fun = float(evaluator.evaluate([dict(x)]).costs[0, 0])
     sims = evaluator.simulate([dict(x)], count=False)[0]
-    fit, noise, warnings = _fit(spec, sims)
-    out = Assessment(fun=fun, fit=fit, noise=noise, simulated=sims, warnings=warnings)
+    noise, source = _noise(spec, stated or {})
+    fit, warnings = _fit(spec, sims, noise)
+    out = Assessment(fun, fit, noise, source, sims, warnings=warnings)
     varied = {n: float(x[n]) for n in space.names}
     sens = sensitivities(evaluator, spec, space, varied) if math.isfinite(fun) else None
     if sens is not None:
