@@ -422,7 +422,7 @@ def _run(
     study: Study,
     out: str | Path | None,
     resume: bool,
-    evaluators: _Evaluators,
+    evaluators: StudyEvaluators,
     control: Control,
     progress: bool | ProgressCallback,
     plots: bool,
