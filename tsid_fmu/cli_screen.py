@@ -114,7 +114,12 @@ def add_screen_parser(sub: Any) -> None:
         "the MISO paper's eq. 7 from an L25; sets apart the parameters no output feels.",
     )
     p.add_argument("study", help="study file (TOML)")
-    p.add_argument("--method", choices=["morris", "sobol"], default="morris")
+    p.add_argument(
+        "--method",
+        choices=["morris", "sobol"],
+        default="morris",
+        help="Morris elementary effects (cheap, default) or Sobol indices (thorough)",
+    )
     p.add_argument(
         "--n",
         type=_whole,

@@ -187,11 +187,7 @@ def screen(
         study = Study.from_toml(study)
     method, n = _check(study, method, n)
     params = study.parameters
-    space = Space(
-        {p.name: p.levels for p in params},
-        {p.name: (p.min, p.max) for p in params},
-        study.method.leveling,
-    )
+    space = Space({p.name: p.levels for p in params}, study.bounds(), study.method.leveling)
     names = list(space.names)
     x = design(method, names, n, seed)
     show = _console() if progress is True else (progress or None)
@@ -216,18 +212,30 @@ def screen(
             failed=failed,
         )
         if contribution:
-            array, s = array_design(len(names))
-            got, extra, bad = _score(ev, space, s, layout, show)
-            out.contribution = {q: array_contribution(s, names, v) for q, v in got.items()}
-            out.array, out.nfev_contribution = array.name, extra
-            out.nfev += extra
-            out.failed += bad
+            _contribution(out, ev, space, layout, show)
     finally:
         if evaluator is None:
             ev.close()
-    out.not_felt = {q: not_felt(method, out.indices[q], out.threshold) for q in out.quantities}
+    _set_apart(out)
+    return out
+
+
+def _contribution(out: ScreeningResult, ev: Evaluator, space: Space, layout, show) -> None:
+    """Add the MISO paper's eq. (7) from an L25 over the same ranges to ``out``."""
+    names = out.parameters
+    array, s = array_design(len(names))
+    got, extra, bad = _score(ev, space, s, layout, show)
+    out.contribution = {q: array_contribution(s, names, v) for q, v in got.items()}
+    out.array, out.nfev_contribution = array.name, extra
+    out.nfev += extra
+    out.failed += bad
+
+
+def _set_apart(out: ScreeningResult) -> None:
+    """Name what each quantity does not feel, and what none of them feels, in ``out``."""
+    names = out.parameters
+    out.not_felt = {q: not_felt(out.method, out.indices[q], out.threshold) for q in out.quantities}
     out.set_apart = [m for m in names if all(m in v for v in out.not_felt.values())]
     if out.contribution:
         low = [{m for m, p in c.items() if p < out.min_percent} for c in out.contribution.values()]
         out.contribution_set_apart = [m for m in names if all(m in v for v in low)]
-    return out
