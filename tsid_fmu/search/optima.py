@@ -18,12 +18,17 @@ fit of the simpler one it nests. So:
 - **Consistent optima** (:func:`consistent`): for each nested pair, a richer candidate
   whose cost is above the simpler one's is not at its optimum: it is refined again from
   the simpler answer embedded (its cost is then at most the simpler one's); a simpler
-  candidate not yet refined from the richer answer is refined from it (the projection
-  onto it). A restart replaces a candidate's answer only where it is lower.
+  candidate above the best richer one that nests it is refined again from that richer
+  answer followed to the nesting point (:func:`follow`: the projection onto it). A
+  restart replaces a candidate's answer only where it is lower.
+- **At the nesting point** (:func:`at_nesting_point`): a richer answer whose extra
+  parameters sit where they make it the simpler structure is that structure; the
+  decision does not credit its extra parameters with a lower cost found there.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -31,12 +36,22 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.search.context import polish
+from tsid_fmu.search.refine import refine_stage
 from tsid_fmu.search.selection import Candidate
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
 
-__all__ = ["ACTIVE_STEP", "REPRODUCE", "consistent", "measure", "nesting", "warm_start"]
+__all__ = [
+    "ACTIVE_STEP",
+    "REPRODUCE",
+    "at_nesting_point",
+    "consistent",
+    "follow",
+    "measure",
+    "nesting",
+    "warm_start",
+]
 
 ACTIVE_STEP = 0.01
 """Step (in search coordinates: a fraction of the first levels' range) by which each Real
@@ -45,6 +60,9 @@ parameter is moved to see whether it changes the outputs in a structure."""
 REPRODUCE = 0.01
 """A richer structure nests a simpler one where its extra parameters reproduce the
 simpler one's fitted outputs to within this fraction of one noise variance in total."""
+
+PATH_STEPS = 4
+"""Steps of :func:`follow` from a richer answer to the simpler structure it nests."""
 
 MAX_ROUNDS = 3
 """Most rounds of :func:`consistent` (each round re-checks the pairs that changed)."""
@@ -208,6 +226,65 @@ def _exps(study: Study) -> list[str]:
     return [e.name for e in study.identify_experiments()]
 
 
+def follow(
+    study: Study,
+    evs: Any,
+    x: Mapping[str, float],
+    embedded: Mapping[str, float],
+    shared: Sequence[str],
+    progress: Any = None,
+) -> tuple[dict[str, float], int]:
+    """Follow a richer answer ``x`` to the simpler structure it nests, in steps.
+
+    The richer structure's other parameters move from ``x`` to ``embedded`` (the values
+    that make it the simpler one) in :data:`PATH_STEPS` steps; at each, the ``shared``
+    parameters are refined by least squares with those held. Dropping the extra
+    parameters at once can land far from the simpler optimum (measured on the SISO
+    friction laws: viscous friction and spring damping trade off, and law 1 refined from
+    law 3's answer stopped at 3e5 times its optimum's cost); a path keeps each step in
+    the valley. Returns the end point (every parameter) and the simulations it cost.
+    """
+    names = list(study.parameter_names)
+    rest = [n for n in names if n not in shared]
+    levels, bounds = study.first_levels(), study.bounds()
+    space = Space({n: levels[n] for n in shared}, {n: bounds[n] for n in shared},
+                  study.method.leveling)  # fmt: skip
+    limit = 10 * (len(shared) + 1)
+    method = dataclasses.replace(study.method, refine_max_nfev=limit)
+    exps, out, nfev = _exps(study), dict(x), 0
+    for t in np.linspace(0.0, 1.0, PATH_STEPS + 1)[1:]:
+        fixed = {n: float((1 - t) * x[n] + t * embedded[n]) for n in rest}
+        ev = evs.get(list(shared), exps, fixed)
+        n0 = ev.nfev
+        start = {n: out[n] for n in shared}
+        scored = ev.evaluate([start])
+        stage = refine_stage(
+            f"path to the nesting point, step {t:.2f}", space, start,
+            float(scored.costs[0, 0]), ev, method, fixed=fixed, progress=progress,
+            start_residuals=scored.residuals[0] if scored.residuals else None,
+        )  # fmt: skip
+        out.update({n: float(stage.x[n]) for n in shared}, **fixed)
+        nfev += ev.nfev - n0
+    return out, nfev
+
+
+def at_nesting_point(study: Study, small: Candidate, big: Candidate, embedded: Mapping) -> bool:
+    """Whether ``big``'s extra parameters sit where they make it ``small``'s structure.
+
+    Within :data:`ACTIVE_STEP` (search coordinates) of the embedding: the richer answer
+    is then the simpler structure, and a lower cost there comes from the model's
+    non-smoothness at that point (event timings), not from what the extra parameters add.
+    """
+    space = _space(study)
+    extra = [n for n in big.active if n not in small.active]
+    gaps = [
+        abs(space.coordinate(j, big.x[n]) - space.coordinate(j, embedded[n]))
+        for j, n in enumerate(space.names)
+        if n in extra
+    ]
+    return bool(gaps) and max(gaps) < ACTIVE_STEP
+
+
 def consistent(
     cands: list[Candidate],
     studies: Sequence[Study],
@@ -220,11 +297,12 @@ def consistent(
     its answer changed (it keeps the lower one). For each nested pair ``(s, r)``:
 
     - ``r`` (richer) with a cost above ``s``'s is restarted from ``s``'s answer embedded;
-    - ``s`` (simpler) is restarted from ``r``'s answer (its shared parameters: the
-      projection onto ``s``), unless it already started from it.
+    - ``s`` (simpler), above the lowest-cost richer candidate that nests it, is
+      restarted from that answer followed to the nesting point (:func:`follow`), once.
     """
     cache: dict = {}
     pairs = nesting(cands, studies, evs, cache)
+    followed: set[tuple[int, int]] = set()
     for _ in range(MAX_ROUNDS):
         changed = False
         for (s, r), embedded in sorted(pairs.items()):
@@ -232,15 +310,16 @@ def consistent(
             if big.cost > small.cost:
                 why = f"cost above {small.label}, which it nests: from its answer embedded"
                 changed |= restart(r, embedded, why)
-            tried = small.extra.setdefault("tried", [])
-            if not any(_same(t, big.x, small.active) for t in tried):
-                why = f"from the answer of {big.label}, which nests it (projected)"
-                changed |= restart(s, dict(big.x), why)
+        for s in sorted({s for s, _ in pairs}):
+            r = min((r for a, r in pairs if a == s), key=lambda r: cands[r].cost)
+            if (s, r) in followed or not cands[r].cost < cands[s].cost:
+                continue
+            followed.add((s, r))
+            start, nfev = follow(studies[r], evs[r], cands[r].x, pairs[(s, r)], cands[s].active)
+            cands[s].nfev += nfev
+            why = f"from the answer of {cands[r].label}, which nests it, followed to it"
+            changed |= restart(s, start, why)
         if not changed:
             break
         pairs = nesting(cands, studies, evs, cache)
     return pairs
-
-
-def _same(a: Mapping[str, float], b: Mapping[str, float], names: Sequence[str]) -> bool:
-    return all(math.isclose(a[n], b[n], rel_tol=1e-9, abs_tol=1e-12) for n in names)

@@ -32,7 +32,7 @@ import numpy as np
 from tsid_fmu.search.adaptive import answer_stage
 from tsid_fmu.search.context import Context, polish
 from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.optima import consistent, measure, update, warm_start
+from tsid_fmu.search.optima import at_nesting_point, consistent, measure, update, warm_start
 from tsid_fmu.search.phases import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate, decide
@@ -220,6 +220,7 @@ def _sub_study(
 
 
 def _measure(study: Study, evs: Evaluators, x: Mapping[str, float]) -> dict[str, Any]:
+    """Measure ``x`` with a structure's evaluators (steps in ``study``'s coordinates)."""
     names = study.parameter_names
     exps = [e.name for e in study.identify_experiments()]
     checks = [e.name for e in study.experiments if e.role == "validate"]
@@ -259,7 +260,7 @@ def _identify_candidate(
         store.write_stage("refinement", stage)
         stages, tried = [stage], [start]
     answer = answer_stage(stages)
-    found = _measure(sub, evs, {n: float(answer.x[n]) for n in names})
+    found = _measure(ctx.study, evs, {n: float(answer.x[n]) for n in names})
     cand = Candidate(label="", values=dict(values), x={}, cost=math.inf, chi2=math.inf, n=0,
                      k=0, active=[], nfev=sum(s.nfev for s in stages), origin=origin,
                      extra={"folder": f"structure_{i + 1:02d}", "tried": tried})  # fmt: skip
@@ -340,12 +341,15 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
             return False
         ctx.store.write_stage(f"{cand.extra['folder']}/restart_{n_restart:02d}", stage)
         all_stages[i].append(stage)
-        update(cand, _measure(studies[i], evs[i], stage.x))
+        update(cand, _measure(ctx.study, evs[i], stage.x))
         cand.origin += f"; restarted {why}"
         return True
 
     nested = consistent(cands, studies, evs, restart)
-    chosen, tied = decide(cands, set(nested))
+    degenerate = {
+        (s, r) for (s, r), e in nested.items() if at_nesting_point(ctx.study, cands[s], cands[r], e)
+    }
+    chosen, tied = decide(cands, set(nested), degenerate)
     stages = [outcome.stage]
     for i, (cand, st) in enumerate(zip(cands, all_stages, strict=True)):
         if i != chosen:
