@@ -61,6 +61,10 @@ REPRODUCE = 0.01
 """A richer structure nests a simpler one where its extra parameters reproduce the
 simpler one's fitted outputs to within this fraction of one noise variance in total."""
 
+NESTING_POINT = 0.01
+"""A richer answer's extra parameters within this fraction of their first levels' range of
+the values that make it a simpler structure are at the nesting point."""
+
 PATH_STEPS = 4
 """Steps of :func:`follow` from a richer answer to the simpler structure it nests."""
 
@@ -271,18 +275,17 @@ def follow(
 def at_nesting_point(study: Study, small: Candidate, big: Candidate, embedded: Mapping) -> bool:
     """Whether ``big``'s extra parameters sit where they make it ``small``'s structure.
 
-    Within :data:`ACTIVE_STEP` (search coordinates) of the embedding: the richer answer
-    is then the simpler structure, and a lower cost there comes from the model's
-    non-smoothness at that point (event timings), not from what the extra parameters add.
+    Each within :data:`NESTING_POINT` of its first levels' range (linear: a nesting value
+    may be 0) of the embedding: the richer answer is then the simpler structure, and a
+    lower cost there comes from the model's non-smoothness at that point (event timings),
+    not from what the extra parameters add.
     """
-    space = _space(study)
+    levels = study.first_levels()
     extra = [n for n in big.active if n not in small.active]
     gaps = [
-        abs(space.coordinate(j, big.x[n]) - space.coordinate(j, embedded[n]))
-        for j, n in enumerate(space.names)
-        if n in extra
+        abs(big.x[n] - embedded[n]) / max(max(levels[n]) - min(levels[n]), 1e-300) for n in extra
     ]
-    return bool(gaps) and max(gaps) < ACTIVE_STEP
+    return bool(gaps) and max(gaps) < NESTING_POINT
 
 
 def consistent(
@@ -303,6 +306,7 @@ def consistent(
     cache: dict = {}
     pairs = nesting(cands, studies, evs, cache)
     followed: set[tuple[int, int]] = set()
+    embedded_from: set[tuple[int, int]] = set()
     for _ in range(MAX_ROUNDS):
         changed = False
         for (s, r), embedded in sorted(pairs.items()):
@@ -310,6 +314,13 @@ def consistent(
             if big.cost > small.cost:
                 why = f"cost above {small.label}, which it nests: from its answer embedded"
                 changed |= restart(r, embedded, why)
+        for r in sorted({r for _, r in pairs}):
+            s = min((s for s, b in pairs if b == r), key=lambda s: cands[s].cost)
+            if (s, r) in embedded_from or cands[r].cost > cands[s].cost:
+                continue  # (a richer one above was restarted just above)
+            embedded_from.add((s, r))
+            why = f"from the answer of {cands[s].label}, which it nests, embedded"
+            changed |= restart(r, pairs[(s, r)], why)
         for s in sorted({s for s, _ in pairs}):
             r = min((r for a, r in pairs if a == s), key=lambda r: cands[r].cost)
             if (s, r) in followed or not cands[r].cost < cands[s].cost:

@@ -201,12 +201,15 @@ def decide(
 
     for c in cands:
         c.aic, c.bic = information(c.chi2, c.n, c.k)
+        c.lrt_p, c.lrt_against = math.nan, ""  # a decision made again starts afresh
+    barred = {r for _, r in degenerate}
     for s, r in nested:
+        if r in barred and (s, r) not in degenerate:
+            continue  # a barred answer is a simpler structure's point: no test against it
         p = lrt(s, r)
         for c, other in ((cands[s], cands[r]), (cands[r], cands[s])):
             if math.isnan(c.lrt_p) or p < c.lrt_p:
                 c.lrt_p, c.lrt_against = p, other.label
-    barred = {r for _, r in degenerate}
     pool = [i for i in range(len(cands)) if i not in barred] or list(range(len(cands)))
     pick = min(pool, key=lambda i: (cands[i].bic, cands[i].k))
     others = sorted(c.bic for i, c in enumerate(cands) if i != pick and i not in barred)
@@ -218,13 +221,14 @@ def decide(
         if step is None:
             break
         pick, why = step
-    for s, r in sorted(nested - degenerate):
+    for s, r in sorted(nested, key=lambda pair: (pair in degenerate, pair)):
         p = lrt(s, r)
         if s == pick and not p < LRT_ALPHA and "nested" not in why:
             extra = ", ".join(sorted(set(cands[r].active) - set(cands[s].active)))
-            why += (
-                f"; nested in {cands[r].label}, whose extra parameter(s) {extra} the data "
-                f"do not support (LRT p = {p:.3g} >= {LRT_ALPHA:g})"
+            why += f"; nested in {cands[r].label}, whose extra parameter(s) {extra} " + (
+                f"stay where they make it {cands[s].label}"
+                if (s, r) in degenerate
+                else f"the data do not support (LRT p = {p:.3g} >= {LRT_ALPHA:g})"
             )
     decided = {a if b == pick else b for a, b in nested if pick in (a, b) and lrt(a, b) < LRT_ALPHA}
     tied = [
