@@ -142,13 +142,19 @@ def _lrt(small: Candidate, big: Candidate) -> float:
 
 
 def _nested_step(
-    pick: int, cands: Sequence[Candidate], nested: set[tuple[int, int]]
+    pick: int,
+    cands: Sequence[Candidate],
+    nested: set[tuple[int, int]],
+    degenerate: set[tuple[int, int]],
 ) -> tuple[int, str] | None:
     """One application of the LRT rule to the current pick; None when it stands."""
+    barred = {r for _, r in degenerate}
     for s, r in sorted(nested):
         small, big = cands[s], cands[r]
-        p = _lrt(small, big)
+        p = 1.0 if (s, r) in degenerate else _lrt(small, big)
         extra = ", ".join(sorted(set(big.active) - set(small.active)))
+        if r in barred and pick != r:
+            continue  # never chosen: it is a simpler structure's point
         if pick == r and not p < LRT_ALPHA:
             return s, (
                 f"nested in {big.label}, whose extra parameter(s) {extra} the data do not "
@@ -163,7 +169,9 @@ def _nested_step(
 
 
 def decide(
-    cands: Sequence[Candidate], nested: set[tuple[int, int]] | None = None
+    cands: Sequence[Candidate],
+    nested: set[tuple[int, int]] | None = None,
+    degenerate: set[tuple[int, int]] | None = None,
 ) -> tuple[int, list[int]]:
     """Choose a structure; fill each candidate's AIC, BIC, LRT and ``why``.
 
@@ -173,6 +181,10 @@ def decide(
         The candidates (``chi2``, ``n``, ``k`` filled).
     nested : set of (int, int)
         Pairs ``(s, r)``: structure ``s`` is nested in the richer ``r``.
+    degenerate : set of (int, int)
+        Nested pairs whose richer answer sits at the nesting point (its extra
+        parameters where they make it ``s``): the richer one does not win there, whatever
+        its cost (a model not smooth at that point can fit a little better there).
 
     Returns
     -------
@@ -182,37 +194,43 @@ def decide(
         The structures indistinguishable from it (BIC within :data:`BIC_CLOSE`, costs
         within noise).
     """
-    nested = set(nested or ())
+    nested, degenerate = set(nested or ()), set(degenerate or ()) & set(nested or ())
+
+    def lrt(s: int, r: int) -> float:
+        return 1.0 if (s, r) in degenerate else _lrt(cands[s], cands[r])
+
     for c in cands:
         c.aic, c.bic = information(c.chi2, c.n, c.k)
+        c.lrt_p, c.lrt_against = math.nan, ""  # a decision made again starts afresh
+    barred = {r for _, r in degenerate}
     for s, r in nested:
-        p = _lrt(cands[s], cands[r])
+        if r in barred and (s, r) not in degenerate:
+            continue  # a barred answer is a simpler structure's point: no test against it
+        p = lrt(s, r)
         for c, other in ((cands[s], cands[r]), (cands[r], cands[s])):
             if math.isnan(c.lrt_p) or p < c.lrt_p:
                 c.lrt_p, c.lrt_against = p, other.label
-    pick = min(range(len(cands)), key=lambda i: (cands[i].bic, cands[i].k))
-    others = sorted(c.bic for i, c in enumerate(cands) if i != pick)
+    pool = [i for i in range(len(cands)) if i not in barred] or list(range(len(cands)))
+    pick = min(pool, key=lambda i: (cands[i].bic, cands[i].k))
+    others = sorted(c.bic for i, c in enumerate(cands) if i != pick and i not in barred)
     why = "the lowest BIC" + (
         f" ({others[0] - cands[pick].bic:.3g} below the next)" if others else ""
     )
     for _ in range(len(cands) * len(cands) + 1):
-        step = _nested_step(pick, cands, nested)
+        step = _nested_step(pick, cands, nested, degenerate)
         if step is None:
             break
         pick, why = step
-    for s, r in sorted(nested):
-        p = _lrt(cands[s], cands[r])
+    for s, r in sorted(nested, key=lambda pair: (pair in degenerate, pair)):
+        p = lrt(s, r)
         if s == pick and not p < LRT_ALPHA and "nested" not in why:
             extra = ", ".join(sorted(set(cands[r].active) - set(cands[s].active)))
-            why += (
-                f"; nested in {cands[r].label}, whose extra parameter(s) {extra} the data "
-                f"do not support (LRT p = {p:.3g} >= {LRT_ALPHA:g})"
+            why += f"; nested in {cands[r].label}, whose extra parameter(s) {extra} " + (
+                f"stay where they make it {cands[s].label}"
+                if (s, r) in degenerate
+                else f"the data do not support (LRT p = {p:.3g} >= {LRT_ALPHA:g})"
             )
-    decided = {
-        a if b == pick else b
-        for a, b in nested
-        if pick in (a, b) and _lrt(cands[a], cands[b]) < LRT_ALPHA
-    }
+    decided = {a if b == pick else b for a, b in nested if pick in (a, b) and lrt(a, b) < LRT_ALPHA}
     tied = [
         i for i, c in enumerate(cands) if i != pick and i not in decided and _close(c, cands[pick])
     ]
@@ -234,6 +252,13 @@ def decide(
             )
         elif i in tied:
             c.why = f"indistinguishable from {cands[pick].label}: the data do not decide"
+        elif i in barred:
+            s = min(a for a, b in degenerate if b == i)
+            c.why = (
+                f"its extra parameter(s) stay where they make it {cands[s].label} (BIC "
+                f"{c.bic - cands[pick].bic:+.4g} against {cands[pick].label}): its lower "
+                "cost there is not theirs"
+            )
         else:
             c.why = f"BIC {c.bic - cands[pick].bic:+.4g} against {cands[pick].label}"
     return pick, tied

@@ -30,8 +30,9 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.search.adaptive import answer_stage
-from tsid_fmu.search.context import Context
+from tsid_fmu.search.context import Context, polish
 from tsid_fmu.search.frame import Frame
+from tsid_fmu.search.optima import at_nesting_point, consistent, measure, update, warm_start
 from tsid_fmu.search.phases import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate, decide
@@ -46,13 +47,9 @@ __all__ = ["MAX_CANDIDATES", "StructureResult", "run_structure"]
 MAX_CANDIDATES = 8
 """Most candidate structures refined at the end."""
 
-ACTIVE_STEP = 0.01
-"""Step (in search coordinates: a fraction of the first levels' range) by which each Real
-parameter is moved to see whether it changes the outputs in a structure."""
-
-REPRODUCE = 0.01
-"""A richer structure nests a simpler one where its extra parameters reproduce the
-simpler one's fitted outputs to within this fraction of one noise variance in total."""
+MAX_ALL = 6
+"""Where the discrete factors' combinations are at most this many, every one of them is a
+candidate (a fixed factor's other levels too, not only its runner-up)."""
 
 
 @dataclass
@@ -144,7 +141,13 @@ def _label(factors: list[DiscreteFactor], values: Mapping[str, float]) -> str:
 def _candidates(
     factors: list[DiscreteFactor], points: list[tuple[float, dict[str, float]]]
 ) -> list[tuple[dict[str, float], str]]:
-    """Return the structures to refine: open combinations, then each fixed factor's runner-up."""
+    """Return the structures to refine, the arrays' choice first.
+
+    Where the factors' combinations are at most :data:`MAX_ALL`, every one of them (a
+    fixed factor's every level: a nested simpler structure scores worse in the arrays,
+    so its level is rarely the runner-up); otherwise the open combinations and each
+    fixed factor's runner-up.
+    """
     fixed = {f.name: f.values[f.fixed] for f in factors if f.fixed is not None}
     open_ = [f for f in factors if f.fixed is None]
     combos = [
@@ -155,6 +158,17 @@ def _candidates(
     out = [(v, "the arrays' choice" if not open_ else "open in the arrays") for v in combos]
     out = out[:MAX_CANDIDATES]
     best = out[0][0]
+    if math.prod(len(f.values) for f in factors) <= MAX_ALL:
+        rest = [
+            dict(zip([f.name for f in factors], vs, strict=True))
+            for vs in itertools.product(*(f.values for f in factors))
+        ]
+        rest = [v for v in rest if v not in [w for w, _ in out]]
+        rest.sort(key=lambda v: _best_point(points, v)[0])
+        for v in rest:
+            moved = [f.name for f in factors if f.fixed is not None and v[f.name] != best[f.name]]
+            out.append((v, f"another level of {', '.join(moved)} (every level is compared)"))
+        return out
     for f in factors:
         if f.fixed is not None and f.runner_up is not None and len(out) < MAX_CANDIDATES:
             alt = {**best, f.name: f.values[f.runner_up]}
@@ -189,48 +203,34 @@ def _centred(
     return out
 
 
-def _active(ev: Any, study: Study, x: Mapping[str, float], r0: np.ndarray) -> list[str]:
-    """Return the Real parameters that change the outputs at ``x`` (the structure's free ones)."""
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    sets = []
-    for j, n in enumerate(space.names):
-        s = space.coordinate(j, x[n])
-        v = space.value(j, s + ACTIVE_STEP)
-        v = v if v != x[n] else space.value(j, s - ACTIVE_STEP)
-        sets.append({**x, n: v})
-    ev_out = ev.evaluate(sets)
-    tol = 1e-9 * max(float(np.linalg.norm(r0)), 1e-300)
-    out = []
-    for n, r in zip(space.names, ev_out.residuals or [None] * len(sets), strict=True):
-        if r is None or float(np.linalg.norm(r - r0)) > tol:
-            out.append(n)
-    return out
-
-
-def _reproduces(
-    ev: Any, study: Study, small: Candidate, big: Candidate, r_small: np.ndarray
-) -> bool:
-    """Whether ``big`` reproduces ``small``'s fit with its extra parameters (nesting)."""
-    from scipy.optimize import least_squares
-
-    extra = [n for n in big.active if n not in small.active]
-    base = {**big.x, **{n: small.x[n] for n in small.active}}
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    idx = [space.names.index(n) for n in extra]
-    bad = np.full(r_small.shape, 1e6)
-
-    def diff(s: np.ndarray) -> np.ndarray:
-        x = {**base, **{n: space.value(j, float(v)) for n, j, v in zip(extra, idx, s, strict=True)}}
-        r = ev.evaluate([x]).residuals
-        return bad if not r or r[0] is None else r[0] - r_small
-
-    start = np.array([space.coordinate(j, big.x[n]) for n, j in zip(extra, idx, strict=True)])
-    lo = np.array([space.s_lower[j] for j in idx])
-    hi = np.array([space.s_upper[j] for j in idx])
-    fit = least_squares(
-        diff, np.clip(start, lo, hi), bounds=(lo, hi), max_nfev=20 * (len(extra) + 1)
+def _sub_study(
+    study: Study,
+    values: Mapping[str, float],
+    levels: Mapping[str, list[float]],
+    x: Mapping[str, float] | None,
+) -> Study:
+    """Return the study of one structure: its values fixed, the Real levels centred on ``x``."""
+    return dataclasses.replace(
+        study,
+        parameters=_centred(study, levels, x),
+        choices=[],
+        start_values={**study.start_values, **values},
+        source=None,
     )
-    return 2 * float(fit.cost) <= REPRODUCE * small.chi2 / max(small.n, 1)
+
+
+def _measure(study: Study, evs: Evaluators, x: Mapping[str, float]) -> dict[str, Any]:
+    """Measure ``x`` with a structure's evaluators (steps in ``study``'s coordinates)."""
+    names = study.parameter_names
+    exps = [e.name for e in study.identify_experiments()]
+    checks = [e.name for e in study.experiments if e.role == "validate"]
+
+    def validate(p: dict[str, float]) -> float | None:
+        if not checks:
+            return None
+        return float(evs.get(names, checks, {}).evaluate([p]).costs[0, 0])
+
+    return measure(evs.get(names, exps, {}), study, x, validate)
 
 
 def _identify_candidate(
@@ -238,71 +238,47 @@ def _identify_candidate(
     i: int,
     values: dict[str, float],
     origin: str,
-    start: tuple[float, dict[str, float] | None],
-    levels: Mapping[str, list[float]],
-    make: Callable[[Study], Evaluators],
-) -> tuple[Candidate, list[StageResult], Study, Evaluators]:
-    """Run the existing stages on one structure; measure its fit, k and validation cost."""
+    sub: Study,
+    evs: Evaluators,
+    warm: list[tuple[dict[str, float], str]] | None,
+) -> tuple[Candidate, list[StageResult]]:
+    """Identify one structure and measure its fit, k and validation cost.
+
+    Without ``warm``: the existing stages (the structure's study of its own). With
+    ``warm`` (start points): the refinement from the best of them.
+    """
     from tsid_fmu.search.pipeline import run_stages
 
-    study = ctx.study
-    sub = dataclasses.replace(
-        study,
-        parameters=_centred(study, levels, start[1]),
-        choices=[],
-        start_values={**study.start_values, **values},
-        source=None,
-    )
-    evs = make(sub)
     store = _Prefixed(ctx.store, f"structure_{i + 1:02d}")
-    stages = run_stages(sub, evs, store, ctx.progress, ctx.control)
+    names = ctx.study.parameter_names
+    if warm is None:
+        stages = run_stages(sub, evs, store, ctx.progress, ctx.control)
+        tried = []
+    else:
+        exps = [e.name for e in sub.identify_experiments()]
+        stage, start, _ = warm_start(evs.get(names, exps, {}), sub, warm, ctx.progress)
+        store.write_stage("refinement", stage)
+        stages, tried = [stage], [start]
     answer = answer_stage(stages)
+    found = _measure(ctx.study, evs, {n: float(answer.x[n]) for n in names})
+    cand = Candidate(label="", values=dict(values), x={}, cost=math.inf, chi2=math.inf, n=0,
+                     k=0, active=[], nfev=sum(s.nfev for s in stages), origin=origin,
+                     extra={"folder": f"structure_{i + 1:02d}", "tried": tried})  # fmt: skip
+    update(cand, found)
+    return cand, stages
+
+
+def _warm_starts(
+    study: Study, cands: list[Candidate], best: dict[str, float] | None
+) -> list[tuple[dict[str, float], str]]:
+    """Return a later candidate's start points: earlier answers, arrays' best, centre."""
     names = study.parameter_names
-    x = {n: float(answer.x[n]) for n in names}
-    exps = [e.name for e in study.identify_experiments()]
-    ev = evs.get(names, exps, {})
-    n0 = ev.nfev
-    scored = ev.evaluate([x])
-    r0 = scored.residuals[0] if scored.residuals else None
-    r0 = np.zeros(0) if r0 is None else np.asarray(r0)
-    active = _active(ev, study, x, r0) if r0.size else list(names)
-    checks = [e.name for e in study.experiments if e.role == "validate"]
-    vcost = None
-    if checks:
-        vcost = float(evs.get(names, checks, {}).evaluate([x]).costs[0, 0])
-    cand = Candidate(
-        label="",
-        values=dict(values),
-        x=x,
-        cost=float(scored.costs[0, 0]),
-        chi2=float(r0 @ r0) if r0.size else math.inf,
-        n=int(r0.size),
-        k=len(active),
-        active=active,
-        nfev=sum(s.nfev for s in stages) + ev.nfev - n0,
-        origin=origin,
-        validation=vcost,
-        extra={"residuals": r0, "folder": f"structure_{i + 1:02d}"},
-    )
-    return cand, stages, sub, evs
-
-
-def _nesting(
-    cands: list[Candidate], studies: list[Study], evs: list[Evaluators]
-) -> set[tuple[int, int]]:
-    """Pairs (s, r): r's free parameters include s's and r reproduces s's fit."""
-    pairs = set()
-    for s, r in itertools.permutations(range(len(cands)), 2):
-        small, big = cands[s], cands[r]
-        if not (set(small.active) < set(big.active)) or not small.n or not big.n:
-            continue
-        exps = [e.name for e in studies[r].identify_experiments()]
-        ev = evs[r].get(studies[r].parameter_names, exps, {})
-        n0 = ev.nfev
-        if _reproduces(ev, studies[r], small, big, small.extra["residuals"]):
-            pairs.add((s, r))
-        big.nfev += ev.nfev - n0
-    return pairs
+    out = [(dict(c.x), f"the answer of {c.label}") for c in sorted(cands, key=lambda c: c.cost)]
+    if best is not None:
+        out.append(({n: best[n] for n in names}, "the arrays' best point in it"))
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    out.append((space.to_x(space.clip(np.zeros(space.dim))), "the centre of the first levels"))
+    return out
 
 
 def _structure_stage(ctx: Context, factors: list[DiscreteFactor], make: Callable) -> Any:
@@ -339,10 +315,12 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         if ctx.progress:
             label = _label(factors, values)
             ctx.progress("stage", {"name": f"structure {i + 1}", "message": f"structure {label}"})
-        best = _best_point(outcome.points, values)
-        cand, stages, sub, ev = _identify_candidate(
-            ctx, i, values, origin, best, outcome.levels, make
-        )
+        best = _best_point(outcome.points, values)[1]
+        sub = _sub_study(ctx.study, values, outcome.levels, best)
+        ev = make(sub)
+        # the arrays' choice: a study of its own; the others from warm starts
+        warm = _warm_starts(ctx.study, cands, best) if cands else None
+        cand, stages = _identify_candidate(ctx, i, values, origin, sub, ev, warm)
         cand.label = _label(factors, values)
         cands.append(cand)
         all_stages.append(stages)
@@ -350,8 +328,28 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         evs.append(ev)
         if stages[-1].status == 2:
             return StructureResult([outcome.stage, *stages], sub, i, [], cands, factors, ev, True)
-    nested = _nesting(cands, studies, evs)
-    chosen, tied = decide(cands, nested)
+
+    def restart(i: int, start: dict[str, float], why: str) -> bool:
+        cand, names = cands[i], studies[i].parameter_names
+        exps = [e.name for e in studies[i].identify_experiments()]
+        ev = evs[i].get(names, exps, {})
+        n_restart = sum(1 for s in all_stages[i] if s.name.startswith("restart")) + 1
+        stage = polish(f"restart {n_restart}: {why}", studies[i], start, ev, ctx.progress)
+        cand.extra.setdefault("tried", []).append(dict(start))
+        cand.nfev += stage.nfev
+        if not stage.cost < cand.cost:
+            return False
+        ctx.store.write_stage(f"{cand.extra['folder']}/restart_{n_restart:02d}", stage)
+        all_stages[i].append(stage)
+        update(cand, _measure(ctx.study, evs[i], stage.x))
+        cand.origin += f"; restarted {why}"
+        return True
+
+    nested = consistent(cands, studies, evs, restart)
+    degenerate = {
+        (s, r) for (s, r), e in nested.items() if at_nesting_point(ctx.study, cands[s], cands[r], e)
+    }
+    chosen, tied = decide(cands, set(nested), degenerate)
     stages = [outcome.stage]
     for i, (cand, st) in enumerate(zip(cands, all_stages, strict=True)):
         if i != chosen:

@@ -1,0 +1,336 @@
+"""Each candidate structure at its own optimum: measured, warm-started, and kept honest.
+
+A comparison of structures by AIC, BIC or the likelihood-ratio test compares optima: a
+candidate stopped in a local minimum makes the choice wrong. Measured on the SISO
+friction laws (``benchmarks/structure.py``), a simpler law refined from the mixed
+arrays' best point in it stopped far above its optimum, and a richer law below the
+fit of the simpler one it nests. So:
+
+- **Measure** (:func:`measure`): a candidate's cost, its noise-weighted residuals, the
+  Real parameters that change its outputs (``k``) and its validation cost.
+- **Warm starts** (:func:`warm_start`): a candidate after the first is refined from the
+  best of its start points: the answers of the candidates refined before it (their
+  shared parameters; for a simpler nested structure the richer fit projected onto it),
+  the best point the arrays saw in it, and the centre of the first levels.
+- **Nesting** (:func:`nesting`): structure ``s`` is nested in ``r`` where ``r``'s free
+  parameters include ``s``'s and ``r``'s extra parameters reproduce ``s``'s fit; the
+  fit that reproduces it is ``s``'s answer **embedded** in ``r``.
+- **Consistent optima** (:func:`consistent`): for each nested pair, a richer candidate
+  whose cost is above the simpler one's is not at its optimum: it is refined again from
+  the simpler answer embedded (its cost is then at most the simpler one's); a simpler
+  candidate above the best richer one that nests it is refined again from that richer
+  answer followed to the nesting point (:func:`follow`: the projection onto it). A
+  restart replaces a candidate's answer only where it is lower.
+- **At the nesting point** (:func:`at_nesting_point`): a richer answer whose extra
+  parameters sit where they make it the simpler structure is that structure; the
+  decision does not credit its extra parameters with a lower cost found there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.search.context import polish
+from tsid_fmu.search.refine import refine_stage
+from tsid_fmu.search.selection import Candidate
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.study.definition import Study
+
+__all__ = [
+    "ACTIVE_STEP",
+    "REPRODUCE",
+    "at_nesting_point",
+    "consistent",
+    "follow",
+    "measure",
+    "nesting",
+    "warm_start",
+]
+
+ACTIVE_STEP = 0.01
+"""Step (in search coordinates: a fraction of the first levels' range) by which each Real
+parameter is moved to see whether it changes the outputs in a structure."""
+
+REPRODUCE = 0.01
+"""A richer structure nests a simpler one where its extra parameters reproduce the
+simpler one's fitted outputs to within this fraction of one noise variance in total."""
+
+NESTING_POINT = 0.01
+"""A richer answer's extra parameters within this fraction of their first levels' range of
+the values that make it a simpler structure are at the nesting point."""
+
+PATH_STEPS = 4
+"""Steps of :func:`follow` from a richer answer to the simpler structure it nests."""
+
+MAX_ROUNDS = 3
+"""Most rounds of :func:`consistent` (each round re-checks the pairs that changed)."""
+
+
+def _space(study: Study) -> Space:
+    return Space(study.first_levels(), study.bounds(), study.method.leveling)
+
+
+def _active(ev: Any, study: Study, x: Mapping[str, float], r0: np.ndarray) -> list[str]:
+    """Return the Real parameters that change the outputs at ``x`` (the structure's free ones)."""
+    space = _space(study)
+    sets = []
+    for j, n in enumerate(space.names):
+        s = space.coordinate(j, x[n])
+        v = space.value(j, s + ACTIVE_STEP)
+        v = v if v != x[n] else space.value(j, s - ACTIVE_STEP)
+        sets.append({**x, n: v})
+    ev_out = ev.evaluate(sets)
+    tol = 1e-9 * max(float(np.linalg.norm(r0)), 1e-300)
+    out = []
+    for n, r in zip(space.names, ev_out.residuals or [None] * len(sets), strict=True):
+        if r is None or float(np.linalg.norm(r - r0)) > tol:
+            out.append(n)
+    return out
+
+
+def measure(
+    ev: Any,
+    study: Study,
+    x: Mapping[str, float],
+    validate: Callable[[dict[str, float]], float | None] | None = None,
+) -> dict[str, Any]:
+    """Score ``x`` in one structure: cost, chi2, n, free parameters, validation cost.
+
+    ``ev`` is the structure's evaluator of every Real parameter (its residuals are the
+    noise-weighted ones); ``validate(x)`` its validation cost, where it has one.
+    Returns the :class:`Candidate` fields they fill, and ``nfev`` (simulations spent).
+    """
+    x = {n: float(x[n]) for n in study.parameter_names}
+    n0 = ev.nfev
+    scored = ev.evaluate([x])
+    r0 = scored.residuals[0] if scored.residuals else None
+    r0 = np.zeros(0) if r0 is None else np.asarray(r0)
+    active = _active(ev, study, x, r0) if r0.size else list(study.parameter_names)
+    out = {
+        "x": x,
+        "cost": float(scored.costs[0, 0]),
+        "chi2": float(r0 @ r0) if r0.size else math.inf,
+        "n": int(r0.size),
+        "k": len(active),
+        "active": active,
+        "validation": validate(x) if validate is not None else None,
+        "residuals": r0,
+    }
+    out["nfev"] = ev.nfev - n0
+    return out
+
+
+def update(cand: Candidate, measured: Mapping[str, Any]) -> None:
+    """Put a measurement into a candidate (its simulations are added, not replaced)."""
+    for key in ("x", "cost", "chi2", "n", "k", "active", "validation"):
+        setattr(cand, key, measured[key])
+    cand.extra["residuals"] = measured["residuals"]
+    cand.nfev += measured["nfev"]
+
+
+def warm_start(
+    ev: Any,
+    study: Study,
+    starts: Sequence[tuple[Mapping[str, float], str]],
+    progress: Any = None,
+) -> tuple[StageResult, dict[str, float], str]:
+    """Refine a structure from the best of ``starts`` (each scored first).
+
+    Returns the refinement (its ``nfev`` counts the scoring of the starts too), the
+    start it began from, and where that came from.
+    """
+    names = study.parameter_names
+    bounds = study.bounds()
+    pts: list[tuple[dict[str, float], str]] = []
+    for x, source in starts:
+        p = {n: min(max(float(x[n]), bounds[n][0]), bounds[n][1]) for n in names}
+        if all(math.isfinite(v) for v in p.values()) and p not in [q for q, _ in pts]:
+            pts.append((p, source))
+    n0 = ev.nfev
+    costs = ev.evaluate([p for p, _ in pts]).costs[:, 0]
+    finite = [i for i in range(len(pts)) if math.isfinite(costs[i])]
+    start, source = pts[min(finite, key=lambda i: costs[i]) if finite else 0]
+    stage = polish(f"refinement from {source}", study, start, ev, progress)
+    stage.nfev = ev.nfev - n0
+    stage.extra["start_from"] = source
+    return stage, start, source
+
+
+def _reproduce(
+    ev: Any, study: Study, small: Candidate, big: Candidate
+) -> tuple[bool, dict[str, float]]:
+    """Whether ``big`` reproduces ``small``'s fit with its extra parameters; the embedding."""
+    from scipy.optimize import least_squares
+
+    r_small = small.extra["residuals"]
+    extra = [n for n in big.active if n not in small.active]
+    base = {**big.x, **{n: small.x[n] for n in small.active}}
+    space = _space(study)
+    idx = [space.names.index(n) for n in extra]
+    bad = np.full(r_small.shape, 1e6)
+
+    def at(s: np.ndarray) -> dict[str, float]:
+        return {
+            **base,
+            **{n: space.value(j, float(v)) for n, j, v in zip(extra, idx, s, strict=True)},
+        }
+
+    def diff(s: np.ndarray) -> np.ndarray:
+        r = ev.evaluate([at(s)]).residuals
+        return bad if not r or r[0] is None else r[0] - r_small
+
+    start = np.array([space.coordinate(j, big.x[n]) for n, j in zip(extra, idx, strict=True)])
+    lo = np.array([space.s_lower[j] for j in idx])
+    hi = np.array([space.s_upper[j] for j in idx])
+    fit = least_squares(
+        diff, np.clip(start, lo, hi), bounds=(lo, hi), max_nfev=20 * (len(extra) + 1)
+    )
+    return 2 * float(fit.cost) <= REPRODUCE * small.chi2 / max(small.n, 1), at(fit.x)
+
+
+def nesting(
+    cands: Sequence[Candidate],
+    studies: Sequence[Study],
+    evs: Sequence[Any],
+    cache: dict | None = None,
+) -> dict[tuple[int, int], dict[str, float]]:
+    """Return the nested pairs, each with the simpler answer embedded in the richer.
+
+    A pair ``(s, r)``: ``r``'s free parameters include ``s``'s and ``r`` reproduces
+    ``s``'s fit; its value is ``s``'s answer embedded in ``r``.
+
+    ``cache`` keeps the checks already made (keyed by both answers), for the rounds of
+    :func:`consistent`.
+    """
+    cache = {} if cache is None else cache
+    pairs = {}
+    for s, r in ((s, r) for s in range(len(cands)) for r in range(len(cands)) if s != r):
+        small, big = cands[s], cands[r]
+        if not (set(small.active) < set(big.active)) or not small.n or not big.n:
+            continue
+        key = (s, r, tuple(sorted(small.x.items())), tuple(sorted(big.x.items())))
+        if key not in cache:
+            ev = evs[r].get(studies[r].parameter_names, _exps(studies[r]), {})
+            n0 = ev.nfev
+            cache[key] = _reproduce(ev, studies[r], small, big)
+            big.nfev += ev.nfev - n0
+        ok, embedded = cache[key]
+        if ok:
+            pairs[(s, r)] = embedded
+    return pairs
+
+
+def _exps(study: Study) -> list[str]:
+    return [e.name for e in study.identify_experiments()]
+
+
+def follow(
+    study: Study,
+    evs: Any,
+    x: Mapping[str, float],
+    embedded: Mapping[str, float],
+    shared: Sequence[str],
+    progress: Any = None,
+) -> tuple[dict[str, float], int]:
+    """Follow a richer answer ``x`` to the simpler structure it nests, in steps.
+
+    The richer structure's other parameters move from ``x`` to ``embedded`` (the values
+    that make it the simpler one) in :data:`PATH_STEPS` steps; at each, the ``shared``
+    parameters are refined by least squares with those held. Dropping the extra
+    parameters at once can land far from the simpler optimum (measured on the SISO
+    friction laws: viscous friction and spring damping trade off, and law 1 refined from
+    law 3's answer stopped at 3e5 times its optimum's cost); a path keeps each step in
+    the valley. Returns the end point (every parameter) and the simulations it cost.
+    """
+    names = list(study.parameter_names)
+    rest = [n for n in names if n not in shared]
+    levels, bounds = study.first_levels(), study.bounds()
+    space = Space({n: levels[n] for n in shared}, {n: bounds[n] for n in shared},
+                  study.method.leveling)  # fmt: skip
+    limit = 10 * (len(shared) + 1)
+    method = dataclasses.replace(study.method, refine_max_nfev=limit)
+    exps, out, nfev = _exps(study), dict(x), 0
+    for t in np.linspace(0.0, 1.0, PATH_STEPS + 1)[1:]:
+        fixed = {n: float((1 - t) * x[n] + t * embedded[n]) for n in rest}
+        ev = evs.get(list(shared), exps, fixed)
+        n0 = ev.nfev
+        start = {n: out[n] for n in shared}
+        scored = ev.evaluate([start])
+        stage = refine_stage(
+            f"path to the nesting point, step {t:.2f}", space, start,
+            float(scored.costs[0, 0]), ev, method, fixed=fixed, progress=progress,
+            start_residuals=scored.residuals[0] if scored.residuals else None,
+        )  # fmt: skip
+        out.update({n: float(stage.x[n]) for n in shared}, **fixed)
+        nfev += ev.nfev - n0
+    return out, nfev
+
+
+def at_nesting_point(study: Study, small: Candidate, big: Candidate, embedded: Mapping) -> bool:
+    """Whether ``big``'s extra parameters sit where they make it ``small``'s structure.
+
+    Each within :data:`NESTING_POINT` of its first levels' range (linear: a nesting value
+    may be 0) of the embedding: the richer answer is then the simpler structure, and a
+    lower cost there comes from the model's non-smoothness at that point (event timings),
+    not from what the extra parameters add.
+    """
+    levels = study.first_levels()
+    extra = [n for n in big.active if n not in small.active]
+    gaps = [
+        abs(big.x[n] - embedded[n]) / max(max(levels[n]) - min(levels[n]), 1e-300) for n in extra
+    ]
+    return bool(gaps) and max(gaps) < NESTING_POINT
+
+
+def consistent(
+    cands: list[Candidate],
+    studies: Sequence[Study],
+    evs: Sequence[Any],
+    restart: Callable[[int, dict[str, float], str], bool],
+) -> dict[tuple[int, int], dict[str, float]]:
+    """Restart the nested candidates that are not at their optimum; return the nesting.
+
+    ``restart(i, start, why)`` refines candidate ``i`` from ``start`` and returns whether
+    its answer changed (it keeps the lower one). For each nested pair ``(s, r)``:
+
+    - ``r`` (richer) with a cost above ``s``'s is restarted from ``s``'s answer embedded;
+    - ``s`` (simpler), above the lowest-cost richer candidate that nests it, is
+      restarted from that answer followed to the nesting point (:func:`follow`), once.
+    """
+    cache: dict = {}
+    pairs = nesting(cands, studies, evs, cache)
+    followed: set[tuple[int, int]] = set()
+    embedded_from: set[tuple[int, int]] = set()
+    for _ in range(MAX_ROUNDS):
+        changed = False
+        for (s, r), embedded in sorted(pairs.items()):
+            small, big = cands[s], cands[r]
+            if big.cost > small.cost:
+                why = f"cost above {small.label}, which it nests: from its answer embedded"
+                changed |= restart(r, embedded, why)
+        for r in sorted({r for _, r in pairs}):
+            s = min((s for s, b in pairs if b == r), key=lambda s: cands[s].cost)
+            if (s, r) in embedded_from or cands[r].cost > cands[s].cost:
+                continue  # (a richer one above was restarted just above)
+            embedded_from.add((s, r))
+            why = f"from the answer of {cands[s].label}, which it nests, embedded"
+            changed |= restart(r, pairs[(s, r)], why)
+        for s in sorted({s for s, _ in pairs}):
+            r = min((r for a, r in pairs if a == s), key=lambda r: cands[r].cost)
+            if (s, r) in followed or not cands[r].cost < cands[s].cost:
+                continue
+            followed.add((s, r))
+            start, nfev = follow(studies[r], evs[r], cands[r].x, pairs[(s, r)], cands[s].active)
+            cands[s].nfev += nfev
+            why = f"from the answer of {cands[r].label}, which nests it, followed to it"
+            changed |= restart(s, start, why)
+        if not changed:
+            break
+        pairs = nesting(cands, studies, evs, cache)
+    return pairs
