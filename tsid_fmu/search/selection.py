@@ -237,6 +237,19 @@ def decide(
     simpler = min([pick, *tied], key=lambda i: (cands[i].k, cands[i].bic))
     if tied and simpler != pick:
         pick = simpler
+    _explain(cands, pick, why, tied, barred, degenerate)
+    return pick, tied
+
+
+def _explain(
+    cands: Sequence[Candidate],
+    pick: int,
+    why: str,
+    tied: list[int],
+    barred: set[int],
+    degenerate: set[tuple[int, int]],
+) -> None:
+    """Mark the chosen candidate and write each candidate's ``why``."""
     for i, c in enumerate(cands):
         c.chosen = i == pick
         if i == pick:
@@ -261,7 +274,6 @@ def decide(
             )
         else:
             c.why = f"BIC {c.bic - cands[pick].bic:+.4g} against {cands[pick].label}"
-    return pick, tied
 
 
 def structures_frame(rows: Sequence[Mapping[str, Any]]) -> Any:
