@@ -187,3 +187,128 @@ def test_the_hac_variance_is_unbiased_and_its_dof_match_its_scatter(coloured):
     assert np.all(np.abs(ratios.mean(axis=0) - 1) < 0.035), ratios.mean(axis=0)
     scatter = 2 / np.log(ratios).var(axis=0)
     assert np.all(np.abs(np.median(dofs, axis=0) / scatter - 1) < 0.3), (dofs, scatter)
+
+
+# -- a known case of every field (killed mutants of docs/mutation-survivors.md) ----------
+# Alternating residuals make the HAC estimate smaller than the Cramer-Rao bound, so the
+# floor gives the standard errors exactly: the inverse of F = J^T J on the seen block.
+
+
+def _known_case() -> tuple[Sensitivities, Space, dict, np.ndarray]:
+    """Two correlated log parameters, a linear one orthogonal to them, one unseen.
+
+    Two experiments, three outputs with residual RMS 2, 0.5 and 1; each output's
+    sensitivities are its RMS times ``base`` (so every whitened output is ``base``).
+    """
+    n = 200
+    t = np.linspace(0.0, 1.0, n)
+    alt = np.where(np.arange(n) % 2, -1.0, 1.0)
+    a_col, b_col = 1.0 + t, 1.0 - 0.5 * t
+    q, _ = np.linalg.qr(np.column_stack([a_col, b_col]))
+    g = 2.5 * np.cos(6 * np.pi * t)
+    base = np.column_stack([a_col, b_col, g - q @ (q.T @ g), np.zeros(n)])
+    rms = ([2.0, 0.5], [1.0])
+    res = [alt[:, None] * np.array(s) for s in rms]
+    jac = [base[:, None, :] * np.array(s)[None, :, None] for s in rms]
+    sens = Sensitivities(["a", "b", "d", "c"], res, jac, ["e1", "e2"], [["y", "z"], ["w"]])
+    wide = (-math.inf, math.inf)
+    space = Space(
+        {"a": [1.0, 100.0], "b": [10.0, 1000.0], "d": [0.0, 2.0], "c": [0.0, 1.0]},
+        {"a": (1e-6, 1e6), "b": (1e-6, 1e6), "d": wide, "c": wide},
+        LevelingOptions(),
+    )
+    return sens, space, {"a": 10.0, "b": 100.0, "d": 1.0, "c": 0.0}, 3 * base.T @ base
+
+
+def test_every_field_of_a_known_case():
+    sens, space, x, fisher = _known_case()
+    u = uncertainty(sens, space, x)
+    n, p = 3 * 200, 3
+    se = np.sqrt(np.diag(np.linalg.inv(fisher[:p, :p])))  # search units
+    t = stats.t.ppf(0.975, n - p)
+    assert u.inflation == 1.0  # the floor holds on every parameter
+    assert u.noise == {"e1": [2.0, 0.5], "e2": [1.0]}
+    assert u.dof == {k: n - p for k in x}
+    for j, k in enumerate("ab"):  # log10, two decades per search unit
+        std = x[k] * math.log(10) * 2 * se[j]
+        assert u.std_error[k] == pytest.approx(std, rel=1e-9)
+        assert u.relative[k] == pytest.approx(100 * std / x[k], rel=1e-9)
+        assert u.cramer_rao[k] == pytest.approx(100 * std / x[k], rel=1e-9)
+        low, high = u.intervals[k]
+        assert low == pytest.approx(x[k] * 10 ** (-2 * t * se[j]), rel=1e-9)
+        assert high == pytest.approx(x[k] * 10 ** (2 * t * se[j]), rel=1e-9)
+    assert u.std_error["d"] == pytest.approx(2 * se[2], rel=1e-9)
+    assert u.intervals["d"] == pytest.approx([1 - 2 * t * se[2], 1 + 2 * t * se[2]], rel=1e-9)
+    # the unseen parameter: no standard error, an open interval, no correlation
+    assert u.std_error["c"] == math.inf and u.relative["c"] == math.inf
+    assert u.cramer_rao["c"] == math.inf and u.intervals["c"] == [None, None]
+    assert u.condition > 1e15
+    assert set(u.whiteness) == {"e1", "e2"} and set(u.whiteness["e1"]) == {"y", "z"}
+    for w in (u.whiteness["e1"]["y"], u.whiteness["e2"]["w"]):
+        assert set(w) == {"p_value", "rho1", "white", "ar_order"}
+        assert w["white"] is False and w["rho1"] < -0.9 and w["ar_order"] >= 1
+    # correlations: the covariance normalised, zero for the unseen parameter
+    cov = np.where(np.isfinite(u.cov), u.cov, 0.0)
+    for i, k in enumerate("abd"):
+        for m, h in enumerate("abd"):
+            r = cov[i, m] / math.sqrt(cov[i, i] * cov[m, m])
+            assert u.correlation[k][h] == pytest.approx(r, rel=1e-9, abs=1e-15)
+        assert u.correlation[k]["c"] == 0.0 and u.correlation["c"][k] == 0.0
+    assert u.correlation["c"]["c"] == 0.0
+
+
+def test_the_combinations_of_a_known_case():
+    sens, space, x, fisher = _known_case()
+    u = uncertainty(sens, space, x)
+    values, vectors = np.linalg.eigh(fisher)
+    order = np.argsort(values)[::-1]  # best determined first
+    assert len(u.combinations) == 4
+    cov = np.where(np.isfinite(u.cov), u.cov, 0.0)
+    labels = ["lg a", "lg b", "d", "c"]
+    for combo, k in zip(u.combinations, order, strict=True):
+        v = vectors[:, k]
+        u_dir = v * space.width / np.linalg.norm(v * space.width)
+        terms = {labels[j]: abs(round(c, 3)) for j, c in enumerate(u_dir) if abs(c) >= 0.05}
+        assert {h: abs(c) for h, c in combo["terms"].items()} == terms
+        if values[k] < 1e-9 * values.max():  # the unseen one
+            assert combo["std_error"] == math.inf and combo["determined"] is False
+            assert math.isnan(combo["percent"])
+            continue
+        se = math.sqrt(v @ cov @ v)
+        assert combo["std_error"] == pytest.approx(se, rel=1e-9)
+        assert combo["determined"] is (se < 0.5)
+        if set(terms) <= {"lg a", "lg b"}:  # relative: 100 ln10 per log10 unit
+            norm = np.linalg.norm(v * space.width)
+            assert combo["percent"] == pytest.approx(100 * math.log(10) * se * norm, rel=1e-9)
+        else:
+            assert math.isnan(combo["percent"])
+    assert [set(c["terms"]) for c in u.combinations][-1] == {"c"}
+    assert sum(c["determined"] for c in u.combinations) == 3
+
+
+def test_an_output_fitted_exactly_is_whitened_by_one():
+    """Zero residuals (RMS 0) would divide by zero: the output counts with RMS 1."""
+    n, c = 100, 10.0
+    sens = Sensitivities(["k"], [np.zeros((n, 1))], [np.full((n, 1, 1), c)], ["e"], [["y"]])
+    space = Space({"k": [0.0, 2.0]}, {"k": (-math.inf, math.inf)}, LevelingOptions())
+    u = uncertainty(sens, space, {"k": 1.5})
+    assert u.std_error["k"] == pytest.approx(2.0 / (c * math.sqrt(n)), rel=1e-12)
+    assert u.noise == {"e": [0.0]}
+
+
+def test_the_interval_ends_at_one_search_unit_past_the_bounds():
+    """First levels 0..2 (s = -0.5 at 0), bounds 0..4 (s = -0.5 .. 1.5): an end beyond a
+    bound by at most one search unit is clipped to it, farther it is open (None); a
+    half-width over 2 * UNDETERMINED opens both ends."""
+    space = Space({"k": [0.0, 2.0]}, {"k": (0.0, 4.0)}, LevelingOptions())
+    assert intervals._interval(space, 0, 0.0, 1.0) == [0.0, 3.0]
+    assert intervals._interval(space, 0, -0.5, 1.0) == [0.0, 2.0]  # low_s = -1.5
+    assert intervals._interval(space, 0, -0.9, 1.0) == [None, pytest.approx(1.2)]
+    assert intervals._interval(space, 0, 1.5, 1.0) == [2.0, 4.0]  # high_s = 2.5
+    assert intervals._interval(space, 0, 1.9, 1.0)[1] is None
+    for half in (1.25, 1.5, math.nan, math.inf):
+        assert intervals._interval(space, 0, 0.0, half) == [None, None]
+
+
+def test_fewer_than_one_degree_of_freedom_count_as_one():
+    assert quantile(0.5) == quantile(1.0) == pytest.approx(stats.t.ppf(0.975, 1), abs=1e-12)

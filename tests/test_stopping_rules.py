@@ -22,7 +22,15 @@ from tsid_fmu.doe.leveling import LevelingOptions, relative_span, relevel
 from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.nextlevels import _rotated_decisions
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.taguchi import TaguchiRun, _limits, _stalled, taguchi_stage
+from tsid_fmu.search.taguchi import (
+    TaguchiRun,
+    _finished,
+    _hand_back,
+    _handover,
+    _limits,
+    _stalled,
+    taguchi_stage,
+)
 from tsid_fmu.study.schema import Method
 
 FLAT = [-20.0, -20.0, -20.0]
@@ -243,3 +251,92 @@ def test_a_stage_that_converges_on_its_last_allowed_iteration_converges():
     short = _valley(n - 1)
     assert short.status == 1 and len(short.records) == n - 1
     assert short.message == f"iteration limit ({n - 1}) reached before the levels converged"
+
+
+# -- the hand-over, the hand-back and a continued stage (search/taguchi.py) ---------------
+# Killed mutants of docs/mutation-survivors.md: each boundary is met exactly (costs are
+# binary fractions), and each message is pinned whole (it is what the trail and the
+# report show as the reason the stage ended).
+
+
+def _recs(costs: list[float], converged: list[bool] | None = None, **extra) -> list:
+    converged = converged or [False] * len(costs)
+    return [
+        SimpleNamespace(
+            index=i + 1,
+            best_cost=c,
+            decision=SimpleNamespace(converged=v, message=f"converged at {i + 1}"),
+            extra=dict(extra) if i == len(costs) - 1 else {},
+        )
+        for i, (c, v) in enumerate(zip(costs, converged, strict=True))
+    ]
+
+
+def _handing(floor: float | None = None, below: float | None = None, handover=False):
+    return SimpleNamespace(method=STALL, floor=floor, hand_back_below=below, handover=handover)
+
+
+def test_the_hand_over_needs_a_fall_of_less_than_half():
+    # a fall of exactly half is still a large gain: the arrays go on
+    assert _handover(_recs([2.0, 1.0]), _handing(), math.inf) is None
+    assert _handover(_recs([2.0, 1.0 + 2.0**-20]), _handing(), math.inf) is not None
+    # with one record the cost before is the start points' one
+    assert _handover(_recs([0.75]), _handing(), 1.0) == (
+        "handed over to the refinement: iteration 1 lowered the best cost by 25 % (less than 50 %)"
+    )
+    assert _handover(_recs([4.0, 2.0, 1.5]), _handing(), math.inf) == (
+        "handed over to the refinement: iteration 3 lowered the best cost by 25 % (less than 50 %)"
+    )
+    # no cost before (or none finite now): no hand-over
+    assert _handover(_recs([1.0]), _handing(), math.inf) is None
+    assert _handover(_recs([math.inf]), _handing(), 1.0) is None
+    # a zero cost before counts as no fall (no division by zero)
+    assert _handover(_recs([1.0]), _handing(), 0.0) == (
+        "handed over to the refinement: iteration 1 lowered the best cost by 0 % (less than 50 %)"
+    )
+
+
+def test_the_hand_over_waits_until_within_handover_fit_of_the_noise_floor():
+    floor = 2.0**-7  # HANDOVER_FIT * floor = 0.78125 exactly
+    assert _handover(_recs([0.78125]), _handing(floor), 1.0) is not None
+    assert _handover(_recs([0.78125 + 2.0**-20]), _handing(floor), 1.0) is None
+
+
+def test_the_hand_back_needs_a_cost_below_the_refinements_and_a_stall():
+    rtol = STALL.leveling.stall_rtol  # 2**-10
+    run = _handing(below=1.0)
+    # a fall of exactly stall_rtol of the cost is no stall; two records are enough
+    assert _hand_back(_recs([0.5 + 0.5 * rtol, 0.5]), run) is None
+    assert _hand_back(_recs([0.5 + 0.4 * rtol, 0.5]), run) == (
+        "handed back to the refinement: the best cost 0.5 is below the refinement's 1 "
+        "and iteration 2 lowered it by less than 0.000976562 of itself"
+    )
+    # not below the refinement's answer (equal, or above): go on
+    assert _hand_back(_recs([1.0, 1.0]), run) is None
+    assert _hand_back(_recs([3.0, 3.0]), run) is None
+    assert _hand_back(_recs([0.5]), run) is None
+    assert _hand_back(_recs([0.9, 0.5, 0.5]), run).endswith(
+        "iteration 3 lowered it by less than 0.000976562 of itself"
+    )
+
+
+def test_the_stall_message_and_a_window_longer_than_two():
+    assert _stalled(_records([1.0, 1.0, 1.0]), Method()) == (
+        "Case 3: every S/N flat for 2 iterations and the best cost fell by less than "
+        "0.0001 of itself: the remaining ranges are what the data hardly determine"
+    )
+    # stall 3: the fall is measured to the last record, not to the second of the window
+    three = Method(leveling=LevelingOptions(stall=3))
+    assert _stalled(_records([1.0, 1.0, 1.0, 0.5]), three) is None
+
+
+def test_a_continued_stage_that_had_ended_reads_back_as_ended():
+    converged = _recs([3.0, 2.0, 1.0], [False, False, True])
+    assert _finished(_handing(), converged, None) == (0, "converged at 3")
+    assert _finished(_handing(), converged, "pending") is None
+    assert _finished(_handing(), _recs([3.0, 2.0, 1.0], [False, True, False]), None) is None
+    handed = _recs([2.0, 1.0], handover="handed over")
+    assert _finished(_handing(handover=True), handed, None) == (0, "handed over")
+    assert _finished(_handing(handover=False), handed, None) is None
+    assert _finished(_handing(), _recs([2.0, 1.0], handback="back"), None) == (0, "back")
+    assert _finished(_handing(), [], None) is None
