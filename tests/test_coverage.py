@@ -23,6 +23,7 @@ from scipy import linalg, stats
 
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty import profile as intervals_profile
 from tsid_fmu.uncertainty.intervals import Z95, quantile, uncertainty
 from tsid_fmu.uncertainty.longrun import LongRun, fit_ar
 from tsid_fmu.uncertainty.profile import CHI2_95
@@ -312,3 +313,68 @@ def test_the_interval_ends_at_one_search_unit_past_the_bounds():
 
 def test_fewer_than_one_degree_of_freedom_count_as_one():
     assert quantile(0.5) == quantile(1.0) == pytest.approx(stats.t.ppf(0.975, 1), abs=1e-12)
+
+
+# -- the profile on a linear problem, where it is known exactly --------------------------
+
+
+class _Linear:
+    """Cost residuals ``A s - y`` of a linear model in the search coordinates."""
+
+    def __init__(self, space: Space, a: np.ndarray, y: np.ndarray):
+        self.space, self.a, self.y, self.calls = space, a, y, 0
+
+    def evaluate(self, rows):
+        self.calls += len(rows)
+        res = [self.a @ self.space.to_s(x) - self.y for x in rows]
+        costs = np.array([[float(r @ r)] for r in res])
+        return type("Ev", (), {"residuals": res, "costs": costs})()
+
+
+def _linear_profile(bounds=(-math.inf, math.inf), thresholds=None):
+    n = 50
+    t = np.linspace(0.0, 1.0, n)
+    a = np.column_stack([1.0 + t, 1.0 - 0.5 * t])
+    y = a @ np.array([0.3, -0.2]) + 0.01 * np.sin(40 * t)
+    space = Space({"p": [0.0, 2.0], "q": [0.0, 2.0]}, {"p": bounds, "q": bounds}, LevelingOptions())
+    s0 = np.linalg.lstsq(a, y, rcond=None)[0]
+    ev = _Linear(space, a, y)
+    r0 = a @ s0 - y
+    problem = intervals_profile.ProfileProblem(
+        ev, space, s0, float(r0 @ r0), a, 0.01, thresholds=thresholds or {}
+    )
+    return problem, np.linalg.inv(a.T @ a), space
+
+
+def test_profile_ends_bracket_the_exact_ones_of_a_linear_problem():
+    """Re-fitting the other parameter exactly, the cost rises by ``d^2 / C_jj`` at an
+    offset ``d``: the ends lie at ``sqrt(limit C_jj)``, found from outside to within an
+    eighth of the bracket (three bisections of the last doubling)."""
+    problem, c, space = _linear_profile(thresholds={"q": 0.04})
+    exact = {"p": math.sqrt(0.01 * c[0, 0]), "q": math.sqrt(0.04 * c[1, 1])}
+    steps = {"p": exact["p"] / 3, "q": exact["q"] / 3}
+    out = intervals_profile.profile_intervals(problem, steps)
+    for j, k in enumerate("pq"):
+        x0 = space.value(j, problem.s0[j])
+        low, high = out[k]
+        for off in (x0 - low, high - x0):  # parameter units: 2 per search unit
+            assert 2 * exact[k] <= off <= 2 * exact[k] * (1 + 1 / 8) + 1e-12, (k, off)
+    assert problem.unresolved == set()
+
+
+def test_a_first_step_past_both_ends_leaves_the_parameter_unresolved():
+    problem, c, _ = _linear_profile()
+    out = intervals_profile.profile_intervals(problem, {"p": 10.0, "q": math.nan})
+    assert problem.unresolved == {"p"}
+    assert out["p"][1] - out["p"][0] <= 2 * 2 * 10.0 / 8 + 1e-12  # within the bisections
+    # q's step is the smallest one, MIN_STEP, far below its ends: resolved
+    exact = math.sqrt(0.01 * c[1, 1])
+    assert 2 * exact <= out["q"][1] - problem.space.value(1, problem.s0[1])
+
+
+def test_a_profile_end_beyond_a_bound_by_more_than_a_unit_is_open():
+    """Bounds 0.5..1.5 (s = -0.25..0.25): the rise never reaches a huge threshold, and
+    the doublings stop once past one search unit beyond a bound: both ends open."""
+    problem, _, _ = _linear_profile(bounds=(0.5, 1.5), thresholds={"p": 1e9, "q": 1e9})
+    out = intervals_profile.profile_intervals(problem, {"p": 0.01, "q": 0.01})
+    assert out == {"p": [None, None], "q": [None, None]}
