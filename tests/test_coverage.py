@@ -378,3 +378,56 @@ def test_a_profile_end_beyond_a_bound_by_more_than_a_unit_is_open():
     problem, _, _ = _linear_profile(bounds=(0.5, 1.5), thresholds={"p": 1e9, "q": 1e9})
     out = intervals_profile.profile_intervals(problem, {"p": 0.01, "q": 0.01})
     assert out == {"p": [None, None], "q": [None, None]}
+
+
+# -- scale groups: ratios the data fix better than the parameters -------------------------
+
+
+def _groups(sigma: dict, corr: dict, names: list[str], linear: tuple = ()):
+    """``scale_groups`` of log parameters (two decades of first levels) with these
+    relative standard errors (percent) and correlations."""
+    levels = {n: ([0.0, 1.0] if n in linear else [1.0, 100.0]) for n in names}
+    space = Space(levels, {n: (-math.inf, math.inf) for n in names}, LevelingOptions())
+    w = 2 * math.log(10) * 100  # percent per search unit
+    sd = np.array([min(sigma[n], 1e3) / w for n in names])  # "open": a finite covariance
+    r = np.eye(len(names))
+    for (a, b), c in corr.items():
+        r[names.index(a), names.index(b)] = r[names.index(b), names.index(a)] = c
+    u = intervals.Uncertainty(values=dict.fromkeys(names, 1.0), relative=dict(sigma))
+    u.cov = np.outer(sd, sd) * r
+    return intervals.scale_groups(u, space)
+
+
+def _ratio(sa: float, sb: float, rho: float) -> float:
+    return math.sqrt(sa * sa + sb * sb - 2 * rho * sa * sb)
+
+
+def test_a_ratio_four_times_better_than_both_parameters_groups_them():
+    sigma = {"m": 20.0, "k": 24.0, "c": 5.0, "lin": 20.0, "tiny": 0.9, "open": math.inf}
+    corr = {("m", "k"): 0.999, ("m", "lin"): 0.999, ("m", "tiny"): 0.999, ("m", "open"): 0.9}
+    names = list(sigma)
+    found = _groups(sigma, corr, names, linear=("lin",))
+    pct = _ratio(20.0, 24.0, 0.999)  # 4.1, and 4 * 4.1 < 20
+    assert found == [
+        {
+            "parameters": ["m", "k"],
+            "ratios": {"m/k": pytest.approx(pct, rel=1e-9)},
+            "scale_percent": 20.0,
+        }
+    ]
+    # the gain is needed against the better-known parameter too
+    assert _groups({"m": 20.0, "k": 24.0}, {("m", "k"): 0.99}, ["m", "k"]) == []
+
+
+def test_groups_join_through_shared_members():
+    sigma = {"a": 30.0, "b": 31.0, "c": 32.0, "d": 10.0}
+    corr = {("a", "b"): 0.999, ("b", "c"): 0.999, ("a", "c"): 0.5}
+    (group,) = _groups(sigma, corr, list(sigma))
+    assert group["parameters"] == ["a", "b", "c"] and group["scale_percent"] == 30.0
+    assert set(group["ratios"]) == {"a/b", "b/c"}
+    assert group["ratios"]["b/c"] == pytest.approx(_ratio(31.0, 32.0, 0.999), rel=1e-9)
+
+
+def test_no_covariance_no_groups():
+    space = Space({"m": [1.0, 100.0]}, {"m": (0.0, math.inf)}, LevelingOptions())
+    assert intervals.scale_groups(intervals.Uncertainty(values={"m": 1.0}), space) == []
