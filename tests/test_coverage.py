@@ -331,12 +331,13 @@ class _Linear:
         return type("Ev", (), {"residuals": res, "costs": costs})()
 
 
-def _linear_profile(bounds=(-math.inf, math.inf), thresholds=None):
+def _linear_profile(bounds=(-math.inf, math.inf), thresholds=None, p_bounds=None):
     n = 50
     t = np.linspace(0.0, 1.0, n)
     a = np.column_stack([1.0 + t, 1.0 - 0.5 * t])
     y = a @ np.array([0.3, -0.2]) + 0.01 * np.sin(40 * t)
-    space = Space({"p": [0.0, 2.0], "q": [0.0, 2.0]}, {"p": bounds, "q": bounds}, LevelingOptions())
+    both = {"p": p_bounds or bounds, "q": bounds}
+    space = Space({"p": [0.0, 2.0], "q": [0.0, 2.0]}, both, LevelingOptions())
     s0 = np.linalg.lstsq(a, y, rcond=None)[0]
     ev = _Linear(space, a, y)
     r0 = a @ s0 - y
@@ -360,6 +361,9 @@ def test_profile_ends_bracket_the_exact_ones_of_a_linear_problem():
         for off in (x0 - low, high - x0):  # parameter units: 2 per search unit
             assert 2 * exact[k] <= off <= 2 * exact[k] * (1 + 1 / 8) + 1e-12, (k, off)
     assert problem.unresolved == set()
+    # three doublings and three bisections a side, each re-fit two simulations: the
+    # first (exact, from the Jacobian) and one that gains less than 1 % of the limit
+    assert problem.evaluator.calls == 2 * 2 * 6 * 2
 
 
 def test_a_first_step_past_both_ends_leaves_the_parameter_unresolved():
@@ -378,6 +382,43 @@ def test_a_profile_end_beyond_a_bound_by_more_than_a_unit_is_open():
     problem, _, _ = _linear_profile(bounds=(0.5, 1.5), thresholds={"p": 1e9, "q": 1e9})
     out = intervals_profile.profile_intervals(problem, {"p": 0.01, "q": 0.01})
     assert out == {"p": [None, None], "q": [None, None]}
+    assert problem.unresolved == set()  # open ends are known, not unresolved
+
+
+def test_each_side_stops_at_its_own_bound():
+    """p at 1.6 (s = 0.3) with bounds 1.5..4 (s = 0.25..1.5) and its exact ends one search
+    unit away: the lower end is open (past s = -0.75 before the rise), the upper one is
+    found at s = 0.3 + 1.05 (doublings 0.3, 0.6, 1.2, bisections 0.9, 1.05, 0.975)."""
+    problem, c, space = _linear_profile(p_bounds=(1.5, 4.0))
+    problem.thresholds = {"p": 1.0 / c[0, 0]}
+    out = intervals_profile.profile_intervals(problem, {"p": 0.3})
+    assert out["p"][0] is None
+    assert out["p"][1] == pytest.approx(space.value(0, problem.s0[0] + 1.05), rel=1e-12)
+
+
+def test_an_end_never_reached_within_the_doublings_is_open_and_known():
+    """MIN_STEP doubled nine times is 0.512 search units: a threshold the cost never
+    rises by within that leaves both ends open, and known to be."""
+    problem, _, _ = _linear_profile(thresholds={"p": 1e9, "q": 1e9})
+    out = intervals_profile.profile_intervals(problem, {})  # no steps: MIN_STEP
+    assert out == {"p": [None, None], "q": [None, None]} and problem.unresolved == set()
+
+
+def test_a_single_parameter_profile():
+    n = 40
+    t = np.linspace(0.0, 1.0, n)
+    a = (1.0 + t)[:, None]
+    y = 0.3 * a[:, 0] + 0.01 * np.cos(30 * t)
+    space = Space({"p": [0.0, 2.0]}, {"p": (-math.inf, math.inf)}, LevelingOptions())
+    s0 = np.linalg.lstsq(a, y, rcond=None)[0]
+    r0 = a @ s0 - y
+    problem = intervals_profile.ProfileProblem(
+        _Linear(space, a, y), space, s0, float(r0 @ r0), a, 0.01
+    )
+    exact = math.sqrt(0.01 / float(a[:, 0] @ a[:, 0]))
+    low, high = intervals_profile.profile_intervals(problem, {"p": exact / 3})["p"]
+    for off in (space.value(0, s0[0]) - low, high - space.value(0, s0[0])):
+        assert 2 * exact <= off <= 2 * exact * 1.125 + 1e-12
 
 
 # -- scale groups: ratios the data fix better than the parameters -------------------------

@@ -12,6 +12,7 @@ from tsid_fmu.doe.leveling import (
     relative_span,
     relevel,
     round_sig,
+    use_log_scale,
 )
 from tsid_fmu.doe.rules import FactorState, _parabola_vertex, decide_factor, main_effect_optimum
 from tsid_fmu.errors import StudyError
@@ -380,3 +381,78 @@ def test_no_finite_sn_is_a_zero_span():
         LevelingOptions(),
     )
     assert d.delta_db == 0.0
+
+
+def test_log_spacing_rules_at_their_edges():
+    log = LevelingOptions(scale="log")
+    assert use_log_scale([0.5, 2.0], log) and not use_log_scale([0.0, 2.0], log)
+    assert use_log_scale([1.0, 10.0], LevelingOptions())  # exactly log_ratio (10)
+    # scale = "log" keeps geometric levels even once the range spans less than log_ratio
+    d = relevel({"k": [1.0, 2.0, 4.0]}, {"k": [-30.0, -10.0, -30.0]}, log)
+    assert d.parameters[0].levels == pytest.approx([2 / 2**0.5, 2.0, 2 * 2**0.5], rel=1e-11)
+    # automatic: a range narrowed to exactly one decade (log_ratio 10) stays geometric
+    d = relevel({"k": [1.0, 10.0, 100.0]}, {"k": [-30.0, -10.0, -30.0]})
+    assert d.parameters[0].levels == pytest.approx([10**0.5, 10.0, 10**1.5], rel=1e-11)
+    assert d.parameters[0].optimum == 10.0  # back from log10
+
+
+def test_log_levels_at_a_bound_and_about_a_run_centre():
+    sn = {"k": [-10.0, -20.0, -30.0]}  # best at the lowest level
+    at_one = relevel({"k": [1.0, 10.0, 100.0]}, sn, bounds={"k": (1.0, 1e4)})
+    assert at_one.parameters[0].case == "narrow"  # log10 of the bound 1 is 0, the level
+    at_zero = relevel({"k": [1.0, 10.0, 100.0]}, sn, bounds={"k": (0.0, 1e4)})
+    assert at_zero.parameters[0].case == "shift"  # a bound of 0 is -inf decades away
+    assert at_zero.parameters[0].levels == pytest.approx([0.1, 1.0, 10.0], rel=1e-11)
+    capped = relevel(
+        {"k": [1.0, 10.0, 100.0]}, {"k": [-30.0, -20.0, -10.0]}, bounds={"k": (0.5, 50.0)}
+    )
+    assert max(capped.parameters[0].levels) == 50.0
+    # a run centre is taken in log10 too; one at or below 0 makes the levels linear
+    sn2 = {"k": [-30.0, -10.0, -20.0]}
+    run = relevel({"k": [1.0, 10.0, 100.0]}, sn2, centre={"k": 20.0}).parameters[0]
+    assert run.optimum == 20.0 and run.levels[1] == pytest.approx(20.0, rel=1e-11)
+    assert run.levels == pytest.approx([20 / 10**0.5, 20.0, 20 * 10**0.5], rel=1e-11)
+    half = relevel({"k": [1.0, 10.0, 100.0]}, sn2, centre={"k": 0.5}).parameters[0]
+    assert half.levels == pytest.approx([0.05, 0.5, 5.0], rel=1e-11)  # geometric
+    zero = relevel({"k": [1.0, 10.0, 100.0]}, sn2, centre={"k": 0.0}).parameters[0]
+    assert zero.levels == [-49.5, 0.0, 49.5]  # linear about 0, moved: the same width
+
+
+def test_kept_and_converged_levels_are_kept_as_they_were():
+    uneven = {"a": [1.0, 2.0, 3.0], "b": [10.0, 12.0, 30.0]}
+    sn = {"a": [-30.0, -20.0, -25.0], "b": [-20.0, -20.01, -20.0]}
+    d = relevel(uneven, sn, SELECTIVE)
+    assert d.parameters[1].case == "keep" and d.parameters[1].levels == [10.0, 12.0, 30.0]
+    assert d.parameters[1].optimum == 20.0  # the middle of the range
+    conv = relevel({"k": [99.9, 99.95, 100.1]}, {"k": [-20.0, -20.05, -20.0]})
+    assert conv.converged and conv.parameters[0].levels == [99.9, 99.95, 100.1]
+    assert conv.parameters[0].optimum == 100.0
+
+
+def test_no_finite_sn_is_flat_and_a_missing_contribution_is_not_minor():
+    d = relevel({"k": [1.0, 2.0, 3.0]}, {"k": [-np.inf] * 3})
+    assert d.case == 2 and d.parameters[0].case == "narrow"
+    opts = LevelingOptions(selective=True, min_contribution=5.0)
+    d = relevel(*REASONS["minor"][:2], opts, contribution={"a": 90.0})
+    assert [p.case for p in d.parameters] == ["recentre", "recentre"]
+
+
+def test_a_shrink_override_and_two_moving_parameters():
+    d = relevel({"k": [1, 2, 3, 4, 5]}, {"k": [-30, -20, -10, -20, -30]}, shrink=0.25)
+    assert d.parameters[0].levels == [2.5, 2.75, 3.0, 3.25, 3.5]
+    both = relevel(
+        {"a": [1.0, 2.0, 3.0], "b": [1.0, 2.0, 3.0]},
+        {"a": [-30.0, -20.0, -25.0], "b": [-30.0, -20.0, -25.0]},
+    )
+    assert both.message == "Case 1: S/N changes significantly for a, b"
+
+
+def test_the_parabola_needs_both_neighbours_of_the_best_level():
+    u = np.arange(1.0, 6.0)
+    assert main_effect_optimum(u, np.array([-30.0, -20.0, -10.0, -np.inf, -40.0]), True) == (
+        2,
+        3.0,
+        "S/N level 3 of 5",
+    )
+    best, _, source = main_effect_optimum(u, np.array([-30.0, -20.0, -10.0, -15.0, -np.inf]), True)
+    assert best == 2 and source == "S/N peak between levels 3 and 4 of 5"
