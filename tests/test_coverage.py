@@ -472,3 +472,43 @@ def test_groups_join_through_shared_members():
 def test_no_covariance_no_groups():
     space = Space({"m": [1.0, 100.0]}, {"m": (0.0, math.inf)}, LevelingOptions())
     assert intervals.scale_groups(intervals.Uncertainty(values={"m": 1.0}), space) == []
+
+
+def test_above_the_floor_the_hac_sandwich_and_its_satterthwaite_dof_set_the_interval():
+    """AR(1) residuals (rho 0.8): the HAC variance F^-1 S F^-1 exceeds the Cramer-Rao one,
+    its degrees of freedom are 2 V^2 / var(V) (var(V) from the AR model's delta method,
+    tests/test_longrun.py), and the interval is +/- t(dof) HAC standard errors."""
+    n = 300
+    t = np.linspace(0.0, 1.0, n)
+    e = np.random.default_rng(1).normal(size=n + 200)
+    r = np.zeros(n + 200)
+    for i in range(1, r.size):
+        r[i] = 0.8 * r[i - 1] + e[i]
+    r = r[200:]
+    jac = 5.0 * np.column_stack([1.0 + t, np.sin(4 * t)])
+    sens = Sensitivities(["a", "b"], [r[:, None]], [jac[:, None, :]], ["e"], [["y"]])
+    wide = (-math.inf, math.inf)
+    space = Space({"a": [0.0, 2.0], "b": [0.0, 2.0]}, {"a": wide, "b": wide}, LevelingOptions())
+    u = uncertainty(sens, space, {"a": 1.0, "b": 1.0})
+    whitened = jac / math.sqrt(np.mean(r**2))
+    inv = np.linalg.inv(whitened.T @ whitened)
+    found = intervals.long_run_covariance([(r / math.sqrt(np.mean(r**2)), whitened)], inv)
+    hac = np.diag(inv @ found.middle @ inv)
+    dof = 2 * hac**2 / found.variance
+    ratio = np.sqrt(hac / np.diag(inv))
+    assert np.all(ratio > 2) and u.inflation == pytest.approx(np.median(ratio), rel=1e-9)
+    for j, k in enumerate("ab"):
+        assert u.dof[k] == pytest.approx(dof[j], rel=1e-9) and 5 < u.dof[k] < 50
+        assert u.std_error[k] == pytest.approx(2 * math.sqrt(hac[j]), rel=1e-9)
+        assert u.cramer_rao[k] == pytest.approx(100 * 2 * math.sqrt(inv[j, j]), rel=1e-9)
+        half = quantile(dof[j]) * 2 * math.sqrt(hac[j])
+        assert u.intervals[k] == pytest.approx([1.0 - half, 1.0 + half], rel=1e-9)
+
+
+def test_separate_groups_and_the_scale_of_the_best_known_member():
+    sigma = {"a": 30.0, "b": 29.0, "c": 12.0, "d": 11.0}
+    corr = {("a", "b"): 0.999, ("c", "d"): 0.999}
+    found = _groups(sigma, corr, list(sigma))
+    assert [g["parameters"] for g in found] == [["a", "b"], ["c", "d"]]
+    assert [g["scale_percent"] for g in found] == [29.0, 11.0]  # the better-known one
+    assert [list(g["ratios"]) for g in found] == [["a/b"], ["c/d"]]

@@ -196,3 +196,13 @@ def test_factors_of_a_space_with_parameters_named_like_factors_are_named_z():
         frame, space, sn, ({"A1": 100.0, "q": 100.0}, "run 1"), LevelingOptions(), {}, None
     )
     assert [g.name for g in f.factors] == ["Z1", "Z2"]
+
+
+def test_a_rotated_factor_centred_on_its_edge_shifts_and_both_movers_are_named():
+    """Centre (104.96, 101.28): factor coordinates (0.25, 0.1), A1 on its upper edge."""
+    space, frame = _rotated_case()
+    sn = {"A1": [-30.0, -20.0, -25.0], "A2": [-30.0, -20.0, -25.0]}
+    centre = ({"p": 104.96, "q": 101.28}, "run 5")
+    d, _ = next_frame(frame, space, sn, centre, LevelingOptions(), {}, None)
+    assert [p.case for p in d.parameters] == ["shift", "recentre"]
+    assert d.message == "Case 1: S/N changes significantly for A1, A2"
