@@ -427,7 +427,7 @@ def test_a_single_parameter_profile():
 def _groups(sigma: dict, corr: dict, names: list[str], linear: tuple = ()):
     """``scale_groups`` of log parameters (two decades of first levels) with these
     relative standard errors (percent) and correlations."""
-    levels = {n: ([0.0, 1.0] if n in linear else [1.0, 100.0]) for n in names}
+    levels = {n: ([0.0, 2.0] if n in linear else [1.0, 100.0]) for n in names}  # width 2
     space = Space(levels, {n: (-math.inf, math.inf) for n in names}, LevelingOptions())
     w = 2 * math.log(10) * 100  # percent per search unit
     sd = np.array([min(sigma[n], 1e3) / w for n in names])  # "open": a finite covariance
@@ -506,9 +506,14 @@ def test_above_the_floor_the_hac_sandwich_and_its_satterthwaite_dof_set_the_inte
 
 
 def test_separate_groups_and_the_scale_of_the_best_known_member():
-    sigma = {"a": 30.0, "b": 29.0, "c": 12.0, "d": 11.0}
+    sigma = {"z": 5.0, "a": 30.0, "b": 29.0, "c": 12.0, "d": 11.0}  # z on its own first
     corr = {("a", "b"): 0.999, ("c", "d"): 0.999}
     found = _groups(sigma, corr, list(sigma))
     assert [g["parameters"] for g in found] == [["a", "b"], ["c", "d"]]
     assert [g["scale_percent"] for g in found] == [29.0, 11.0]  # the better-known one
     assert [list(g["ratios"]) for g in found] == [["a/b"], ["c/d"]]
+
+
+def test_only_parameters_known_worse_than_one_percent_are_grouped():
+    assert _groups({"a": 1.0, "b": 1.0}, {("a", "b"): 0.999}, ["a", "b"]) == []
+    assert len(_groups({"a": 1.5, "b": 1.5}, {("a", "b"): 0.999}, ["a", "b"])) == 1
