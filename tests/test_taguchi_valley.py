@@ -112,10 +112,11 @@ def test_a_stage_reports_its_start_points_and_each_iteration_in_order():
     events, kept = [], []
     recorder = type("R", (), {"iteration": lambda self, rec: kept.append(rec)})()
     ev = ValleyEvaluator()
+    ev.evaluate([{"p": 1.0, "q": 1.0}])  # an evaluator already used: its count is not 0
     run = _valley_run(starts=starts, fixed={"k": 7.0}, experiments=["e1"], nfev_before=5)
     stage = taguchi_stage(run, ev, recorder, lambda kind, data: events.append((kind, data)))
     assert stage.status == 0 and stage.name == "valley" and stage.experiments == ["e1"]
-    assert stage.x["k"] == 7.0 and stage.nfev == ev.nfev  # the start points counted
+    assert stage.x["k"] == 7.0 and stage.nfev == ev.nfev - 1  # the start points counted
     assert kept == stage.records  # each record once, in order
     centre = ev.cost(p=2.0, q=0.8)
     assert events[0] == ("start", {"stage": "valley", "cost": centre, "source": "centre"})
@@ -129,7 +130,7 @@ def test_a_stage_reports_its_start_points_and_each_iteration_in_order():
     assert [d["iteration"] for d in begun] == list(range(1, len(stage.records) + 1))
     assert all(d["stage"] == "valley" for d in begun) and done == stage.records
     assert begun[0]["frame"] is run.first
-    assert stage.records[-1].nfev_total == ev.nfev + 5
+    assert stage.records[-1].nfev_total == ev.nfev - 1 + 5
 
 
 def test_a_stage_paused_and_continued_ends_as_the_uninterrupted_one():
@@ -147,3 +148,26 @@ def test_a_stage_paused_and_continued_ends_as_the_uninterrupted_one():
         _valley_run(prior=whole.records, nfev_before=whole.nfev), ValleyEvaluator()
     )
     assert again.status == 0 and again.nfev == 0 and again.message == whole.message
+
+
+def test_a_stage_whose_sn_is_always_flat_ends_by_stalling():
+    """A significance no S/N reaches keeps every factor flat (Case 2, narrowing) and a
+    tolerance no range reaches rules out Case 3 by size: the stall rule ends the stage."""
+    run = _valley_run()
+    run.method = Method(
+        cost="sse",
+        array="L9",
+        max_iterations=60,
+        leveling=LevelingOptions(significance_db=1e6, tolerance=1e-9),
+    )
+    stage = taguchi_stage(run, ValleyEvaluator())
+    assert stage.status == 0 and stage.records[-1].decision.converged
+    assert stage.message.startswith("Case 3: every S/N flat for 2 iterations")
+    assert stage.message == stage.records[-1].decision.message
+    assert not any(r.decision.converged for r in stage.records[:-1])
+
+
+def test_a_stage_paused_before_its_first_iteration_has_no_answer():
+    stage = taguchi_stage(_valley_run(pause_after=0, fixed={"k": 1.0}), ValleyEvaluator())
+    assert stage.status == 2 and stage.records == [] and stage.nfev == 0
+    assert stage.cost == math.inf and stage.x == {"k": 1.0}
