@@ -206,3 +206,24 @@ def test_a_rotated_factor_centred_on_its_edge_shifts_and_both_movers_are_named()
     d, _ = next_frame(frame, space, sn, centre, LevelingOptions(), {}, None)
     assert [p.case for p in d.parameters] == ["shift", "recentre"]
     assert d.message == "Case 1: S/N changes significantly for A1, A2"
+
+
+def test_a_flat_small_rotated_factor_beside_a_mover_is_done_and_no_finite_sn_is_flat():
+    space = Space(
+        {"p": [92.0, 108.0], "q": [92.0, 108.0]}, {"p": WIDE, "q": WIDE}, LevelingOptions()
+    )
+    frame = Frame(
+        np.zeros(2),
+        [
+            Factor("A1", np.array([1.0, 0.0]), np.array([-0.25, 0.0, 0.25])),
+            Factor("A2", np.array([0.0, 1.0]), np.array([-1 / 128, 0.0, 1 / 128])),  # span 0.25 %
+        ],
+        anchor={"p": 100.0, "q": 100.0},
+    )
+    centre = ({"p": 100.0, "q": 100.0}, "run 1")
+    moving = {"A1": [-30.0, -20.0, -25.0], "A2": [-20.0, -20.01, -20.0]}
+    d, _ = next_frame(frame, space, moving, centre, LevelingOptions(), {}, None)
+    assert [p.case for p in d.parameters] == ["recentre", "converged"]
+    failed = {"A1": [-np.inf] * 3, "A2": [-np.inf] * 3}  # every run failed: flat, 0 dB
+    d, _ = next_frame(frame, space, failed, centre, LevelingOptions(), {}, None)
+    assert [p.delta_db for p in d.parameters] == [0.0, 0.0] and d.case == 2
