@@ -4,6 +4,7 @@ for, before the restructure replaced it by rotated factors inside the Taguchi st
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 
@@ -171,3 +172,30 @@ def test_a_stage_paused_before_its_first_iteration_has_no_answer():
     stage = taguchi_stage(_valley_run(pause_after=0, fixed={"k": 1.0}), ValleyEvaluator())
     assert stage.status == 2 and stage.records == [] and stage.nfev == 0
     assert stage.cost == math.inf and stage.x == {"k": 1.0}
+
+
+def test_a_stage_continued_after_a_pending_rerun_or_edited_levels_starts_from_them():
+    """The trail keeps a decided re-run in the last record (``extra["next"]``) and a
+    person may edit the next levels (``override``): a continued stage runs its next
+    iteration on those levels and says so in the record."""
+    done = taguchi_stage(_valley_run(max_iterations=3), ValleyEvaluator())
+    prior = copy.deepcopy(done.records)
+    for r in prior:
+        r.decision.converged = False
+    chosen = prior[0].frame
+    prior[-1].extra["next"] = {"frame": chosen.to_dict(), "note": "re-run note", "from": [1, 2]}
+    nfev = prior[-1].nfev_total
+    run = _valley_run(prior=prior, nfev_before=nfev, max_iterations=4)
+    rec = taguchi_stage(run, ValleyEvaluator()).records[-1]
+    assert rec.index == 4 and rec.frame.level_values(run.space) == chosen.level_values(run.space)
+    assert rec.extra["rerun"] == "re-run note" and rec.extra["rerun_from"] == [1, 2]
+    # levels edited by a person replace the decided ones, without a re-run origin
+    prior = copy.deepcopy(done.records)
+    for r in prior:
+        r.decision.converged = False
+    edited = _valley_run(prior=prior, nfev_before=nfev, max_iterations=4, override=chosen)
+    rec = taguchi_stage(edited, ValleyEvaluator()).records[-1]
+    assert rec.extra["rerun"] == "levels edited by a person" and "rerun_from" not in rec.extra
+    assert rec.frame.level_values(run.space) == chosen.level_values(run.space)
+    # the best so far is carried into the continued stage: never worse than before
+    assert rec.best_cost <= prior[-1].best_cost
