@@ -19,10 +19,24 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-STATUS = {1: "killed", 3: "killed", 0: "survived", 33: "no tests", 5: "no tests", 36: "timeout"}
+STATUS = {
+    1: "killed",
+    3: "killed",
+    0: "survived",
+    33: "no tests",
+    5: "no tests",
+    36: "timeout",
+    -24: "timeout",
+    24: "timeout",
+    152: "timeout",
+}
 
 GROUPS = {
-    "target: interval": ["uncertainty/intervals.py", "uncertainty/profile.py", "uncertainty/longrun.py"],
+    "target: interval": [
+        "uncertainty/intervals.py",
+        "uncertainty/profile.py",
+        "uncertainty/longrun.py",
+    ],
     "target: stopping": ["search/taguchi.py", "doe/rules.py", "doe/leveling.py"],
     "target: level-update": ["search/nextlevels.py"],
 }
