@@ -22,6 +22,7 @@ from tsid_fmu.uncertainty.longrun import fit_ar
 from tsid_fmu.uncertainty.sensitivity import sensitivities
 
 assess = importlib.import_module("tsid_fmu.uncertainty.assess")  # the package exports a function
+longrun = importlib.import_module("tsid_fmu.uncertainty.longrun")
 
 
 def arma(rng: np.random.Generator, n: int, phi: list[float], burn: int = 2000) -> np.ndarray:
@@ -155,3 +156,113 @@ def test_each_parameter_profile_carries_its_own_inflation():
         wald = quantile(u.dof[name]) * u.std_error[name]
         low, high = u.profile[name]
         assert 0.5 * (high - low) / wald == pytest.approx(1.06, abs=0.07), name
+
+
+# -- the AR pieces against closed forms (killed mutants of docs/mutation-survivors.md) ---
+
+
+def _ar_gamma(phi: list[float], innovation: float, lags: int) -> np.ndarray:
+    """Autocovariances of a stationary AR(p) by its MA(inf) sum (independent of longrun)."""
+    p, psi = len(phi), np.zeros(4000)
+    psi[0] = 1.0
+    for k in range(1, psi.size):
+        psi[k] = sum(phi[i] * psi[k - 1 - i] for i in range(min(p, k)))
+    return np.array([innovation * psi[: psi.size - h] @ psi[h:] for h in range(lags + 1)])
+
+
+@pytest.mark.parametrize("phi", [[0.5], [0.5, 0.3], [0.7, -0.2, 0.1]])
+def test_an_ar_model_its_autocovariances_and_their_extension(phi):
+    gamma = _ar_gamma(phi, 2.0, 8)
+    assert longrun._from_coefficients(np.array(phi), 2.0) == pytest.approx(
+        gamma[: len(phi) + 1], rel=1e-9
+    )
+    model = longrun._model(gamma[: len(phi) + 1])
+    assert model.coefficients == pytest.approx(phi, rel=1e-9)
+    assert model.innovation == pytest.approx(2.0, rel=1e-9)
+    for n in (1, len(phi), len(phi) + 1, len(phi) + 2, 9):
+        assert model.extend(n) == pytest.approx(gamma[:n], rel=1e-9), n
+
+
+def test_levinson_on_an_ar1():
+    coefficients, variances, reflections = longrun._levinson(np.array([1.0, 0.5, 0.25]))
+    assert [list(c) for c in coefficients] == [[0.5], [0.5, 0.0]]
+    assert list(variances) == [1.0, 0.75, 0.75] and list(reflections) == [0.5, 0.0]
+
+
+def test_non_stationary_autocovariances_give_no_model():
+    assert longrun._model(np.array([0.0, 0.0])) is None
+    assert longrun._model(np.array([1.0, 1.5])) is None  # |reflection| > 1
+    assert longrun._model(np.array([1.0, 1.0, 1.0])) is None  # a reflection of 1
+    assert longrun._from_coefficients(np.array([1.5]), 1.0) is None  # gamma_0 < 0
+    assert longrun._from_coefficients(np.array([1.0]), 1.0) is None  # singular
+
+
+@pytest.mark.parametrize(
+    ("n", "order"), [(0, 0), (1, 0), (2, 0), (3, 0), (5, 1), (10, 4), (21, 9), (100, 20)]
+)
+def test_the_highest_order_tried(n, order):
+    assert longrun.max_order(n) == order
+
+
+def test_autocovariances_are_the_uncentred_lagged_sums():
+    r = np.array([0.3, -1.2, 0.7, 2.0, -0.4, 0.1, 0.9])
+    direct = [r[: r.size - k] @ r[k:] / r.size for k in range(r.size)]
+    assert longrun._autocovariances(r, r.size - 1) == pytest.approx(direct, abs=1e-12)
+
+
+def test_fit_ar_with_a_fixed_order_and_without_data():
+    rng = np.random.default_rng(7)
+    x = arma(rng, 400, [0.6])
+    assert fit_ar(x, order=3).order == 3  # fixed: no BIC
+    assert fit_ar(x[:3], order=5).order <= 2  # at most n - 1
+    for empty in (np.zeros(10), np.zeros(0)):
+        m = fit_ar(empty)
+        assert m.order == 0 and m.innovation == 0.0 and list(m.autocovariance) == [0.0]
+    # an alternating series: a negative lag-1 autocovariance is no reason to give up
+    m = fit_ar(np.where(np.arange(200) % 2, -1.0, 1.0))
+    assert m.order >= 1 and m.rho1 < -0.9
+    # an order-0 answer keeps the variance as its innovation
+    w = fit_ar(rng.normal(size=2000))
+    assert w.order == 0 and w.innovation == pytest.approx(np.mean(w.autocovariance[0]))
+
+
+def test_the_delta_variance_of_an_ar1_model():
+    """``2 d^2 / n`` from the innovation variance, plus ``(d d / d phi)^2`` times the
+    Yule-Walker variance of ``phi`` (``sigma^2 / (gamma_0 n)``), with ``d`` the diagonal
+    of ``F^-1 J^T Gamma J F^-1`` from a dense Toeplitz ``Gamma``."""
+    n, phi, s2 = 120, 0.5, 1.5
+    t = np.linspace(0.0, 1.0, n)
+    jac = np.column_stack([1.0 + t, np.sin(5 * t)])
+    inv = np.linalg.inv(jac.T @ jac)
+
+    def diag(ph: float) -> np.ndarray:
+        g = s2 * ph ** np.arange(n) / (1 - ph**2)
+        return np.diag(inv @ jac.T @ linalg.toeplitz(g) @ jac @ inv)
+
+    model = longrun._model(_ar_gamma([phi], s2, 1))
+    series = longrun._Series(jac, inv)
+    d = diag(phi)
+    assert series.variance(series.kernel(model.extend(n))) == pytest.approx(d, rel=1e-9)
+    slope = (diag(phi + 1e-6) - diag(phi - 1e-6)) / 2e-6
+    expected = 2 * d**2 / n + slope**2 * s2 / (model.autocovariance[0] * n)
+    assert longrun._delta_variance(series, model, d) == pytest.approx(expected, rel=1e-4)
+    # white: the innovation term alone
+    white = longrun.ArNoise(np.array([s2]), np.zeros(0), s2)
+    assert longrun._delta_variance(series, white, d) == pytest.approx(2 * d**2 / n, rel=1e-12)
+
+
+def test_the_variance_of_several_series_is_their_sum():
+    rng = np.random.default_rng(3)
+    series = []
+    for n in (150, 90):
+        t = np.linspace(0, 1, n)
+        series.append((arma(rng, n, [0.6]), np.column_stack([np.exp(-2 * t), t])))
+    inv = np.linalg.inv(sum(j.T @ j for _, j in series))
+    found = long_run_covariance(series, inv)
+    parts = []
+    for (_, j), m in zip(series, found.models, strict=True):
+        g = linalg.toeplitz(m.extend(j.shape[0]))
+        d = np.diag(inv @ j.T @ g @ j @ inv)
+        parts.append(longrun._delta_variance(longrun._Series(j, inv), m, d))
+    assert found.variance == pytest.approx(sum(parts), rel=1e-9)
+    assert np.all(parts[0] > 0) and np.all(parts[1] > 0)

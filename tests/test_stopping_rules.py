@@ -11,6 +11,7 @@ their own copy of the tolerance and flatness rules, pinned the same way.
 
 from __future__ import annotations
 
+import copy
 import math
 from types import SimpleNamespace
 
@@ -22,7 +23,17 @@ from tsid_fmu.doe.leveling import LevelingOptions, relative_span, relevel
 from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.nextlevels import _rotated_decisions
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.taguchi import TaguchiRun, _limits, _stalled, taguchi_stage
+from tsid_fmu.search.taguchi import (
+    TaguchiRun,
+    _decide_rerun,
+    _finished,
+    _hand_back,
+    _handover,
+    _limits,
+    _next_best,
+    _stalled,
+    taguchi_stage,
+)
 from tsid_fmu.study.schema import Method
 
 FLAT = [-20.0, -20.0, -20.0]
@@ -243,3 +254,181 @@ def test_a_stage_that_converges_on_its_last_allowed_iteration_converges():
     short = _valley(n - 1)
     assert short.status == 1 and len(short.records) == n - 1
     assert short.message == f"iteration limit ({n - 1}) reached before the levels converged"
+
+
+# -- the hand-over, the hand-back and a continued stage (search/taguchi.py) ---------------
+# Killed mutants of docs/mutation-survivors.md: each boundary is met exactly (costs are
+# binary fractions), and each message is pinned whole (it is what the trail and the
+# report show as the reason the stage ended).
+
+
+def _recs(costs: list[float], converged: list[bool] | None = None, **extra) -> list:
+    converged = converged or [False] * len(costs)
+    return [
+        SimpleNamespace(
+            index=i + 1,
+            best_cost=c,
+            decision=SimpleNamespace(converged=v, message=f"converged at {i + 1}"),
+            extra=dict(extra) if i == len(costs) - 1 else {},
+        )
+        for i, (c, v) in enumerate(zip(costs, converged, strict=True))
+    ]
+
+
+def _handing(floor: float | None = None, below: float | None = None, handover=False):
+    return SimpleNamespace(method=STALL, floor=floor, hand_back_below=below, handover=handover)
+
+
+def test_the_hand_over_needs_a_fall_of_less_than_half():
+    # a fall of exactly half is still a large gain: the arrays go on
+    assert _handover(_recs([2.0, 1.0]), _handing(), math.inf) is None
+    assert _handover(_recs([2.0, 1.0 + 2.0**-20]), _handing(), math.inf) is not None
+    # with one record the cost before is the start points' one
+    assert _handover(_recs([0.75]), _handing(), 1.0) == (
+        "handed over to the refinement: iteration 1 lowered the best cost by 25 % (less than 50 %)"
+    )
+    assert _handover(_recs([4.0, 2.0, 1.5]), _handing(), math.inf) == (
+        "handed over to the refinement: iteration 3 lowered the best cost by 25 % (less than 50 %)"
+    )
+    # no cost before (or none finite now): no hand-over
+    assert _handover(_recs([1.0]), _handing(), math.inf) is None
+    assert _handover(_recs([math.inf]), _handing(), 1.0) is None
+    # a zero cost before counts as no fall (no division by zero)
+    assert _handover(_recs([1.0]), _handing(), 0.0) == (
+        "handed over to the refinement: iteration 1 lowered the best cost by 0 % (less than 50 %)"
+    )
+
+
+def test_the_hand_over_waits_until_within_handover_fit_of_the_noise_floor():
+    floor = 2.0**-7  # HANDOVER_FIT * floor = 0.78125 exactly
+    assert _handover(_recs([0.78125]), _handing(floor), 1.0) is not None
+    assert _handover(_recs([0.78125 + 2.0**-20]), _handing(floor), 1.0) is None
+
+
+def test_the_hand_back_needs_a_cost_below_the_refinements_and_a_stall():
+    rtol = STALL.leveling.stall_rtol  # 2**-10
+    run = _handing(below=1.0)
+    # a fall of exactly stall_rtol of the cost is no stall; two records are enough
+    assert _hand_back(_recs([0.5 + 0.5 * rtol, 0.5]), run) is None
+    assert _hand_back(_recs([0.5 + 0.4 * rtol, 0.5]), run) == (
+        "handed back to the refinement: the best cost 0.5 is below the refinement's 1 "
+        "and iteration 2 lowered it by less than 0.000976562 of itself"
+    )
+    # not below the refinement's answer (equal, or above): go on
+    assert _hand_back(_recs([1.0, 1.0]), run) is None
+    assert _hand_back(_recs([3.0, 3.0]), run) is None
+    assert _hand_back(_recs([0.5]), run) is None
+    assert _hand_back(_recs([0.9, 0.5, 0.5]), run).endswith(
+        "iteration 3 lowered it by less than 0.000976562 of itself"
+    )
+
+
+def test_the_stall_message_and_a_window_longer_than_two():
+    assert _stalled(_records([1.0, 1.0, 1.0]), Method()) == (
+        "Case 3: every S/N flat for 2 iterations and the best cost fell by less than "
+        "0.0001 of itself: the remaining ranges are what the data hardly determine"
+    )
+    # stall 3: the fall is measured to the last record, not to the second of the window
+    three = Method(leveling=LevelingOptions(stall=3))
+    assert _stalled(_records([1.0, 1.0, 1.0, 0.5]), three) is None
+
+
+def test_a_continued_stage_that_had_ended_reads_back_as_ended():
+    converged = _recs([3.0, 2.0, 1.0], [False, False, True])
+    assert _finished(_handing(), converged, None) == (0, "converged at 3")
+    assert _finished(_handing(), converged, "pending") is None
+    assert _finished(_handing(), _recs([3.0, 2.0, 1.0], [False, True, False]), None) is None
+    handed = _recs([2.0, 1.0], handover="handed over")
+    assert _finished(_handing(handover=True), handed, None) == (0, "handed over")
+    assert _finished(_handing(handover=False), handed, None) is None
+    assert _finished(_handing(), _recs([2.0, 1.0], handback="back"), None) == (0, "back")
+    assert _finished(_handing(), [], None) is None
+
+
+# -- the re-run from the next-best run (search/taguchi.py ``_next_best``) ------------------
+
+
+def _flat_records(costs, converged=(), extra=None, spans=0.2):
+    """Records whose runs cost ``10 * index + run`` (run 0 best), spans of ``spans``."""
+    frame = SimpleNamespace(spans=lambda space: {"p": spans, "q": 0.01})
+    return [
+        SimpleNamespace(
+            index=i + 1,
+            best_cost=c,
+            decision=SimpleNamespace(converged=i in converged),
+            extra=dict((extra or {}).get(i, {})),
+            next_frame=frame,
+            measured_costs=np.array([10.0 * (i + 1) + k for k in (0, 3, 1, np.inf, 2)]),
+        )
+        for i, c in enumerate(costs)
+    ]
+
+
+RERUN = SimpleNamespace(method=Method(), space=None)
+
+
+def test_the_next_best_run_is_taken_after_rerun_after_iterations_without_a_gain():
+    recs = _flat_records([3.0, 3.0, 3.0])
+    src, i = _next_best(recs, RERUN)
+    assert src is recs[0] and i == 2  # the second-cheapest run of the iteration before
+    assert _next_best(recs[:2], RERUN) is None
+    assert _next_best(_flat_records([3.0, 3.0, 2.9]), RERUN) is None  # a gain
+    five = _flat_records([5.0, 4.0, 3.0, 3.0, 3.0], converged=(1,))
+    assert _next_best(five, RERUN)[0] is five[2]  # from RERUN_AFTER before the last
+    assert _next_best(_flat_records([3.0] * 3, converged=(2,)), RERUN) is None
+    assert _next_best(_flat_records([3.0] * 4, converged=(2,)), RERUN) is not None
+
+
+def test_a_rerun_gets_its_own_iterations_and_is_not_repeated():
+    assert _next_best(_flat_records([3.0] * 3, extra={1: {"rerun": "x"}}), RERUN) is None
+    assert _next_best(_flat_records([3.0] * 3, extra={0: {"rerun": "x"}}), RERUN) is not None
+    tried = _flat_records([3.0] * 3, extra={1: {"rerun_from": [1, 2]}})
+    assert _next_best(tried, RERUN)[1] == 4  # then run 4 (the failed run 3 is skipped)
+    both = _flat_records([3.0] * 3, extra={1: {"rerun_from": [1, 2]}, 0: {"rerun_from": [1, 4]}})
+    assert _next_best(both, RERUN)[1] == 1
+
+
+def test_near_convergence_a_flat_iteration_is_no_wrong_turn():
+    """Every span at most ten times the tolerance (0.05): no re-run."""
+    assert _next_best(_flat_records([3.0] * 3, spans=0.05), RERUN) is None
+    assert _next_best(_flat_records([3.0] * 3, spans=0.0501), RERUN) is not None
+
+
+def test_the_rerun_decision_its_note_and_its_frame():
+    levels = {"p": [1.0, 2.0, 4.0], "q": [0.2, 0.8, 1.6]}
+    space = Space(levels, {n: (1e-6, math.inf) for n in levels}, LevelingOptions())
+    run = TaguchiRun(
+        name="t",
+        space=space,
+        first=Frame.from_levels(space, levels),
+        method=Method(cost="sse", array="L9", max_iterations=3),
+    )
+    recs = copy.deepcopy(taguchi_stage(run, ValleyEvaluator()).records)
+    for r in recs:
+        r.decision.converged = False
+    recs[2].best_cost = recs[0].best_cost  # no gain over two iterations
+    i = int(np.argsort(recs[0].measured_costs, kind="stable")[1])
+    events = []
+    frame, note, origin = _decide_rerun(recs, run, 0, lambda k, d: events.append((k, d)))
+    assert origin == [1, i]
+    assert note == (
+        f"iteration 3 did not lower the cost ({recs[0].best_cost:.6g}); re-conducted from "
+        f"iteration 1, run {i + 1} (next best)"
+    )
+    assert events == [("rerun", {"message": note})]
+    x = dict(zip(recs[0].parameters, map(float, recs[0].sets[i]), strict=True))
+    expected = relevel(
+        recs[0].frame.level_values(space),
+        recs[0].sn_means(),
+        run.method.leveling,
+        bounds=space.bounds,
+        centre=x,
+        contribution=recs[0].anova.contribution,
+        centre_label=f"iteration 1, run {i + 1}",
+    )
+    assert frame.level_values(space) == expected.next_levels()
+    # the limit on re-runs, and a converged last iteration, stop it
+    assert _decide_rerun(recs, run, run.method.max_reruns, None) is None
+    assert _decide_rerun(recs, run, run.method.max_reruns - 1, None) is not None
+    recs[2].decision.converged = True
+    assert _decide_rerun(recs, run, 0, None) is None

@@ -4,6 +4,7 @@ for, before the restructure replaced it by rotated factors inside the Taguchi st
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 
@@ -91,3 +92,110 @@ def test_an_iteration_with_a_failed_run_round_trips_through_strict_json():
     np.testing.assert_array_equal(
         back.costs[np.isfinite(rec.costs)], rec.costs[np.isfinite(rec.costs)]
     )
+
+
+# -- what a stage reports, and a stage continued after a pause (killed mutants of
+# docs/mutation-survivors.md: the progress events, the recorder, the start points and
+# the resume were reached by no fast test)
+
+
+def _valley_run(**kw) -> TaguchiRun:
+    levels = {"p": [1.0, 2.0, 4.0], "q": [0.2, 0.8, 1.6]}
+    space = Space(levels, {n: (1e-6, math.inf) for n in levels}, LevelingOptions())
+    method = Method(cost="sse", array="L9", max_iterations=kw.pop("max_iterations", 60))
+    return TaguchiRun(
+        name="valley", space=space, first=Frame.from_levels(space, levels), method=method, **kw
+    )
+
+
+def test_a_stage_reports_its_start_points_and_each_iteration_in_order():
+    starts = [({"p": 2.0, "q": 0.8}, "centre"), ({"p": 9.0, "q": 9.0}, "far")]
+    events, kept = [], []
+    recorder = type("R", (), {"iteration": lambda self, rec: kept.append(rec)})()
+    ev = ValleyEvaluator()
+    ev.evaluate([{"p": 1.0, "q": 1.0}])  # an evaluator already used: its count is not 0
+    run = _valley_run(starts=starts, fixed={"k": 7.0}, experiments=["e1"], nfev_before=5)
+    stage = taguchi_stage(run, ev, recorder, lambda kind, data: events.append((kind, data)))
+    assert stage.status == 0 and stage.name == "valley" and stage.experiments == ["e1"]
+    assert stage.x["k"] == 7.0 and stage.nfev == ev.nfev - 1  # the start points counted
+    assert kept == stage.records  # each record once, in order
+    centre = ev.cost(p=2.0, q=0.8)
+    assert events[0] == ("start", {"stage": "valley", "cost": centre, "source": "centre"})
+    assert stage.records[0].extra["starts"] == [
+        {"x": {"p": 2.0, "q": 0.8}, "cost": centre, "source": "centre"},
+        {"x": {"p": 9.0, "q": 9.0}, "cost": ev.cost(p=9.0, q=9.0), "source": "far"},
+    ]
+    assert all("starts" not in r.extra for r in stage.records[1:])
+    begun = [d for k, d in events if k == "iteration"]
+    done = [d["record"] for k, d in events if k == "iteration done"]
+    assert [d["iteration"] for d in begun] == list(range(1, len(stage.records) + 1))
+    assert all(d["stage"] == "valley" for d in begun) and done == stage.records
+    assert begun[0]["frame"] is run.first
+    assert stage.records[-1].nfev_total == ev.nfev - 1 + 5
+
+
+def test_a_stage_paused_and_continued_ends_as_the_uninterrupted_one():
+    whole = taguchi_stage(_valley_run(), ValleyEvaluator())
+    first = taguchi_stage(_valley_run(pause_after=2), ValleyEvaluator())
+    assert first.status == 2 and len(first.records) == 2
+    rest = taguchi_stage(
+        _valley_run(prior=first.records, nfev_before=first.nfev), ValleyEvaluator()
+    )
+    assert rest.status == whole.status == 0 and rest.message == whole.message
+    assert [r.best_cost for r in rest.records] == [r.best_cost for r in whole.records]
+    assert rest.nfev + first.nfev == whole.nfev and rest.x == whole.x
+    # continuing a stage that had ended runs nothing more
+    again = taguchi_stage(
+        _valley_run(prior=whole.records, nfev_before=whole.nfev), ValleyEvaluator()
+    )
+    assert again.status == 0 and again.nfev == 0 and again.message == whole.message
+
+
+def test_a_stage_whose_sn_is_always_flat_ends_by_stalling():
+    """A significance no S/N reaches keeps every factor flat (Case 2, narrowing) and a
+    tolerance no range reaches rules out Case 3 by size: the stall rule ends the stage."""
+    run = _valley_run()
+    run.method = Method(
+        cost="sse",
+        array="L9",
+        max_iterations=60,
+        leveling=LevelingOptions(significance_db=1e6, tolerance=1e-9),
+    )
+    stage = taguchi_stage(run, ValleyEvaluator())
+    assert stage.status == 0 and stage.records[-1].decision.converged
+    assert stage.message.startswith("Case 3: every S/N flat for 2 iterations")
+    assert stage.message == stage.records[-1].decision.message
+    assert not any(r.decision.converged for r in stage.records[:-1])
+
+
+def test_a_stage_paused_before_its_first_iteration_has_no_answer():
+    stage = taguchi_stage(_valley_run(pause_after=0, fixed={"k": 1.0}), ValleyEvaluator())
+    assert stage.status == 2 and stage.records == [] and stage.nfev == 0
+    assert stage.cost == math.inf and stage.x == {"k": 1.0}
+
+
+def test_a_stage_continued_after_a_pending_rerun_or_edited_levels_starts_from_them():
+    """The trail keeps a decided re-run in the last record (``extra["next"]``) and a
+    person may edit the next levels (``override``): a continued stage runs its next
+    iteration on those levels and says so in the record."""
+    done = taguchi_stage(_valley_run(max_iterations=3), ValleyEvaluator())
+    prior = copy.deepcopy(done.records)
+    for r in prior:
+        r.decision.converged = False
+    chosen = prior[0].frame
+    prior[-1].extra["next"] = {"frame": chosen.to_dict(), "note": "re-run note", "from": [1, 2]}
+    nfev = prior[-1].nfev_total
+    run = _valley_run(prior=prior, nfev_before=nfev, max_iterations=4)
+    rec = taguchi_stage(run, ValleyEvaluator()).records[-1]
+    assert rec.index == 4 and rec.frame.level_values(run.space) == chosen.level_values(run.space)
+    assert rec.extra["rerun"] == "re-run note" and rec.extra["rerun_from"] == [1, 2]
+    # levels edited by a person replace the decided ones, without a re-run origin
+    prior = copy.deepcopy(done.records)
+    for r in prior:
+        r.decision.converged = False
+    edited = _valley_run(prior=prior, nfev_before=nfev, max_iterations=4, override=chosen)
+    rec = taguchi_stage(edited, ValleyEvaluator()).records[-1]
+    assert rec.extra["rerun"] == "levels edited by a person" and "rerun_from" not in rec.extra
+    assert rec.frame.level_values(run.space) == chosen.level_values(run.space)
+    # the best so far is carried into the continued stage: never worse than before
+    assert rec.best_cost <= prior[-1].best_cost

@@ -219,7 +219,9 @@ def decide_factor(
     interior = inside if centre is not None else 0 < best < len(u) - 1
     if not interior:
         optimum_u = min(max(optimum_u, u[0]), u[-1]) if centre is None else optimum_u
-    side = "" if interior else ("upper" if optimum_u >= u[-1] else "lower")
+    # a boundary centre is within eps of one end: the nearer end is its side (comparing
+    # with u[-1] alone sent a centre just under the top level, by rounding, downwards)
+    side = "" if interior else ("upper" if optimum_u > 0.5 * (u[0] + u[-1]) else "lower")
     at_bound = (side == "upper" and u[-1] >= bounds[1]) or (side == "lower" and u[0] <= bounds[0])
     case, factor = _case(state, interior, side, at_bound, centre is not None, options)
     half = 0.5 * (u[-1] - u[0]) * factor
