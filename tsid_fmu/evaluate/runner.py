@@ -129,9 +129,12 @@ class SetRunner:
         self.started = 0  # simulations started for the current set
         self.sessions: list[FMUSession] = []
         self.fixed_delays: list[dict[str, float]] = []  # per experiment, by input name
-        fmu_parameters = [n for n in spec.parameter_names if delay_input(n) is None]
         try:
-            for e in spec.experiments:
+            for i, e in enumerate(spec.experiments):
+                # the shared parameters and this experiment's own copies, by FMU variable
+                fmu_parameters = [
+                    n for n in spec.experiment_parameters(i) if delay_input(n) is None
+                ]
                 options: dict = {"hold": dict(e.hold)} if e.hold else {}
                 start, delays = split_delays({**spec.start_values, **e.start_values})
                 self.fixed_delays.append(delays)
@@ -156,7 +159,7 @@ class SetRunner:
         experiment = self.spec.experiments[e]
         self.started += 1
         self.monitor.started(e, r, self.started)
-        values, delays = split_delays(params)
+        values, delays = split_delays(self.spec.experiment_values(e, params))
         inputs = delayed_inputs(
             experiment.time,
             experiment.replicate_inputs(r),

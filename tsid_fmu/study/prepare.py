@@ -116,8 +116,13 @@ def _noisy_inputs(study: Study, index: int, inputs: np.ndarray | None) -> tuple[
     return tuple(out)
 
 
-def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
+def prepare_experiment(
+    study: Study, index: int, parameters: Sequence[str] | None = None
+) -> PreparedExperiment:
     """Load experiment ``index`` of a study and arrange it for simulation.
+
+    Of the per-experiment parameters' copies among ``parameters`` (default the study's
+    ``parameter_names``), this experiment's own set their variables in it alone.
 
     Replicate ``r`` (``r >= 2``) of experiment ``index`` adds Gaussian noise drawn from
     ``numpy.random.default_rng([seed, index, r - 1])`` with a standard deviation of
@@ -125,6 +130,7 @@ def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
     measured input itself.
     """
     experiment = study.experiments[index]
+    varied = set(study.parameter_names if parameters is None else parameters)
     data = load_experiment(experiment)
     inputs = data.columns(list(experiment.inputs.values())) if experiment.inputs else None
     measured = data.columns(list(experiment.outputs.values()))
@@ -148,6 +154,11 @@ def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
         hold=dict(experiment.hold),
         windows=windows,
         window_weights=tuple(experiment.window_weights or ()),
+        copies={
+            c.name: c.variable
+            for c in study.copies
+            if c.experiment == experiment.name and c.name in varied
+        },
     )
 
 
@@ -189,10 +200,11 @@ def prepare(
         by_name = {e.name: i for i, e in enumerate(study.experiments)}
         indices = [by_name[n] for n in experiments]
     interface, step = solver_settings(study)
+    names = tuple(study.parameter_names if parameters is None else parameters)
     return EvaluationSpec(
         fmu=study.fmu,
-        parameter_names=tuple(study.parameter_names if parameters is None else parameters),
-        experiments=tuple(prepare_experiment(study, i) for i in indices),
+        parameter_names=names,
+        experiments=tuple(prepare_experiment(study, i, names) for i in indices),
         cost=study.method.cost,
         start_values=dict(study.start_values),
         interface=interface,
