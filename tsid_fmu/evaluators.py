@@ -55,14 +55,14 @@ class StudyEvaluators:
             held = {k: v for k, v in fixed.items() if k not in params}
             copies = {c.name: c for c in self.study.copies if c.name in held}
             start = {**base.start_values, **{k: v for k, v in held.items() if k not in copies}}
+
+            def own(experiment: str) -> dict[str, float]:
+                return {
+                    c.variable: held[n] for n, c in copies.items() if c.experiment == experiment
+                }
+
             experiments = tuple(
-                dataclasses.replace(
-                    e,
-                    start_values={
-                        **e.start_values,
-                        **{c.variable: held[n] for n, c in copies.items() if c.experiment == e.name},
-                    },
-                )
+                dataclasses.replace(e, start_values={**e.start_values, **own(e.name)})
                 for e in base.experiments
             )
             self.specs[key] = dataclasses.replace(

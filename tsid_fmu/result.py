@@ -331,9 +331,7 @@ class IdentificationResult:
         (name, kind, cost, simulations, iterations, status, message), the ``warnings``
         and ``out_dir``. Non-finite numbers are ``null``.
         """
-        units = (
-            {p.name: p.unit for p in self.study.identified_parameters()} if self.study else {}
-        )
+        units = {p.name: p.unit for p in self.study.identified_parameters()} if self.study else {}
         params = {
             name: {
                 "value": value,

@@ -203,8 +203,12 @@ class Study:
         clash = sorted(set(names) & set(self.start_values))
         if clash:
             raise StudyError(f"{', '.join(clash)} both identified and fixed in start_values")
+        own = {p.name for p in self.parameters if p.per_experiment} | {
+            n for e in self.experiments for n, how in e.initial.items() if how == IDENTIFY
+        }
         for e in self.experiments:
-            clash = sorted(n for n in set(e.initial) & set(names) if e.initial[n] != IDENTIFY)
+            # an experiment may fix a per-experiment parameter itself (it then has no copy)
+            clash = sorted(set(e.initial) & (set(names) - own))
             if clash:
                 raise StudyError(
                     f"experiment {e.name!r}: initial {', '.join(map(repr, clash))} is set from "
@@ -213,10 +217,8 @@ class Study:
         self._check_phases(names, exp_names)
         self._check_choices(names)
         self._check_copies()
-        select_array(
-            [len(p.levels) for p in self.shared_parameters] + [len(c.choices) for c in self.choices],
-            name=self.method.array,
-        )
+        factors = [len(p.levels) for p in self.shared_parameters]  # the arrays' factors
+        select_array(factors + [len(c.choices) for c in self.choices], name=self.method.array)
 
     def _check_copies(self) -> None:
         """Check the per-experiment parameters (:mod:`tsid_fmu.study.copies`)."""
@@ -316,7 +318,7 @@ class Study:
         return [p for p in self.parameters if p.name not in own]
 
     def identified_parameters(self) -> list[Parameter]:
-        """The parameters identified: each per-experiment one replaced by its copies."""
+        """Return the parameters identified: each per-experiment one replaced by its copies."""
         return expand(self.parameters, self.copies)
 
     @property

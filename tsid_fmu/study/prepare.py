@@ -12,8 +12,9 @@ from tsid_fmu.evaluate.cost import NOISE_POWER, noise_level
 from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.evaluate.windows import select, window_ranges
+from tsid_fmu.fmu.delay import delay_input
 from tsid_fmu.study.definition import Study
-from tsid_fmu.study.initial import initial_values
+from tsid_fmu.study.initial import check_settable, initial_values
 from tsid_fmu.study.schema import Experiment
 
 __all__ = [
@@ -137,6 +138,10 @@ def prepare_experiment(
     windows: tuple[tuple[int, int], ...] = ()
     if experiment.windows or experiment.warmup:
         windows = window_ranges(experiment.name, data.time, experiment.windows, experiment.warmup)
+    copies = {c.name: c.variable for c in study.copies if c.experiment == experiment.name}
+    where = f"experiment {experiment.name!r}: per-experiment parameter"
+    check_settable(study.fmu, sorted({v for v in copies.values() if not delay_input(v)}), where)
+    copies = {k: v for k, v in copies.items() if k in varied}
     # the noise, the weights and the residual scales come from the scored samples only
     weights, scale = _weights_and_scale(study, experiment, select(windows, measured))
     return PreparedExperiment(
@@ -154,11 +159,7 @@ def prepare_experiment(
         hold=dict(experiment.hold),
         windows=windows,
         window_weights=tuple(experiment.window_weights or ()),
-        copies={
-            c.name: c.variable
-            for c in study.copies
-            if c.experiment == experiment.name and c.name in varied
-        },
+        copies=copies,
     )
 
 
