@@ -9,6 +9,7 @@ constant is shared, the initial state ``x0`` differs per experiment.
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -21,6 +22,8 @@ from tsid_fmu import Experiment, Parameter, Phase, Study, identify, load
 from tsid_fmu.errors import StudyError
 from tsid_fmu.report.html import html_report
 from tsid_fmu.report.markdown import markdown_report
+from tsid_fmu.report.scored import initial_note, per_experiment_note
+from tsid_fmu.scaffold import init_study
 from tsid_fmu.study.prepare import prepare, serial_evaluator
 
 TAU, SIGMA = 0.37, 0.002
@@ -105,7 +108,9 @@ def test_each_experiment_gets_its_own_initial_position(lag_fmu, records, tmp_pat
     assert all(rec.parameters == ["tau"] for rec in taguchi.records)
     # each copy is reported, and reads back from the output folder
     assert {"x0[a]", "x0[b]"} <= set(res.parameters_frame().index)
-    assert "x0[a]" in html_report(res) and "x0[b]" in markdown_report(res)
+    note = "Identified per experiment (one row each in the parameter table): x0 (x0[a], x0[b])"
+    assert note in html_report(res) and note in markdown_report(res)
+    assert "| x0[b] |" in markdown_report(res)
     again = load(tmp_path / "out", study=s)
     assert again.params == pytest.approx(res.params)
     assert not again.warnings or all("changed" not in w for w in again.warnings)
@@ -136,6 +141,9 @@ def test_identify_is_a_per_experiment_parameter(lag_fmu, records):
     spec = prepare(s)
     assert [e.copies for e in spec.experiments] == [{"x0[a]": "x0"}, {"x0[b]": "x0"}]
     assert all("x0" not in e.start_values for e in spec.experiments)
+    # the report says they were identified, not set from the data
+    assert initial_note(SimpleNamespace(study=s)) == ""
+    assert "x0 (x0[a], x0[b])" in per_experiment_note(SimpleNamespace(study=s))
 
 
 def test_a_copy_moves_its_own_experiment_only(lag_fmu, records):
@@ -235,3 +243,21 @@ def test_per_experiment_and_identify_read_and_write_as_toml(lag_fmu, records, tm
     (tmp_path / "bad.toml").write_text(text)
     with pytest.raises(StudyError, match=r"\[parameters\] x0 per_experiment must be true or false"):
         Study.from_toml(tmp_path / "bad.toml")
+
+
+def test_init_writes_an_identify_hint_that_reads_back(tmp_path):
+    from test_init import SISO
+
+    text = init_study(
+        SISO.parents[1] / "fmus" / "LSEA_SISO.fmu", SISO / "measured.csv", tmp_path / "s.toml"
+    )
+    assert '#   initial = { x_m = "identify" }' in text
+    assert "per_experiment = true in an entry identifies one value per experiment" in text
+    lines = text.replace('#   initial = { x_m = "identify" }', 'initial = { x_m = "identify" }')
+    lines = lines.replace(
+        "[parameters]\n", '[parameters]\nx_m = { levels = [-0.01, 0, 0.01], unit = "m" }\n', 1
+    )
+    (tmp_path / "s2.toml").write_text(lines)
+    s = Study.from_toml(tmp_path / "s2.toml")
+    assert [n for n in s.parameter_names if n.startswith("x_m")] == ["x_m[measured]"]
+    assert prepare(s).experiments[0].copies == {"x_m[measured]": "x_m"}
