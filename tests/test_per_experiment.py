@@ -261,3 +261,10 @@ def test_init_writes_an_identify_hint_that_reads_back(tmp_path):
     s = Study.from_toml(tmp_path / "s2.toml")
     assert [n for n in s.parameter_names if n.startswith("x_m")] == ["x_m[measured]"]
     assert prepare(s).experiments[0].copies == {"x_m[measured]": "x_m"}
+
+
+def test_screening_screens_each_copy(lag_fmu, records):
+    from tsid_fmu import screen
+
+    found = screen(study(lag_fmu, records, per_experiment()), n=4, workers=1, timeout=0)
+    assert found.parameters == ["tau", "x0[a]", "x0[b]"]
