@@ -156,9 +156,16 @@ def test_a_copy_moves_its_own_experiment_only(lag_fmu, records):
                 {"tau": TAU, "x0[a]": 0.8, "x0[b]": 0.3},
             ]
         ).residuals
+        nfev = ev.nfev
     assert np.array_equal(one[:n], other[:n])  # experiment a: the same
     assert not np.allclose(one[n:], other[n:])  # experiment b: moved
     assert abs(one[n]) < 5 and abs(other[n]) > 100  # b's first sample, in noise units
+    # a's outputs were reused for the second set (the Jacobian's block-sparse columns):
+    # three simulations, not four, and the same residuals as a fresh run
+    assert nfev == 3
+    with serial_evaluator(s) as fresh:
+        alone = fresh.evaluate([{"tau": TAU, "x0[a]": 0.8, "x0[b]": 0.3}]).residuals[0]
+    assert np.array_equal(alone, other)
 
 
 def test_held_copies_and_one_experiment(lag_fmu, records):
