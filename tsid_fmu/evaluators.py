@@ -44,13 +44,32 @@ class StudyEvaluators:
     def spec(
         self, params: list[str], exps: list[str], fixed: Mapping[str, float]
     ) -> EvaluationSpec:
-        """Return the spec of a sub-problem: ``fixed`` values set, the others not."""
+        """Return the spec of a sub-problem: ``fixed`` values set, the others not.
+
+        A fixed copy of a per-experiment parameter sets its variable in its own
+        experiment only (the arrays hold the copies so, :mod:`tsid_fmu.study.copies`).
+        """
         key = self._key(params, exps, fixed)
         if key not in self.specs:
             base = prepare(self.study, exps, params)
-            start = {**base.start_values, **{k: v for k, v in fixed.items() if k not in params}}
+            held = {k: v for k, v in fixed.items() if k not in params}
+            copies = {c.name: c for c in self.study.copies if c.name in held}
+            start = {**base.start_values, **{k: v for k, v in held.items() if k not in copies}}
+
+            def own(experiment: str) -> dict[str, float]:
+                return {
+                    c.variable: held[n] for n, c in copies.items() if c.experiment == experiment
+                }
+
+            experiments = tuple(
+                dataclasses.replace(e, start_values={**e.start_values, **own(e.name)})
+                for e in base.experiments
+            )
             self.specs[key] = dataclasses.replace(
-                base, start_values=start, interface=self.interface or base.interface
+                base,
+                start_values=start,
+                experiments=experiments,
+                interface=self.interface or base.interface,
             )
         return self.specs[key]
 

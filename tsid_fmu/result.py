@@ -331,7 +331,7 @@ class IdentificationResult:
         (name, kind, cost, simulations, iterations, status, message), the ``warnings``
         and ``out_dir``. Non-finite numbers are ``null``.
         """
-        units = {p.name: p.unit for p in self.study.parameters} if self.study else {}
+        units = {p.name: p.unit for p in self.study.identified_parameters()} if self.study else {}
         params = {
             name: {
                 "value": value,
@@ -452,7 +452,7 @@ class IdentificationResult:
         import pandas as pd
 
         rows = []
-        params = self.study.parameters if self.study else []
+        params = self.study.identified_parameters() if self.study else []
         for p in params:
             low, high = self.intervals.get(p.name, [None, None])
             se = self.uncertainty.relative.get(p.name, math.nan) if self.uncertainty else math.nan

@@ -233,10 +233,15 @@ def _initial_hint(states: list[str], outputs: Mapping[str, str]) -> list[str]:
         if compared
         else 'STATE = "from_data:COLUMN"'
     )
+    state = compared[0] if compared else "STATE"
     return [
         "# to start a state (or the parameter that sets it, such as x0) at the data's first",
         '# sample, uncomment ("from_data": the column the state is compared with):',
         f"# initial = {{ {value} }}",
+        "# or identify its start in each experiment (one value per experiment, beside the",
+        "# shared parameters), with its range given in [parameters]:",
+        f'#   initial = {{ {state} = "identify" }}',
+        f"#   [parameters] {state} = {{ levels = [LOW, MID, HIGH] }}",
     ]
 
 
@@ -292,7 +297,9 @@ def init_study(
         "",
         "[parameters]",
         "# five log-spaced levels over one decade around the FMU's start value, within the",
-        "# FMU's min/max; numerical settings (steps, tolerances, thresholds) commented out",
+        "# FMU's min/max; numerical settings (steps, tolerances, thresholds) commented out;",
+        "# per_experiment = true in an entry identifies one value per experiment (reported",
+        "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
         *params,
     ]
     text = "\n".join(lines) + "\n"

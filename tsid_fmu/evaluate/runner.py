@@ -41,6 +41,9 @@ __all__ = [
     "warm_up",
 ]
 
+REUSE_PER_EXPERIMENT = 8
+"""Outputs kept per experiment for reuse (only where the spec has per-experiment copies)."""
+
 Job = tuple[str, dict[str, float], bool]
 """``(kind, parameters, full)``: kind ``"run"`` scores a set (:meth:`SetRunner.run`;
 ``full=False``: the measured inputs only), ``"sim"`` simulates it on the measured inputs
@@ -127,11 +130,17 @@ class SetRunner:
         self.n_replicates = spec.n_replicates
         self.plans = [e.replicate_plan(self.n_replicates) for e in spec.experiments]
         self.started = 0  # simulations started for the current set
+        # with per-experiment copies: each experiment's latest outputs, by its own values
+        copies = any(e.copies for e in spec.experiments)
+        self.reuse: dict[tuple, np.ndarray] | None = {} if copies else None
         self.sessions: list[FMUSession] = []
         self.fixed_delays: list[dict[str, float]] = []  # per experiment, by input name
-        fmu_parameters = [n for n in spec.parameter_names if delay_input(n) is None]
         try:
-            for e in spec.experiments:
+            for i, e in enumerate(spec.experiments):
+                # the shared parameters and this experiment's own copies, by FMU variable
+                fmu_parameters = [
+                    n for n in spec.experiment_parameters(i) if delay_input(n) is None
+                ]
                 options: dict = {"hold": dict(e.hold)} if e.hold else {}
                 start, delays = split_delays({**spec.start_values, **e.start_values})
                 self.fixed_delays.append(delays)
@@ -154,9 +163,16 @@ class SetRunner:
 
     def _simulate(self, e: int, r: int, params: Mapping[str, float]) -> np.ndarray:
         experiment = self.spec.experiments[e]
+        own = self.spec.experiment_values(e, params)
+        key = (e, r, tuple(own.items())) if self.reuse is not None else None
+        if key is not None and key in self.reuse:
+            # the same values for this experiment as a recent set: another experiment's
+            # copy moved (the Jacobian's block-sparse columns), not this one's inputs
+            self.reuse[key] = self.reuse.pop(key)
+            return self.reuse[key].copy()
         self.started += 1
         self.monitor.started(e, r, self.started)
-        values, delays = split_delays(params)
+        values, delays = split_delays(own)
         inputs = delayed_inputs(
             experiment.time,
             experiment.replicate_inputs(r),
@@ -164,9 +180,14 @@ class SetRunner:
             {**self.fixed_delays[e], **delays},
         )
         try:
-            return self.sessions[e].simulate(experiment.time, inputs, values)
+            y = self.sessions[e].simulate(experiment.time, inputs, values)
         finally:
             self.monitor.finished()
+        if key is not None and self.reuse is not None:
+            self.reuse[key] = y.copy()
+            while len(self.reuse) > REUSE_PER_EXPERIMENT * len(self.sessions):
+                del self.reuse[next(iter(self.reuse))]
+        return y
 
     def run(self, params: Mapping[str, float], full: bool = True) -> SetResult:
         """Score one parameter set (``full=False``: the measured inputs only).
@@ -184,13 +205,14 @@ class SetRunner:
                 if plan[r] != r:  # the same inputs as an earlier replicate: the same cost
                     values.append(values[plan[r]])
                     continue
-                t0 = time.monotonic()
+                t0, before = time.monotonic(), self.started
                 try:
                     y = self._simulate(e, r, params)
                 except TsidError as exc:
                     costs[:] = math.inf
                     return SetResult(costs, f"{experiment.name}: {exc}", None, self.started)
-                durations.append(time.monotonic() - t0)
+                if self.started > before:  # not reused: its time counts
+                    durations.append(time.monotonic() - t0)
                 per_output = experiment.output_costs(self.cost, y)
                 value = float(np.dot(per_output, experiment.weights))
                 values.append(value if math.isfinite(value) else math.inf)
@@ -209,13 +231,14 @@ class SetRunner:
         out: list[Simulated] = []
         durations: list[float] = []
         for e, experiment in enumerate(self.spec.experiments):
-            t0 = time.monotonic()
+            t0, before = time.monotonic(), self.started
             try:
                 y = self._simulate(e, 0, params)
             except TsidError as exc:
                 out.append(Simulated(experiment.name, None, str(exc)))
                 continue
-            durations.append(time.monotonic() - t0)
+            if self.started > before:
+                durations.append(time.monotonic() - t0)
             y.flags.writeable = False
             out.append(Simulated(experiment.name, y, None))
         return SimResult(out, self.started, durations)

@@ -111,6 +111,11 @@ class PreparedExperiment:
         whole record is simulated either way.
     window_weights : tuple of float, optional
         Weight of each window's cost (default 1 each).
+    copies : mapping of str to str, optional
+        This experiment's own parameters: parameter name (of the spec's
+        ``parameter_names``) -> the FMU variable it sets in this experiment only (a
+        per-experiment parameter's copy, :mod:`tsid_fmu.study.copies`). The other
+        experiments ignore it.
 
     Raises
     ------
@@ -136,9 +141,11 @@ class PreparedExperiment:
     hold: Mapping[str, str] = field(default_factory=dict)
     windows: Ranges = ()
     window_weights: tuple[float, ...] = ()
+    copies: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         put = object.__setattr__
+        put(self, "copies", {str(k): str(v) for k, v in self.copies.items()})
         put(self, "name", str(self.name))
         put(self, "windows", tuple((int(a), int(b)) for a, b in self.windows))
         weights = self.window_weights or (1.0,) * len(self.windows)
@@ -338,9 +345,35 @@ class EvaluationSpec:
             twice = sorted({n for n in names if list(names).count(n) > 1})
             if twice:
                 raise StudyError(f"{what} names must be unique: {', '.join(twice)} repeated")
-        fixed = [*self.start_values, *self.parameter_names]
-        for e in self.experiments:  # delay(<input>): an input of every experiment
-            check_delays([*fixed, *e.start_values], e.input_names, f"experiment {e.name!r}")
+        owned = [c for e in self.experiments for c in e.copies]
+        stray = sorted({c for c in owned if owned.count(c) > 1 or c not in self.parameter_names})
+        if stray:
+            raise StudyError(
+                f"per-experiment parameter(s) {', '.join(stray)} must be parameters of the "
+                "evaluation, each of one experiment"
+            )
+        for i, e in enumerate(self.experiments):  # delay(<input>): an input of every experiment
+            names = [*self.start_values, *self.experiment_parameters(i), *e.start_values]
+            check_delays(names, e.input_names, f"experiment {e.name!r}")
+
+    def experiment_parameters(self, index: int) -> list[str]:
+        """Return what experiment ``index`` sets from a parameter set: FMU variable names.
+
+        The shared parameters, and the FMU variables of its own copies
+        (:attr:`PreparedExperiment.copies`); the other experiments' copies not.
+        """
+        owned = {c for e in self.experiments for c in e.copies}
+        mine = self.experiments[index].copies
+        return [mine.get(n, n) for n in self.parameter_names if n not in owned or n in mine]
+
+    def experiment_values(self, index: int, parameters: Mapping[str, float]) -> dict[str, float]:
+        """Return a parameter set as experiment ``index`` applies it: by FMU variable name.
+
+        Its own copies set their variables; the other experiments' copies are left out.
+        """
+        owned = {c for e in self.experiments for c in e.copies}
+        mine = self.experiments[index].copies
+        return {mine.get(k, k): v for k, v in parameters.items() if k not in owned or k in mine}
 
     def head(self, fraction: float, min_samples: int = 20) -> EvaluationSpec:
         """Return this spec with each experiment cut to the first ``fraction`` of its samples.

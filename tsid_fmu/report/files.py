@@ -69,7 +69,9 @@ def write_result_files(result: IdentificationResult, out: Path) -> None:
         return
     atomic_write(out / "parameters.csv", result.parameters_frame().to_csv())
     units = {p.name: p.unit for p in study.parameters}
-    values = dict(result.params)
+    # a per-experiment parameter's copies are no FMU variables: one set cannot hold them
+    copies = {c.name for c in study.copies}
+    values = {k: v for k, v in result.params.items() if k not in copies}
     values.update({k: v for k, v in study.start_values.items() if k not in values})
     desc = {k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in values}
     desc.update({k: "fixed in the study" for k in study.start_values})

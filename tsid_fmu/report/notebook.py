@@ -56,7 +56,7 @@ def _std_error(u: Any, name: str) -> float | str:
 def parameter_rows(result: Any) -> list[list[Any]]:
     """Rows of the parameter table: value, unit, 95 % interval, standard error, flags."""
     rows = []
-    params = result.study.parameters if result.study else []
+    params = result.study.identified_parameters() if result.study else []
     names = [p.name for p in params] or result.names
     units = {p.name: p.unit for p in params}
     first = {p.name: f"{fmt(min(p.levels))} .. {fmt(max(p.levels))}" for p in params}

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from tsid_fmu.result import IdentificationResult
+from tsid_fmu.study.schema import IDENTIFY
 
-__all__ = ["experiment_notes", "initial_note", "windows_note"]
+__all__ = ["experiment_notes", "initial_note", "per_experiment_note", "windows_note"]
 
 
 def windows_note(result: IdentificationResult) -> str:
@@ -33,15 +34,34 @@ def windows_note(result: IdentificationResult) -> str:
 def initial_note(result: IdentificationResult) -> str:
     """Return a sentence naming the initial states set from the data ("" if none)."""
     parts = [
-        f"{e.name}: " + ", ".join(f"{k} ({v})" for k, v in e.initial.items())
+        f"{e.name}: " + ", ".join(f"{k} ({v})" for k, v in mine.items())
         for e in (result.study.experiments if result.study is not None else ())
-        if e.initial
+        if (mine := {k: v for k, v in e.initial.items() if v != IDENTIFY})
     ]
     if not parts:
         return ""
     return "Initial states set from the record's first sample: " + "; ".join(parts) + "."
 
 
+def per_experiment_note(result: IdentificationResult) -> str:
+    """Return a sentence naming the per-experiment parameters and their copies ("" if none)."""
+    copies = result.study.copies if result.study is not None else []
+    by_variable: dict[str, list[str]] = {}
+    for c in copies:
+        by_variable.setdefault(c.variable, []).append(c.name)
+    if not by_variable:
+        return ""
+    parts = [f"{v} ({', '.join(names)})" for v, names in by_variable.items()]
+    return (
+        "Identified per experiment (one row each in the parameter table): "
+        + "; ".join(parts)
+        + ". The arrays ran over the shared parameters with these held at the centre of "
+        "their first levels; the least-squares refinement moved them with the shared ones "
+        "over every experiment's residuals, and their intervals come from that joint fit."
+    )
+
+
 def experiment_notes(result: IdentificationResult) -> list[str]:
-    """Return the notes on the experiments' windows and initial states (none if neither)."""
-    return [n for n in (windows_note(result), initial_note(result)) if n]
+    """Return the notes on the experiments' windows, initial states and own parameters."""
+    notes = (windows_note(result), initial_note(result), per_experiment_note(result))
+    return [n for n in notes if n]

@@ -227,8 +227,11 @@ def write_model_ssp(result: IdentificationResult, out: Path) -> Path | None:
     units = {p.name: p.unit for p in study.parameters}
     # an input delay is applied to the data by tsid-fmu, not an FMU variable: SSP 1.0
     # has no place for it, so the report names it instead
+    copies = {c.name for c in study.copies}  # one value per experiment: no FMU variable
     values = {
-        k: v for k, v in {**result.params, **study.start_values}.items() if not delay_input(k)
+        k: v
+        for k, v in {**result.params, **study.start_values}.items()
+        if not delay_input(k) and k not in copies
     }
     desc = {k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in values}
     desc.update(dict.fromkeys(study.start_values, "fixed in the study"))

@@ -32,4 +32,6 @@ def study_units(study: Any) -> dict[str, str]:
         return {}
     units = fmu_units(study.fmu)
     units.update({p.name: p.unit for p in study.parameters if p.unit})
+    # a per-experiment parameter's copies in its variable's unit
+    units.update({c.name: units[c.variable] for c in study.copies if units.get(c.variable)})
     return units

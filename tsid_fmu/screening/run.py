@@ -186,7 +186,7 @@ def screen(
     if not isinstance(study, Study):
         study = Study.from_toml(study)
     method, n = _check(study, method, n)
-    params = study.parameters
+    params = study.identified_parameters()  # a per-experiment parameter: each copy
     space = Space({p.name: p.levels for p in params}, study.bounds(), study.method.leveling)
     names = list(space.names)
     x = design(method, names, n, seed)

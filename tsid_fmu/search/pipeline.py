@@ -17,6 +17,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 
+import numpy as np
+
 from tsid_fmu.errors import StudyError
 from tsid_fmu.search.adaptive import answer_stage
 from tsid_fmu.search.context import Context, Control, StageStore, polish
@@ -33,7 +35,7 @@ from tsid_fmu.search.verdict import noise_floor
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Parameter, Phase
 
-__all__ = ["Control", "Evaluators", "StageStore", "run_stages"]
+__all__ = ["Control", "Evaluators", "StageStore", "held_copies", "run_stages"]
 
 
 class _Recorder:
@@ -240,6 +242,23 @@ def run_stages(
     return [*stages, check(ctx, answer_stage(stages))]
 
 
+def held_copies(study: Study) -> dict[str, float]:
+    """Return the values the arrays hold the per-experiment parameters' copies at.
+
+    The centre of their first levels, as the shared parameters' centre start point: the
+    arrays run over the shared parameters only, and the refinement after them moves the
+    copies with the shared ones (:mod:`tsid_fmu.study.copies`).
+    """
+    names = [c.name for c in study.copies]
+    if not names:
+        return {}
+    levels, bounds = study.first_levels(), study.bounds()
+    space = Space(
+        {n: levels[n] for n in names}, {n: bounds[n] for n in names}, study.method.leveling
+    )
+    return space.to_x(space.clip(np.zeros(space.dim)))
+
+
 def _single(
     ctx: Context,
     handover: bool,
@@ -249,13 +268,15 @@ def _single(
     """Run the one Taguchi stage of an ungrouped study (continued from the trail, if any).
 
     A Taguchi stage always continues from its iterations on disk: finished, it returns
-    at once; stopped at a limit, it goes on if the limit now allows.
+    at once; stopped at a limit, it goes on if the limit now allows. Its arrays run over
+    the shared parameters, the per-experiment copies held (:func:`held_copies`).
     """
     exps = [e.name for e in ctx.study.identify_experiments()]
-    params = list(ctx.study.parameters)
+    params = list(ctx.study.shared_parameters)
+    held = held_copies(ctx.study)
     limit = ctx.control.max_iterations
     return _taguchi(
-        ctx, "", "taguchi", "taguchi", params, exps, {}, 0, limit, handover, records, below
+        ctx, "", "taguchi", "taguchi", params, exps, held, 0, limit, handover, records, below
     )
 
 

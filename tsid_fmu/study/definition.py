@@ -33,7 +33,9 @@ from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.errors import ArrayError, StudyError
 from tsid_fmu.study.checks import check_choice, check_number, check_text
 from tsid_fmu.study.choice import Choice, resolve_choices
+from tsid_fmu.study.copies import Copy, expand, plan_copies
 from tsid_fmu.study.schema import (
+    IDENTIFY,
     ContributionOptions,
     Experiment,
     Method,
@@ -165,7 +167,7 @@ class Study:
         self.fmu = Path(self.fmu).resolve()  # one spelling per file: equal studies compare equal
         if not self.parameters:
             raise StudyError("no parameters to identify")
-        names = self.parameter_names
+        names = [p.name for p in self.parameters]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise StudyError(f"parameter(s) listed twice: {', '.join(dupes)}")
@@ -201,8 +203,12 @@ class Study:
         clash = sorted(set(names) & set(self.start_values))
         if clash:
             raise StudyError(f"{', '.join(clash)} both identified and fixed in start_values")
+        own = {p.name for p in self.parameters if p.per_experiment} | {
+            n for e in self.experiments for n, how in e.initial.items() if how == IDENTIFY
+        }
         for e in self.experiments:
-            clash = sorted(set(e.initial) & set(names))
+            # an experiment may fix a per-experiment parameter itself (it then has no copy)
+            clash = sorted(set(e.initial) & (set(names) - own))
             if clash:
                 raise StudyError(
                     f"experiment {e.name!r}: initial {', '.join(map(repr, clash))} is set from "
@@ -210,10 +216,38 @@ class Study:
                 )
         self._check_phases(names, exp_names)
         self._check_choices(names)
-        select_array(
-            [len(p.levels) for p in self.parameters] + [len(c.choices) for c in self.choices],
-            name=self.method.array,
-        )
+        self._check_copies()
+        factors = [len(p.levels) for p in self.shared_parameters]  # the arrays' factors
+        select_array(factors + [len(c.choices) for c in self.choices], name=self.method.array)
+
+    def _check_copies(self) -> None:
+        """Check the per-experiment parameters (:mod:`tsid_fmu.study.copies`)."""
+        copies = plan_copies(self.parameters, self.experiments)
+        if not copies:
+            return
+        own = sorted({c.variable for c in copies})
+        what = f"per-experiment parameter(s) {', '.join(own)}"
+        named = [p.name for p in self.identified_parameters()]
+        twice = sorted({n for n in named if named.count(n) > 1})
+        if twice:
+            raise StudyError(f"{what}: a copy's name is a parameter's too: {', '.join(twice)}")
+        if not self.shared_parameters:
+            raise StudyError(
+                f"{what}: every parameter is per experiment, and the arrays run over the "
+                "shared ones; identify at least one shared parameter, or set these from the "
+                'data (initial = "from_data...")'
+            )
+        if self.phases or self.contribution.enabled or self.choices:
+            raise StudyError(
+                f"{what} cannot be combined with [[phases]], [contribution] or choices yet"
+            )
+        method = self.method
+        if method.refine == "none" or (method.refine == "auto" and method.cost != "sse"):
+            raise StudyError(
+                f"{what} are fitted by the least-squares refinement, which [method] refine = "
+                f"{method.refine!r} with cost = {method.cost!r} does not run; set "
+                'refine = "least_squares", or cost = "sse" with refine = "auto"'
+            )
 
     def _check_choices(self, names: list[str]) -> None:
         if not self.choices:
@@ -266,8 +300,26 @@ class Study:
 
     @property
     def parameter_names(self) -> list[str]:
-        """Names of the identified (Real) parameters, in study order."""
-        return [p.name for p in self.parameters]
+        """Names of the identified (Real) parameters, in study order.
+
+        A per-experiment parameter is named by its copies, ``name[<experiment>]``.
+        """
+        return [p.name for p in self.identified_parameters()]
+
+    @property
+    def copies(self) -> list[Copy]:
+        """The copies of the per-experiment parameters (:mod:`tsid_fmu.study.copies`)."""
+        return plan_copies(self.parameters, self.experiments)
+
+    @property
+    def shared_parameters(self) -> list[Parameter]:
+        """The parameters every experiment shares (those the arrays run over)."""
+        own = {c.variable for c in self.copies}
+        return [p for p in self.parameters if p.name not in own]
+
+    def identified_parameters(self) -> list[Parameter]:
+        """Return the parameters identified: each per-experiment one replaced by its copies."""
+        return expand(self.parameters, self.copies)
 
     @property
     def choice_names(self) -> list[str]:
@@ -275,12 +327,12 @@ class Study:
         return [c.name for c in self.choices]
 
     def first_levels(self) -> dict[str, list[float]]:
-        """Levels of the first iteration by parameter name."""
-        return {p.name: list(p.levels) for p in self.parameters}
+        """Levels of the first iteration by (identified) parameter name."""
+        return {p.name: list(p.levels) for p in self.identified_parameters()}
 
     def bounds(self) -> dict[str, tuple[float, float]]:
-        """Physical bounds by parameter name."""
-        return {p.name: p.bounds for p in self.parameters}
+        """Physical bounds by (identified) parameter name."""
+        return {p.name: p.bounds for p in self.identified_parameters()}
 
     def identify_experiments(self) -> list[Experiment]:
         """Return the experiments that are fitted (role ``identify``)."""

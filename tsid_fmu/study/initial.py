@@ -19,7 +19,7 @@ from tsid_fmu.data.measured import MeasuredData
 from tsid_fmu.errors import DataError, FMUError, StudyError
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.variables import REAL_TYPES, find_variable, initial_state, variable_info
-from tsid_fmu.study.schema import Experiment, initial_column
+from tsid_fmu.study.schema import IDENTIFY, Experiment, initial_column
 
 __all__ = ["check_settable", "initial_values"]
 
@@ -57,6 +57,9 @@ def check_settable(fmu: Path, names: list[str], where: str) -> None:
 def initial_values(fmu: Path, experiment: Experiment, data: MeasuredData) -> dict[str, float]:
     """Return the start values that ``experiment.initial`` takes from ``data``.
 
+    Variables marked ``"identify"`` are checked settable too, but take no value here:
+    they are per-experiment parameters (:mod:`tsid_fmu.study.copies`).
+
     Raises
     ------
     StudyError
@@ -65,7 +68,9 @@ def initial_values(fmu: Path, experiment: Experiment, data: MeasuredData) -> dic
     where = f"experiment {experiment.name!r}: initial"
     check_settable(fmu, list(experiment.initial), where)
     out = {}
-    for name in experiment.initial:
+    for name, how in experiment.initial.items():
+        if how == IDENTIFY:
+            continue
         column = initial_column(experiment, name) or ""
         try:
             out[name] = float(data.column(column)[0])

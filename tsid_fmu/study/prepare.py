@@ -12,8 +12,9 @@ from tsid_fmu.evaluate.cost import NOISE_POWER, noise_level
 from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.evaluate.windows import select, window_ranges
+from tsid_fmu.fmu.delay import delay_input
 from tsid_fmu.study.definition import Study
-from tsid_fmu.study.initial import initial_values
+from tsid_fmu.study.initial import check_settable, initial_values
 from tsid_fmu.study.schema import Experiment
 
 __all__ = [
@@ -116,8 +117,13 @@ def _noisy_inputs(study: Study, index: int, inputs: np.ndarray | None) -> tuple[
     return tuple(out)
 
 
-def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
+def prepare_experiment(
+    study: Study, index: int, parameters: Sequence[str] | None = None
+) -> PreparedExperiment:
     """Load experiment ``index`` of a study and arrange it for simulation.
+
+    Of the per-experiment parameters' copies among ``parameters`` (default the study's
+    ``parameter_names``), this experiment's own set their variables in it alone.
 
     Replicate ``r`` (``r >= 2``) of experiment ``index`` adds Gaussian noise drawn from
     ``numpy.random.default_rng([seed, index, r - 1])`` with a standard deviation of
@@ -125,12 +131,17 @@ def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
     measured input itself.
     """
     experiment = study.experiments[index]
+    varied = set(study.parameter_names if parameters is None else parameters)
     data = load_experiment(experiment)
     inputs = data.columns(list(experiment.inputs.values())) if experiment.inputs else None
     measured = data.columns(list(experiment.outputs.values()))
     windows: tuple[tuple[int, int], ...] = ()
     if experiment.windows or experiment.warmup:
         windows = window_ranges(experiment.name, data.time, experiment.windows, experiment.warmup)
+    copies = {c.name: c.variable for c in study.copies if c.experiment == experiment.name}
+    where = f"experiment {experiment.name!r}: per-experiment parameter"
+    check_settable(study.fmu, sorted({v for v in copies.values() if not delay_input(v)}), where)
+    copies = {k: v for k, v in copies.items() if k in varied}
     # the noise, the weights and the residual scales come from the scored samples only
     weights, scale = _weights_and_scale(study, experiment, select(windows, measured))
     return PreparedExperiment(
@@ -148,6 +159,7 @@ def prepare_experiment(study: Study, index: int) -> PreparedExperiment:
         hold=dict(experiment.hold),
         windows=windows,
         window_weights=tuple(experiment.window_weights or ()),
+        copies=copies,
     )
 
 
@@ -189,10 +201,11 @@ def prepare(
         by_name = {e.name: i for i, e in enumerate(study.experiments)}
         indices = [by_name[n] for n in experiments]
     interface, step = solver_settings(study)
+    names = tuple(study.parameter_names if parameters is None else parameters)
     return EvaluationSpec(
         fmu=study.fmu,
-        parameter_names=tuple(study.parameter_names if parameters is None else parameters),
-        experiments=tuple(prepare_experiment(study, i) for i in indices),
+        parameter_names=names,
+        experiments=tuple(prepare_experiment(study, i, names) for i in indices),
         cost=study.method.cost,
         start_values=dict(study.start_values),
         interface=interface,

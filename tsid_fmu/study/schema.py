@@ -27,6 +27,7 @@ from tsid_fmu.study.checks import (
 
 __all__ = [
     "FROM_DATA",
+    "IDENTIFY",
     "MAX_REPLICATES",
     "ContributionOptions",
     "Experiment",
@@ -58,6 +59,11 @@ class Parameter:
         Physical bounds that later levels never cross.
     unit : str
         Unit shown in reports.
+    per_experiment : bool
+        Identify one value per identification experiment (a nuisance parameter such
+        as each test's initial position) instead of one shared by all: the study
+        identifies a copy ``name[<experiment>]`` for each experiment that does not fix
+        the variable itself (:mod:`tsid_fmu.study.copies`).
     """
 
     name: str
@@ -65,6 +71,7 @@ class Parameter:
     min: float = -math.inf
     max: float = math.inf
     unit: str = ""
+    per_experiment: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isprintable() or not self.name:
@@ -94,6 +101,8 @@ class Parameter:
             )
         if not isinstance(self.unit, str):
             raise StudyError(f"parameter {self.name!r}: unit must be a string")
+        if not isinstance(self.per_experiment, bool):
+            raise StudyError(f"parameter {self.name!r}: per_experiment must be true or false")
 
     @property
     def bounds(self) -> tuple[float, float]:
@@ -156,7 +165,9 @@ class Experiment:
         ``"from_data"`` (the column this experiment compares that variable with, when
         it is one of its outputs). The variable must be settable before initialisation:
         a parameter (such as a state's ``x0``) or a state whose start value is its
-        initial value (``initial="exact"``).
+        initial value (``initial="exact"``). ``"identify"`` identifies the value per
+        experiment instead: the study's parameter of that name (which gives its range)
+        becomes a per-experiment parameter (:mod:`tsid_fmu.study.copies`).
     """
 
     data: Any
@@ -226,23 +237,28 @@ class Experiment:
     def _check_initial(self, where: str) -> None:
         for name, how in self.initial.items():
             label = f"{where}: initial {name!r}"
+            if name in self.start_values:
+                raise StudyError(f"{label} is also fixed in start_values; give one of them")
+            if how == IDENTIFY:
+                continue
             column = initial_column(self, name)
             if column is None:
                 raise StudyError(
-                    f'{label} must be "from_data:<column>" or "from_data" (for an output), '
-                    f"got {how!r}"
+                    f'{label} must be "from_data:<column>", "from_data" (for an output) or '
+                    f'"identify" (one value per experiment), got {how!r}'
                 )
             if not column:
                 raise StudyError(
                     f'{label} = "from_data": {name!r} is not an output of this experiment; '
                     'name the column: "from_data:<column>"'
                 )
-            if name in self.start_values:
-                raise StudyError(f"{label} is also fixed in start_values; give one of them")
 
 
 FROM_DATA = "from_data"
 """An experiment's ``initial`` value that sets a state from the data's first sample."""
+
+IDENTIFY = "identify"
+"""An experiment's ``initial`` value that identifies the state per experiment."""
 
 
 def initial_column(experiment: Experiment, name: str) -> str | None:

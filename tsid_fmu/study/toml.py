@@ -58,7 +58,7 @@ _DATA = {
     "window_weights",
     "initial",
 }
-_PARAM = {"levels", "min", "max", "unit", "choices"}
+_PARAM = {"levels", "min", "max", "unit", "choices", "per_experiment"}
 _PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
 _METHOD_TYPES: dict[str, type] = {
     "array": str,
@@ -264,6 +264,7 @@ def _parameters(doc: Mapping[str, Any], where: _Where) -> list[Parameter | Choic
                 min=_get(spec, "min", float, where, label, -math.inf),
                 max=_get(spec, "max", float, where, label, math.inf),
                 unit=_get(spec, "unit", str, where, label, ""),
+                per_experiment=_get(spec, "per_experiment", bool, where, label, False),
             )
         )
     return out
@@ -445,6 +446,8 @@ def _document(fields: Mapping[str, Any], base: Path, stem: str) -> dict[str, Any
         spec.update({k: v for k, v in (("min", p.min), ("max", p.max)) if math.isfinite(v)})
         if p.unit:
             spec["unit"] = p.unit
+        if p.per_experiment:
+            spec["per_experiment"] = True
         params[p.name] = spec
     for c in fields.get("choices") or []:
         params[c.name] = {"choices": list(c.choices)}

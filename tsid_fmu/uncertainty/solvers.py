@@ -157,7 +157,7 @@ def simulate_solver(
     """
     e = spec.experiments[index]
     start, fixed = split_delays({**spec.start_values, **e.start_values})
-    values, delays = split_delays(dict(x))
+    values, delays = split_delays(spec.experiment_values(index, x))
     u = delayed_inputs(e.time, e.inputs, e.input_names, {**fixed, **delays})
     t, u = (e.time, u) if k == 1 else _finer_grid(e, u, k)
     with FMUSession(
