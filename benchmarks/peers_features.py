@@ -130,6 +130,32 @@ emit(ok=True, seconds=time.time() - t, what="Morris (4 trajectories) and Sobol (
      morris_rank=list(mu.sort_values(ascending=False).index))
 api.close()
 """,
+        "a discrete factor (an Integer switch)": """
+import pathlib, tempfile
+from ebcpy import FMU_API, TimeSeriesData
+from aixcalibuha import TunerParas, Goals, CalibrationClass, Calibrator
+wd = pathlib.Path(tempfile.mkdtemp())
+d = rig[rig.time <= 2.0 + 1e-9].set_index("time")
+api = FMU_API(model_name=FMU.replace("LSEA_SISO", "LSEA_SISO_Friction"),
+              working_directory=wd / "sim", log_fmu=False, n_cpu=1)
+api.set_sim_setup({"output_interval": 0.001, "stop_time": 2.0})
+tuner = TunerParas(names=["friction", "F_cm", "F_vm"], initial_values=[2, 60, 40],
+                   bounds=[(1, 3), (10, 110), (1, 80)])
+goals = Goals(meas_target_data=TimeSeriesData(d[["F_o", "x_m"]].copy()),
+              variable_names={"F_o": ["F_o", "F_o"], "x_m": ["x_m", "x_m"]},
+              statistical_measure="NRMSE", weightings=[0.5, 0.5])
+cls = CalibrationClass(name="all", start_time=0.0, stop_time=2.0, goals=goals,
+                       tuner_paras=tuner, inputs=TimeSeriesData(d[["F_m"]].copy()))
+t = time.time()
+cal = Calibrator(working_directory=wd / "cal", sim_api=api, calibration_class=cls,
+                 show_plot=False, create_tsd_plot=False, save_tsd_plot=False,
+                 max_itercount=30, verbose_logging=False)
+res = cal.calibrate(framework="scipy_differential_evolution", method="best1bin",
+                    maxiter=1, popsize=3, polish=False)
+emit(ok=True, seconds=time.time() - t, what="the Integer 'friction' as a tuner parameter "
+     "(1..3): searched as a real number", estimate={k: float(v) for k, v in res.items()})
+api.close()
+""",
     },
     "estim8": {
         "measured inputs": """
