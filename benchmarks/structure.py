@@ -1,6 +1,12 @@
 """Structure identification on the SISO plant: the friction law chosen from the data.
 
-    python benchmarks/structure.py [--seeds 10] [--quick] [--workers 1]
+    python benchmarks/structure.py [--seeds 10] [--quick] [--workers K] [--out FILE]
+
+``--workers K`` runs the data sets in K processes (each task one route of one data
+set: the structure study with its reference, or the naive study of one law; every
+simulation in the task's own FMU process), so that the 10-seed run (30 data sets, 120
+tasks) fits a many-core machine; ``--out FILE`` also writes the tables and one line per
+data set there (Markdown). Only the repository and the venv's packages are needed.
 
 Data: ``examples/lsea_siso/friction_laws.py``, an independent simulation (piecewise
 exact for laws 1 and 2, SciPy hybrid ``solve_ivp`` for law 3) of the SISO rig (load
@@ -136,8 +142,8 @@ def chi2_at(st: Study, x: dict[str, float]) -> tuple[float, int]:
     return float(r @ r), r.size
 
 
-def one(law: int, seed: int, workers: int) -> dict:
-    """Structure study, naive route and reference on one data set."""
+def structure_route(law: int, seed: int, workers: int = 1) -> dict:
+    """The structure study on one data set, with the reference at its chosen law."""
     t0 = time.perf_counter()
     st = study(law, seed)
     out = identify(st, workers=workers, plots=False)
@@ -151,20 +157,80 @@ def one(law: int, seed: int, workers: int) -> dict:
     start = truth if chosen == law else x
     ref_chi2, ref_nfev = reference(law, seed, chosen, {**x, **start})
     err = max(abs(x[k] / truth[k] - 1) for k in LAW_PARAMS[law]) if chosen == law else math.nan
-    naive_nfev, bics = 0, {}
-    for cand in (1, 2, 3):
-        nst = study(law, seed, fixed=cand)
-        nout = identify(nst, workers=workers, plots=False)
-        naive_nfev += nout.nfev
-        c2, n = chi2_at(nst, {k: float(nout.params[k]) for k in LAW_PARAMS[cand]})
-        bics[cand] = information(c2, n, len(LAW_PARAMS[cand]))[1]
-    naive = min(bics, key=lambda k: (bics[k], k))
     return {
         "law": law, "seed": seed, "chosen": chosen, "tied": tied, "why": s.get("why", ""),
         "error": err, "ratio": chi2 / ref_chi2, "nfev": out.nfev, "ref_nfev": ref_nfev,
-        "naive_nfev": naive_nfev, "naive": naive, "bics": bics,
+        "stages": {st_.name: st_.nfev for st_ in out.stages},
         "seconds": time.perf_counter() - t0,
     }  # fmt: skip
+
+
+def naive_route(law: int, seed: int, cand: int, workers: int = 1) -> dict:
+    """The naive study of law ``cand`` on one data set: its simulations and BIC."""
+    t0 = time.perf_counter()
+    nst = study(law, seed, fixed=cand)
+    nout = identify(nst, workers=workers, plots=False)
+    c2, n = chi2_at(nst, {k: float(nout.params[k]) for k in LAW_PARAMS[cand]})
+    bic = information(c2, n, len(LAW_PARAMS[cand]))[1]
+    return {"nfev": nout.nfev, "bic": bic, "seconds": time.perf_counter() - t0}
+
+
+def merge(row: dict, naive: dict[int, dict]) -> dict:
+    """Join a data set's structure row and its three naive studies."""
+    bics = {c: naive[c]["bic"] for c in sorted(naive)}
+    return {
+        **row,
+        "naive_nfev": sum(naive[c]["nfev"] for c in naive),
+        "naive": min(bics, key=lambda k: (bics[k], k)),
+        "bics": bics,
+        "seconds": row["seconds"] + sum(naive[c]["seconds"] for c in naive),
+    }
+
+
+def one(law: int, seed: int, workers: int) -> dict:
+    """Structure study, naive route and reference on one data set (in this process)."""
+    return merge(
+        structure_route(law, seed, workers),
+        {c: naive_route(law, seed, c, workers) for c in (1, 2, 3)},
+    )
+
+
+def _task(task: tuple) -> tuple[tuple, dict]:
+    """Run one task of :func:`run_all` (in a worker process)."""
+    kind, law, seed, cand = task
+    if kind == "structure":
+        return task, structure_route(law, seed)
+    return task, naive_route(law, seed, cand)
+
+
+def line(r: dict) -> str:
+    """One data set's result as a line."""
+    return (
+        f"law {r['law']} seed {r['seed']}: chose {r['chosen']}"
+        f"{' (indist.)' if r['tied'] else ''}, naive {r['naive']}, error "
+        f"{100 * r['error']:.3g} %, cost ratio {r['ratio']:.6f}, sims {r['nfev']} vs naive "
+        f"{r['naive_nfev']} ({r['seconds']:.0f} s): {r['why']}"
+    )
+
+
+def run_all(laws_: list[int], seeds: list[int], processes: int) -> list[dict]:
+    """Every data set's structure and naive routes, in ``processes`` processes."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    tasks = [("structure", law, s, 0) for law in laws_ for s in seeds]
+    tasks += [("naive", law, s, c) for law in laws_ for s in seeds for c in (1, 2, 3)]
+    done: dict[tuple, dict] = {}
+    rows = []
+    with ProcessPoolExecutor(max_workers=processes) as pool:
+        for fut in as_completed([pool.submit(_task, t) for t in tasks]):
+            task, res = fut.result()
+            done[task] = res
+            _, law, seed, _ = task
+            parts = [("structure", law, seed, 0), *[("naive", law, seed, c) for c in (1, 2, 3)]]
+            if all(p in done for p in parts):
+                rows.append(merge(done[parts[0]], {c: done[p] for c, p in enumerate(parts[1:], 1)}))
+                print(line(rows[-1]), flush=True)
+    return sorted(rows, key=lambda r: (r["law"], r["seed"]))
 
 
 def table(rows: list[dict]) -> list[str]:
@@ -185,7 +251,7 @@ def table(rows: list[dict]) -> list[str]:
     lines += [
         "",
         "| true law | seeds | worst error (max over seeds) | cost / least_squares (max) | "
-        "simulations: structure | naive (3 laws) | structure / naive |",
+        "simulations: structure (of which mixed arrays) | naive (3 laws) | structure / naive |",
         "|---|---|---|---|---|---|---|",
     ]
     for law in (1, 2, 3):
@@ -195,10 +261,11 @@ def table(rows: list[dict]) -> list[str]:
         errs = [r["error"] for r in rs if not math.isnan(r["error"])]
         err = f"{100 * max(errs):.3g} %" if errs else "n/a"
         s_n = statistics.mean(r["nfev"] for r in rs)
+        a_n = statistics.mean(r.get("stages", {}).get("structure", 0) for r in rs)
         n_n = statistics.mean(r["naive_nfev"] for r in rs)
         lines.append(
             f"| {law} | {len(rs)} | {err} | {max(r['ratio'] for r in rs):.6f} | "
-            f"{s_n:.0f} | {n_n:.0f} | {s_n / n_n:.2f} |"
+            f"{s_n:.0f} ({a_n:.0f}) | {n_n:.0f} | {s_n / n_n:.2f} |"
         )
     return lines
 
@@ -210,22 +277,27 @@ def main(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--quick", action="store_true", help="one seed per law")
     ap.add_argument("--laws", type=int, nargs="*", default=[1, 2, 3])
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--out", type=Path, help="also write the tables to this file")
     args = ap.parse_args(argv)
-    seeds = range(1, 2 if args.quick else args.seeds + 1)
-    rows = []
-    for law in args.laws:
-        for seed in seeds:
-            r = one(law, seed, args.workers)
-            rows.append(r)
-            print(
-                f"law {law} seed {seed}: chose {r['chosen']}{' (indist.)' if r['tied'] else ''}"
-                f", naive {r['naive']}, error {100 * r['error']:.3g} %, cost ratio "
-                f"{r['ratio']:.6f}, sims {r['nfev']} vs naive {r['naive_nfev']} "
-                f"({r['seconds']:.0f} s): {r['why']}",
-                flush=True,
-            )
-    print(f"\n{datetime.date.today()}: python benchmarks/structure.py {' '.join(sys.argv[1:])}\n")
-    print("\n".join(table(rows)))
+    seeds = list(range(1, 2 if args.quick else args.seeds + 1))
+    t0 = time.perf_counter()
+    if args.workers > 1:
+        rows = run_all(args.laws, seeds, args.workers)
+    else:
+        rows = []
+        for law in args.laws:
+            for seed in seeds:
+                rows.append(one(law, seed, 1))
+                print(line(rows[-1]), flush=True)
+    wall = time.perf_counter() - t0
+    head = (
+        f"{datetime.date.today()}: python benchmarks/structure.py {' '.join(sys.argv[1:])}"
+        f" ({wall:.0f} s wall, {sum(r['seconds'] for r in rows):.0f} s in the tasks)"
+    )
+    text = "\n".join([head, "", *table(rows), "", *(line(r) for r in rows)])
+    print("\n" + text)
+    if args.out is not None:
+        args.out.write_text(text + "\n", encoding="utf-8")
     return rows
 
 

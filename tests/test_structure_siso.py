@@ -24,17 +24,38 @@ LAW3_NOT_AT_OPTIMUM = (
     "measured 2026-11-26 (benchmarks/structure.py --quick, seed 1): law 3 is chosen, but "
     "no start reaches its optimum (the arrays' best point in it, the other laws' answers "
     "embedded): it stops at 6.42x SciPy's least-squares cost, where the naive law-3 study "
-    "from Table I's centre gets there"
+    "from Table I's centre gets there; why (law 1's B_s absorbs the viscous friction and "
+    "least squares cannot undo the split): docs/structure-diagnosis.md"
 )
 
 
 @functools.cache
-def _run(law: int) -> dict:
+def _bench():
     path = ROOT / "benchmarks" / "structure.py"
     spec = importlib.util.spec_from_file_location("bench_structure_siso", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    return bench.one(law, 1, workers=1)
+    return bench
+
+
+@functools.cache
+def _run(law: int) -> dict:
+    return _bench().one(law, 1, workers=1)
+
+
+def test_parallel_benchmark_joins_each_data_set_with_its_three_naive_studies():
+    """``--workers``: each data set's row is its structure route plus its own naive ones."""
+    bench = _bench()
+    row = {"law": 2, "seed": 4, "chosen": 2, "tied": False, "why": "", "error": 0.01,
+           "ratio": 1.0, "nfev": 500, "ref_nfev": 9, "stages": {"structure": 200},
+           "seconds": 3.0}  # fmt: skip
+    naive = {1: {"nfev": 10, "bic": 5.0, "seconds": 1.0},
+             2: {"nfev": 20, "bic": -7.0, "seconds": 1.0},
+             3: {"nfev": 40, "bic": -6.0, "seconds": 1.0}}  # fmt: skip
+    merged = bench.merge(row, naive)
+    assert merged["naive_nfev"] == 70 and merged["naive"] == 2 and merged["seconds"] == 6.0
+    lines = bench.table([merged])
+    assert "| 500 (200) | 70 | 7.14 |" in lines[-1]
 
 
 @pytest.mark.slow
