@@ -217,8 +217,14 @@ def run_all(laws_: list[int], seeds: list[int], processes: int) -> list[dict]:
     """Every data set's structure and naive routes, in ``processes`` processes."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    tasks = [("structure", law, s, 0) for law in laws_ for s in seeds]
-    tasks += [("naive", law, s, c) for law in laws_ for s in seeds for c in (1, 2, 3)]
+    # seed by seed, each data set's four tasks together: a run cut short still gives
+    # whole data sets for the first seeds
+    tasks = [
+        t
+        for s in seeds
+        for law in laws_
+        for t in [("structure", law, s, 0), *[("naive", law, s, c) for c in (1, 2, 3)]]
+    ]
     done: dict[tuple, dict] = {}
     rows = []
     with ProcessPoolExecutor(max_workers=processes) as pool:
