@@ -237,3 +237,113 @@ def test_a_failed_simulation_in_the_profile_has_no_residuals():
     problem.evaluator.residuals = False
     cost, r = problem.cost(problem.s0)
     assert r is None and cost == pytest.approx(problem.cost0, rel=1e-12)
+
+
+# -- thresholds met exactly (equivalent verdicts of docs/mutation-survivors.md re-checked:
+# each boundary can be built exactly, so each strict or non-strict rule is pinned)
+
+
+def test_a_combination_known_to_exactly_half_a_unit_is_not_determined():
+    """F = 4 (four samples of sensitivity 1): the standard error is 0.5 search units
+    exactly, UNDETERMINED, and determined means below it."""
+    u = uncertainty(*_case(np.ones((4, 1))))
+    assert u.combinations[0]["std_error"] == 0.5 and u.combinations[0]["determined"] is False
+
+
+def test_the_degrees_of_freedom_are_at_least_one_with_as_many_samples_as_parameters_plus_one():
+    """Three samples, two parameters: n - p = 1 degree of freedom, not more."""
+    cols = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    u = uncertainty(*_case(cols))
+    assert u.dof == {"k0": 1.0, "k1": 1.0}
+
+
+def test_a_ratio_exactly_ratio_gain_times_better_is_not_grouped():
+    """The ratio's relative error times RATIO_GAIN equal to the weaker parameter's (the
+    same floating-point expression as scale_groups): not grouped; a little more: grouped."""
+    space = Space({"m": [1.0, 100.0], "k": [1.0, 100.0]}, {"m": WIDE, "k": WIDE}, LevelingOptions())
+    w = space.width * math.log(10.0) * 100.0
+    cov = np.array([[1e-3, 0.99e-3], [0.99e-3, 1e-3]])
+    var = cov[0, 0] * w[0] ** 2 + cov[1, 1] * w[1] ** 2 - 2 * cov[0, 1] * w[0] * w[1]
+    at = math.sqrt(max(var, 0.0)) * intervals.RATIO_GAIN
+    assert at > 1.0
+
+    def groups(weaker: float) -> list:
+        u = Uncertainty(values={"m": 1.0, "k": 1.0}, relative={"m": weaker, "k": 2 * weaker})
+        u.cov = cov
+        return intervals.scale_groups(u, space)
+
+    assert groups(at) == []
+    assert [g["parameters"] for g in groups(at * (1 + 1e-12))] == [["m", "k"]]
+
+
+def _exact():
+    """The linear problem with the exact Jacobian: each re-fit is exact, so the rise at
+    an offset d of p is ``c d^2`` and does not depend on the limit."""
+    problem, _, _, pinv = _chord(scale=1.0)
+    return problem, pinv
+
+
+def test_a_doubling_that_rises_exactly_by_the_limit_is_inside():
+    """Steps 1/8, 1/4, ... (exact in binary): a limit equal to the rise at the first
+    step keeps that step inside, so the end lies between 1/8 and 1/4, at 9/64 after
+    three bisections; (a rise of the limit counted as outside would put it at 1/8)."""
+    problem, pinv = _exact()
+    step = 0.125
+    limit = profile._refit(problem, 0, step, pinv, 1.0) - problem.cost0
+    off, found = profile._end(problem, 0, 1.0, step, pinv, limit)
+    assert (off, found) == (0.140625, True)
+
+
+def test_a_bisection_point_that_rises_exactly_by_the_limit_is_inside():
+    """The end between 1/8 and 1/4; a limit equal to the rise at the first bisection
+    point, 3/16, keeps it inside: the next ones are 7/32 (outside) and 13/64."""
+    problem, pinv = _exact()
+    limit = profile._refit(problem, 0, 0.1875, pinv, 1.0) - problem.cost0
+    assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (0.203125, True)
+
+
+class _Scripted:
+    """Returns the given costs in turn (one row a call), with zero residuals."""
+
+    def __init__(self, costs, n):
+        self.costs, self.n, self.calls = list(costs), n, 0
+
+    def evaluate(self, rows, progress=None):
+        cost = self.costs[self.calls]
+        self.calls += 1
+        return Evaluation(np.array([[cost]]), [None], 1, [np.zeros(self.n)])
+
+
+def test_a_re_fit_step_that_gains_exactly_1_percent_of_the_limit_goes_on():
+    """Limit 100: a gain of exactly 1 (10 -> 9) is not below 1 % of it, the re-fit takes
+    another step; a gain of 0.5 then ends it."""
+    problem, _, _, _ = _chord()
+    n = problem.jacobian.shape[0]
+    problem.evaluator = _Scripted([10.0, 9.0, 8.5, 8.0], n)
+    pinv = np.zeros((1, n))
+    assert profile._refit(problem, 0, 0.1, pinv, 100.0) == 8.5
+    assert problem.evaluator.calls == 3
+
+
+@pytest.mark.parametrize("sign", [-1.0, 1.0])
+def test_a_step_ending_exactly_one_unit_past_a_bound_is_still_taken(sign):
+    """p at s = 0.5 with bounds 0..4 (s = -0.5..1.5) and a limit never reached: the
+    doublings 1/8 .. 2 end exactly one search unit past a bound on either side (s =
+    -1.5, 2.5), a step still taken, as with bounds a hair wider; a hair narrower, that
+    step is skipped (two simulations fewer). Either way the end is open."""
+    n = 40
+    t = np.linspace(0.0, 1.0, n)
+    a = np.column_stack([1.0 + t, 1.0 - 0.5 * t])
+    s0 = np.array([0.5, -0.25])
+
+    def sims(bounds: tuple[float, float]) -> int:
+        space = Space(
+            {"p": [0.0, 2.0], "q": [0.0, 2.0]}, {"p": bounds, "q": WIDE}, LevelingOptions()
+        )
+        problem = profile.ProfileProblem(_Linear(space, a, a @ s0), space, s0, 0.0, a, 1.0)
+        end = profile._end(problem, 0, sign, 0.125, np.linalg.pinv(a[:, [1]]), 1e9)
+        assert end == (math.inf, True)
+        return len(problem.evaluator.asked)
+
+    exact, wider, narrower = sims((0.0, 4.0)), sims((-1e-9, 4 + 1e-9)), sims((1e-9, 4 - 1e-9))
+    assert exact == wider and narrower == exact - 2

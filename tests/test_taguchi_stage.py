@@ -347,3 +347,8 @@ def test_the_rerun_note_gives_the_last_iterations_cost(monkeypatch):
         "iteration 5 did not lower the cost (3); re-conducted from iteration 3, run 2 (next best)"
     )
     assert origin == [3, 1] and seen == [(3, 1)] and frame == "f"
+
+
+def test_of_start_points_tied_in_cost_the_first_listed_is_the_best():
+    best, _ = _evaluate_starts(_starts_run(), _Fixed([4.0, 4.0, 5.0], [None] * 3), None)
+    assert best.source == "fmu"
