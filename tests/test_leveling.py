@@ -472,3 +472,17 @@ def test_a_run_centre_exactly_eps_inside_an_end_is_on_that_end():
     assert 0.0 + eps == 2e-9 and 2.0 - eps == 2.0 - 2e-9
     assert case(0.0 + eps) == case(2.0 - eps) == "shift"
     assert case(0.0 + 2 * eps) == case(2.0 - 2 * eps) == "recentre"
+
+
+def test_decide_factor_leaves_the_levels_and_optimum_to_its_caller():
+    """Its docstring: the decision comes with ``levels`` empty (and no optimum, NaN):
+    the caller makes them in its own units."""
+    d, _, half = decide_factor(
+        "k",
+        np.array([1.0, 2.0, 3.0]),
+        np.array([-30.0, -20.0, -25.0]),
+        FactorState(flat=False, small=False),
+        LevelingOptions(),
+    )
+    assert d.levels == [] and math.isnan(d.optimum)
+    assert d.case == "recentre" and half == 0.5
