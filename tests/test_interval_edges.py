@@ -283,23 +283,36 @@ def _exact():
     return problem, pinv
 
 
-def test_a_doubling_that_rises_exactly_by_the_limit_is_inside():
-    """Steps 1/8, 1/4, ... (exact in binary): a limit equal to the rise at the first
-    step keeps that step inside, so the end lies between 1/8 and 1/4, at 9/64 after
-    three bisections; (a rise of the limit counted as outside would put it at 1/8)."""
+def test_a_step_or_bisection_point_rising_exactly_by_the_limit_is_the_end():
+    """Steps 1/8, 1/4, ... and bisection points (exact in binary): a limit equal to the
+    rise at the first step, or at the first bisection point 3/16 of the bracket (1/8,
+    1/4), makes that point the end (the root of the rise reaches the limit's there)."""
     problem, pinv = _exact()
-    step = 0.125
-    limit = profile._refit(problem, 0, step, pinv, 1.0) - problem.cost0
-    off, found = profile._end(problem, 0, 1.0, step, pinv, limit)
-    assert (off, found) == (0.140625, True)
+    for at in (0.125, 0.1875):
+        limit = profile._refit(problem, 0, at, pinv, 1.0) - problem.cost0
+        assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (at, True)
 
 
-def test_a_bisection_point_that_rises_exactly_by_the_limit_is_inside():
-    """The end between 1/8 and 1/4; a limit equal to the rise at the first bisection
-    point, 3/16, keeps it inside: the next ones are 7/32 (outside) and 13/64."""
+def test_the_end_is_interpolated_in_its_bracket_linearly_in_the_root_of_the_rise():
+    """A rise c d^2 gives the exact crossing sqrt(limit / c); any rise stays within the
+    bracket; a failed simulation at the outer end (infinite rise) leaves the outer end,
+    and a rise below zero inside (a better fit found) counts as zero."""
+    for c, d_in, d_out in ((4.0, 0.5, 0.75), (0.3, 1.0, 2.0)):
+        limit = c * 0.6**2 if c == 4.0 else c * 1.7**2
+        end = profile._crossing(d_in, c * d_in**2, d_out, c * d_out**2, limit)
+        assert end == pytest.approx(math.sqrt(limit / c), rel=1e-12)
+    # a quartic rise: the crossing of its root's chord, inside the bracket
+    end = profile._crossing(1.0, 1.0, 2.0, 16.0, 4.0)
+    assert end == pytest.approx(1.0 + (2.0 - 1.0) / (4.0 - 1.0))
+    assert profile._crossing(1.0, 0.5, 2.0, math.inf, 1.0) == 2.0
+    assert profile._crossing(1.0, -0.25, 2.0, 4.0, 1.0) == 1.5
+
+
+def test_an_unresolved_end_is_the_outer_end_of_its_bracket():
+    """A first step of 10 search units, past the end: the bisections of (0, 10) give the
+    bracket (0, 1.25) with no point inside, and the end returned is 1.25, an upper bound."""
     problem, pinv = _exact()
-    limit = profile._refit(problem, 0, 0.1875, pinv, 1.0) - problem.cost0
-    assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (0.203125, True)
+    assert profile._end(problem, 0, 1.0, 10.0, pinv, 0.01) == (1.25, False)
 
 
 class _Scripted:
