@@ -360,3 +360,16 @@ def test_a_step_ending_exactly_one_unit_past_a_bound_is_still_taken(sign):
 
     exact, wider, narrower = sims((0.0, 4.0)), sims((-1e-9, 4 + 1e-9)), sims((1e-9, 4 - 1e-9))
     assert exact == wider and narrower == exact - 2
+
+
+def test_an_end_within_the_first_step_keeps_the_outer_end_of_its_bracket():
+    """A first step of 1/8 past the end (a limit equal to the rise at 0.1): the bracket
+    (3/32, 7/64) lies within the first step, below what the simulations may resolve, and
+    its outer end 7/64 is the end returned (interpolated, it would be 0.1)."""
+    problem, pinv = _exact()
+    limit = profile._refit(problem, 0, 0.1, pinv, 1.0) - problem.cost0
+    assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (0.109375, True)
+    # a bisection point rising exactly by the limit is inside: the bracket goes on to
+    # (1/16, 5/64), whose outer end is returned
+    limit = profile._refit(problem, 0, 0.0625, pinv, 1.0) - problem.cost0
+    assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (0.078125, True)

@@ -127,9 +127,11 @@ def _end(
 
     The end is where the cost has risen by ``limit``: the steps double until the rise
     exceeds it, :data:`BISECTIONS` bisections narrow that bracket, and the end is
-    interpolated in it (:func:`_crossing`). The flag is False where no point inside the
-    interval was found: the end is then only known to lie within the offset returned,
-    the bracket's outer end.
+    interpolated in it (:func:`_crossing`). An end within the first step is not: its
+    bracket lies below the first step, where the rises compare offsets the simulations
+    may not resolve (:data:`MIN_STEP`), and the bracket's outer end is kept as a bound.
+    The flag is False where no point inside the interval was found: the end is then only
+    known to lie within the offset returned.
     """
     inside, rise_in, rise = 0.0, 0.0, 0.0
     delta = step
@@ -143,7 +145,7 @@ def _end(
         inside, rise_in, delta = delta, rise, 2 * delta
     else:
         return math.inf, True
-    outside, rise_out = delta, rise
+    outside, rise_out, doubled = delta, rise, inside > 0
     for _ in range(BISECTIONS):
         mid = 0.5 * (inside + outside)
         rise = _refit(problem, j, sign * mid, pinv, limit) - problem.cost0
@@ -151,8 +153,8 @@ def _end(
             outside, rise_out = mid, rise
         else:
             inside, rise_in = mid, rise
-    if inside <= 0:
-        return outside, False
+    if not doubled:
+        return outside, inside > 0
     return _crossing(inside, rise_in, outside, rise_out, limit), True
 
 
