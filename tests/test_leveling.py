@@ -456,3 +456,33 @@ def test_the_parabola_needs_both_neighbours_of_the_best_level():
     )
     best, _, source = main_effect_optimum(u, np.array([-30.0, -20.0, -10.0, -15.0, -np.inf]), True)
     assert best == 2 and source == "S/N peak between levels 3 and 4 of 5"
+
+
+def test_a_run_centre_exactly_eps_inside_an_end_is_on_that_end():
+    """eps = 1e-9 of the range (2e-9 for levels 0, 1, 2, a sum exact in floating point):
+    a centre at u[0] + eps or u[-1] - eps counts as on the end (the rule is strict), one
+    a little farther in is interior."""
+    u, sn = np.array([0.0, 1.0, 2.0]), np.array([-30.0, -20.0, -25.0])
+    eps = 1e-9 * 2.0
+    state = FactorState(flat=False, small=False)
+
+    def case(c: float) -> str:
+        return decide_factor("k", u, sn, state, LevelingOptions(), centre=(c, "run 1"))[0].case
+
+    assert 0.0 + eps == 2e-9 and 2.0 - eps == 2.0 - 2e-9
+    assert case(0.0 + eps) == case(2.0 - eps) == "shift"
+    assert case(0.0 + 2 * eps) == case(2.0 - 2 * eps) == "recentre"
+
+
+def test_decide_factor_leaves_the_levels_and_optimum_to_its_caller():
+    """Its docstring: the decision comes with ``levels`` empty (and no optimum, NaN):
+    the caller makes them in its own units."""
+    d, _, half = decide_factor(
+        "k",
+        np.array([1.0, 2.0, 3.0]),
+        np.array([-30.0, -20.0, -25.0]),
+        FactorState(flat=False, small=False),
+        LevelingOptions(),
+    )
+    assert d.levels == [] and math.isnan(d.optimum)
+    assert d.case == "recentre" and half == 0.5

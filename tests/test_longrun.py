@@ -266,3 +266,62 @@ def test_the_variance_of_several_series_is_their_sum():
         parts.append(longrun._delta_variance(longrun._Series(j, inv), m, d))
     assert found.variance == pytest.approx(sum(parts), rel=1e-9)
     assert np.all(parts[0] > 0) and np.all(parts[1] > 0)
+
+
+# -- more closed forms (killed mutants of docs/mutation-survivors.md) ---------------------
+
+
+def test_autocovariances_of_small_or_negatively_correlated_processes():
+    """gamma_0 = s2 / (1 - phi^2) is positive for any stationary AR(1), however small s2
+    and whatever the sign of phi (gamma_1 = phi gamma_0 is then negative); a zero
+    innovation variance is no process."""
+    for phi, s2 in ((-0.5, 0.1), (0.5, 1e-3), (-0.9, 2.0)):
+        gamma = longrun._from_coefficients(np.array([phi]), s2)
+        assert gamma == pytest.approx([s2 / (1 - phi**2), phi * s2 / (1 - phi**2)], rel=1e-12)
+    assert longrun._from_coefficients(np.array([0.5]), 0.0) is None
+
+
+def test_a_fixed_order_is_cut_to_the_series_length_less_one():
+    r = np.array([0.3, -1.2, 0.7, 2.0, -0.4])
+    assert fit_ar(r, order=10).order == 4
+    assert fit_ar(r, order=4).order == 4 and fit_ar(r, order=2).order == 2
+    assert fit_ar(np.array([0.8]), order=3).order == 0
+
+
+def test_the_expected_residual_autocovariances_of_a_fit_are_the_dense_ones():
+    """Residuals of a least-squares fit are ``(I - H) e`` with ``H = J F^-1 J^T``; under
+    an AR(1) model of ``e`` (Toeplitz ``Gamma``) their expected lagged sums over ``n``
+    are those of ``(I - H) Gamma (I - H)^T``."""
+    n, phi, s2 = 30, 0.8, 1.0
+    t = np.linspace(0.0, 1.0, n)
+    jac = np.column_stack([1.0 + t, np.cos(3 * t)])
+    inv = np.linalg.inv(jac.T @ jac)
+    model = longrun._model(_ar_gamma([phi], s2, 1))
+    series = longrun._Series(jac, inv)
+    kernel = series.kernel(model.extend(n))
+    outer = inv @ series.middle(kernel) @ inv
+    found = series.expected(model, kernel, outer)
+    rest = np.eye(n) - jac @ inv @ jac.T
+    m = rest @ linalg.toeplitz(model.extend(n)) @ rest.T
+    dense = [np.trace(m, offset=-lag) / n for lag in range(model.order + 1)]
+    assert found == pytest.approx(dense, rel=1e-9)
+
+
+def test_the_delta_method_slope_is_the_forward_difference_of_step():
+    """As test_the_delta_variance_of_an_ar1_model, against the dense forward difference
+    over STEP (which the code takes; a backward one differs by about 1e-5 here)."""
+    n, phi, s2 = 120, 0.5, 1.5
+    t = np.linspace(0.0, 1.0, n)
+    jac = np.column_stack([1.0 + t, np.sin(5 * t)])
+    inv = np.linalg.inv(jac.T @ jac)
+
+    def diag(ph: float) -> np.ndarray:
+        g = s2 * ph ** np.arange(n) / (1 - ph**2)
+        return np.diag(inv @ jac.T @ linalg.toeplitz(g) @ jac @ inv)
+
+    model = longrun._model(_ar_gamma([phi], s2, 1))
+    d = diag(phi)
+    slope = (diag(phi + longrun.STEP) - d) / longrun.STEP
+    expected = 2 * d**2 / n + slope**2 * s2 / (model.autocovariance[0] * n)
+    found = longrun._delta_variance(longrun._Series(jac, inv), model, d)
+    assert found == pytest.approx(expected, rel=1e-8)

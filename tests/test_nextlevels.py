@@ -227,3 +227,76 @@ def test_a_flat_small_rotated_factor_beside_a_mover_is_done_and_no_finite_sn_is_
     failed = {"A1": [-np.inf] * 3, "A2": [-np.inf] * 3}  # every run failed: flat, 0 dB
     d, _ = next_frame(frame, space, failed, centre, LevelingOptions(), {}, None)
     assert [p.delta_db for p in d.parameters] == [0.0, 0.0] and d.case == 2
+
+
+# -- kept rotated directions, names, log limits, zero widths, no centre (killed mutants of
+# docs/mutation-survivors.md)
+
+
+def test_kept_directions_are_rescaled_to_the_new_centre_and_stay_unit_vectors():
+    """p in log10 at 10, the new centre at p = 20: the anchored scale of p doubles, so a
+    kept direction (0.6, 0.8) becomes (0.3, 0.8) normalised."""
+    space = Space(
+        {"p": [1.0, 100.0], "q": [92.0, 108.0]},
+        {"p": (0.0, math.inf), "q": WIDE},
+        LevelingOptions(),
+    )
+    off = np.array([-0.1, 0.0, 0.1])
+    factors = [Factor("A1", np.array([1.0, 0.0]), off), Factor("A2", np.array([0.6, 0.8]), off)]
+    frame = Frame(np.zeros(2), factors, anchor={"p": 10.0, "q": 100.0})
+    sn = {"A1": [-30.0, -20.0, -25.0], "A2": [-30.0, -20.0, -25.0]}
+    _, f = next_frame(
+        frame, space, sn, ({"p": 20.0, "q": 100.0}, "run 2"), LevelingOptions(), {}, None
+    )
+    want = np.array([0.3, 0.8]) / math.hypot(0.3, 0.8)
+    assert f.factors[0].direction == pytest.approx([1.0, 0.0], rel=1e-12)
+    assert f.factors[1].direction == pytest.approx(want, rel=1e-12)
+
+
+def test_only_names_like_a1_make_the_factors_z():
+    space = Space(
+        {"k1": [92.0, 108.0], "q": [92.0, 108.0]}, {"k1": WIDE, "q": WIDE}, LevelingOptions()
+    )
+    off = np.array([-0.25, 0.0, 0.25])
+    frame = Frame(
+        np.zeros(2),
+        [Factor("A1", np.array([1.0, 0.0]), off), Factor("A2", np.array([0.0, 1.0]), off)],
+        anchor={"k1": 100.0, "q": 100.0},
+    )
+    sn = {"A1": [-30.0, -20.0, -25.0], "A2": [-30.0, -20.0, -25.0]}
+    centre = ({"k1": 100.0, "q": 100.0}, "run 1")
+    _, f = next_frame(frame, space, sn, centre, LevelingOptions(), {}, None)
+    assert [g.name for g in f.factors] == ["A1", "A2"]
+
+
+def test_a_log_parameter_after_a_linear_one_is_kept_positive_too():
+    """As test_rotated_widths_keep_a_log_parameter_positive_..., with the linear parameter
+    first: every log parameter limits the widths, not only those before a linear one."""
+    space = Space(
+        {"q": [92.0, 108.0], "p": [1.0, 100.0]},
+        {"q": WIDE, "p": (0.0, math.inf)},
+        LevelingOptions(),
+    )
+    centre = {"q": 100.0, "p": 10.0}
+    directions = np.eye(2)
+    limit = nextlevels._positive_limit(space, space.anchored(centre), centre, directions)
+    room = nextlevels.POSITIVE_MARGIN * 10.0 / (10.0 * math.log(10) * 2)
+    assert limit[0] == math.inf and limit[1] == pytest.approx(room, rel=1e-12)
+
+
+def test_a_zero_half_width_is_floored_above_zero():
+    """A factor decided to zero width (no extent along it) keeps a half-width of 1e-12,
+    not zero."""
+    _, frame = _rotated_case()
+    out = nextlevels._widths(np.eye(2), None, np.zeros((2, 2)), frame, [0.0, 0.0], np.ones(2))
+    assert list(out) == [1e-12, 1e-12]
+
+
+def test_an_axis_aligned_frame_rotated_without_a_run_centre_is_anchored_at_its_centre():
+    """SISO selection (no run centre) with principal axes: the rotated frame is anchored
+    at the current frame's centre, the middle of the first levels here."""
+    space, frame, _, sn = _axis_case()
+    axes = (np.eye(2), np.array([4.0, 1.0]))
+    _, f = next_frame(frame, space, sn, None, LevelingOptions(), {}, axes)
+    assert not f.axis_aligned
+    assert f.anchor == pytest.approx({"p": 2.0, "q": 100.0}, rel=1e-12)

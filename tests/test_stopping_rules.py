@@ -148,6 +148,30 @@ def test_a_rotated_factor_at_the_significance_is_case_1():
     assert _rotated(1 / 128, [0.0, 0.1, 0.0])[1] == 1
 
 
+def test_a_rotated_factor_contributing_exactly_the_minimum_is_not_minor():
+    """As test_a_contribution_at_the_minimum_is_not_minor, for rotated factors."""
+    space = Space(
+        {"p": [92.0, 108.0], "q": [92.0, 108.0]},
+        {"p": (-math.inf, math.inf), "q": (-math.inf, math.inf)},
+        LevelingOptions(),
+    )
+    offsets = np.array([-0.25, 0.0, 0.25])
+    factors = [
+        Factor("A1", np.array([1.0, 0.0]), offsets),
+        Factor("A2", np.array([0.0, 1.0]), offsets),
+    ]
+    frame = Frame(np.zeros(2), factors, anchor={"p": 100.0, "q": 100.0})
+    sn = {"A1": [-30.0, -20.0, -25.0], "A2": [-21.0, -20.0, -22.0]}
+    opts = LevelingOptions(selective=True, min_contribution=5.0)
+
+    def case_a2(share: float) -> str:
+        d = _rotated_decisions(frame, space, sn, np.zeros(2), "run 1", opts, {"A2": share})
+        return d.parameters[1].case
+
+    assert case_a2(4.99) == "keep"
+    assert case_a2(5.0) == "recentre"
+
+
 # -- the stall rule (search/taguchi.py ``_stalled``): stall 2, stall_rtol 1e-4 ------------
 
 

@@ -289,7 +289,7 @@ def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Un
 
 RATIO_GAIN = 4.0
 """A ratio of two parameters counts as determined when its relative standard error is
-at least this many times smaller than each parameter's own."""
+more than this many times smaller than each parameter's own (exactly this many: not)."""
 
 
 def scale_groups(u: Uncertainty, space: Space) -> list[dict[str, Any]]:

@@ -1,0 +1,375 @@
+"""Edge cases of the intervals (uncertainty/intervals.py, profile.py), no FMU.
+
+Each case is worked from the definitions: the covariance is the pseudo-inverse of the
+whitened Fisher matrix on its eigenvalues above 1e-14 of the largest (the rest are
+directions the data do not see: infinite variance for every parameter in them), never
+below the Cramer-Rao bound; the degrees of freedom are Satterthwaite's, within 1 and
+``n - p``; the profile re-fit is a chord Gauss-Newton iteration of at most
+``CHORD_STEPS + 1`` simulations that stops when a step gains less than 1 % of the
+threshold. They kill the open mutants of docs/mutation-survivors.md in those files.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+
+import numpy as np
+import pytest
+
+from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.evaluate.protocol import Evaluation
+from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty import profile
+from tsid_fmu.uncertainty.intervals import Uncertainty, quantile, uncertainty
+from tsid_fmu.uncertainty.longrun import LongRun
+from tsid_fmu.uncertainty.sensitivity import Sensitivities
+
+intervals = importlib.import_module("tsid_fmu.uncertainty.intervals")
+
+WIDE = (-math.inf, math.inf)
+
+
+def _alternating(n: int) -> np.ndarray:
+    """Residuals of RMS exactly 1 whose HAC variance is below the Cramer-Rao bound, so
+    the floor gives the standard errors: ``sqrt(diag(F^+))``."""
+    return np.where(np.arange(n) % 2, -1.0, 1.0)
+
+
+def _case(columns: np.ndarray, residuals: np.ndarray | None = None):
+    """One experiment, one output, linear parameters of first levels 0..2 (a search unit
+    is 2), at x = 1 each."""
+    n, p = columns.shape
+    r = _alternating(n) if residuals is None else residuals
+    names = [f"k{j}" for j in range(p)]
+    sens = Sensitivities(names, [r[:, None]], [columns[:, None, :]], ["e"], [["y"]])
+    levels = {k: [0.0, 2.0] for k in names}
+    space = Space(levels, dict.fromkeys(names, WIDE), LevelingOptions())
+    return sens, space, dict.fromkeys(names, 1.0)
+
+
+def test_a_fisher_matrix_below_one_is_inverted_as_it_is():
+    """Small sensitivities: every eigenvalue of F below 1. The standard errors (the
+    floor: ``sqrt(diag(F^-1))``), the condition number and the combinations' errors
+    (``sqrt(v^T C v)`` along each eigenvector) come from F itself."""
+    n = 200
+    t = np.linspace(0.0, 1.0, n)
+    cols = 0.005 * np.column_stack([1.0 + t, 1.0 - 0.5 * t])
+    sens, space, x = _case(cols)
+    u = uncertainty(sens, space, x)
+    fisher = cols.T @ cols
+    values, vectors = np.linalg.eigh(fisher)
+    cov = u.cov
+    assert values.max() < 0.05
+    assert u.values == x
+    se = np.sqrt(np.diag(np.linalg.inv(fisher)))
+    assert [u.std_error[k] for k in x] == pytest.approx(2 * se, rel=1e-9)
+    assert u.condition == pytest.approx(values.max() / values.min(), rel=1e-9)
+    for combo, k in zip(u.combinations, np.argsort(values)[::-1], strict=True):
+        v = vectors[:, k]
+        assert combo["std_error"] == pytest.approx(math.sqrt(v @ cov @ v), rel=1e-9)
+        assert combo["determined"] is (combo["std_error"] < 0.5)
+
+
+@pytest.mark.parametrize(("small", "seen"), [(3e-7, False), (3.0000001e-7, True)])
+def test_an_eigenvalue_at_1e_14_of_the_largest_is_not_seen(small, seen):
+    """F = diag(9, small^2); 1e-14 * 9 equals 3e-7 squared in floating point exactly:
+    that eigenvalue is at the cut, and the cut is strict."""
+    cols = np.zeros((20, 2))
+    cols[0, 0], cols[1, 1] = 3.0, small
+    assert (1e-14 * 9.0 == 3e-7 * 3e-7) and (cols.T @ cols)[1, 1] == small * small
+    u = uncertainty(*_case(cols))
+    assert math.isfinite(u.std_error["k0"])
+    assert math.isfinite(u.std_error["k1"]) is seen
+    if seen:  # at least the Cramer-Rao bound 1 / small (2 per search unit)
+        assert u.std_error["k1"] >= 2 / small * (1 - 1e-12)
+
+
+def test_parameters_seen_only_through_their_sum_are_both_unseen():
+    """Two equal columns: the null direction (1, -1) / sqrt 2 has one negative weight;
+    both parameters have no standard error, no Cramer-Rao bound, open intervals, and no
+    parameter is left to measure the inflation by (it stays 1)."""
+    t = np.linspace(0.0, 1.0, 50)
+    g = 1.0 + t
+    u = uncertainty(*_case(np.column_stack([g, g])))
+    for k in ("k0", "k1"):
+        assert u.std_error[k] == math.inf and u.cramer_rao[k] == math.inf
+        assert u.intervals[k] == [None, None]
+    assert u.inflation == 1.0
+
+
+def test_a_null_direction_adds_no_variance_to_a_parameter_it_barely_moves():
+    """Columns g and c g with c = 1000.5: the null direction (c, -1) / |(c, -1)| moves k1
+    by a weight whose square is below 1e-6, so k1 counts as seen, with the variance of
+    the one seen direction only: ``(c^2 / (1 + c^2)) / lambda``."""
+    n, c = 50, 1000.5
+    g = 1.0 + np.linspace(0.0, 1.0, n)
+    u = uncertainty(*_case(np.column_stack([g, c * g])))
+    lam = float(g @ g) * (1 + c * c)
+    assert u.std_error["k0"] == math.inf
+    assert u.std_error["k1"] == pytest.approx(2 * math.sqrt(c * c / (1 + c * c) / lam), rel=1e-6)
+
+
+def test_a_non_finite_jacobian_has_no_uncertainty():
+    cols = np.column_stack([np.ones(10), np.arange(10.0)])
+    cols[3, 1] = np.nan
+    assert uncertainty(*_case(cols)) is None
+
+
+def _ar1(n: int, seed: int = 1) -> np.ndarray:
+    e = np.random.default_rng(seed).normal(size=n + 200)
+    r = np.zeros(n + 200)
+    for i in range(1, r.size):
+        r[i] = 0.8 * r[i - 1] + e[i]
+    return r[200:]
+
+
+@pytest.mark.parametrize(("scale", "dof"), [(1e8, 1.0), (1e-8, 298.0)])
+def test_satterthwaite_dof_are_kept_within_1_and_n_minus_p(monkeypatch, scale, dof):
+    """AR(1) residuals put the HAC variance above the floor, so its degrees of freedom
+    ``2 V^2 / var(V)`` count; a variance of V scaled far up (or down) takes them below
+    one (above n - p = 298), where they are clipped."""
+    real = intervals.long_run_covariance
+
+    def scaled(series, inverse):
+        found = real(series, inverse)
+        return LongRun(found.middle, found.variance * scale, found.models)
+
+    monkeypatch.setattr(intervals, "long_run_covariance", scaled)
+    t = np.linspace(0.0, 1.0, 300)
+    cols = 5.0 * np.column_stack([1.0 + t, np.sin(4 * t)])
+    u = uncertainty(*_case(cols, _ar1(300)))
+    assert u.inflation > 2  # above the floor
+    assert u.dof == {"k0": dof, "k1": dof}
+    half = quantile(dof) * u.std_error["k0"]
+    assert u.intervals["k0"] == pytest.approx([1.0 - half, 1.0 + half], rel=1e-9)
+
+
+def test_to_dict_writes_non_finite_numbers_as_none_and_keeps_lists():
+    u = Uncertainty(values={"a": 1.0}, std_error={"a": math.inf}, condition=math.nan)
+    u.intervals = {"a": [0.5, 2.0], "b": [None, math.inf]}
+    d = u.to_dict()
+    assert d["std_error"] == {"a": None} and d["condition"] is None
+    assert d["intervals"] == {"a": [0.5, 2.0], "b": [None, None]}
+    assert d["values"] == {"a": 1.0} and d["inflation"] == 1.0
+
+
+# -- the profile's re-fit --------------------------------------------------------------
+
+
+class _Linear:
+    """Residuals ``A s - y``; ``asked`` keeps every coordinate vector simulated."""
+
+    def __init__(self, space: Space, a: np.ndarray, y: np.ndarray, residuals: bool = True):
+        self.space, self.a, self.y, self.residuals, self.asked = space, a, y, residuals, []
+
+    def evaluate(self, rows, progress=None):
+        s = [self.space.to_s(x) for x in rows]
+        self.asked += s
+        res = [self.a @ v - self.y for v in s]
+        costs = np.array([[float(r @ r)] for r in res])
+        return Evaluation(costs, [None] * len(rows), len(rows), res if self.residuals else None)
+
+
+def _chord(bounds=WIDE, scale=2.0):
+    """A linear problem whose Jacobian is given with its second column ``scale`` times
+    its size: each chord step multiplies the error of q's re-fit by ``1 - 1 / scale``
+    (halves it for the default 2)."""
+    n = 40
+    t = np.linspace(0.0, 1.0, n)
+    a = np.column_stack([1.0 + t, 1.0 - 0.5 * t])
+    y = a @ np.array([0.3, -0.2]) + 0.01 * np.sin(30 * t)
+    space = Space({"p": [0.0, 2.0], "q": [0.0, 2.0]}, {"p": WIDE, "q": bounds}, LevelingOptions())
+    s0 = np.linalg.lstsq(a, y, rcond=None)[0]
+    r0 = a @ s0 - y
+    jac = a * np.array([1.0, scale])
+    problem = profile.ProfileProblem(_Linear(space, a, y), space, s0, float(r0 @ r0), jac, 1.0)
+    return problem, a, y, np.linalg.pinv(jac[:, [1]])
+
+
+def test_the_re_fit_takes_chord_steps_until_one_gains_under_1_percent_of_the_limit():
+    """Moving p by delta, q's exact re-fit moves by x* = -(a1.a0 / a1.a1) delta; the
+    chord starts at half of it and halves the error each step, so the k-th simulation
+    (k = 0, 1, ...) costs P + |a1|^2 (x* / 2^(k+1))^2 above the exact profile cost P.
+    With the first excess at 100 limits, the gains (3/4 of each excess) stay above 1 %
+    of the limit: all CHORD_STEPS + 1 = 7 simulations run."""
+    problem, a, y, pinv = _chord()
+    a0, a1 = a[:, 0], a[:, 1]
+    limit = 0.1
+    shift = -(a1 @ a0) / (a1 @ a1)
+    delta = math.sqrt(100 * limit / (a1 @ a1)) / abs(0.5 * shift)  # first excess 100 limit
+    best = profile._refit(problem, 0, delta, pinv, limit)
+    assert len(problem.evaluator.asked) == profile.CHORD_STEPS + 1 == 7
+    exact = problem.s0 + np.array([delta, shift * delta])
+    r = a @ exact - y
+    excess = (a1 @ a1) * (shift * delta / 2**7) ** 2
+    assert best == pytest.approx(float(r @ r) + excess, rel=1e-9)
+    # a first excess of 2 limits: the sixth simulation's gain, 3/4 * 2 / 4^4 limits, is
+    # under 1 % of the limit and ends the re-fit
+    problem.evaluator.asked = []
+    profile._refit(problem, 0, delta / math.sqrt(50), pinv, limit)
+    assert len(problem.evaluator.asked) == 6
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_the_re_fit_goes_on_from_the_bound_it_clipped_to(sign):
+    """q's column given at 0.6 of its true size: the chord's first point overshoots q's
+    exact re-fit x* to 1/0.6 x*. A bound at 1.3 x* clips it there; the next step,
+    (1/0.6)(0.3 x*) = 0.5 x*, goes on from the bound to 0.8 x*. (Left beyond the bound,
+    the next point would be 1.17 x*, clipped to the bound again.) p moving up sends q
+    down: the lower bound, and the upper one when p moves down."""
+    problem, a, _, _ = _chord(scale=0.6)
+    s1 = problem.s0[1]
+    delta = sign * 0.5
+    shift = -(a[:, 1] @ a[:, 0]) / (a[:, 1] @ a[:, 1]) * delta
+    at = 1.0 + 2 * (s1 + 1.3 * shift)  # the bound, in values (1 + 2 s)
+    bounds = (at, math.inf) if shift < 0 else (-math.inf, at)
+    assert bool(shift < 0) == (sign > 0)
+    problem, _, _, pinv = _chord(scale=0.6, bounds=bounds)
+    profile._refit(problem, 0, delta, pinv, 1e-9)
+    asked_q = [s[1] for s in problem.evaluator.asked]
+    assert asked_q[0] == pytest.approx(s1 + 1.3 * shift, abs=1e-12)
+    assert asked_q[1] == pytest.approx(s1 + 0.8 * shift, rel=1e-9)
+
+
+def test_a_failed_simulation_in_the_profile_has_no_residuals():
+    problem, _, _, _ = _chord()
+    problem.evaluator.residuals = False
+    cost, r = problem.cost(problem.s0)
+    assert r is None and cost == pytest.approx(problem.cost0, rel=1e-12)
+
+
+# -- thresholds met exactly (equivalent verdicts of docs/mutation-survivors.md re-checked:
+# each boundary can be built exactly, so each strict or non-strict rule is pinned)
+
+
+def test_a_combination_known_to_exactly_half_a_unit_is_not_determined():
+    """F = 4 (four samples of sensitivity 1): the standard error is 0.5 search units
+    exactly, UNDETERMINED, and determined means below it."""
+    u = uncertainty(*_case(np.ones((4, 1))))
+    assert u.combinations[0]["std_error"] == 0.5 and u.combinations[0]["determined"] is False
+
+
+def test_the_degrees_of_freedom_are_at_least_one_with_as_many_samples_as_parameters_plus_one():
+    """Three samples, two parameters: n - p = 1 degree of freedom, not more."""
+    cols = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    u = uncertainty(*_case(cols))
+    assert u.dof == {"k0": 1.0, "k1": 1.0}
+
+
+def test_a_ratio_exactly_ratio_gain_times_better_is_not_grouped():
+    """The ratio's relative error times RATIO_GAIN equal to the weaker parameter's (the
+    same floating-point expression as scale_groups): not grouped; a little more: grouped."""
+    space = Space({"m": [1.0, 100.0], "k": [1.0, 100.0]}, {"m": WIDE, "k": WIDE}, LevelingOptions())
+    w = space.width * math.log(10.0) * 100.0
+    cov = np.array([[1e-3, 0.99e-3], [0.99e-3, 1e-3]])
+    var = cov[0, 0] * w[0] ** 2 + cov[1, 1] * w[1] ** 2 - 2 * cov[0, 1] * w[0] * w[1]
+    at = math.sqrt(max(var, 0.0)) * intervals.RATIO_GAIN
+    assert at > 1.0
+
+    def groups(weaker: float) -> list:
+        u = Uncertainty(values={"m": 1.0, "k": 1.0}, relative={"m": weaker, "k": 2 * weaker})
+        u.cov = cov
+        return intervals.scale_groups(u, space)
+
+    assert groups(at) == []
+    assert [g["parameters"] for g in groups(at * (1 + 1e-12))] == [["m", "k"]]
+
+
+def _exact():
+    """The linear problem with the exact Jacobian: each re-fit is exact, so the rise at
+    an offset d of p is ``c d^2`` and does not depend on the limit."""
+    problem, _, _, pinv = _chord(scale=1.0)
+    return problem, pinv
+
+
+def test_a_step_or_bisection_point_rising_exactly_by_the_limit_is_the_end():
+    """Steps 1/8, 1/4, ... and bisection points (exact in binary): a limit equal to the
+    rise at the first step, or at the first bisection point 3/16 of the bracket (1/8,
+    1/4), makes that point the end (the root of the rise reaches the limit's there)."""
+    problem, pinv = _exact()
+    for at in (0.125, 0.1875):
+        limit = profile._refit(problem, 0, at, pinv, 1.0) - problem.cost0
+        assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (at, True)
+
+
+def test_the_end_is_interpolated_in_its_bracket_linearly_in_the_root_of_the_rise():
+    """A rise c d^2 gives the exact crossing sqrt(limit / c); any rise stays within the
+    bracket; a failed simulation at the outer end (infinite rise) leaves the outer end,
+    and a rise below zero inside (a better fit found) counts as zero."""
+    for c, d_in, d_out in ((4.0, 0.5, 0.75), (0.3, 1.0, 2.0)):
+        limit = c * 0.6**2 if c == 4.0 else c * 1.7**2
+        end = profile._crossing(d_in, c * d_in**2, d_out, c * d_out**2, limit)
+        assert end == pytest.approx(math.sqrt(limit / c), rel=1e-12)
+    # a quartic rise: the crossing of its root's chord, inside the bracket
+    end = profile._crossing(1.0, 1.0, 2.0, 16.0, 4.0)
+    assert end == pytest.approx(1.0 + (2.0 - 1.0) / (4.0 - 1.0))
+    assert profile._crossing(1.0, 0.5, 2.0, math.inf, 1.0) == 2.0
+    assert profile._crossing(1.0, -0.25, 2.0, 4.0, 1.0) == 1.5
+
+
+def test_an_unresolved_end_is_the_outer_end_of_its_bracket():
+    """A first step of 10 search units, past the end: the bisections of (0, 10) give the
+    bracket (0, 1.25) with no point inside, and the end returned is 1.25, an upper bound."""
+    problem, pinv = _exact()
+    assert profile._end(problem, 0, 1.0, 10.0, pinv, 0.01) == (1.25, False)
+
+
+class _Scripted:
+    """Returns the given costs in turn (one row a call), with zero residuals."""
+
+    def __init__(self, costs, n):
+        self.costs, self.n, self.calls = list(costs), n, 0
+
+    def evaluate(self, rows, progress=None):
+        cost = self.costs[self.calls]
+        self.calls += 1
+        return Evaluation(np.array([[cost]]), [None], 1, [np.zeros(self.n)])
+
+
+def test_a_re_fit_step_that_gains_exactly_1_percent_of_the_limit_goes_on():
+    """Limit 100: a gain of exactly 1 (10 -> 9) is not below 1 % of it, the re-fit takes
+    another step; a gain of 0.5 then ends it."""
+    problem, _, _, _ = _chord()
+    n = problem.jacobian.shape[0]
+    problem.evaluator = _Scripted([10.0, 9.0, 8.5, 8.0], n)
+    pinv = np.zeros((1, n))
+    assert profile._refit(problem, 0, 0.1, pinv, 100.0) == 8.5
+    assert problem.evaluator.calls == 3
+
+
+@pytest.mark.parametrize("sign", [-1.0, 1.0])
+def test_a_step_ending_exactly_one_unit_past_a_bound_is_still_taken(sign):
+    """p at s = 0.5 with bounds 0..4 (s = -0.5..1.5) and a limit never reached: the
+    doublings 1/8 .. 2 end exactly one search unit past a bound on either side (s =
+    -1.5, 2.5), a step still taken, as with bounds a hair wider; a hair narrower, that
+    step is skipped (two simulations fewer). Either way the end is open."""
+    n = 40
+    t = np.linspace(0.0, 1.0, n)
+    a = np.column_stack([1.0 + t, 1.0 - 0.5 * t])
+    s0 = np.array([0.5, -0.25])
+
+    def sims(bounds: tuple[float, float]) -> int:
+        space = Space(
+            {"p": [0.0, 2.0], "q": [0.0, 2.0]}, {"p": bounds, "q": WIDE}, LevelingOptions()
+        )
+        problem = profile.ProfileProblem(_Linear(space, a, a @ s0), space, s0, 0.0, a, 1.0)
+        end = profile._end(problem, 0, sign, 0.125, np.linalg.pinv(a[:, [1]]), 1e9)
+        assert end == (math.inf, True)
+        return len(problem.evaluator.asked)
+
+    exact, wider, narrower = sims((0.0, 4.0)), sims((-1e-9, 4 + 1e-9)), sims((1e-9, 4 - 1e-9))
+    assert exact == wider and narrower == exact - 2
+
+
+def test_an_end_within_the_first_step_keeps_the_outer_end_of_its_bracket():
+    """A first step of 1/8 past the end (a limit equal to the rise at 0.1): the bracket
+    (3/32, 7/64) lies within the first step, below what the simulations may resolve, and
+    its outer end 7/64 is the end returned (interpolated, it would be 0.1)."""
+    problem, pinv = _exact()
+    limit = profile._refit(problem, 0, 0.1, pinv, 1.0) - problem.cost0
+    assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (0.109375, True)
+    # a bisection point rising exactly by the limit is inside: the bracket goes on to
+    # (1/16, 5/64), whose outer end is returned
+    limit = profile._refit(problem, 0, 0.0625, pinv, 1.0) - problem.cost0
+    assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (0.078125, True)
