@@ -67,3 +67,19 @@ def test_the_reports_and_the_command_line_show_them(run, capsys):
     _print_result(plain, out, 0)
     assert "bootstrap" not in capsys.readouterr().out
     assert math.isfinite(res.sampled.std_error["tau"])
+
+
+def test_init_mentions_the_option_and_it_reads_back_when_uncommented(tmp_path):
+    from test_init import _ball
+
+    from tsid_fmu import Study
+    from tsid_fmu.scaffold import init_study
+
+    fmu, data = _ball(tmp_path)
+    text = init_study(fmu, data, tmp_path / "study.toml")
+    keys = ("# uncertainty = ", "# uncertainty_replicates = ")
+    assert all(k in text for k in keys)
+    lines = [ln.removeprefix("# ") if ln.startswith(keys) else ln for ln in text.splitlines()]
+    (tmp_path / "sampled.toml").write_text("\n".join(lines) + "\n")
+    method = Study.from_toml(tmp_path / "sampled.toml").method
+    assert (method.uncertainty, method.uncertainty_replicates) == ("bootstrap", 100)
