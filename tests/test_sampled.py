@@ -194,3 +194,36 @@ def test_sampled_intervals_travel_through_json():
     back = Sampled.from_dict(json.loads(json.dumps(out.to_dict(), allow_nan=False)))
     assert back.to_dict() == out.to_dict()
     assert math.isnan(back.estimates["a"][1]) and math.isnan(back.std_error["b"])
+
+
+def test_the_shared_model_refits_reach_each_replicates_own_optimum():
+    from scipy.optimize import least_squares
+
+    from tsid_fmu.uncertainty.refits import Replicate, SharedModel, refit, tolerance
+
+    t = np.linspace(0.0, 4.0, 80)
+    sigma = 0.3  # large: one Gauss-Newton step misses the optima by up to 0.3 se
+
+    def residuals(s: np.ndarray) -> np.ndarray:
+        return s[0] * np.exp(-s[1] * t) / sigma
+
+    rng = np.random.default_rng(4)
+    data = [2.0 * np.exp(-1.3 * t) + rng.normal(0.0, sigma, t.size) for _ in range(25)]
+    s0 = least_squares(lambda s: residuals(s) - data[0] / sigma, [2.0, 1.3]).x
+    r0 = residuals(s0)
+    jac0 = np.column_stack(
+        [(residuals(s0 + h) - residuals(s0 - h)) / 2e-6 for h in np.eye(2) * 1e-6]
+    )
+    tol = tolerance(r0 - data[0] / sigma)  # the answer's residual variance
+    reps = [Replicate(y / sigma, np.zeros(2), r0 - y / sigma, tol) for y in data[1:]]
+    space = Space(
+        {"a": [1.0, 3.0], "b": [0.5, 2.0]},
+        {"a": (0, 9), "b": (0, 9)},
+        LevelingOptions(scale="linear"),
+    )
+    refit(reps, SharedModel(r0, jac0), space, s0, lambda pts: [residuals(p) for p in pts])
+    se = np.sqrt(np.diag(np.linalg.inv(jac0.T @ jac0)))  # residuals in units of the noise
+    for rep, y in zip(reps, data[1:], strict=True):
+        best = least_squares(lambda s, y=y: residuals(s) - y / sigma, s0, xtol=1e-12).x
+        assert np.all(np.abs(s0 + rep.d - best) < 0.05 * se), (rep.steps, s0 + rep.d, best)
+    assert sum(rep.steps for rep in reps) <= 5 * len(reps)
