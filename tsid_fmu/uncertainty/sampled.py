@@ -9,16 +9,19 @@ parameters gives the intervals.
   experiment's rows drawn together, the block length from the residuals' AR model
   (:mod:`.resample`);
 * ``"monte_carlo"``: ``e*`` is drawn from the AR(p) model of each residual series
-  (white Gaussian noise where the residuals are white).
+  (white Gaussian noise where the residuals are white), the model of the HAC intervals
+  (:func:`.longrun.long_run_covariance`: corrected for what the fit absorbs).
 
-Either way the draws are rescaled by ``sqrt(n / (n - p))``, as residuals are smaller
-than the noise by what the fit absorbed. Each replicate is re-fitted from the answer
-(its own data move its optimum by about a standard error) by a short least squares of
-the study's ``sse`` cost in the search coordinates (:mod:`tsid_fmu.search.space`),
-within the bounds, at most :data:`~.refits.MAX_STEPS` simulations each: the replicates
-share one local model of the residuals, learnt from all their simulations
-(:mod:`.refits`), and step in lockstep, every step of every replicate still moving in
-one batch to the evaluator (in parallel over its workers, through its memo).
+Residuals are smaller than the noise by what the fit absorbed: the bootstrap's draws are
+rescaled by ``sqrt(n / (n - p))``, the AR models are corrected as the HAC intervals'.
+
+Each replicate is re-fitted from the answer (its own data move its optimum by about a
+standard error) by a short least squares of the study's ``sse`` cost in the search
+coordinates (:mod:`tsid_fmu.search.space`), within the bounds, at most
+:data:`~.refits.MAX_STEPS` simulations each: the replicates share one local model of
+the residuals, learnt from all their simulations (:mod:`.refits`), and step in
+lockstep, every step of every replicate still moving in one batch to the evaluator (in
+parallel over its workers, through its memo).
 
 The intervals are Efron's percentile intervals (:func:`.resample.percentile`) of the
 re-fitted values, at the level of the other intervals (95 %).
@@ -37,7 +40,7 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
 from tsid_fmu.uncertainty.intervals import LEVEL
-from tsid_fmu.uncertainty.longrun import fit_ar
+from tsid_fmu.uncertainty.longrun import ArNoise, long_run_covariance
 from tsid_fmu.uncertainty.refits import MAX_STEPS, Replicate, SharedModel, refit, tolerance
 from tsid_fmu.uncertainty.resample import ar_draw, block_bootstrap, block_length, percentile
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian
@@ -140,13 +143,33 @@ def _describe(kind: str) -> str:
         "circular block bootstrap of the residuals (block length: the Politis-White rule "
         "from their AR model)"
         if kind == "bootstrap"
-        else "Monte Carlo noise from the AR(p) model of each residual series"
+        else "Monte Carlo noise from the AR(p) model of each residual series (the HAC "
+        "intervals' models, corrected for what the fit absorbs)"
     )
     return (
         f"{draws}; each replicate re-fitted from the answer by least squares (Gauss-Newton "
         f"on a local model of the residuals shared by the replicates, at most {MAX_STEPS} "
         "simulations each); Efron's percentile intervals of the re-fitted values"
     )
+
+
+def _noise_models(sens: Sensitivities) -> list[ArNoise]:
+    """Return the AR model of every residual series, as the HAC intervals make them.
+
+    Each series whitened by its RMS (the models' unit), in the order of the experiments
+    and their outputs; corrected for what the fit absorbs
+    (:func:`.longrun.long_run_covariance`).
+    """
+    series = []
+    for r, jac in zip(sens.residuals, sens.jacobian, strict=True):
+        sigma = np.sqrt(np.mean(r**2, axis=0))
+        sigma = np.where(sigma > 0, sigma, 1.0)
+        series += [(r[:, k] / sigma[k], jac[:, k, :] / sigma[k]) for k in range(r.shape[1])]
+    stacked = np.vstack([j for _, j in series])
+    values, vectors = np.linalg.eigh(stacked.T @ stacked)
+    keep = values > 1e-14 * max(float(values.max()), 1e-300)
+    inverse = (vectors * np.where(keep, 1.0 / np.maximum(values, 1e-300), 0.0)) @ vectors.T
+    return list(long_run_covariance(series, inverse).models)
 
 
 class _Draws:
@@ -158,6 +181,7 @@ class _Draws:
         self.noise: dict[str, Any] = {}
         total = sum(r.size for r in sens.residuals)
         inflate = math.sqrt(total / max(total - p, 1))
+        models = _noise_models(sens) if kind == "monte_carlo" else []
         for e, r in zip(spec.experiments, sens.residuals, strict=True):
             rows = e.weighted(np.ones((len(e.time), 1)))[:, 0]  # sqrt of window weights
             plain = r / e.scale[None, :] / np.where(rows > 0, rows, 1.0)[:, None] * inflate
@@ -165,9 +189,10 @@ class _Draws:
                 how: Any = block_length(plain)
                 self.noise[e.name] = {"block_length": how}
             else:
-                how = [fit_ar(c - c.mean()) for c in plain.T]
+                rms = np.sqrt(np.mean((plain / inflate) ** 2, axis=0))
+                how = [(models.pop(0), sd) for sd in rms]
                 self.noise[e.name] = {
-                    "ar_order": dict(zip(e.output_names, [m.order for m in how], strict=True))
+                    "ar_order": dict(zip(e.output_names, [m.order for m, _ in how], strict=True))
                 }
             self.blocks.append((plain, rows, how))
 
@@ -178,7 +203,7 @@ class _Draws:
             if self.kind == "bootstrap":
                 e = block_bootstrap(plain, how, rng)
             else:
-                e = np.column_stack([ar_draw(m, plain.shape[0], rng) for m in how])
+                e = np.column_stack([sd * ar_draw(m, plain.shape[0], rng) for m, sd in how])
             parts.append((e * rows[:, None]).reshape(-1))
         return np.concatenate(parts)
 
