@@ -66,6 +66,14 @@ def test_the_reports_and_the_command_line_show_them(run, capsys):
     assert "bootstrap 95 % interval" in printed and "replicates (0 failed" in printed
     _print_result(plain, out, 0)
     assert "bootstrap" not in capsys.readouterr().out
+    # tsid identify --json: the summary carries it, as its schema says
+    import jsonschema
+    from test_cli_shell import _schema
+
+    summary = res.summary()
+    jsonschema.validate(summary, _schema())
+    assert summary["parameters"]["tau"]["sampled_interval"] == res.sampled.intervals["tau"]
+    assert "sampled_interval" not in plain.summary()["parameters"]["tau"]
     assert math.isfinite(res.sampled.std_error["tau"])
 
 

@@ -333,7 +333,8 @@ class IdentificationResult:
         """Return the answer in brief, as strict JSON data (``tsid identify --json``).
 
         It follows ``tsid_fmu/schemas/result-summary.schema.json``: ``parameters`` (per
-        name its ``value``, 95 % ``interval`` and ``unit``, and why it is ``weak``),
+        name its ``value``, 95 % ``interval`` and ``unit``, why it is ``weak``, and its
+        ``sampled_interval`` where the study asks for one),
         ``fun``, ``nfev``, ``nit``, ``status``, ``success``, ``message``, the ``stages``
         (name, kind, cost, simulations, iterations, status, message), the ``warnings``
         and ``out_dir``. Non-finite numbers are ``null``.
@@ -345,6 +346,7 @@ class IdentificationResult:
                 "interval": list(self.intervals.get(name) or [None, None]),
                 "unit": units.get(name, ""),
                 "weak": self.weak.get(name),
+                **({"sampled_interval": self.sampled.intervals[name]} if self._has(name) else {}),
             }
             for name, value in self.params.items()
         }
@@ -376,6 +378,9 @@ class IdentificationResult:
                 **self._structure_summary(),
             }
         )
+
+    def _has(self, name: str) -> bool:
+        return self.sampled is not None and name in self.sampled.intervals
 
     def _structure_summary(self) -> dict[str, Any]:
         """Return the ``structure`` entry of :meth:`summary` (structure identification only)."""
