@@ -93,14 +93,17 @@ def _show_progress(quiet: bool, stream: Any) -> bool:
 
 def _print_result(result: Any, out: Path, code: int) -> None:
     """Print the answer rounded to 5 significant figures, under a headline with the exit code."""
-    from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
+    from tsid_fmu.report.notebook import parameter_columns, parameter_rows, sampled_note
     from tsid_fmu.report.style import cost_name, fmt
     from tsid_fmu.result import STATUS
 
     rows = [[fmt(v) if not isinstance(v, str) else v for v in r] for r in parameter_rows(result)]
-    widths = [max(len(str(x)) for x in col) for col in zip(PARAMETER_COLUMNS, *rows, strict=True)]
-    for r in [PARAMETER_COLUMNS, *rows]:
+    columns = parameter_columns(result)
+    widths = [max(len(str(x)) for x in col) for col in zip(columns, *rows, strict=True)]
+    for r in [columns, *rows]:
         print("  ".join(str(x).ljust(w) for x, w in zip(r, widths, strict=True)).rstrip())
+    if result.sampled is not None:
+        print(sampled_note(result.sampled))
     print()
     for st in result.stages:
         print(f"stage {st.name} ({st.kind}): cost {fmt(st.cost)}, {st.nfev} simulations")

@@ -34,6 +34,7 @@ from tsid_fmu.trail.integrity import sha256_file, unseal
 from tsid_fmu.trail.owner import FINGERPRINT, differences, fingerprint, read_fingerprint
 from tsid_fmu.trail.reader import read_stage
 from tsid_fmu.uncertainty.intervals import Uncertainty
+from tsid_fmu.uncertainty.sampled import Sampled
 
 __all__ = ["load"]
 
@@ -241,6 +242,7 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
             stages=_stages(out, list(data.get("stages") or [])),
             intervals={str(k): list(v) for k, v in (data.get("intervals") or {}).items()},
             uncertainty=_uncertainty(data.get("uncertainty")),
+            sampled=Sampled.from_dict(data["sampled"]) if data.get("sampled") else None,
             fit=dict(data.get("fit") or {}),
             noise=dict(data.get("noise") or {}),
             noise_source=dict(data.get("noise_source") or {}),

@@ -23,6 +23,7 @@ from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
 from tsid_fmu.trail.files import strict
 from tsid_fmu.uncertainty.intervals import Uncertainty
+from tsid_fmu.uncertainty.sampled import Sampled
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -101,6 +102,10 @@ class IdentificationResult:
         95 % interval ``[low, high]`` per parameter (``None``: not determined).
     uncertainty : Uncertainty or None
         Standard errors, correlations, determined combinations.
+    sampled : Sampled or None
+        Bootstrap or Monte Carlo percentile intervals, beside :attr:`intervals` (which
+        stay the primary ones), where ``[method] uncertainty`` asks for them; their
+        re-fitted values by replicate: ``sampled.to_pandas()``.
     fit : dict
         Cost kinds and fit percentage per experiment and output at ``x``.
     noise : dict
@@ -155,6 +160,7 @@ class IdentificationResult:
     stages: list[StageResult] = field(default_factory=list)
     intervals: dict[str, list[float | None]] = field(default_factory=dict)
     uncertainty: Uncertainty | None = None
+    sampled: Sampled | None = None
     fit: dict[str, Any] = field(default_factory=dict)
     noise: dict[str, dict[str, float]] = field(default_factory=dict)
     noise_source: dict[str, dict[str, str]] = field(default_factory=dict)
@@ -298,6 +304,7 @@ class IdentificationResult:
                 "stages": [s.to_dict() for s in self.stages],
                 "intervals": self.intervals,
                 "uncertainty": self.uncertainty.to_dict() if self.uncertainty else None,
+                "sampled": self.sampled.to_dict() if self.sampled else None,
                 "fit": self.fit,
                 "noise": self.noise,
                 "noise_source": self.noise_source,
@@ -326,7 +333,8 @@ class IdentificationResult:
         """Return the answer in brief, as strict JSON data (``tsid identify --json``).
 
         It follows ``tsid_fmu/schemas/result-summary.schema.json``: ``parameters`` (per
-        name its ``value``, 95 % ``interval`` and ``unit``, and why it is ``weak``),
+        name its ``value``, 95 % ``interval`` and ``unit``, why it is ``weak``, and its
+        ``sampled_interval`` where the study asks for one),
         ``fun``, ``nfev``, ``nit``, ``status``, ``success``, ``message``, the ``stages``
         (name, kind, cost, simulations, iterations, status, message), the ``warnings``
         and ``out_dir``. Non-finite numbers are ``null``.
@@ -338,6 +346,7 @@ class IdentificationResult:
                 "interval": list(self.intervals.get(name) or [None, None]),
                 "unit": units.get(name, ""),
                 "weak": self.weak.get(name),
+                **({"sampled_interval": self.sampled.intervals[name]} if self._has(name) else {}),
             }
             for name, value in self.params.items()
         }
@@ -369,6 +378,9 @@ class IdentificationResult:
                 **self._structure_summary(),
             }
         )
+
+    def _has(self, name: str) -> bool:
+        return self.sampled is not None and name in self.sampled.intervals
 
     def _structure_summary(self) -> dict[str, Any]:
         """Return the ``structure`` entry of :meth:`summary` (structure identification only)."""
@@ -447,8 +459,23 @@ class IdentificationResult:
             before = s.cost if s.kind not in ("contribution", "horizon") else before
         return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
 
+    def _sampled_columns(self, name: str) -> dict[str, float]:
+        """Return the sampled interval of ``name`` as the columns of :meth:`parameters_frame`."""
+        if self.sampled is None:
+            return {}
+        low, high = self.sampled.intervals.get(name) or [None, None]
+        kind = self.sampled.kind.replace("_", " ")
+        return {
+            f"{kind} low": math.nan if low is None else low,
+            f"{kind} high": math.nan if high is None else high,
+        }
+
     def parameters_frame(self) -> pd.DataFrame:
-        """Return the identified parameters with units, intervals, ranges and flags."""
+        """Return the identified parameters with units, intervals, ranges and flags.
+
+        With sampled intervals (:attr:`sampled`), their ends follow the standard error
+        (columns ``bootstrap low``/``high`` or ``monte carlo low``/``high``).
+        """
         import pandas as pd
 
         rows = []
@@ -464,6 +491,7 @@ class IdentificationResult:
                     "95% low": math.nan if low is None else low,
                     "95% high": math.nan if high is None else high,
                     "std error [%]": se,
+                    **self._sampled_columns(p.name),
                     "first levels": f"{min(p.levels):.6g} .. {max(p.levels):.6g}",
                     "weakly determined": self.weak.get(p.name, ""),
                 }

@@ -17,7 +17,7 @@ from pathlib import Path
 from tsid_fmu.report.html_diagnostics import diagnostics_section
 from tsid_fmu.report.html_iteration import iteration_section
 from tsid_fmu.report.html_tables import CSS, esc, image, table, table_from_frame
-from tsid_fmu.report.notebook import PARAMETER_COLUMNS, parameter_rows
+from tsid_fmu.report.notebook import parameter_columns, parameter_rows, sampled_note
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
 from tsid_fmu.report.scored import experiment_notes
@@ -104,11 +104,13 @@ def _headline(result: IdentificationResult, cost: str) -> str:
 
 
 def _parameters(result: IdentificationResult, images: Mapping[str, bytes]) -> str:
-    body = table(PARAMETER_COLUMNS, parameter_rows(result))
+    body = table(parameter_columns(result), parameter_rows(result))
     note = (
         '<p class="note">95 % interval and standard error: '
         f"{esc(result.uncertainty.method if result.uncertainty else 'not computed')}.</p>"
     )
+    if result.sampled is not None:
+        note += f'<p class="note">{esc(sampled_note(result.sampled))}</p>'
     if "parameters.png" in images:
         note += image(images["parameters.png"], "parameter values per iteration")
         note += (

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from tsid_fmu.report.notebook import sampled_note
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.scored import experiment_notes
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
@@ -173,6 +174,8 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
     for name, (low, high) in result.intervals.items():
         if low is None or high is None:
             lines.append(f"- **{name}**: the data do not determine it: its 95 % interval is open")
+    if result.sampled is not None:
+        lines += ["", escape(sampled_note(result.sampled))]
     mismatch = [w for w in result.warnings if "model or solver mismatch" in w]
     if mismatch:
         lines += ["", "**These intervals assume that the model explains the data; it does not:**"]

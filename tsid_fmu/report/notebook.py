@@ -17,12 +17,14 @@ from tsid_fmu.report.style import fmt, fmt_levels
 from tsid_fmu.result import register_views
 
 __all__ = [
+    "parameter_columns",
     "parameter_rows",
     "plot_convergence",
     "plot_fit",
     "plot_main_effects",
     "plot_parameters",
     "result_html",
+    "sampled_note",
 ]
 
 PARAMETER_COLUMNS = [
@@ -53,8 +55,40 @@ def _std_error(u: Any, name: str) -> float | str:
     return u.relative.get(name, math.nan)
 
 
+def _sampled_label(result: Any) -> str:
+    return f"{result.sampled.kind.replace('_', ' ')} 95 % interval"
+
+
+def sampled_note(sampled: Any) -> str:
+    """Return what the sampled intervals are and what they cost, in one paragraph."""
+    kind = sampled.kind.replace("_", " ")
+    noise = "; ".join(
+        f"{exp}: block length {how['block_length']}"
+        if "block_length" in how
+        else f"{exp}: AR order " + ", ".join(f"{o} {p}" for o, p in how["ar_order"].items())
+        for exp, how in sampled.noise.items()
+    )
+    return (
+        f"{kind.capitalize()} {100 * sampled.level:g} % intervals, beside the primary ones "
+        f"(a check that does not linearise the model): {sampled.method}. {sampled.replicates} "
+        f"replicates ({sampled.failed} failed, {sampled.unfinished} stopped at the step "
+        f"limit), {sampled.nfev} simulations; {noise}."
+    )
+
+
+def parameter_columns(result: Any) -> list[str]:
+    """Columns of the parameter table: :data:`PARAMETER_COLUMNS`, and a sampled interval's."""
+    if getattr(result, "sampled", None) is None:
+        return list(PARAMETER_COLUMNS)
+    return [*PARAMETER_COLUMNS[:4], _sampled_label(result), *PARAMETER_COLUMNS[4:]]
+
+
 def parameter_rows(result: Any) -> list[list[Any]]:
-    """Rows of the parameter table: value, unit, 95 % interval, standard error, flags."""
+    """Rows of the parameter table: value, unit, 95 % interval, standard error, flags.
+
+    With sampled intervals (``result.sampled``), theirs follows the primary interval
+    (:func:`parameter_columns`).
+    """
     rows = []
     params = result.study.identified_parameters() if result.study else []
     names = [p.name for p in params] or result.names
@@ -81,6 +115,12 @@ def parameter_rows(result: Any) -> list[list[Any]]:
         rows.append(
             [f["name"], chosen, "", "chosen structure", math.nan, " | ".join(f["labels"]), ""]
         )
+    sampled = getattr(result, "sampled", None)
+    if sampled is not None:
+        for row in rows:
+            low, high = sampled.intervals.get(row[0]) or [None, None]
+            value = row[1] if isinstance(row[1], float | int) else math.nan
+            row.insert(4, _interval(low, value, high) if row[0] in sampled.intervals else "")
     return rows
 
 
@@ -93,7 +133,7 @@ def result_html(result: Any) -> str:
         f"<div><p><b>{esc(status)}</b>: {esc(result.message)}</p>",
         f"<p>cost {esc(fmt(result.fun))} on the measured inputs; {result.nit} Taguchi "
         f"iterations; {result.nfev} simulations</p>",
-        table(PARAMETER_COLUMNS, parameter_rows(result)),
+        table(parameter_columns(result), parameter_rows(result)),
     ]
     stages = result.stages_frame()
     if len(stages):

@@ -14,10 +14,13 @@ from tsid_fmu.errors import StudyError
 
 __all__ = [
     "INT64",
+    "MAX_SAMPLED",
+    "UNCERTAINTY",
     "check_bound",
     "check_choice",
     "check_number",
     "check_text",
+    "check_uncertainty",
     "check_whole",
     "check_windows",
     "parse_toml",
@@ -25,6 +28,13 @@ __all__ = [
 
 INT64 = (-(2**63), 2**63 - 1)
 """The integers TOML promises to hold; a study file's integers must lie in this range."""
+
+UNCERTAINTY = ("analytic", "bootstrap", "monte_carlo")
+"""``[method] uncertainty``: the covariance and profile intervals alone (``analytic``), or
+also sampled ones (:mod:`tsid_fmu.uncertainty.sampled`)."""
+
+MAX_SAMPLED = 100_000
+"""Most re-fits of ``[method] uncertainty_replicates``."""
 
 
 def _digits(value: int) -> int:
@@ -183,3 +193,19 @@ def check_windows(
     if any(w < 0 for w in checked) or not any(checked):
         raise StudyError(f"{where}: window_weights must be >= 0 and not all 0")
     return spans, warm, checked
+
+
+def check_uncertainty(kind: Any, replicates: Any, cost: str) -> tuple[str, int]:
+    """Return ``[method] uncertainty`` and ``uncertainty_replicates``, checked.
+
+    The sampled kinds re-fit by least squares, so they need the ``sse`` cost; at least
+    20 replicates make a 95 % percentile interval (its ends are the 2.5 % quantiles).
+    """
+    kind = check_choice(kind, "uncertainty", UNCERTAINTY)
+    replicates = check_whole(replicates, "uncertainty_replicates", 20, MAX_SAMPLED)
+    if kind != "analytic" and cost != "sse":
+        raise StudyError(
+            f"uncertainty = {kind!r} re-fits by least squares, which minimises the sse cost; "
+            f'the study uses {cost!r} (give cost = "sse", or uncertainty = "analytic")'
+        )
+    return kind, replicates

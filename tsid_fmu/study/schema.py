@@ -21,6 +21,7 @@ from tsid_fmu.study.checks import (
     check_choice,
     check_number,
     check_text,
+    check_uncertainty,
     check_whole,
     check_windows,
 )
@@ -436,6 +437,11 @@ class Method:
         simulations with a reference solver each; see ``interface``). Default true.
         ``false`` skips both checks: ``"auto"`` then simulates with Co-Simulation where
         the FMU has it, and ``result.extra["fidelity"]`` says that nothing was checked.
+    uncertainty, uncertainty_replicates : str, int
+        Sampled intervals beside the primary ones (:mod:`tsid_fmu.uncertainty.sampled`,
+        ``sse`` only): ``"bootstrap"`` (block bootstrap of the residuals) or
+        ``"monte_carlo"`` (AR noise), that many re-fits (default 100, at least 20).
+        Default ``"analytic"``: none.
     leveling : LevelingOptions
         Re-leveling thresholds and rules.
     """
@@ -458,6 +464,8 @@ class Method:
     step: float | None = None
     tolerance: float = 1e-10
     fidelity: bool = True
+    uncertainty: str = "analytic"
+    uncertainty_replicates: int = 100
     leveling: LevelingOptions = field(default_factory=LevelingOptions)
 
     def __post_init__(self) -> None:
@@ -499,5 +507,8 @@ class Method:
                 raise StudyError(f"step must be at least 1e-9 s, got {self.step}")
         if not 0 < check_number(self.tolerance, "tolerance") < 1:
             raise StudyError(f"tolerance must be between 0 and 1, got {self.tolerance}")
+        self.uncertainty, self.uncertainty_replicates = check_uncertainty(
+            self.uncertainty, self.uncertainty_replicates, self.cost
+        )
         if not isinstance(self.leveling, LevelingOptions):
             raise StudyError("leveling must be a LevelingOptions")

@@ -79,6 +79,8 @@ _METHOD_TYPES: dict[str, type] = {
     "step": float,
     "tolerance": float,
     "fidelity": bool,
+    "uncertainty": str,
+    "uncertainty_replicates": int,
 }
 _LEVELING_TYPES: dict[str, type] = {
     "significance_db": float,
