@@ -49,6 +49,17 @@ UNDETERMINED = 0.5
 range) is *not determined* by the data."""
 
 
+def json_safe(v: Any) -> Any:
+    """Return ``v`` with its non-finite floats, in nested dicts and lists, as ``None``."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: json_safe(w) for k, w in v.items()}
+    if isinstance(v, list):
+        return [json_safe(w) for w in v]
+    return v
+
+
 @dataclass
 class Uncertainty:
     """Standard errors, intervals, residual diagnostics and determined combinations.
@@ -130,16 +141,6 @@ class Uncertainty:
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-serialisable copy (non-finite numbers as ``None``)."""
-
-        def clean(v: Any) -> Any:
-            if isinstance(v, float):
-                return v if math.isfinite(v) else None
-            if isinstance(v, dict):
-                return {k: clean(w) for k, w in v.items()}
-            if isinstance(v, list):
-                return [clean(w) for w in v]
-            return v
-
         keys = (
             "values",
             "std_error",
@@ -158,7 +159,7 @@ class Uncertainty:
             "resolution",
             "dof",
         )
-        return clean({k: getattr(self, k) for k in keys})
+        return json_safe({k: getattr(self, k) for k in keys})
 
 
 def quantile(dof: float) -> float:

@@ -39,7 +39,7 @@ import numpy as np
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
-from tsid_fmu.uncertainty.intervals import LEVEL
+from tsid_fmu.uncertainty.intervals import LEVEL, json_safe
 from tsid_fmu.uncertainty.longrun import ArNoise, long_run_covariance
 from tsid_fmu.uncertainty.refits import MAX_STEPS, Replicate, SharedModel, refit, tolerance
 from tsid_fmu.uncertainty.resample import ar_draw, block_bootstrap, block_length, percentile
@@ -102,17 +102,7 @@ class Sampled:
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-serialisable copy (non-finite numbers as ``None``)."""
-
-        def clean(v: Any) -> Any:
-            if isinstance(v, float):
-                return v if math.isfinite(v) else None
-            if isinstance(v, dict):
-                return {k: clean(w) for k, w in v.items()}
-            if isinstance(v, list):
-                return [clean(w) for w in v]
-            return v
-
-        return clean(dict(vars(self)))
+        return json_safe(dict(vars(self)))
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Sampled:
