@@ -48,6 +48,26 @@ EST = {{"F_cm": (60.0, 10, 110), "F_vm": (40.0, 1, 80), "M_m": (8.0, 4, 12),
         "K_s": (5500.0, 1000, 10000), "B_s": (10.0, 0.1, 20)}}
 """
 
+_AIX = """
+import pathlib, tempfile
+from ebcpy import FMU_API, TimeSeriesData
+from aixcalibuha import TunerParas, Goals, CalibrationClass
+wd = pathlib.Path(tempfile.mkdtemp())
+d = rig[rig.time <= 2.0 + 1e-9].set_index("time")
+def setup(fmu, est, **kw):
+    api = FMU_API(model_name=fmu, working_directory=wd / "sim", log_fmu=False, n_cpu=1)
+    api.set_sim_setup({"output_interval": 0.001, "stop_time": 2.0})
+    names = list(est)
+    tuner = TunerParas(names=names, initial_values=[est[n][0] for n in names],
+                       bounds=[est[n][1:] for n in names])
+    goals = Goals(meas_target_data=TimeSeriesData(d[["F_o", "x_m"]].copy()),
+                  variable_names={"F_o": ["F_o", "F_o"], "x_m": ["x_m", "x_m"]},
+                  statistical_measure="NRMSE", weightings=[0.5, 0.5])
+    cls = CalibrationClass(name="probe", start_time=0.0, stop_time=2.0, goals=goals,
+                           tuner_paras=tuner, inputs=TimeSeriesData(d[["F_m"]].copy()), **kw)
+    return api, cls
+"""
+
 PROBES: dict[str, dict[str, str]] = {
     "modestpy": {
         "measured inputs, global + local search": """
@@ -77,23 +97,10 @@ emit(ok=True, seconds=time.time() - t, what="learning periods (random, whole sec
 """,
     },
     "aixcalibuha": {
-        "measured inputs, a scored window": """
-import pathlib, tempfile
-from ebcpy import FMU_API, TimeSeriesData
-from aixcalibuha import TunerParas, Goals, CalibrationClass, Calibrator
-wd = pathlib.Path(tempfile.mkdtemp())
-d = rig[rig.time <= 2.0 + 1e-9].set_index("time")
-api = FMU_API(model_name=FMU, working_directory=wd / "sim", log_fmu=False, n_cpu=1)
-api.set_sim_setup({"output_interval": 0.001, "stop_time": 2.0})
-names = list(EST)
-tuner = TunerParas(names=names, initial_values=[EST[n][0] for n in names],
-                   bounds=[EST[n][1:] for n in names])
-goals = Goals(meas_target_data=TimeSeriesData(d[["F_o", "x_m"]].copy()),
-              variable_names={"F_o": ["F_o", "F_o"], "x_m": ["x_m", "x_m"]},
-              statistical_measure="NRMSE", weightings=[0.5, 0.5])
-cls = CalibrationClass(name="window", start_time=0.0, stop_time=2.0, goals=goals,
-                       tuner_paras=tuner, relevant_intervals=[(0.5, 2.0)],
-                       inputs=TimeSeriesData(d[["F_m"]].copy()))
+        "measured inputs, a scored window": _AIX
+        + """
+from aixcalibuha import Calibrator
+api, cls = setup(FMU, EST, relevant_intervals=[(0.5, 2.0)])
 t = time.time()
 cal = Calibrator(working_directory=wd / "cal", sim_api=api, calibration_class=cls,
                  show_plot=False, create_tsd_plot=False, save_tsd_plot=False,
@@ -104,22 +111,10 @@ emit(ok=True, seconds=time.time() - t, what="differential evolution, window 0.5-
      estimate={k: float(v) for k, v in res.items()})
 api.close()
 """,
-        "sensitivity screening (Morris, Sobol)": """
-import pathlib, tempfile
-from ebcpy import FMU_API, TimeSeriesData
-from aixcalibuha import TunerParas, Goals, CalibrationClass, MorrisAnalyzer, SobolAnalyzer
-wd = pathlib.Path(tempfile.mkdtemp())
-d = rig[rig.time <= 2.0 + 1e-9].set_index("time")
-api = FMU_API(model_name=FMU, working_directory=wd / "sim", log_fmu=False, n_cpu=1)
-api.set_sim_setup({"output_interval": 0.001, "stop_time": 2.0})
-names = list(EST)
-tuner = TunerParas(names=names, initial_values=[EST[n][0] for n in names],
-                   bounds=[EST[n][1:] for n in names])
-goals = Goals(meas_target_data=TimeSeriesData(d[["F_o", "x_m"]].copy()),
-              variable_names={"F_o": ["F_o", "F_o"], "x_m": ["x_m", "x_m"]},
-              statistical_measure="NRMSE", weightings=[0.5, 0.5])
-cls = CalibrationClass(name="all", start_time=0.0, stop_time=2.0, goals=goals,
-                       tuner_paras=tuner, inputs=TimeSeriesData(d[["F_m"]].copy()))
+        "sensitivity screening (Morris, Sobol)": _AIX
+        + """
+from aixcalibuha import MorrisAnalyzer, SobolAnalyzer
+api, cls = setup(FMU, EST)
 t = time.time()
 morris = MorrisAnalyzer(sim_api=api, num_samples=4, cd=wd / "m", analysis_variable="mu_star")
 rm = morris.run(calibration_classes=[cls], plot_result=False)[0]
@@ -130,22 +125,11 @@ emit(ok=True, seconds=time.time() - t, what="Morris (4 trajectories) and Sobol (
      morris_rank=list(mu.sort_values(ascending=False).index))
 api.close()
 """,
-        "a discrete factor (an Integer switch)": """
-import pathlib, tempfile
-from ebcpy import FMU_API, TimeSeriesData
-from aixcalibuha import TunerParas, Goals, CalibrationClass, Calibrator
-wd = pathlib.Path(tempfile.mkdtemp())
-d = rig[rig.time <= 2.0 + 1e-9].set_index("time")
-api = FMU_API(model_name=FMU.replace("LSEA_SISO", "LSEA_SISO_Friction"),
-              working_directory=wd / "sim", log_fmu=False, n_cpu=1)
-api.set_sim_setup({"output_interval": 0.001, "stop_time": 2.0})
-tuner = TunerParas(names=["friction", "F_cm", "F_vm"], initial_values=[2, 60, 40],
-                   bounds=[(1, 3), (10, 110), (1, 80)])
-goals = Goals(meas_target_data=TimeSeriesData(d[["F_o", "x_m"]].copy()),
-              variable_names={"F_o": ["F_o", "F_o"], "x_m": ["x_m", "x_m"]},
-              statistical_measure="NRMSE", weightings=[0.5, 0.5])
-cls = CalibrationClass(name="all", start_time=0.0, stop_time=2.0, goals=goals,
-                       tuner_paras=tuner, inputs=TimeSeriesData(d[["F_m"]].copy()))
+        "a discrete factor (an Integer switch)": _AIX
+        + """
+from aixcalibuha import Calibrator
+est = {"friction": (2, 1, 3), "F_cm": (60.0, 10, 110), "F_vm": (40.0, 1, 80)}
+api, cls = setup(FMU.replace("LSEA_SISO", "LSEA_SISO_Friction"), est)
 t = time.time()
 cal = Calibrator(working_directory=wd / "cal", sim_api=api, calibration_class=cls,
                  show_plot=False, create_tsd_plot=False, save_tsd_plot=False,
