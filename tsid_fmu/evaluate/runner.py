@@ -163,7 +163,9 @@ class SetRunner:
 
     def _simulate(self, e: int, r: int, params: Mapping[str, float]) -> np.ndarray:
         experiment = self.spec.experiments[e]
-        own = self.spec.experiment_values(e, params)
+        # only a study with per-experiment copies maps the set per experiment (the
+        # per-row hot path of every other study stays as it was)
+        own = params if self.reuse is None else self.spec.experiment_values(e, params)
         key = (e, r, tuple(own.items())) if self.reuse is not None else None
         if key is not None and key in self.reuse:
             # the same values for this experiment as a recent set: another experiment's
