@@ -17,6 +17,7 @@ import pytest
 from scipy import stats
 from spec_helpers import CurveEvaluator, floor_experiment
 
+import tsid_fmu.search.structure as structure
 import tsid_fmu.study.definition as definition
 from tsid_fmu import Choice, Experiment, Method, Parameter, Study
 from tsid_fmu.doe.arrays import get_array
@@ -162,7 +163,12 @@ def test_a_discrete_factor_is_fixed_only_when_significant_with_the_same_best_twi
     assert not settled([(True, 1), (False, 1)])
 
 
-def test_the_arrays_fix_the_offset_the_data_show_and_keep_the_levels_of_the_choices():
+def test_the_arrays_fix_the_offset_the_data_show_and_keep_the_levels_of_the_choices(
+    monkeypatch,
+):
+    # the rule, not the cap on the arrays' iterations: the toy's offset is significant
+    # with the same best level from its 4th and 5th iterations
+    monkeypatch.setattr(structure, "MAX_ITERATIONS", 8)
     found = _identify(_data(a=2.0, b=1.3, c=0.3, on=1))
     stage = found.stages[0]
     (on,) = found.factors
@@ -172,6 +178,16 @@ def test_the_arrays_fix_the_offset_the_data_show_and_keep_the_levels_of_the_choi
     for rec in stage.records:
         assert rec.levels.get("on", [0.0, 1.0]) == [0.0, 1.0]  # never re-leveled
     assert "on" not in stage.records[-1].next_frame.names  # fixed: out of the arrays
+    assert found.values == {"on": 1.0}
+
+
+def test_the_arrays_stop_after_their_cap_with_the_switch_open_and_every_level_a_candidate():
+    found = _identify(_data(a=2.0, b=1.3, c=0.3, on=1))
+    stage = found.stages[0]
+    (on,) = found.factors
+    assert len(stage.records) == structure.MAX_ITERATIONS == 3
+    assert on.fixed is None and "iteration limit (3)" in stage.message
+    assert sorted(c.label for c in found.candidates) == ["on=0", "on=1"]
     assert found.values == {"on": 1.0}
 
 
@@ -380,3 +396,63 @@ def test_a_richer_candidate_is_also_refined_from_the_simpler_answer_embedded():
     consistent(cands, studies, evs, restart)
     assert any(i == 1 and "embedded" in w for i, w in calls)
     assert cands[1].cost < 0.5 * stuck
+
+
+# -- the simplest structure first, the richer ones from its answer embedded --------------
+
+
+def test_the_simplest_structure_gets_the_own_study_and_the_richer_its_answer_embedded():
+    # the arrays rank on=1 first (the data have an offset): the own study still goes to
+    # on=0 (2 free parameters against 3), and on=1 starts from on=0's answer embedded
+    measured = _data(a=2.0, b=1.3, c=0.3, on=1)
+    made = []
+
+    def make(sub):
+        made.append(_Evaluators(measured, sub.start_values))
+        return made[-1]
+
+    found = run_structure(Context(_study(), make(_study()), NullStore(), None, Control()), make)
+    first, later = sorted(found.candidates, key=lambda c: c.extra["folder"])
+    assert first.label == "on=0" and "the simplest (2 free parameters)" in first.origin
+    assert later.label == "on=1" and "the simplest" not in later.origin
+    (summary,) = [s for s in found.stages if s.kind == "candidate"]
+    assert summary.name == "structure on=0"
+    assert any(n.startswith("taguchi") for n in summary.extra["stages"])
+    assert not any(s.kind == "taguchi" for s in found.stages[2:])  # on=1: no study of its own
+    # on=0's answer embedded in on=1: its a and b held, the offset fitted to reproduce it
+    asked = [x for e in made if e.start.get("on") == 1.0 for ev in e.pool.values()
+             for x in ev.asked]  # fmt: skip
+    held = [x for x in asked if (x["a"], x["b"]) == (first.x["a"], first.x["b"])]
+    assert len({x["c"] for x in held}) >= 2
+    assert found.values == {"on": 1.0} and later.x["c"] == pytest.approx(0.3, abs=0.01)
+
+
+def test_an_embedding_reaches_a_nesting_value_on_a_bound_that_log_coordinates_cannot():
+    from tsid_fmu.search.optima import embed
+
+    def model(a, b, c, on):  # any c > 0 switches a step on (as a friction term would)
+        return _model(a, b, c + 0.05 * (c > 0), on)
+
+    measured = _data(a=2.0, b=1.3, c=0.0, on=0)
+    study = _study()
+    # the offset's levels a decade apart from 0.01: log coordinates, where c = 0 (its
+    # lower bound, the nesting value) is at minus infinity
+    study.parameters[2] = Parameter("c", [0.01, 0.1, 1.0], 0.0, 1.0)
+    small = _toy_candidate(study, measured, 0.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=0")
+    ev = _Evaluators(measured, {"on": 1.0}, model).get(study.parameter_names, [], {})
+    ok, point = embed(ev, study, small, ["a", "b", "c"], {"a": 1.0, "b": 1.0, "c": 0.5})
+    assert ok and point["c"] == 0.0 and point["a"] == small.x["a"]
+
+
+def test_a_chosen_answer_from_a_warm_start_gets_its_own_study_unless_shown_optimal():
+    from tsid_fmu.search.candidates import needs_own_study
+    from tsid_fmu.search.stage import StageResult
+
+    def stage(holds):
+        extra = {"stationarity": {"holds": holds, "test": "gauss-newton", "detail": ""}}
+        return StageResult("refinement", "refinement", {"a": 1.0}, 1.0, 10, "", extra=extra)
+
+    assert needs_own_study(1, {0}, [stage(False)])
+    assert not needs_own_study(1, {0}, [stage(True)])
+    assert not needs_own_study(0, {0}, [stage(False)])  # it had one
+    assert needs_own_study(1, {0}, [StageResult("refinement", "refinement", {}, 1.0, 1, "")])

@@ -9,12 +9,15 @@ fit of the simpler one it nests. So:
 - **Measure** (:func:`measure`): a candidate's cost, its noise-weighted residuals, the
   Real parameters that change its outputs (``k``) and its validation cost.
 - **Warm starts** (:func:`warm_start`): a candidate after the first is refined from the
-  best of its start points: the answers of the candidates refined before it (their
-  shared parameters; for a simpler nested structure the richer fit projected onto it),
-  the best point the arrays saw in it, and the centre of the first levels.
+  best of its start points: the answers of the candidates refined before it that it
+  nests, embedded in it (:func:`embed`), those answers as they are, the best point the
+  arrays saw in it, and the centre of the first levels.
 - **Nesting** (:func:`nesting`): structure ``s`` is nested in ``r`` where ``r``'s free
   parameters include ``s``'s and ``r``'s extra parameters reproduce ``s``'s fit; the
-  fit that reproduces it is ``s``'s answer **embedded** in ``r``.
+  fit that reproduces it is ``s``'s answer **embedded** in ``r``: by least squares over
+  the extra parameters, or, where that does not reproduce it, with extra parameters on
+  their lower bounds (a viscous coefficient of 0, which logarithmic search coordinates
+  reach only at minus infinity).
 - **Consistent optima** (:func:`consistent`): for each nested pair, a richer candidate
   whose cost is above the simpler one's is not at its optimum: it is refined again from
   the simpler answer embedded (its cost is then at most the simpler one's); a simpler
@@ -47,6 +50,7 @@ __all__ = [
     "REPRODUCE",
     "at_nesting_point",
     "consistent",
+    "embed",
     "follow",
     "measure",
     "nesting",
@@ -165,15 +169,36 @@ def warm_start(
 def _reproduce(
     ev: Any, study: Study, small: Candidate, big: Candidate
 ) -> tuple[bool, dict[str, float]]:
-    """Whether ``big`` reproduces ``small``'s fit with its extra parameters; the embedding."""
+    """Whether ``big`` reproduces ``small``'s fit with its extra parameters; the embedding.
+
+    First by least squares over the extra parameters from ``big``'s values (the nesting
+    values nearest its answer); where that does not reproduce it, again after moving
+    extra parameters onto their lower bounds (:func:`_at_bounds`).
+    """
+    extra = [n for n in big.active if n not in small.active]
+    base = {**big.x, **{n: small.x[n] for n in small.active}}
+    tol = REPRODUCE * small.chi2 / max(small.n, 1)
+    gap, point = _fit_extra(ev, study, small, base, extra)
+    if gap <= tol:
+        return True, point
+    rest, gap = _at_bounds(ev, study, base, extra, small.extra["residuals"])
+    if rest and rest != extra and gap > tol:
+        gap, point = _fit_extra(ev, study, small, base, rest)
+    elif rest != extra:
+        point = dict(base)
+    return gap <= tol, point
+
+
+def _fit_extra(
+    ev: Any, study: Study, small: Candidate, base: dict[str, float], extra: list[str]
+) -> tuple[float, dict[str, float]]:
+    """Fit ``extra`` (from ``base``) to reproduce ``small``'s outputs: the gap and the point."""
     from scipy.optimize import least_squares
 
     r_small = small.extra["residuals"]
-    extra = [n for n in big.active if n not in small.active]
-    base = {**big.x, **{n: small.x[n] for n in small.active}}
     space = _space(study)
-    idx = [space.names.index(n) for n in extra]
     bad = np.full(r_small.shape, 1e6)
+    idx = [space.names.index(n) for n in extra]
 
     def at(s: np.ndarray) -> dict[str, float]:
         return {
@@ -185,13 +210,55 @@ def _reproduce(
         r = ev.evaluate([at(s)]).residuals
         return bad if not r or r[0] is None else r[0] - r_small
 
-    start = np.array([space.coordinate(j, big.x[n]) for n, j in zip(extra, idx, strict=True)])
+    start = np.array([space.coordinate(j, base[n]) for n, j in zip(extra, idx, strict=True)])
     lo = np.array([space.s_lower[j] for j in idx])
     hi = np.array([space.s_upper[j] for j in idx])
     fit = least_squares(
         diff, np.clip(start, lo, hi), bounds=(lo, hi), max_nfev=20 * (len(extra) + 1)
     )
-    return 2 * float(fit.cost) <= REPRODUCE * small.chi2 / max(small.n, 1), at(fit.x)
+    return 2 * float(fit.cost), at(fit.x)
+
+
+def _at_bounds(
+    ev: Any, study: Study, base: dict[str, float], extra: list[str], r_small: np.ndarray
+) -> tuple[list[str], float]:
+    """Move each extra parameter to its lower bound where that reproduces better.
+
+    A nesting value often sits on a bound (a viscous coefficient of 0), which search
+    coordinates spaced logarithmically reach only at minus infinity. Each extra
+    parameter in turn is set to its finite lower bound in ``base`` (in place) where the
+    outputs come closer to ``small``'s there (one run each). Returns the others and the
+    sum of squares of the outputs' difference at ``base``.
+    """
+
+    def gap(x: dict[str, float]) -> float:
+        r = ev.evaluate([x]).residuals
+        return math.inf if not r or r[0] is None else float(np.sum((r[0] - r_small) ** 2))
+
+    bounds = study.bounds()
+    now, rest = gap(base), []
+    for n in extra:
+        lo = bounds[n][0]
+        trial = {**base, n: float(lo)} if math.isfinite(lo) and lo != base[n] else None
+        g = gap(trial) if trial is not None else math.inf
+        if trial is not None and g < now:
+            base[n], now = float(lo), g
+        else:
+            rest.append(n)
+    return rest, now
+
+
+def embed(
+    ev: Any, study: Study, small: Candidate, active: Sequence[str], x: Mapping[str, float]
+) -> tuple[bool, dict[str, float]]:
+    """Embed ``small``'s answer in a richer structure not yet refined (its free ``active``).
+
+    As :func:`nesting` checks a pair, from ``x`` (the richer structure's start) instead of
+    its answer: whether its extra parameters reproduce ``small``'s fit, and the point
+    that does (``small``'s answer embedded: a start whose cost is ``small``'s).
+    """
+    big = Candidate("", {}, dict(x), math.inf, math.inf, 1, len(active), list(active))
+    return _reproduce(ev, study, small, big)
 
 
 def nesting(
@@ -293,6 +360,9 @@ def consistent(
     studies: Sequence[Study],
     evs: Sequence[Any],
     restart: Callable[[int, dict[str, float], str], bool],
+    *,
+    known: Mapping[tuple[int, int], dict[str, float]] | None = None,
+    own: set[int] | frozenset[int] = frozenset(),
 ) -> dict[tuple[int, int], dict[str, float]]:
     """Restart the nested candidates that are not at their optimum; return the nesting.
 
@@ -300,13 +370,22 @@ def consistent(
     its answer changed (it keeps the lower one). For each nested pair ``(s, r)``:
 
     - ``r`` (richer) with a cost above ``s``'s is restarted from ``s``'s answer embedded;
+    - ``r`` is restarted once from ``s``'s answer embedded (unless ``known`` holds the
+      pair: ``r`` was refined from the best of its starts, that embedding among them);
     - ``s`` (simpler), above the lowest-cost richer candidate that nests it, is
-      restarted from that answer followed to the nesting point (:func:`follow`), once.
+      restarted from that answer followed to the nesting point (:func:`follow`), once,
+      unless ``s`` is in ``own`` (it had a study of its own from the first levels).
+
+    The nesting is checked at the answers (the embedding nearest each richer answer):
+    the one found before a richer candidate was refined (``known``) may lie on another
+    of the values that make it the simpler structure (measured on the SISO friction
+    laws: the Stribeck law is Coulomb's at ``F_sm = F_cm`` for any ``V_s``, and at a
+    small ``V_s`` for any ``F_sm``).
     """
     cache: dict = {}
     pairs = nesting(cands, studies, evs, cache)
-    followed: set[tuple[int, int]] = set()
-    embedded_from: set[tuple[int, int]] = set()
+    followed: set[tuple[int, int]] = {(s, r) for s, r in pairs if s in own}
+    embedded_from: set[tuple[int, int]] = set(known or ())
     for _ in range(MAX_ROUNDS):
         changed = False
         for (s, r), embedded in sorted(pairs.items()):

@@ -1,38 +1,54 @@
 """Structure identification: the structure stage, then every candidate refined and compared.
 
 1. The structure stage (:mod:`tsid_fmu.search.structure`) runs mixed arrays of the
-   Real parameters and the discrete factors until every discrete factor is fixed (or
-   the stage ends with some open).
+   Real parameters and the discrete factors until every discrete factor is fixed, or
+   for at most :data:`~tsid_fmu.search.structure.MAX_ITERATIONS` iterations.
 2. The candidate structures: every combination of the levels still open (at most
    :data:`MAX_CANDIDATES`, the best-scoring first), and for each fixed factor its
-   runner-up level, so that the choice is always compared with an alternative.
-3. Each candidate is identified as a study of its own (the study's Real parameters,
-   the structure's values fixed): the existing stages (the Taguchi stage from levels
-   centred on the best set the arrays saw in that structure, then the refinement,
-   restarts or check, as the study's method says), kept in the trail as
+   runner-up level, so that the choice is always compared with an alternative (all
+   combinations where they are at most :data:`MAX_ALL`).
+3. Each candidate's free parameters are probed at the best point the arrays saw in it
+   (:mod:`tsid_fmu.search.candidates`). The simplest (fewest free parameters) is
+   identified as a study of its own over those parameters, from the first levels (the
+   Taguchi stage, then the refinement, as the study's method says); every other one by
+   a short refinement from the best of its warm starts: the earlier answers it nests,
+   embedded in it (its extra parameters fitted to reproduce them), the earlier answers,
+   the arrays' best point in it, the centre of the first levels. Kept in the trail as
    ``structure_NN/``.
-4. At each candidate's optimum: the residuals, the Real parameters that change the
+4. At each candidate's answer: the residuals, the Real parameters that change the
    outputs in that structure (``k``), and, for each pair whose free parameters are
    nested, whether the richer one reproduces the simpler one's fit with its extra
-   parameters (then it nests it, and the likelihood-ratio test applies).
-5. :func:`tsid_fmu.search.selection.decide` chooses.
+   parameters (then it nests it, and the likelihood-ratio test applies); candidates
+   not at their optimum by that nesting are restarted
+   (:func:`~tsid_fmu.search.optima.consistent`).
+5. :func:`tsid_fmu.search.selection.decide` chooses. A choice whose answer came from a
+   warm start and is not shown to be an optimum gets a study of its own, and the
+   comparison is made again.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
-from tsid_fmu.search.adaptive import answer_stage
+from tsid_fmu.search.candidates import (
+    best_point,
+    embedded_answers,
+    identify_candidate,
+    measure_in,
+    needs_own_study,
+    own_again,
+    own_study,
+    probe,
+    short,
+    simplest_first,
+    warm_starts,
+)
 from tsid_fmu.search.context import Context, polish
-from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.optima import at_nesting_point, consistent, measure, update, warm_start
+from tsid_fmu.search.optima import at_nesting_point, consistent, update
 from tsid_fmu.search.phases import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate, decide
@@ -40,7 +56,6 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure import DiscreteFactor, StructureRun, structure_stage
 from tsid_fmu.study.definition import Study
-from tsid_fmu.study.schema import Parameter
 
 __all__ = ["MAX_CANDIDATES", "StructureResult", "run_structure"]
 
@@ -92,31 +107,6 @@ class StructureResult:
         }
 
 
-class _Prefixed:
-    """A stage store whose keys lie under one folder (a candidate's stages)."""
-
-    def __init__(self, store: Any, prefix: str) -> None:
-        self.store, self.prefix = store, prefix
-
-    def _k(self, key: str) -> str:
-        return f"{self.prefix}/{key or 'taguchi'}"
-
-    def iterations(self, key: str) -> list[IterationRecord]:
-        return self.store.iterations(self._k(key))
-
-    def override(self, key: str, record: IterationRecord, space: Space) -> Frame | None:
-        return self.store.override(self._k(key), record, space)
-
-    def stage(self, key: str) -> StageResult | None:
-        return self.store.stage(self._k(key))
-
-    def write_iteration(self, key: str, record: IterationRecord, space: Space) -> None:
-        self.store.write_iteration(self._k(key), record, space)
-
-    def write_stage(self, key: str, result: StageResult) -> None:
-        self.store.write_stage(self._k(key), result)
-
-
 class _Recorder:
     def __init__(self, store: Any, space: Space) -> None:
         self.store, self.space = store, space
@@ -154,7 +144,7 @@ def _candidates(
         {**fixed, **{f.name: v for f, v in zip(open_, vs, strict=True)}}
         for vs in itertools.product(*(f.values for f in open_))
     ]
-    combos.sort(key=lambda v: _best_point(points, v)[0])
+    combos.sort(key=lambda v: best_point(points, v)[0])
     out = [(v, "the arrays' choice" if not open_ else "open in the arrays") for v in combos]
     out = out[:MAX_CANDIDATES]
     best = out[0][0]
@@ -164,7 +154,7 @@ def _candidates(
             for vs in itertools.product(*(f.values for f in factors))
         ]
         rest = [v for v in rest if v not in [w for w, _ in out]]
-        rest.sort(key=lambda v: _best_point(points, v)[0])
+        rest.sort(key=lambda v: best_point(points, v)[0])
         for v in rest:
             moved = [f.name for f in factors if f.fixed is not None and v[f.name] != best[f.name]]
             out.append((v, f"another level of {', '.join(moved)} (every level is compared)"))
@@ -174,110 +164,6 @@ def _candidates(
             alt = {**best, f.name: f.values[f.runner_up]}
             if alt not in [v for v, _ in out]:
                 out.append((alt, f"runner-up level of {f.name}"))
-    return out
-
-
-def _best_point(
-    points: list[tuple[float, dict[str, float]]], values: Mapping[str, float]
-) -> tuple[float, dict[str, float] | None]:
-    inside = [
-        (c, x) for c, x in points if math.isfinite(c) and all(x[k] == v for k, v in values.items())
-    ]
-    return min(inside, key=lambda p: p[0]) if inside else (math.inf, None)
-
-
-def _centred(
-    study: Study, levels: Mapping[str, list[float]], x: Mapping[str, float] | None
-) -> list[Parameter]:
-    """Return the Real parameters with the structure stage's last levels, moved onto ``x``."""
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    out = []
-    for j, p in enumerate(study.parameters):
-        lv = sorted(levels[p.name])
-        if x is not None:
-            s = np.array([space.coordinate(j, v) for v in lv])
-            shift = space.coordinate(j, x[p.name]) - 0.5 * (s[0] + s[-1])
-            moved = [space.value(j, v + shift) for v in s]
-            lv = moved if len(set(moved)) == len(moved) else lv
-        out.append(dataclasses.replace(p, levels=lv))
-    return out
-
-
-def _sub_study(
-    study: Study,
-    values: Mapping[str, float],
-    levels: Mapping[str, list[float]],
-    x: Mapping[str, float] | None,
-) -> Study:
-    """Return the study of one structure: its values fixed, the Real levels centred on ``x``."""
-    return dataclasses.replace(
-        study,
-        parameters=_centred(study, levels, x),
-        choices=[],
-        start_values={**study.start_values, **values},
-        source=None,
-    )
-
-
-def _measure(study: Study, evs: Evaluators, x: Mapping[str, float]) -> dict[str, Any]:
-    """Measure ``x`` with a structure's evaluators (steps in ``study``'s coordinates)."""
-    names = study.parameter_names
-    exps = [e.name for e in study.identify_experiments()]
-    checks = [e.name for e in study.experiments if e.role == "validate"]
-
-    def validate(p: dict[str, float]) -> float | None:
-        if not checks:
-            return None
-        return float(evs.get(names, checks, {}).evaluate([p]).costs[0, 0])
-
-    return measure(evs.get(names, exps, {}), study, x, validate)
-
-
-def _identify_candidate(
-    ctx: Context,
-    i: int,
-    values: dict[str, float],
-    origin: str,
-    sub: Study,
-    evs: Evaluators,
-    warm: list[tuple[dict[str, float], str]] | None,
-) -> tuple[Candidate, list[StageResult]]:
-    """Identify one structure and measure its fit, k and validation cost.
-
-    Without ``warm``: the existing stages (the structure's study of its own). With
-    ``warm`` (start points): the refinement from the best of them.
-    """
-    from tsid_fmu.search.pipeline import run_stages
-
-    store = _Prefixed(ctx.store, f"structure_{i + 1:02d}")
-    names = ctx.study.parameter_names
-    if warm is None:
-        stages = run_stages(sub, evs, store, ctx.progress, ctx.control)
-        tried = []
-    else:
-        exps = [e.name for e in sub.identify_experiments()]
-        stage, start, _ = warm_start(evs.get(names, exps, {}), sub, warm, ctx.progress)
-        store.write_stage("refinement", stage)
-        stages, tried = [stage], [start]
-    answer = answer_stage(stages)
-    found = _measure(ctx.study, evs, {n: float(answer.x[n]) for n in names})
-    cand = Candidate(label="", values=dict(values), x={}, cost=math.inf, chi2=math.inf, n=0,
-                     k=0, active=[], nfev=sum(s.nfev for s in stages), origin=origin,
-                     extra={"folder": f"structure_{i + 1:02d}", "tried": tried})  # fmt: skip
-    update(cand, found)
-    return cand, stages
-
-
-def _warm_starts(
-    study: Study, cands: list[Candidate], best: dict[str, float] | None
-) -> list[tuple[dict[str, float], str]]:
-    """Return a later candidate's start points: earlier answers, arrays' best, centre."""
-    names = study.parameter_names
-    out = [(dict(c.x), f"the answer of {c.label}") for c in sorted(cands, key=lambda c: c.cost)]
-    if best is not None:
-        out.append(({n: best[n] for n in names}, "the arrays' best point in it"))
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    out.append((space.to_x(space.clip(np.zeros(space.dim))), "the centre of the first levels"))
     return out
 
 
@@ -310,17 +196,28 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
     factors = discrete_factors(ctx.study)
     outcome = _structure_stage(ctx, factors, make)
     found = _candidates(factors, outcome.points)
-    cands, all_stages, studies, evs = [], [], [], []
-    for i, (values, origin) in enumerate(found):
+    probed = [probe(ctx.study, outcome.points, outcome.levels, v, make) for v, _ in found]
+    order = simplest_first([len(p[3]) for p in probed])
+    cands, all_stages, studies, evs, owns = [], [], [], [], []
+    known: dict[tuple[int, int], dict[str, float]] = {}
+    for i, j in enumerate(order):
+        (values, origin), (sub, ev, best, active, n_probe) = found[j], probed[j]
         if ctx.progress:
             label = _label(factors, values)
             ctx.progress("stage", {"name": f"structure {i + 1}", "message": f"structure {label}"})
-        best = _best_point(outcome.points, values)[1]
-        sub = _sub_study(ctx.study, values, outcome.levels, best)
-        ev = make(sub)
-        # the arrays' choice: a study of its own; the others from warm starts
-        warm = _warm_starts(ctx.study, cands, best) if cands else None
-        cand, stages = _identify_candidate(ctx, i, values, origin, sub, ev, warm)
+        own = (own_study(ctx.study, values, active, best), make)
+        owns.append(own)
+        if i == 0:
+            origin += f"; the simplest ({len(active)} free parameters): a study of its own"
+        embedded, n_embed = [], 0
+        if cands:
+            embedded, n_embed = embedded_answers(ctx.study, cands, active, best, ev)
+            known.update({(s, i): point for s, point, _ in embedded})
+        warm = warm_starts(ctx.study, cands, best, embedded) if cands else None
+        cand, stages = identify_candidate(
+            ctx, i, values, origin, own if i == 0 else None, sub, ev, warm
+        )
+        cand.nfev += n_probe + n_embed
         cand.label = _label(factors, values)
         cands.append(cand)
         all_stages.append(stages)
@@ -334,22 +231,44 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         exps = [e.name for e in studies[i].identify_experiments()]
         ev = evs[i].get(names, exps, {})
         n_restart = sum(1 for s in all_stages[i] if s.name.startswith("restart")) + 1
-        stage = polish(f"restart {n_restart}: {why}", studies[i], start, ev, ctx.progress)
+        stage = polish(f"restart {n_restart}: {why}", short(studies[i]), start, ev, ctx.progress)
         cand.extra.setdefault("tried", []).append(dict(start))
         cand.nfev += stage.nfev
         if not stage.cost < cand.cost:
             return False
         ctx.store.write_stage(f"{cand.extra['folder']}/restart_{n_restart:02d}", stage)
         all_stages[i].append(stage)
-        update(cand, _measure(ctx.study, evs[i], stage.x))
+        update(cand, measure_in(ctx.study, evs[i], stage.x))
         cand.origin += f"; restarted {why}"
         return True
 
-    nested = consistent(cands, studies, evs, restart)
-    degenerate = {
-        (s, r) for (s, r), e in nested.items() if at_nesting_point(ctx.study, cands[s], cands[r], e)
-    }
-    chosen, tied = decide(cands, set(nested), degenerate)
+    owned = {0}
+    while True:
+        nested = consistent(cands, studies, evs, restart, known=known, own=owned)
+        known = nested
+        degenerate = {(s, r) for (s, r), e in nested.items()
+                      if at_nesting_point(ctx.study, cands[s], cands[r], e)}  # fmt: skip
+        chosen, tied = decide(cands, set(nested), degenerate)
+        if not needs_own_study(chosen, owned, all_stages[chosen]):
+            break
+        owned.add(chosen)
+        if own_again(ctx, chosen, cands[chosen], owns[chosen], evs[chosen], all_stages):
+            return StructureResult([outcome.stage, *all_stages[chosen]], studies[chosen],
+                                   chosen, [], cands, factors, evs[chosen], True)  # fmt: skip
+    return _result(ctx, outcome, factors, (cands, all_stages, studies, evs), chosen, tied, nested)
+
+
+def _result(
+    ctx: Context,
+    outcome: Any,
+    factors: list[DiscreteFactor],
+    found: tuple[list[Candidate], list[list[StageResult]], list[Study], list[Evaluators]],
+    chosen: int,
+    tied: list[int],
+    nested: Mapping[tuple[int, int], Any],
+) -> StructureResult:
+    """Assemble the result: the arrays, the other structures, the comparison, the chosen."""
+    cands, all_stages, studies, evs = found
     stages = [outcome.stage]
     for i, (cand, st) in enumerate(zip(cands, all_stages, strict=True)):
         if i != chosen:
