@@ -21,11 +21,11 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 LAW3_NOT_AT_OPTIMUM = (
-    "measured 2026-11-26 (benchmarks/structure.py --quick, seed 1): law 3 is chosen, but "
-    "no start reaches its optimum (the arrays' best point in it, the other laws' answers "
-    "embedded): it stops at 6.42x SciPy's least-squares cost, where the naive law-3 study "
-    "from Table I's centre gets there; why (law 1's B_s absorbs the viscous friction and "
-    "least squares cannot undo the split): docs/structure-diagnosis.md"
+    "measured 2026-11-26 (benchmarks/structure.py, seed 1): law 3 is chosen and gets a "
+    "study of its own (the naive route's law-3 study), which stops at 1.011x SciPy's "
+    "least-squares cost from the truth, as the naive route does; on dev seed 101 SciPy's "
+    "least_squares from that answer stops at 1.010x too: local minima along the stick-slip "
+    "events (docs/structure-diagnosis.md)"
 )
 
 
