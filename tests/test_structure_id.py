@@ -456,3 +456,26 @@ def test_a_chosen_answer_from_a_warm_start_gets_its_own_study_unless_shown_optim
     assert not needs_own_study(1, {0}, [stage(True)])
     assert not needs_own_study(0, {0}, [stage(False)])  # it had one
     assert needs_own_study(1, {0}, [StageResult("refinement", "refinement", {}, 1.0, 1, "")])
+
+
+def test_a_poor_fit_gives_the_richest_candidate_without_one_a_study_of_its_own():
+    from tsid_fmu.search.candidates import next_own_study
+    from tsid_fmu.search.stage import StageResult
+
+    def stage(holds):
+        extra = {"stationarity": {"holds": holds, "test": "gauss-newton", "detail": ""}}
+        return StageResult("refinement", "refinement", {"a": 1.0}, 1.0, 10, "", extra=extra)
+
+    n = 1000  # the noise floor of 1000 noise-weighted residuals
+    law1 = Candidate("1", {"s": 1.0}, {}, 1.6e11, 1.6e11, n, 4, list("abcd"))
+    law2 = Candidate("2", {"s": 2.0}, {}, 1.6e11, 1.6e11, n, 5, list("abcde"))
+    law3 = Candidate("3", {"s": 3.0}, {}, 2.0e11, 2.0e11, n, 7, list("abcdefg"))
+    cands, stages = [law1, law2, law3], [[stage(True)], [stage(True)], [stage(True)]]
+    # law 1 chosen (it had the own study), far above the floor: law 3 is given one
+    assert next_own_study(0, {0}, stages, cands, float(n)) == 2
+    assert next_own_study(0, {0, 2}, stages, cands, float(n)) == 1
+    assert next_own_study(0, {0, 1, 2}, stages, cands, float(n)) is None
+    law1.cost = 19.0 * n  # within POOR_FIT (20) times the floor: the choice stands
+    assert next_own_study(0, {0}, stages, cands, float(n)) is None
+    stages[1] = [stage(False)]  # a chosen warm start not shown optimal comes first
+    assert next_own_study(1, {0}, stages, cands, float(n)) == 1

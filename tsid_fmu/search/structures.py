@@ -22,8 +22,9 @@
    not at their optimum by that nesting are restarted
    (:func:`~tsid_fmu.search.optima.consistent`).
 5. :func:`tsid_fmu.search.selection.decide` chooses. A choice whose answer came from a
-   warm start and is not shown to be an optimum gets a study of its own, and the
-   comparison is made again.
+   warm start and is not shown to be an optimum gets a study of its own, or, where the
+   choice is a poor fit, the richest candidate without one
+   (:func:`~tsid_fmu.search.candidates.next_own_study`); the comparison is made again.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from tsid_fmu.search.candidates import (
     embedded_answers,
     identify_candidate,
     measure_in,
-    needs_own_study,
+    next_own_study,
     own_again,
     own_study,
     probe,
@@ -55,6 +56,7 @@ from tsid_fmu.search.selection import Candidate, decide
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure import DiscreteFactor, StructureRun, structure_stage
+from tsid_fmu.search.verdict import noise_floor
 from tsid_fmu.study.definition import Study
 
 __all__ = ["MAX_CANDIDATES", "StructureResult", "run_structure"]
@@ -243,18 +245,22 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         return True
 
     owned = {0}
+    names, exps = ctx.study.parameter_names, [e.name for e in ctx.study.identify_experiments()]
+    weighted = ctx.study.method.weighting == "noise"
     while True:
         nested = consistent(cands, studies, evs, restart, known=known, own=owned)
         known = nested
         degenerate = {(s, r) for (s, r), e in nested.items()
                       if at_nesting_point(ctx.study, cands[s], cands[r], e)}  # fmt: skip
         chosen, tied = decide(cands, set(nested), degenerate)
-        if not needs_own_study(chosen, owned, all_stages[chosen]):
+        floor = noise_floor(evs[chosen].get(names, exps, {}), weighted)
+        target = next_own_study(chosen, owned, all_stages, cands, floor)
+        if target is None:
             break
-        owned.add(chosen)
-        if own_again(ctx, chosen, cands[chosen], owns[chosen], evs[chosen], all_stages):
-            return StructureResult([outcome.stage, *all_stages[chosen]], studies[chosen],
-                                   chosen, [], cands, factors, evs[chosen], True)  # fmt: skip
+        owned.add(target)
+        if own_again(ctx, target, cands[target], owns[target], evs[target], all_stages):
+            return StructureResult([outcome.stage, *all_stages[target]], studies[target],
+                                   target, [], cands, factors, evs[target], True)  # fmt: skip
     return _result(ctx, outcome, factors, (cands, all_stages, studies, evs), chosen, tied, nested)
 
 
