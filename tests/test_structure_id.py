@@ -479,3 +479,34 @@ def test_a_poor_fit_gives_the_richest_candidate_without_one_a_study_of_its_own()
     assert next_own_study(0, {0}, stages, cands, float(n)) is None
     stages[1] = [stage(False)]  # a chosen warm start not shown optimal comes first
     assert next_own_study(1, {0}, stages, cands, float(n)) == 1
+
+
+def _wave(a: float, b: float, c: float, w: float, on: float) -> np.ndarray:
+    return a * np.exp(-b * T) + (c * np.sin(w * T) if on else 0.0)
+
+
+def test_a_chosen_warm_start_stuck_in_a_poor_fit_is_identified_again_by_its_own_study():
+    # on=1 adds an oscillation c sin(w t): embedded from on=0 (c = 0) its frequency has no
+    # gradient, so the warm refinement stops far above the noise; only a study of its own
+    # (the Taguchi stage over w) finds w = 7
+    measured = _wave(2.0, 1.3, 0.3, 7.0, 1) + np.random.default_rng(1).normal(0, SIGMA, T.size)
+    data = pd.DataFrame({"time": T, "y": np.zeros_like(T)})
+    study = Study(
+        fmu=ROOT / "no-such.fmu",
+        parameters=[
+            Parameter("a", [1.0, 2.0, 3.0], 0.0, 10.0),
+            Parameter("b", [0.5, 1.0, 2.0], 0.01, 10.0),
+            Parameter("c", [0.05, 0.25, 0.65], 0.0, 1.0),
+            Parameter("w", [2.0, 5.0, 9.0], 0.5, 20.0),
+            Choice("on", [0, 1]),
+        ],
+        experiments=[Experiment(data, inputs={}, outputs={"y": "y"}, noise={"y": SIGMA})],
+        method=Method(cost="sse", weighting="noise", replicates=1, max_iterations=8),
+    )
+    ctx = Context(study, _Evaluators(measured, {}, _wave), NullStore(), None, Control())
+    found = run_structure(ctx, lambda sub: _Evaluators(measured, sub.start_values, _wave))
+    rich = found.candidates[found.chosen]
+    assert rich.label == "on=1" and "a study of its own after the comparison" in rich.origin
+    assert rich.cost < 2 * T.size and rich.x["w"] == pytest.approx(7.0, abs=0.01)
+    warm = [s for s in found.stages if s.name.startswith("refinement from")]
+    assert warm and warm[0].cost > 100 * T.size  # where the warm start stopped
