@@ -10,11 +10,13 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+import pandas as pd
 import pytest
+from spec_helpers import experiment
 
 from tsid_fmu import Method, StudyError
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.evaluate import Evaluation, PreparedExperiment, Simulated
+from tsid_fmu.evaluate import Evaluation, Simulated
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.toml import study_from_document
 from tsid_fmu.uncertainty.longrun import fit_ar
@@ -83,16 +85,8 @@ class LineEvaluator:
     n_replicates = 1
 
     def __init__(self, measured: np.ndarray) -> None:
-        exp = PreparedExperiment(
-            name="line",
-            time=T,
-            input_names=(),
-            output_names=("y",),
-            inputs=None,
-            measured=measured[:, None],
-            weights=np.ones(1),
-            scale=np.array([SIGMA]),
-        )
+        frame = pd.DataFrame({"time": T, "y": measured})
+        exp = experiment(frame, {}, {"y": "y"}, name="line", scale=[SIGMA])
         self.spec = SimpleNamespace(cost="sse", experiments=(exp,))
         self.measured, self.nfev = measured, 0
 

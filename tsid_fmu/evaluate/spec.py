@@ -12,6 +12,7 @@ Replicate 1 of every experiment is its measured input itself; replicates 2..R us
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -362,8 +363,7 @@ class EvaluationSpec:
         The shared parameters, and the FMU variables of its own copies
         (:attr:`PreparedExperiment.copies`); the other experiments' copies not.
         """
-        owned = {c for e in self.experiments for c in e.copies}
-        mine = self.experiments[index].copies
+        owned, mine = self.copied, self.experiments[index].copies
         return [mine.get(n, n) for n in self.parameter_names if n not in owned or n in mine]
 
     def experiment_values(self, index: int, parameters: Mapping[str, float]) -> dict[str, float]:
@@ -371,9 +371,16 @@ class EvaluationSpec:
 
         Its own copies set their variables; the other experiments' copies are left out.
         """
-        owned = {c for e in self.experiments for c in e.copies}
-        mine = self.experiments[index].copies
+        owned, mine = self.copied, self.experiments[index].copies
         return {mine.get(k, k): v for k, v in parameters.items() if k not in owned or k in mine}
+
+    @functools.cached_property
+    def copied(self) -> frozenset[str]:
+        """The parameters that are some experiment's own copy (computed once per spec).
+
+        :meth:`experiment_values` runs once per simulation of a study with copies.
+        """
+        return frozenset(c for e in self.experiments for c in e.copies)
 
     def head(self, fraction: float, min_samples: int = 20) -> EvaluationSpec:
         """Return this spec with each experiment cut to the first ``fraction`` of its samples.

@@ -110,11 +110,16 @@ def own_study(
         for p in study.parameters
         if p.name not in names
     }
+    return _structure_study(study, {**values, **held}, keep)
+
+
+def _structure_study(study: Study, fixed: Mapping[str, float], parameters: list) -> Study:
+    """Return ``study`` with ``fixed`` set as start values and these Real ``parameters``."""
     return dataclasses.replace(
         study,
-        parameters=keep,
+        parameters=parameters,
         choices=[],
-        start_values={**study.start_values, **values, **held},
+        start_values={**study.start_values, **fixed},
         source=None,
     )
 
@@ -252,13 +257,7 @@ def _sub_study(
     x: Mapping[str, float] | None,
 ) -> Study:
     """Return the study of one structure: its values fixed, the Real levels centred on ``x``."""
-    return dataclasses.replace(
-        study,
-        parameters=_centred(study, levels, x),
-        choices=[],
-        start_values={**study.start_values, **values},
-        source=None,
-    )
+    return _structure_study(study, values, _centred(study, levels, x))
 
 
 def measure_in(study: Study, evs: Evaluators, x: Mapping[str, float]) -> dict[str, Any]:

@@ -361,7 +361,7 @@ def consistent(
     evs: Sequence[Any],
     restart: Callable[[int, dict[str, float], str], bool],
     *,
-    known: Mapping[tuple[int, int], dict[str, float]] | None = None,
+    started: set[tuple[int, int]] | frozenset[tuple[int, int]] = frozenset(),
     own: set[int] | frozenset[int] = frozenset(),
 ) -> dict[tuple[int, int], dict[str, float]]:
     """Restart the nested candidates that are not at their optimum; return the nesting.
@@ -370,14 +370,14 @@ def consistent(
     its answer changed (it keeps the lower one). For each nested pair ``(s, r)``:
 
     - ``r`` (richer) with a cost above ``s``'s is restarted from ``s``'s answer embedded;
-    - ``r`` is restarted once from ``s``'s answer embedded (unless ``known`` holds the
+    - ``r`` is restarted once from ``s``'s answer embedded (unless ``started`` holds the
       pair: ``r`` was refined from the best of its starts, that embedding among them);
     - ``s`` (simpler), above the lowest-cost richer candidate that nests it, is
       restarted from that answer followed to the nesting point (:func:`follow`), once,
       unless ``s`` is in ``own`` (it had a study of its own from the first levels).
 
     The nesting is checked at the answers (the embedding nearest each richer answer):
-    the one found before a richer candidate was refined (``known``) may lie on another
+    the one found before a richer candidate was refined may lie on another
     of the values that make it the simpler structure (measured on the SISO friction
     laws: the Stribeck law is Coulomb's at ``F_sm = F_cm`` for any ``V_s``, and at a
     small ``V_s`` for any ``F_sm``).
@@ -385,7 +385,7 @@ def consistent(
     cache: dict = {}
     pairs = nesting(cands, studies, evs, cache)
     followed: set[tuple[int, int]] = {(s, r) for s, r in pairs if s in own}
-    embedded_from: set[tuple[int, int]] = set(known or ())
+    embedded_from: set[tuple[int, int]] = set(started)
     for _ in range(MAX_ROUNDS):
         changed = False
         for (s, r), embedded in sorted(pairs.items()):

@@ -201,7 +201,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
     probed = [probe(ctx.study, outcome.points, outcome.levels, v, make) for v, _ in found]
     order = simplest_first([len(p[3]) for p in probed])
     cands, all_stages, studies, evs, owns = [], [], [], [], []
-    known: dict[tuple[int, int], dict[str, float]] = {}
+    started: set[tuple[int, int]] = set()  # (simpler, richer): refined from its embedding
     for i, j in enumerate(order):
         (values, origin), (sub, ev, best, active, n_probe) = found[j], probed[j]
         if ctx.progress:
@@ -214,7 +214,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         embedded, n_embed = [], 0
         if cands:
             embedded, n_embed = embedded_answers(ctx.study, cands, active, best, ev)
-            known.update({(s, i): point for s, point, _ in embedded})
+            started.update((s, i) for s, _, _ in embedded)
         warm = warm_starts(ctx.study, cands, best, embedded) if cands else None
         cand, stages = identify_candidate(
             ctx, i, values, origin, own if i == 0 else None, sub, ev, warm
@@ -248,8 +248,8 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
     names, exps = ctx.study.parameter_names, [e.name for e in ctx.study.identify_experiments()]
     weighted = ctx.study.method.weighting == "noise"
     while True:
-        nested = consistent(cands, studies, evs, restart, known=known, own=owned)
-        known = nested
+        nested = consistent(cands, studies, evs, restart, started=started, own=owned)
+        started |= set(nested)
         degenerate = {(s, r) for (s, r), e in nested.items()
                       if at_nesting_point(ctx.study, cands[s], cands[r], e)}  # fmt: skip
         chosen, tied = decide(cands, set(nested), degenerate)
