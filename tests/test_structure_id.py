@@ -482,13 +482,15 @@ def test_a_poor_fit_gives_the_richest_candidate_without_one_a_study_of_its_own()
 
 
 def _wave(a: float, b: float, c: float, w: float, on: float) -> np.ndarray:
-    return a * np.exp(-b * T) + (c * np.sin(w * T) if on else 0.0)
+    # the oscillation has a dead band: amplitudes below 0.02 do not show
+    return a * np.exp(-b * T) + (c * np.sin(w * T) if on and c > 0.02 else 0.0)
 
 
 def test_a_chosen_warm_start_stuck_in_a_poor_fit_is_identified_again_by_its_own_study():
-    # on=1 adds an oscillation c sin(w t): embedded from on=0 (c = 0) its frequency has no
-    # gradient, so the warm refinement stops far above the noise; only a study of its own
-    # (the Taguchi stage over w) finds w = 7
+    # on=1 adds an oscillation c sin(w t) with a dead band (c <= 0.02 shows nothing):
+    # embedded from on=0 (inside the band) neither c nor w has a gradient, so the warm
+    # refinement stops far above the noise; only a study of its own (the Taguchi stage
+    # over c and w) finds w = 7
     measured = _wave(2.0, 1.3, 0.3, 7.0, 1) + np.random.default_rng(1).normal(0, SIGMA, T.size)
     data = pd.DataFrame({"time": T, "y": np.zeros_like(T)})
     study = Study(
@@ -510,3 +512,79 @@ def test_a_chosen_warm_start_stuck_in_a_poor_fit_is_identified_again_by_its_own_
     assert rich.cost < 2 * T.size and rich.x["w"] == pytest.approx(7.0, abs=0.01)
     warm = [s for s in found.stages if s.name.startswith("refinement from")]
     assert warm and warm[0].cost > 100 * T.size  # where the warm start stopped
+
+
+# -- the checks' cost: each embedding fit stops once it reproduces, each found once ------
+
+
+def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_fit():
+    from tsid_fmu.search.optima import REPRODUCE, embed
+
+    measured = _data(a=2.0, b=1.3, c=0.0, on=0)
+    study = _study()
+    # log coordinates for the offset: its nesting value, c = 0, lies at minus infinity,
+    # so a fit run to its end walks on towards it long after c no longer shows
+    study.parameters[2] = Parameter("c", [0.01, 0.1, 1.0], 0.0, 1.0)
+    small = _toy_candidate(study, measured, 0.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=0")
+    ev = _Evaluators(measured, {"on": 1.0}).get(study.parameter_names, [], {})
+    ok, point = embed(ev, study, small, ["a", "b", "c"], {"a": 1.0, "b": 1.0, "c": 0.5})
+    gap = np.sum(((_model(point["a"], point["b"], point["c"], 1) - measured) / SIGMA
+                  - small.extra["residuals"]) ** 2)  # fmt: skip
+    assert ok and 0 < point["c"] < 1e-3 and gap <= REPRODUCE * small.chi2 / small.n
+    assert ev.nfev <= 25  # run on to its end, the fit takes 36 runs here (limit 40)
+
+
+def test_a_nesting_found_earlier_is_reused_where_the_richer_answer_fits_far_better():
+    from tsid_fmu.search.optima import known, nesting
+
+    measured = _data(a=2.0, b=1.3, c=0.3, on=1)
+    cands, studies, evs, _, _ = _nested_pair(
+        measured, {"a": 2.2, "b": 1.1, "c": 0.5}, {"a": 2.0, "b": 1.3, "c": 0.3}
+    )
+    assert cands[1].chi2 < 0.01 * cands[0].chi2
+    earlier = {"a": cands[0].x["a"], "b": cands[0].x["b"], "c": 0.0}
+    cache: dict = {}
+    known(cache, 0, 1, cands[0], earlier)
+    assert nesting(cands, studies, evs, cache) == {(0, 1): earlier}
+    assert all(ev.nfev == 0 for ev in evs[1].pool.values())  # no fit at the richer answer
+    # a richer answer that fits hardly better may sit at a nesting point: the fit is made
+    cands[1].chi2 = 0.9 * cands[0].chi2
+    cache = {}
+    known(cache, 0, 1, cands[0], earlier)
+    assert set(nesting(cands, studies, evs, cache)) == {(0, 1)}
+    assert sum(ev.nfev for ev in evs[1].pool.values()) > 0
+
+
+def test_a_richer_candidate_is_restarted_from_one_simpler_answer_once():
+    measured = _data(a=2.0, b=1.3, c=0.0, on=0)
+    # the richer answer a hair above the simpler one, at its fit: a restart from the
+    # simpler answer embedded cannot go below it, and is not tried again
+    cands, studies, evs, _, _ = _nested_pair(
+        measured, {"a": 2.0, "b": 1.3, "c": 0.5}, {"a": 2.0, "b": 1.3, "c": 0.0}
+    )
+    cands[1].cost = cands[0].cost * (1 + 1e-9)
+    calls = []
+
+    def restart(i, start, why):
+        calls.append((i, why))
+        return False
+
+    cache: dict = {}
+    consistent(cands, studies, evs, restart, cache=cache)
+    consistent(cands, studies, evs, restart, cache=cache)  # after another candidate's study
+    assert [w for _, w in calls if w.startswith("cost above")] == [
+        "cost above on=0, which it nests: from its answer embedded"
+    ]
+
+
+def test_a_candidate_with_a_study_of_its_own_is_not_followed_from_a_richer_answer():
+    measured = _data(a=2.0, b=1.3, c=0.0, on=0)
+    # the simpler candidate stuck above the richer one that nests it: with a study of its
+    # own it is not followed from the richer answer (in any round), without one it is
+    cands, studies, evs, restart, calls = _nested_pair(
+        measured, {"a": 0.5, "b": 6.0, "c": 0.2}, {"a": 2.0, "b": 1.3, "c": 0.0}
+    )
+    consistent(cands, studies, evs, restart, own={0})
+    assert not any("followed" in w for _, w in calls)
+    consistent(cands, studies, evs, restart)
+    assert any(i == 0 and "followed" in w for i, w in calls)

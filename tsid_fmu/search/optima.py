@@ -52,6 +52,7 @@ __all__ = [
     "consistent",
     "embed",
     "follow",
+    "known",
     "measure",
     "nesting",
     "warm_start",
@@ -74,6 +75,14 @@ PATH_STEPS = 4
 
 MAX_ROUNDS = 3
 """Most rounds of :func:`consistent` (each round re-checks the pairs that changed)."""
+
+FAR_BETTER = 0.5
+"""A richer answer whose chi-square is below this fraction of a simpler one's is not at a
+nesting point of that answer: there the richer structure is the simpler one, and fits
+no better than the simpler one's optimum beyond what the model's non-smoothness gives
+(measured on the SISO friction laws: a Stribeck answer at the Coulomb + viscous nesting
+point, 0.2 % below). For such a pair an embedding of the simpler answer found earlier
+shows the nesting, with no fit at the richer answer."""
 
 
 def _space(study: Study) -> Space:
@@ -178,21 +187,35 @@ def _reproduce(
     extra = [n for n in big.active if n not in small.active]
     base = {**big.x, **{n: small.x[n] for n in small.active}}
     tol = REPRODUCE * small.chi2 / max(small.n, 1)
-    gap, point = _fit_extra(ev, study, small, base, extra)
-    if gap <= tol:
+    ok, point = _fit_extra(ev, study, small, base, extra, tol)
+    if ok:
         return True, point
     rest, gap = _at_bounds(ev, study, base, extra, small.extra["residuals"])
     if rest and rest != extra and gap > tol:
-        gap, point = _fit_extra(ev, study, small, base, rest)
-    elif rest != extra:
-        point = dict(base)
-    return gap <= tol, point
+        return _fit_extra(ev, study, small, base, rest, tol)
+    return gap <= tol, (point if rest == extra else dict(base))
+
+
+class _Reproduced(Exception):
+    """Raised inside the least-squares fit once the gap is within the tolerance."""
 
 
 def _fit_extra(
-    ev: Any, study: Study, small: Candidate, base: dict[str, float], extra: list[str]
-) -> tuple[float, dict[str, float]]:
-    """Fit ``extra`` (from ``base``) to reproduce ``small``'s outputs: the gap and the point."""
+    ev: Any,
+    study: Study,
+    small: Candidate,
+    base: dict[str, float],
+    extra: list[str],
+    tol: float,
+) -> tuple[bool, dict[str, float]]:
+    """Fit ``extra`` (from ``base``) to reproduce ``small``'s outputs.
+
+    Returns whether the gap (sum of squares of the outputs' difference) came within
+    ``tol``, and the point. The fit stops at the first point within ``tol``: a nesting
+    value on a bound that logarithmic coordinates reach only at minus infinity is
+    approached without end, and measured on the SISO friction laws a fit run to its
+    limit cost 40 to 80 runs where the gap was within ``tol`` after a few.
+    """
     from scipy.optimize import least_squares
 
     r_small = small.extra["residuals"]
@@ -208,15 +231,21 @@ def _fit_extra(
 
     def diff(s: np.ndarray) -> np.ndarray:
         r = ev.evaluate([at(s)]).residuals
-        return bad if not r or r[0] is None else r[0] - r_small
+        d = bad if not r or r[0] is None else r[0] - r_small
+        if float(d @ d) <= tol:
+            raise _Reproduced(s)
+        return d
 
     start = np.array([space.coordinate(j, base[n]) for n, j in zip(extra, idx, strict=True)])
     lo = np.array([space.s_lower[j] for j in idx])
     hi = np.array([space.s_upper[j] for j in idx])
-    fit = least_squares(
-        diff, np.clip(start, lo, hi), bounds=(lo, hi), max_nfev=20 * (len(extra) + 1)
-    )
-    return 2 * float(fit.cost), at(fit.x)
+    try:
+        fit = least_squares(
+            diff, np.clip(start, lo, hi), bounds=(lo, hi), max_nfev=20 * (len(extra) + 1)
+        )
+    except _Reproduced as done:
+        return True, at(np.asarray(done.args[0]))
+    return 2 * float(fit.cost) <= tol, at(fit.x)
 
 
 def _at_bounds(
@@ -273,7 +302,11 @@ def nesting(
     ``s``'s fit; its value is ``s``'s answer embedded in ``r``.
 
     ``cache`` keeps the checks already made (keyed by both answers), for the rounds of
-    :func:`consistent`.
+    :func:`consistent`, and the embeddings found of each simpler answer (keyed by the
+    pair and that answer alone: :func:`known`). Where the richer answer fits far better
+    (:data:`FAR_BETTER`), such an embedding is the pair's, with no fit at the richer
+    answer: the embedding nearest it matters only at a nesting point
+    (:func:`at_nesting_point`).
     """
     cache = {} if cache is None else cache
     pairs = {}
@@ -281,7 +314,11 @@ def nesting(
         small, big = cands[s], cands[r]
         if not (set(small.active) < set(big.active)) or not small.n or not big.n:
             continue
-        key = (s, r, tuple(sorted(small.x.items())), tuple(sorted(big.x.items())))
+        answer = tuple(sorted(small.x.items()))
+        key = (s, r, answer, tuple(sorted(big.x.items())))
+        found = cache.get((s, r, answer))
+        if key not in cache and found is not None and big.chi2 < FAR_BETTER * small.chi2:
+            cache[key] = (True, found)
         if key not in cache:
             ev = evs[r].get(studies[r].parameter_names, _exps(studies[r]), {})
             n0 = ev.nfev
@@ -290,7 +327,13 @@ def nesting(
         ok, embedded = cache[key]
         if ok:
             pairs[(s, r)] = embedded
+            cache.setdefault((s, r, answer), embedded)
     return pairs
+
+
+def known(cache: dict, s: int, r: int, small: Candidate, embedded: Mapping[str, float]) -> None:
+    """Keep in a :func:`nesting` cache an embedding of ``s``'s answer in ``r`` found before."""
+    cache[(s, r, tuple(sorted(small.x.items())))] = dict(embedded)
 
 
 def _exps(study: Study) -> list[str]:
@@ -363,13 +406,17 @@ def consistent(
     *,
     started: set[tuple[int, int]] | frozenset[tuple[int, int]] = frozenset(),
     own: set[int] | frozenset[int] = frozenset(),
+    cache: dict | None = None,
 ) -> dict[tuple[int, int], dict[str, float]]:
     """Restart the nested candidates that are not at their optimum; return the nesting.
 
     ``restart(i, start, why)`` refines candidate ``i`` from ``start`` and returns whether
     its answer changed (it keeps the lower one). For each nested pair ``(s, r)``:
 
-    - ``r`` (richer) with a cost above ``s``'s is restarted from ``s``'s answer embedded;
+    - ``r`` (richer) with a cost above ``s``'s is restarted from ``s``'s answer embedded,
+      once per answer of ``s`` (measured on the SISO friction laws: a Coulomb +
+      viscous answer at the Coulomb fit, a hair above it, was restarted six times from
+      embeddings that all cost the same);
     - ``r`` is restarted once from ``s``'s answer embedded (unless ``started`` holds the
       pair: ``r`` was refined from the best of its starts, that embedding among them);
     - ``s`` (simpler), above the lowest-cost richer candidate that nests it, is
@@ -380,17 +427,21 @@ def consistent(
     the one found before a richer candidate was refined may lie on another
     of the values that make it the simpler structure (measured on the SISO friction
     laws: the Stribeck law is Coulomb's at ``F_sm = F_cm`` for any ``V_s``, and at a
-    small ``V_s`` for any ``F_sm``).
+    small ``V_s`` for any ``F_sm``). ``cache`` (see :func:`nesting`) may carry the
+    embeddings found before the richer candidates were refined, and keeps the checks
+    for the next call.
     """
-    cache: dict = {}
+    cache = {} if cache is None else cache
     pairs = nesting(cands, studies, evs, cache)
-    followed: set[tuple[int, int]] = {(s, r) for s, r in pairs if s in own}
+    followed: set[tuple[int, int]] = set()
     embedded_from: set[tuple[int, int]] = set(started)
     for _ in range(MAX_ROUNDS):
         changed = False
         for (s, r), embedded in sorted(pairs.items()):
             small, big = cands[s], cands[r]
-            if big.cost > small.cost:
+            key = ("lifted", s, r, tuple(sorted(small.x.items())))
+            if big.cost > small.cost and key not in cache:
+                cache[key] = True  # another embedding of the same answer costs the same
                 why = f"cost above {small.label}, which it nests: from its answer embedded"
                 changed |= restart(r, embedded, why)
         for r in sorted({r for _, r in pairs}):
@@ -402,7 +453,7 @@ def consistent(
             changed |= restart(r, pairs[(s, r)], why)
         for s in sorted({s for s, _ in pairs}):
             r = min((r for a, r in pairs if a == s), key=lambda r: cands[r].cost)
-            if (s, r) in followed or not cands[r].cost < cands[s].cost:
+            if (s, r) in followed or s in own or not cands[r].cost < cands[s].cost:
                 continue
             followed.add((s, r))
             start, nfev = follow(studies[r], evs[r], cands[r].x, pairs[(s, r)], cands[s].active)

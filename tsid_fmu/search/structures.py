@@ -49,7 +49,7 @@ from tsid_fmu.search.candidates import (
     warm_starts,
 )
 from tsid_fmu.search.context import Context, polish
-from tsid_fmu.search.optima import at_nesting_point, consistent, update
+from tsid_fmu.search.optima import at_nesting_point, consistent, known, update
 from tsid_fmu.search.phases import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate, decide
@@ -202,6 +202,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
     order = simplest_first([len(p[3]) for p in probed])
     cands, all_stages, studies, evs, owns = [], [], [], [], []
     started: set[tuple[int, int]] = set()  # (simpler, richer): refined from its embedding
+    checks: dict[tuple[int, int], dict[str, float]] = {}  # those embeddings
     for i, j in enumerate(order):
         (values, origin), (sub, ev, best, active, n_probe) = found[j], probed[j]
         if ctx.progress:
@@ -215,6 +216,8 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         if cands:
             embedded, n_embed = embedded_answers(ctx.study, cands, active, best, ev)
             started.update((s, i) for s, _, _ in embedded)
+            for s, point, _ in embedded:
+                checks[(s, i)] = point
         warm = warm_starts(ctx.study, cands, best, embedded) if cands else None
         cand, stages = identify_candidate(
             ctx, i, values, origin, own if i == 0 else None, sub, ev, warm
@@ -230,6 +233,8 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
 
     def restart(i: int, start: dict[str, float], why: str) -> bool:
         cand, names = cands[i], studies[i].parameter_names
+        if start in cand.extra.get("tried", []):
+            return False  # refined from there already (the nesting unchanged since)
         exps = [e.name for e in studies[i].identify_experiments()]
         ev = evs[i].get(names, exps, {})
         n_restart = sum(1 for s in all_stages[i] if s.name.startswith("restart")) + 1
@@ -244,11 +249,13 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         cand.origin += f"; restarted {why}"
         return True
 
-    owned = {0}
+    owned, cache = {0}, {}
+    for (s, r), point in checks.items():
+        known(cache, s, r, cands[s], point)
     names, exps = ctx.study.parameter_names, [e.name for e in ctx.study.identify_experiments()]
     weighted = ctx.study.method.weighting == "noise"
     while True:
-        nested = consistent(cands, studies, evs, restart, started=started, own=owned)
+        nested = consistent(cands, studies, evs, restart, started=started, own=owned, cache=cache)
         started |= set(nested)
         degenerate = {(s, r) for (s, r), e in nested.items()
                       if at_nesting_point(ctx.study, cands[s], cands[r], e)}  # fmt: skip
