@@ -553,16 +553,23 @@ def test_a_nesting_found_earlier_is_reused_where_the_richer_answer_fits_far_bett
     known(cache, 0, 1, cands[0], earlier)
     assert set(nesting(cands, studies, evs, cache)) == {(0, 1)}
     assert sum(ev.nfev for ev in evs[1].pool.values()) > 0
+    # far better, no embedding known, the simpler answer settled: nothing turns on the
+    # pair (no restart, no follow, the LRT and BIC agree), and it is not checked
+    cands[1].chi2 = 0.01 * cands[0].chi2
+    before = sum(ev.nfev for ev in evs[1].pool.values())
+    assert nesting(cands, studies, evs, {}, settled={0}) == {}
+    assert sum(ev.nfev for ev in evs[1].pool.values()) == before
+    assert set(nesting(cands, studies, evs, {})) == {(0, 1)}  # not settled: checked
 
 
 def test_a_richer_candidate_is_restarted_from_one_simpler_answer_once():
     measured = _data(a=2.0, b=1.3, c=0.0, on=0)
-    # the richer answer a hair above the simpler one, at its fit: a restart from the
-    # simpler answer embedded cannot go below it, and is not tried again
+    # a richer answer above the simpler one, which a restart from the simpler answer
+    # embedded does not lower (the restart keeps the lower): not tried again
     cands, studies, evs, _, _ = _nested_pair(
         measured, {"a": 2.0, "b": 1.3, "c": 0.5}, {"a": 2.0, "b": 1.3, "c": 0.0}
     )
-    cands[1].cost = cands[0].cost * (1 + 1e-9)
+    cands[1].chi2 = cands[1].cost = 1.5 * cands[0].chi2
     calls = []
 
     def restart(i, start, why):
@@ -575,16 +582,75 @@ def test_a_richer_candidate_is_restarted_from_one_simpler_answer_once():
     assert [w for _, w in calls if w.startswith("cost above")] == [
         "cost above on=0, which it nests: from its answer embedded"
     ]
+    # above by less than an embedding may differ (1e-7, as law 2 at law 1's fit): it
+    # reproduces the simpler fit already, and is not restarted at all
+    cands[1].chi2 = cands[1].cost = cands[0].chi2 * (1 + 1e-7)
+    calls.clear()
+    consistent(cands, studies, evs, restart)
+    assert not [w for _, w in calls if w.startswith("cost above")]
 
 
-def test_a_candidate_with_a_study_of_its_own_is_not_followed_from_a_richer_answer():
+def test_a_candidate_shown_at_an_optimum_is_not_followed_from_a_richer_answer():
     measured = _data(a=2.0, b=1.3, c=0.0, on=0)
-    # the simpler candidate stuck above the richer one that nests it: with a study of its
-    # own it is not followed from the richer answer (in any round), without one it is
+    # the simpler candidate stuck above the richer one that nests it: settled (a study of
+    # its own, or a stationary answer) it is not followed from the richer answer in any
+    # round; otherwise it is
     cands, studies, evs, restart, calls = _nested_pair(
         measured, {"a": 0.5, "b": 6.0, "c": 0.2}, {"a": 2.0, "b": 1.3, "c": 0.0}
     )
-    consistent(cands, studies, evs, restart, own={0})
+    consistent(cands, studies, evs, restart, settled={0})
     assert not any("followed" in w for _, w in calls)
     consistent(cands, studies, evs, restart)
     assert any(i == 0 and "followed" in w for i, w in calls)
+
+
+def test_only_the_lowest_cost_earlier_answer_that_embeds_is_embedded():
+    from tsid_fmu.search.candidates import embedded_answers
+
+    measured = _data(a=2.0, b=1.3, c=0.3, on=1)
+    study = _study()
+    worse = _toy_candidate(study, measured, 0.0, {"a": 1.0, "b": 2.0, "c": 0.5}, "worse")
+    better = _toy_candidate(study, measured, 0.0, {"a": 2.1, "b": 1.2, "c": 0.5}, "better")
+    assert better.cost < worse.cost
+    evs = _Evaluators(measured, {"on": 1.0})
+    found, runs = embedded_answers(study, [worse, better], ["a", "b", "c"], None, evs)
+    assert [(s, label) for s, _, label in found] == [(1, "better")]
+    assert runs == sum(ev.nfev for ev in evs.pool.values()) > 0
+
+
+def test_among_earlier_answers_as_good_as_the_best_the_simplest_is_embedded():
+    import dataclasses
+
+    from tsid_fmu.search.candidates import embedded_answers
+
+    measured = _data(a=2.0, b=1.3, c=0.3, on=1)
+    study = _study()
+    simple = _toy_candidate(study, measured, 0.0, {"a": 2.1, "b": 1.2, "c": 0.5}, "simple")
+    # a richer answer at the simple fit, lower by less than an embedding may differ (as
+    # law 2 at law 1's fit): the simpler one is embedded, its fit has fewer unknowns
+    richer = dataclasses.replace(simple, label="richer", k=3, chi2=simple.chi2 * (1 - 1e-9))
+    found, _ = embedded_answers(study, [simple, richer], ["a", "b", "c"], None,
+                                _Evaluators(measured, {"on": 1.0}))  # fmt: skip
+    assert [label for _, _, label in found] == ["simple"]
+    richer.chi2 = 0.5 * simple.chi2  # far better: the lowest first
+    found, _ = embedded_answers(study, [simple, richer], ["a", "b", "c"], None,
+                                _Evaluators(measured, {"on": 1.0}))  # fmt: skip
+    assert [label for _, _, label in found] == ["richer"]
+
+
+def test_a_warm_answer_shown_stationary_is_settled_for_the_nesting_checks(monkeypatch):
+    from tsid_fmu.search import structures
+    from tsid_fmu.search.candidates import stationary
+
+    seen = []
+    real = structures.consistent
+
+    def spy(cands, studies, evs, restart, **options):
+        seen.append(set(options["settled"]))
+        return real(cands, studies, evs, restart, **options)
+
+    monkeypatch.setattr(structures, "consistent", spy)
+    found = _identify(_data(a=2.0, b=1.3, c=0.3, on=1))
+    (warm,) = [s for s in found.stages if s.name.startswith("refinement from")]
+    assert stationary([warm])  # on=1, refined from on=0's answer embedded
+    assert seen and seen[0] == {0, 1}  # on=0 had its own study; on=1 is stationary

@@ -46,6 +46,7 @@ from tsid_fmu.search.candidates import (
     probe,
     short,
     simplest_first,
+    stationary,
     warm_starts,
 )
 from tsid_fmu.search.context import Context, polish
@@ -255,7 +256,10 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
     names, exps = ctx.study.parameter_names, [e.name for e in ctx.study.identify_experiments()]
     weighted = ctx.study.method.weighting == "noise"
     while True:
-        nested = consistent(cands, studies, evs, restart, started=started, own=owned, cache=cache)
+        settled = owned | {i for i, st in enumerate(all_stages) if stationary(st)}
+        nested = consistent(
+            cands, studies, evs, restart, started=started, settled=settled, cache=cache
+        )
         started |= set(nested)
         degenerate = {(s, r) for (s, r), e in nested.items()
                       if at_nesting_point(ctx.study, cands[s], cands[r], e)}  # fmt: skip
