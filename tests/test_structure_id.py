@@ -442,6 +442,7 @@ def test_an_embedding_reaches_a_nesting_value_on_a_bound_that_log_coordinates_ca
     ev = _Evaluators(measured, {"on": 1.0}, model).get(study.parameter_names, [], {})
     ok, point = embed(ev, study, small, ["a", "b", "c"], {"a": 1.0, "b": 1.0, "c": 0.5})
     assert ok and point["c"] == 0.0 and point["a"] == small.x["a"]
+    assert ev.nfev == 1  # every extra parameter on its lower bound, tried first
 
 
 def test_a_chosen_answer_from_a_warm_start_gets_its_own_study_unless_shown_optimal():
@@ -518,7 +519,7 @@ def test_a_chosen_warm_start_stuck_in_a_poor_fit_is_identified_again_by_its_own_
 
 
 def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_fit():
-    from tsid_fmu.search.optima import REPRODUCE, embed
+    from tsid_fmu.search.optima import REPRODUCE, nesting
 
     measured = _data(a=2.0, b=1.3, c=0.0, on=0)
     study = _study()
@@ -526,12 +527,14 @@ def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_f
     # so a fit run to its end walks on towards it long after c no longer shows
     study.parameters[2] = Parameter("c", [0.01, 0.1, 1.0], 0.0, 1.0)
     small = _toy_candidate(study, measured, 0.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=0")
-    ev = _Evaluators(measured, {"on": 1.0}).get(study.parameter_names, [], {})
-    ok, point = embed(ev, study, small, ["a", "b", "c"], {"a": 1.0, "b": 1.0, "c": 0.5})
+    big = _toy_candidate(study, measured, 1.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=1")
+    evs = [_Evaluators(measured, {"on": 0.0}), _Evaluators(measured, {"on": 1.0})]
+    before = big.nfev
+    (point,) = nesting([small, big], [study, study], evs).values()
     gap = np.sum(((_model(point["a"], point["b"], point["c"], 1) - measured) / SIGMA
                   - small.extra["residuals"]) ** 2)  # fmt: skip
-    assert ok and 0 < point["c"] < 1e-3 and gap <= REPRODUCE * small.chi2 / small.n
-    assert ev.nfev <= 25  # run on to its end, the fit takes 36 runs here (limit 40)
+    assert 0 < point["c"] < 1e-3 and gap <= REPRODUCE * small.chi2 / small.n
+    assert big.nfev - before <= 25  # run on to its end, the fit takes 36 runs here (limit 40)
 
 
 def test_a_nesting_found_earlier_is_reused_where_the_richer_answer_fits_far_better():
@@ -654,3 +657,25 @@ def test_a_warm_answer_shown_stationary_is_settled_for_the_nesting_checks(monkey
     (warm,) = [s for s in found.stages if s.name.startswith("refinement from")]
     assert stationary([warm])  # on=1, refined from on=0's answer embedded
     assert seen and seen[0] == {0, 1}  # on=0 had its own study; on=1 is stationary
+
+
+def test_a_richer_candidate_refined_from_one_of_two_equal_answers_is_not_restarted():
+    import dataclasses
+
+    measured = _data(a=2.0, b=1.3, c=0.3, on=1)
+    cands, studies, evs, _, _ = _nested_pair(
+        measured, {"a": 2.1, "b": 1.2, "c": 0.5}, {"a": 2.0, "b": 1.3, "c": 0.3}
+    )
+    calls = []
+
+    def restart(i, start, why):
+        calls.append((i, why))
+        return False
+
+    # a second simpler answer at the first one's fit, 1e-9 lower (as law 2 at law 1's
+    # fit); the richer one was refined from the first embedded: that start is as good
+    twin = dataclasses.replace(cands[0], label="twin", chi2=cands[0].chi2 * (1 - 1e-9),
+                               cost=cands[0].cost * (1 - 1e-9))  # fmt: skip
+    cands = [cands[0], cands[1], twin]
+    consistent(cands, [*studies, studies[0]], [*evs, evs[0]], restart, started={(0, 1)})
+    assert not [w for _, w in calls if "which it nests, embedded" in w]
