@@ -24,7 +24,8 @@ from tsid_fmu.doe.arrays import get_array
 from tsid_fmu.doe.leveling import LevelingDecision
 from tsid_fmu.search.context import Context, Control
 from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.optima import at_nesting_point, consistent, measure, update
+from tsid_fmu.search.nesting import at_nesting_point
+from tsid_fmu.search.optima import consistent, measure, update
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate, decide
 from tsid_fmu.search.space import Space
@@ -428,7 +429,7 @@ def test_the_simplest_structure_gets_the_own_study_and_the_richer_its_answer_emb
 
 
 def test_an_embedding_reaches_a_nesting_value_on_a_bound_that_log_coordinates_cannot():
-    from tsid_fmu.search.optima import embed
+    from tsid_fmu.search.nesting import embed
 
     def model(a, b, c, on):  # any c > 0 switches a step on (as a friction term would)
         return _model(a, b, c + 0.05 * (c > 0), on)
@@ -519,7 +520,7 @@ def test_a_chosen_warm_start_stuck_in_a_poor_fit_is_identified_again_by_its_own_
 
 
 def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_fit():
-    from tsid_fmu.search.optima import REPRODUCE, nesting
+    from tsid_fmu.search.nesting import REPRODUCE, nesting
 
     measured = _data(a=2.0, b=1.3, c=0.0, on=0)
     study = _study()
@@ -538,7 +539,7 @@ def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_f
 
 
 def test_a_nesting_found_earlier_is_reused_where_the_richer_answer_fits_far_better():
-    from tsid_fmu.search.optima import known, nesting
+    from tsid_fmu.search.nesting import known, nesting
 
     measured = _data(a=2.0, b=1.3, c=0.3, on=1)
     cands, studies, evs, _, _ = _nested_pair(

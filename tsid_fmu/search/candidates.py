@@ -37,7 +37,8 @@ import numpy as np
 from tsid_fmu.search.adaptive import answer_stage, verdict
 from tsid_fmu.search.context import Context
 from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.optima import embed, measure, slack, update, warm_start
+from tsid_fmu.search.nesting import embed, slack
+from tsid_fmu.search.optima import measure, update, warm_start
 from tsid_fmu.search.phases import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate
@@ -321,10 +322,10 @@ def embedded_answers(
 
     The earlier candidates whose free parameters are a subset of ``active`` are tried
     lowest cost first (among those as good as the lowest, to within what an embedding
-    may differ, :func:`~tsid_fmu.search.optima.slack`, the simplest first: measured on
+    may differ, :func:`~tsid_fmu.search.nesting.slack`, the simplest first: measured on
     the SISO friction laws, law 2's answer at law 1's fit did not embed in law 3 after
     78 runs, law 1's did after 18); the first whose answer this structure's extra parameters
-    reproduce (:func:`~tsid_fmu.search.optima.embed`, from ``best`` or the centre of the
+    reproduce (:func:`~tsid_fmu.search.nesting.embed`, from ``best`` or the centre of the
     first levels) is returned as ``[(index, point, label)]`` (empty where none does).
     Only the lowest-cost start is refined from (:func:`~tsid_fmu.search.optima.
     warm_start`), and an embedding costs up to 20 runs per extra parameter: measured on

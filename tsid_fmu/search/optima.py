@@ -10,23 +10,21 @@ fit of the simpler one it nests. So:
   Real parameters that change its outputs (``k``) and its validation cost.
 - **Warm starts** (:func:`warm_start`): a candidate after the first is refined from the
   best of its start points: the answers of the candidates refined before it that it
-  nests, embedded in it (:func:`embed`), those answers as they are, the best point the
-  arrays saw in it, and the centre of the first levels.
-- **Nesting** (:func:`nesting`): structure ``s`` is nested in ``r`` where ``r``'s free
-  parameters include ``s``'s and ``r``'s extra parameters reproduce ``s``'s fit; the
-  fit that reproduces it is ``s``'s answer **embedded** in ``r``: by least squares over
-  the extra parameters, or, where that does not reproduce it, with extra parameters on
-  their lower bounds (a viscous coefficient of 0, which logarithmic search coordinates
-  reach only at minus infinity).
+  nests, embedded in it (:func:`~tsid_fmu.search.nesting.embed`), those answers as they
+  are, the best point the arrays saw in it, and the centre of the first levels.
+- **Nesting** (:mod:`tsid_fmu.search.nesting`): structure ``s`` is nested in ``r`` where
+  ``r``'s free parameters include ``s``'s and ``r``'s extra parameters reproduce ``s``'s
+  fit; the fit that reproduces it is ``s``'s answer **embedded** in ``r``.
 - **Consistent optima** (:func:`consistent`): for each nested pair, a richer candidate
   whose cost is above the simpler one's is not at its optimum: it is refined again from
   the simpler answer embedded (its cost is then at most the simpler one's); a simpler
   candidate above the best richer one that nests it is refined again from that richer
   answer followed to the nesting point (:func:`follow`: the projection onto it). A
   restart replaces a candidate's answer only where it is lower.
-- **At the nesting point** (:func:`at_nesting_point`): a richer answer whose extra
-  parameters sit where they make it the simpler structure is that structure; the
-  decision does not credit its extra parameters with a lower cost found there.
+- **At the nesting point** (:func:`~tsid_fmu.search.nesting.at_nesting_point`): a richer
+  answer whose extra parameters sit where they make it the simpler structure is that
+  structure; the decision does not credit its extra parameters with a lower cost found
+  there.
 """
 
 from __future__ import annotations
@@ -39,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.search.context import polish
+from tsid_fmu.search.nesting import exps, nesting, slack
 from tsid_fmu.search.refine import refine_stage
 from tsid_fmu.search.selection import Candidate
 from tsid_fmu.search.space import Space
@@ -47,15 +46,10 @@ from tsid_fmu.study.definition import Study
 
 __all__ = [
     "ACTIVE_STEP",
-    "REPRODUCE",
-    "at_nesting_point",
     "consistent",
-    "embed",
     "follow",
-    "known",
     "measure",
-    "nesting",
-    "slack",
+    "update",
     "warm_start",
 ]
 
@@ -63,27 +57,11 @@ ACTIVE_STEP = 0.01
 """Step (in search coordinates: a fraction of the first levels' range) by which each Real
 parameter is moved to see whether it changes the outputs in a structure."""
 
-REPRODUCE = 0.01
-"""A richer structure nests a simpler one where its extra parameters reproduce the
-simpler one's fitted outputs to within this fraction of one noise variance in total."""
-
-NESTING_POINT = 0.01
-"""A richer answer's extra parameters within this fraction of their first levels' range of
-the values that make it a simpler structure are at the nesting point."""
-
 PATH_STEPS = 4
 """Steps of :func:`follow` from a richer answer to the simpler structure it nests."""
 
 MAX_ROUNDS = 3
 """Most rounds of :func:`consistent` (each round re-checks the pairs that changed)."""
-
-FAR_BETTER = 0.5
-"""A richer answer whose chi-square is below this fraction of a simpler one's is not at a
-nesting point of that answer: there the richer structure is the simpler one, and fits
-no better than the simpler one's optimum beyond what the model's non-smoothness gives
-(measured on the SISO friction laws: a Stribeck answer at the Coulomb + viscous nesting
-point, 0.2 % below). For such a pair an embedding of the simpler answer found earlier
-shows the nesting, with no fit at the richer answer."""
 
 
 def _space(study: Study) -> Space:
@@ -176,192 +154,6 @@ def warm_start(
     return stage, start, source
 
 
-def _reproduce(
-    ev: Any, study: Study, small: Candidate, big: Candidate, anywhere: bool = False
-) -> tuple[bool, dict[str, float]]:
-    """Whether ``big`` reproduces ``small``'s fit with its extra parameters; the embedding.
-
-    First by least squares over the extra parameters from ``big``'s values (the nesting
-    values nearest its answer); where that does not reproduce it, again after moving
-    extra parameters onto their lower bounds (:func:`_at_bounds`). With ``anywhere``
-    (any nesting values will do), every extra parameter on its lower bound is tried
-    first, in one run: a term switched off by a coefficient of 0 nests there (measured
-    on the SISO friction laws: law 1 in law 2 at ``F_vm = 0``, where the least squares
-    in logarithmic coordinates took 20 to 60 runs).
-    """
-    extra = [n for n in big.active if n not in small.active]
-    base = {**big.x, **{n: small.x[n] for n in small.active}}
-    tol = REPRODUCE * small.chi2 / max(small.n, 1)
-    if anywhere:
-        bounds = study.bounds()
-        low = {**base, **{n: float(bounds[n][0]) for n in extra}}
-        if all(math.isfinite(low[n]) for n in extra):
-            r = ev.evaluate([low]).residuals
-            diff = None if not r or r[0] is None else r[0] - small.extra["residuals"]
-            if diff is not None and float(diff @ diff) <= tol:
-                return True, low
-    ok, point = _fit_extra(ev, study, small, base, extra, tol)
-    if ok:
-        return True, point
-    rest, gap = _at_bounds(ev, study, base, extra, small.extra["residuals"])
-    if rest and rest != extra and gap > tol:
-        return _fit_extra(ev, study, small, base, rest, tol)
-    return gap <= tol, (point if rest == extra else dict(base))
-
-
-class _Reproduced(Exception):
-    """Raised inside the least-squares fit once the gap is within the tolerance."""
-
-
-def _fit_extra(
-    ev: Any,
-    study: Study,
-    small: Candidate,
-    base: dict[str, float],
-    extra: list[str],
-    tol: float,
-) -> tuple[bool, dict[str, float]]:
-    """Fit ``extra`` (from ``base``) to reproduce ``small``'s outputs.
-
-    Returns whether the gap (sum of squares of the outputs' difference) came within
-    ``tol``, and the point. The fit stops at the first point within ``tol``: a nesting
-    value on a bound that logarithmic coordinates reach only at minus infinity is
-    approached without end, and measured on the SISO friction laws a fit run to its
-    limit cost 40 to 80 runs where the gap was within ``tol`` after a few.
-    """
-    from scipy.optimize import least_squares
-
-    r_small = small.extra["residuals"]
-    space = _space(study)
-    bad = np.full(r_small.shape, 1e6)
-    idx = [space.names.index(n) for n in extra]
-
-    def at(s: np.ndarray) -> dict[str, float]:
-        return {
-            **base,
-            **{n: space.value(j, float(v)) for n, j, v in zip(extra, idx, s, strict=True)},
-        }
-
-    def diff(s: np.ndarray) -> np.ndarray:
-        r = ev.evaluate([at(s)]).residuals
-        d = bad if not r or r[0] is None else r[0] - r_small
-        if float(d @ d) <= tol:
-            raise _Reproduced(s)
-        return d
-
-    start = np.array([space.coordinate(j, base[n]) for n, j in zip(extra, idx, strict=True)])
-    lo = np.array([space.s_lower[j] for j in idx])
-    hi = np.array([space.s_upper[j] for j in idx])
-    try:
-        fit = least_squares(
-            diff, np.clip(start, lo, hi), bounds=(lo, hi), max_nfev=20 * (len(extra) + 1)
-        )
-    except _Reproduced as done:
-        return True, at(np.asarray(done.args[0]))
-    return 2 * float(fit.cost) <= tol, at(fit.x)
-
-
-def _at_bounds(
-    ev: Any, study: Study, base: dict[str, float], extra: list[str], r_small: np.ndarray
-) -> tuple[list[str], float]:
-    """Move each extra parameter to its lower bound where that reproduces better.
-
-    A nesting value often sits on a bound (a viscous coefficient of 0), which search
-    coordinates spaced logarithmically reach only at minus infinity. Each extra
-    parameter in turn is set to its finite lower bound in ``base`` (in place) where the
-    outputs come closer to ``small``'s there (one run each). Returns the others and the
-    sum of squares of the outputs' difference at ``base``.
-    """
-
-    def gap(x: dict[str, float]) -> float:
-        r = ev.evaluate([x]).residuals
-        return math.inf if not r or r[0] is None else float(np.sum((r[0] - r_small) ** 2))
-
-    bounds = study.bounds()
-    now, rest = gap(base), []
-    for n in extra:
-        lo = bounds[n][0]
-        trial = {**base, n: float(lo)} if math.isfinite(lo) and lo != base[n] else None
-        g = gap(trial) if trial is not None else math.inf
-        if trial is not None and g < now:
-            base[n], now = float(lo), g
-        else:
-            rest.append(n)
-    return rest, now
-
-
-def embed(
-    ev: Any, study: Study, small: Candidate, active: Sequence[str], x: Mapping[str, float]
-) -> tuple[bool, dict[str, float]]:
-    """Embed ``small``'s answer in a richer structure not yet refined (its free ``active``).
-
-    As :func:`nesting` checks a pair, from ``x`` (the richer structure's start) instead of
-    its answer: whether its extra parameters reproduce ``small``'s fit, and the point
-    that does (``small``'s answer embedded: a start whose cost is ``small``'s). Any
-    nesting values will do: every extra parameter on its lower bound is tried first.
-    """
-    big = Candidate("", {}, dict(x), math.inf, math.inf, 1, len(active), list(active))
-    return _reproduce(ev, study, small, big, anywhere=True)
-
-
-def nesting(
-    cands: Sequence[Candidate],
-    studies: Sequence[Study],
-    evs: Sequence[Any],
-    cache: dict | None = None,
-    settled: set[int] | frozenset[int] = frozenset(),
-) -> dict[tuple[int, int], dict[str, float]]:
-    """Return the nested pairs, each with the simpler answer embedded in the richer.
-
-    A pair ``(s, r)``: ``r``'s free parameters include ``s``'s and ``r`` reproduces
-    ``s``'s fit; its value is ``s``'s answer embedded in ``r``.
-
-    ``cache`` keeps the checks already made (keyed by both answers), for the rounds of
-    :func:`consistent`, and the embeddings found of each simpler answer (keyed by the
-    pair and that answer alone: :func:`known`). Where the richer answer fits far better
-    (:data:`FAR_BETTER`), such an embedding is the pair's, with no fit at the richer
-    answer: the embedding nearest it matters only at a nesting point
-    (:func:`at_nesting_point`). Where no such embedding is known and the simpler
-    answer is ``settled`` (shown to be an optimum), the pair is not checked: nothing
-    turns on it. The richer answer is not above the simpler one, the simpler one is
-    not followed from it, and the likelihood-ratio test and BIC both prefer the richer
-    one (its statistic is at least ``n ln 2``).
-    """
-    cache = {} if cache is None else cache
-    pairs = {}
-    for s, r in ((s, r) for s in range(len(cands)) for r in range(len(cands)) if s != r):
-        small, big = cands[s], cands[r]
-        if not (set(small.active) < set(big.active)) or not small.n or not big.n:
-            continue
-        answer = tuple(sorted(small.x.items()))
-        key = (s, r, answer, tuple(sorted(big.x.items())))
-        found = cache.get((s, r, answer))
-        if key not in cache and big.chi2 < FAR_BETTER * small.chi2:
-            if found is None and s in settled:
-                continue
-            if found is not None:
-                cache[key] = (True, found)
-        if key not in cache:
-            ev = evs[r].get(studies[r].parameter_names, _exps(studies[r]), {})
-            n0 = ev.nfev
-            cache[key] = _reproduce(ev, studies[r], small, big)
-            big.nfev += ev.nfev - n0
-        ok, embedded = cache[key]
-        if ok:
-            pairs[(s, r)] = embedded
-            cache.setdefault((s, r, answer), embedded)
-    return pairs
-
-
-def known(cache: dict, s: int, r: int, small: Candidate, embedded: Mapping[str, float]) -> None:
-    """Keep in a :func:`nesting` cache an embedding of ``s``'s answer in ``r`` found before."""
-    cache[(s, r, tuple(sorted(small.x.items())))] = dict(embedded)
-
-
-def _exps(study: Study) -> list[str]:
-    return [e.name for e in study.identify_experiments()]
-
-
 def follow(
     study: Study,
     evs: Any,
@@ -387,10 +179,10 @@ def follow(
                   study.method.leveling)  # fmt: skip
     limit = 10 * (len(shared) + 1)
     method = dataclasses.replace(study.method, refine_max_nfev=limit)
-    exps, out, nfev = _exps(study), dict(x), 0
+    identify, out, nfev = exps(study), dict(x), 0
     for t in np.linspace(0.0, 1.0, PATH_STEPS + 1)[1:]:
         fixed = {n: float((1 - t) * x[n] + t * embedded[n]) for n in rest}
-        ev = evs.get(list(shared), exps, fixed)
+        ev = evs.get(list(shared), identify, fixed)
         n0 = ev.nfev
         start = {n: out[n] for n in shared}
         scored = ev.evaluate([start])
@@ -402,34 +194,6 @@ def follow(
         out.update({n: float(stage.x[n]) for n in shared}, **fixed)
         nfev += ev.nfev - n0
     return out, nfev
-
-
-def at_nesting_point(study: Study, small: Candidate, big: Candidate, embedded: Mapping) -> bool:
-    """Whether ``big``'s extra parameters sit where they make it ``small``'s structure.
-
-    Each within :data:`NESTING_POINT` of its first levels' range (linear: a nesting value
-    may be 0) of the embedding: the richer answer is then the simpler structure, and a
-    lower cost there comes from the model's non-smoothness at that point (event timings),
-    not from what the extra parameters add.
-    """
-    levels = study.first_levels()
-    extra = [n for n in big.active if n not in small.active]
-    gaps = [
-        abs(big.x[n] - embedded[n]) / max(max(levels[n]) - min(levels[n]), 1e-300) for n in extra
-    ]
-    return bool(gaps) and max(gaps) < NESTING_POINT
-
-
-def slack(small: Candidate) -> float:
-    """How far above ``small``'s chi-square an embedding of its answer may lie.
-
-    An embedding reproduces ``small``'s noise-weighted outputs to within ``tol =``
-    :data:`REPRODUCE` ``* chi2 / n`` in sum of squares; its chi-square is then at most
-    ``(sqrt(chi2) + sqrt(tol))**2``. A richer answer above ``small``'s by less already
-    reproduces its fit, and a restart from an embedding cannot do better.
-    """
-    tol = REPRODUCE * small.chi2 / max(small.n, 1)
-    return 2.0 * math.sqrt(max(small.chi2, 0.0) * tol) + tol
 
 
 def consistent(

@@ -50,7 +50,8 @@ from tsid_fmu.search.candidates import (
     warm_starts,
 )
 from tsid_fmu.search.context import Context, polish
-from tsid_fmu.search.optima import at_nesting_point, consistent, known, update
+from tsid_fmu.search.nesting import at_nesting_point, known
+from tsid_fmu.search.optima import consistent, update
 from tsid_fmu.search.phases import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate, decide
@@ -203,7 +204,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
     order = simplest_first([len(p[3]) for p in probed])
     cands, all_stages, studies, evs, owns = [], [], [], [], []
     started: set[tuple[int, int]] = set()  # (simpler, richer): refined from its embedding
-    checks: dict[tuple[int, int], dict[str, float]] = {}  # those embeddings
+    cache: dict = {}  # the nesting checks, and the embeddings found before refining
     for i, j in enumerate(order):
         (values, origin), (sub, ev, best, active, n_probe) = found[j], probed[j]
         if ctx.progress:
@@ -216,9 +217,9 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         embedded, n_embed = [], 0
         if cands:
             embedded, n_embed = embedded_answers(ctx.study, cands, active, best, ev)
-            started.update((s, i) for s, _, _ in embedded)
             for s, point, _ in embedded:
-                checks[(s, i)] = point
+                started.add((s, i))
+                known(cache, s, i, cands[s], point)
         warm = warm_starts(ctx.study, cands, best, embedded) if cands else None
         cand, stages = identify_candidate(
             ctx, i, values, origin, own if i == 0 else None, sub, ev, warm
@@ -236,8 +237,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         cand, names = cands[i], studies[i].parameter_names
         if start in cand.extra.get("tried", []):
             return False  # refined from there already (the nesting unchanged since)
-        exps = [e.name for e in studies[i].identify_experiments()]
-        ev = evs[i].get(names, exps, {})
+        ev = evs[i].get(names, [e.name for e in studies[i].identify_experiments()], {})
         n_restart = sum(1 for s in all_stages[i] if s.name.startswith("restart")) + 1
         stage = polish(f"restart {n_restart}: {why}", short(studies[i]), start, ev, ctx.progress)
         cand.extra.setdefault("tried", []).append(dict(start))
@@ -250,9 +250,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         cand.origin += f"; restarted {why}"
         return True
 
-    owned, cache = {0}, {}
-    for (s, r), point in checks.items():
-        known(cache, s, r, cands[s], point)
+    owned = {0}
     names, exps = ctx.study.parameter_names, [e.name for e in ctx.study.identify_experiments()]
     weighted = ctx.study.method.weighting == "noise"
     while True:
