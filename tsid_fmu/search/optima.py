@@ -214,7 +214,7 @@ def consistent(
     - ``r`` (richer) with a chi-square above ``s``'s by more than an embedding may
       differ (:func:`slack`) is restarted from ``s``'s answer embedded, once per answer
       of ``s`` (measured on the SISO friction laws: a Coulomb + viscous answer at the
-      Coulomb fit, 1e-7 above it, was restarted six times from embeddings that all cost
+      Coulomb fit, 1e-7 above it, was restarted five times from embeddings that all cost
       the same);
     - ``r`` is restarted once from the lowest-cost ``s``'s answer embedded (unless
       ``started`` holds a pair of ``r`` with an ``s`` as good, to within :func:`slack`:
