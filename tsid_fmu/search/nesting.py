@@ -80,11 +80,9 @@ def _reproduce(
     if anywhere:
         bounds = study.bounds()
         low = {**base, **{n: float(bounds[n][0]) for n in extra}}
-        if all(math.isfinite(low[n]) for n in extra):
-            r = ev.evaluate([low]).residuals
-            diff = None if not r or r[0] is None else r[0] - small.extra["residuals"]
-            if diff is not None and float(diff @ diff) <= tol:
-                return True, low
+        finite = all(math.isfinite(low[n]) for n in extra)
+        if finite and _gap(ev, low, small.extra["residuals"]) <= tol:
+            return True, low
     ok, point = _fit_extra(ev, study, small, base, extra, tol)
     if ok:
         return True, point
@@ -146,6 +144,12 @@ def _fit_extra(
     return 2 * float(fit.cost) <= tol, at(fit.x)
 
 
+def _gap(ev: Any, x: Mapping[str, float], r_small: np.ndarray) -> float:
+    """Return the sum of squares of the outputs' difference from ``r_small`` at ``x`` (one run)."""
+    r = ev.evaluate([dict(x)]).residuals
+    return math.inf if not r or r[0] is None else float(np.sum((r[0] - r_small) ** 2))
+
+
 def _at_bounds(
     ev: Any, study: Study, base: dict[str, float], extra: list[str], r_small: np.ndarray
 ) -> tuple[list[str], float]:
@@ -157,17 +161,12 @@ def _at_bounds(
     outputs come closer to ``small``'s there (one run each). Returns the others and the
     sum of squares of the outputs' difference at ``base``.
     """
-
-    def gap(x: dict[str, float]) -> float:
-        r = ev.evaluate([x]).residuals
-        return math.inf if not r or r[0] is None else float(np.sum((r[0] - r_small) ** 2))
-
     bounds = study.bounds()
-    now, rest = gap(base), []
+    now, rest = _gap(ev, base, r_small), []
     for n in extra:
         lo = bounds[n][0]
         trial = {**base, n: float(lo)} if math.isfinite(lo) and lo != base[n] else None
-        g = gap(trial) if trial is not None else math.inf
+        g = _gap(ev, trial, r_small) if trial is not None else math.inf
         if trial is not None and g < now:
             base[n], now = float(lo), g
         else:
