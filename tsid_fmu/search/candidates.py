@@ -339,15 +339,16 @@ def embedded_answers(
     nested = [s for s, c in enumerate(cands) if c.n and set(c.active) < set(active)]
     if not nested:
         return [], 0
-    best = min((cands[s] for s in nested), key=lambda c: c.chi2)
-    tie = best.chi2 + slack(best)  # answers within what an embedding may differ: one fit
+    lowest = min((cands[s] for s in nested), key=lambda c: c.chi2)
+    tie = lowest.chi2 + slack(lowest)  # answers within what an embedding may differ: one fit
 
     def order(s: int) -> tuple:
         c = cands[s]
         return (c.chi2 > tie, c.k if c.chi2 <= tie else 0, c.chi2, s)
 
+    start = {n: float(x0[n]) for n in names}
     for s in sorted(nested, key=order):
-        ok, point = embed(ev, study, cands[s], active, {n: float(x0[n]) for n in names})
+        ok, point = embed(ev, study, cands[s], active, start)
         if ok:
             return [(s, point, cands[s].label)], ev.nfev - n0
     return [], ev.nfev - n0
