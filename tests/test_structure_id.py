@@ -520,7 +520,7 @@ def test_a_chosen_warm_start_stuck_in_a_poor_fit_is_identified_again_by_its_own_
 
 
 def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_fit():
-    from tsid_fmu.search.nesting import REPRODUCE, nesting
+    from tsid_fmu.search.nesting import REPRODUCE, _fit_extra
 
     measured = _data(a=2.0, b=1.3, c=0.0, on=0)
     study = _study()
@@ -529,13 +529,37 @@ def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_f
     study.parameters[2] = Parameter("c", [0.01, 0.1, 1.0], 0.0, 1.0)
     small = _toy_candidate(study, measured, 0.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=0")
     big = _toy_candidate(study, measured, 1.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=1")
-    evs = [_Evaluators(measured, {"on": 0.0}), _Evaluators(measured, {"on": 1.0})]
-    before = big.nfev
-    (point,) = nesting([small, big], [study, study], evs).values()
+    ev = _Evaluators(measured, {"on": 1.0}).get(study.parameter_names, [], {})
+    tol = REPRODUCE * small.chi2 / small.n
+    base = {**big.x, "a": small.x["a"], "b": small.x["b"]}
+    ok, point = _fit_extra(ev, study, small, base, ["c"], tol)
     gap = np.sum(((_model(point["a"], point["b"], point["c"], 1) - measured) / SIGMA
                   - small.extra["residuals"]) ** 2)  # fmt: skip
-    assert 0 < point["c"] < 1e-3 and gap <= REPRODUCE * small.chi2 / small.n
-    assert big.nfev - before <= 25  # run on to its end, the fit takes 36 runs here (limit 40)
+    assert ok and 0 < point["c"] < 1e-3 and gap <= tol
+    assert ev.nfev <= 25  # run on to its end, the fit takes 36 runs here (limit 40)
+
+
+def test_a_nesting_check_puts_extra_parameters_near_their_bounds_on_them_first():
+    """The check at the answers: c's nesting value, 0, is its lower bound, which log
+    coordinates reach only at minus infinity. The richer answer's c = 0.005 lies within
+    NESTING_POINT of the first levels' range (0.99) of it: moved there (one run, and one
+    at the richer answer), it reproduces exactly. A fit first walks c towards it (and
+    stops short, at the first point within the tolerance). At c = 0.05, not near its
+    bound, c is fitted from there."""
+    from tsid_fmu.search.nesting import nesting
+
+    measured = _data(a=2.0, b=1.3, c=0.0, on=0)
+    study = _study()
+    study.parameters[2] = Parameter("c", [0.01, 0.1, 1.0], 0.0, 1.0)
+    small = _toy_candidate(study, measured, 0.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=0")
+    for c, on_bound in ((0.005, True), (0.05, False)):
+        big = _toy_candidate(study, measured, 1.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=1")
+        big.x["c"] = c
+        evs = [_Evaluators(measured, {"on": 0.0}), _Evaluators(measured, {"on": 1.0})]
+        before = big.nfev
+        (point,) = nesting([small, big], [study, study], evs).values()
+        assert (point["c"] == 0.0) == on_bound and point["a"] == small.x["a"]
+        assert (big.nfev - before <= 2) == on_bound
 
 
 def test_a_nesting_found_earlier_is_reused_where_the_richer_answer_fits_far_better():
