@@ -6,7 +6,8 @@ directions the data do not see: infinite variance for every parameter in them), 
 below the Cramer-Rao bound; the degrees of freedom are Satterthwaite's, within 1 and
 ``n - p``; the profile re-fit is a chord Gauss-Newton iteration of at most
 ``CHORD_STEPS + 1`` simulations that stops when a step gains less than 1 % of the
-threshold. They kill the open mutants of docs/mutation-survivors.md in those files.
+threshold, its Jacobian corrected by each step's secant and re-linearised to check a
+bracket's outer end. They kill the open mutants of docs/mutation-survivors.md in those files.
 """
 
 from __future__ import annotations
@@ -184,15 +185,29 @@ def _chord(bounds=WIDE, scale=2.0):
     r0 = a @ s0 - y
     jac = a * np.array([1.0, scale])
     problem = profile.ProfileProblem(_Linear(space, a, y), space, s0, float(r0 @ r0), jac, 1.0)
-    return problem, a, y, np.linalg.pinv(jac[:, [1]])
+    return problem, a, y, profile._Secant(problem, 0)
 
 
-def test_the_re_fit_takes_chord_steps_until_one_gains_under_1_percent_of_the_limit():
-    """Moving p by delta, q's exact re-fit moves by x* = -(a1.a0 / a1.a1) delta; the
-    chord starts at half of it and halves the error each step, so the k-th simulation
-    (k = 0, 1, ...) costs P + |a1|^2 (x* / 2^(k+1))^2 above the exact profile cost P.
-    With the first excess at 100 limits, the gains (3/4 of each excess) stay above 1 %
-    of the limit: all CHORD_STEPS + 1 = 7 simulations run."""
+def _no_secant(monkeypatch):
+    """Keep every profile's Jacobian as it was given: no secant update, no check."""
+    monkeypatch.setattr(profile._Secant, "update", _keep_last)
+    monkeypatch.setattr(profile, "CHECKS", 0)
+
+
+def _keep_last(self, s, r):
+    self.s, self.r = s.copy(), np.asarray(r, dtype=float)
+
+
+def test_the_re_fit_takes_chord_steps_until_one_gains_under_1_percent_of_the_limit(
+    monkeypatch,
+):
+    """With the given Jacobian kept: moving p by delta, q's exact re-fit moves by
+    x* = -(a1.a0 / a1.a1) delta; the chord starts at half of it and halves the error
+    each step, so the k-th simulation (k = 0, 1, ...) costs P + |a1|^2 (x* / 2^(k+1))^2
+    above the exact profile cost P. With the first excess at 100 limits, the gains (3/4
+    of each excess) stay above 1 % of the limit: all CHORD_STEPS + 1 = 7 simulations
+    run."""
+    _no_secant(monkeypatch)
     problem, a, y, pinv = _chord()
     a0, a1 = a[:, 0], a[:, 1]
     limit = 0.1
@@ -207,8 +222,28 @@ def test_the_re_fit_takes_chord_steps_until_one_gains_under_1_percent_of_the_lim
     # a first excess of 2 limits: the sixth simulation's gain, 3/4 * 2 / 4^4 limits, is
     # under 1 % of the limit and ends the re-fit
     problem.evaluator.asked = []
-    profile._refit(problem, 0, delta / math.sqrt(50), pinv, limit)
+    profile._refit(problem, 0, delta / math.sqrt(50), profile._Secant(problem, 0), limit)
     assert len(problem.evaluator.asked) == 6
+
+
+def test_each_re_fit_step_corrects_the_jacobian_by_its_secant():
+    """The same re-fit with the secant rule: the first chord step (along q only) halves
+    q's error and its secant gives q's column exactly, so the second lands on the exact
+    re-fit and the third gains nothing: 4 simulations, the exact profile cost. The next
+    offset starts from that re-fit with the corrected Jacobian: exact at once."""
+    problem, a, y, secant = _chord()
+    a0, a1 = a[:, 0], a[:, 1]
+    shift = -(a1 @ a0) / (a1 @ a1)
+    delta = math.sqrt(100 * 0.1 / (a1 @ a1)) / abs(0.5 * shift)
+    best = profile._refit(problem, 0, delta, secant, 0.1)
+    assert len(problem.evaluator.asked) == 4
+    r = a @ (problem.s0 + np.array([delta, shift * delta])) - y
+    assert best == pytest.approx(float(r @ r), rel=1e-9)
+    assert secant.jac[:, 1] == pytest.approx(a1, rel=1e-9)
+    problem.evaluator.asked = []
+    best = profile._refit(problem, 0, 2 * delta, secant, 0.1)
+    r = a @ (problem.s0 + np.array([2 * delta, 2 * shift * delta])) - y
+    assert len(problem.evaluator.asked) == 2 and best == pytest.approx(float(r @ r), rel=1e-9)
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
@@ -226,7 +261,7 @@ def test_the_re_fit_goes_on_from_the_bound_it_clipped_to(sign):
     bounds = (at, math.inf) if shift < 0 else (-math.inf, at)
     assert bool(shift < 0) == (sign > 0)
     problem, _, _, pinv = _chord(scale=0.6, bounds=bounds)
-    profile._refit(problem, 0, delta, pinv, 1e-9)
+    profile._refit(problem, 0, delta, pinv, 1e-9)  # a fresh secant: the given Jacobian
     asked_q = [s[1] for s in problem.evaluator.asked]
     assert asked_q[0] == pytest.approx(s1 + 1.3 * shift, abs=1e-12)
     assert asked_q[1] == pytest.approx(s1 + 0.8 * shift, rel=1e-9)
@@ -283,14 +318,25 @@ def _exact():
     return problem, pinv
 
 
-def test_a_step_or_bisection_point_rising_exactly_by_the_limit_is_the_end():
+def test_a_step_or_bisection_point_rising_exactly_by_the_limit_is_the_end(monkeypatch):
     """Steps 1/8, 1/4, ... and bisection points (exact in binary): a limit equal to the
     rise at the first step, or at the first bisection point 3/16 of the bracket (1/8,
     1/4), makes that point the end (the root of the rise reaches the limit's there)."""
-    problem, pinv = _exact()
-    for at in (0.125, 0.1875):
-        limit = profile._refit(problem, 0, at, pinv, 1.0) - problem.cost0
-        assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (at, True)
+    problem, secant = _exact()
+    limit = profile._refit(problem, 0, 0.125, secant, 1.0) - problem.cost0
+    assert profile._end(problem, 0, 1.0, 0.125, limit) == (0.125, True)
+    # the rise the search itself finds at 3/16 (its re-fits go on from the last one's
+    # point, so a re-fit from the answer may differ from it in the last bit)
+    rises = {}
+    refit = profile._refit
+
+    def recorded(problem, j, delta, secant, limit):
+        rises[delta] = refit(problem, j, delta, secant, limit) - problem.cost0
+        return rises[delta] + problem.cost0
+
+    monkeypatch.setattr(profile, "_refit", recorded)
+    profile._end(_exact()[0], 0, 1.0, 0.125, 2.25 * limit)  # about the rise at 3/16
+    assert profile._end(_exact()[0], 0, 1.0, 0.125, rises[0.1875]) == (0.1875, True)
 
 
 def test_the_end_is_interpolated_in_its_bracket_linearly_in_the_root_of_the_rise():
@@ -311,8 +357,8 @@ def test_the_end_is_interpolated_in_its_bracket_linearly_in_the_root_of_the_rise
 def test_an_unresolved_end_is_the_outer_end_of_its_bracket():
     """A first step of 10 search units, past the end: the bisections of (0, 10) give the
     bracket (0, 1.25) with no point inside, and the end returned is 1.25, an upper bound."""
-    problem, pinv = _exact()
-    assert profile._end(problem, 0, 1.0, 10.0, pinv, 0.01) == (1.25, False)
+    problem, _ = _exact()
+    assert profile._end(problem, 0, 1.0, 10.0, 0.01) == (1.25, False)
 
 
 class _Scripted:
@@ -333,8 +379,7 @@ def test_a_re_fit_step_that_gains_exactly_1_percent_of_the_limit_goes_on():
     problem, _, _, _ = _chord()
     n = problem.jacobian.shape[0]
     problem.evaluator = _Scripted([10.0, 9.0, 8.5, 8.0], n)
-    pinv = np.zeros((1, n))
-    assert profile._refit(problem, 0, 0.1, pinv, 100.0) == 8.5
+    assert profile._refit(problem, 0, 0.1, profile._Secant(problem, 0), 100.0) == 8.5
     assert problem.evaluator.calls == 3
 
 
@@ -354,7 +399,7 @@ def test_a_step_ending_exactly_one_unit_past_a_bound_is_still_taken(sign):
             {"p": [0.0, 2.0], "q": [0.0, 2.0]}, {"p": bounds, "q": WIDE}, LevelingOptions()
         )
         problem = profile.ProfileProblem(_Linear(space, a, a @ s0), space, s0, 0.0, a, 1.0)
-        end = profile._end(problem, 0, sign, 0.125, np.linalg.pinv(a[:, [1]]), 1e9)
+        end = profile._end(problem, 0, sign, 0.125, 1e9)
         assert end == (math.inf, True)
         return len(problem.evaluator.asked)
 
@@ -368,8 +413,68 @@ def test_an_end_within_the_first_step_keeps_the_outer_end_of_its_bracket():
     its outer end 7/64 is the end returned (interpolated, it would be 0.1)."""
     problem, pinv = _exact()
     limit = profile._refit(problem, 0, 0.1, pinv, 1.0) - problem.cost0
-    assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (0.109375, True)
+    assert profile._end(problem, 0, 1.0, 0.125, limit) == (0.109375, True)
     # a bisection point rising exactly by the limit is inside: the bracket goes on to
     # (1/16, 5/64), whose outer end is returned
-    limit = profile._refit(problem, 0, 0.0625, pinv, 1.0) - problem.cost0
-    assert profile._end(problem, 0, 1.0, 0.125, pinv, limit) == (0.078125, True)
+    limit = profile._refit(problem, 0, 0.0625, profile._Secant(problem, 0), 1.0) - problem.cost0
+    assert profile._end(problem, 0, 1.0, 0.125, limit) == (0.078125, True)
+
+
+@pytest.mark.parametrize("without", ["", "secant", "checks", "both"])
+def test_an_end_the_given_jacobian_overstates_is_found_by_the_secant_or_the_check(
+    monkeypatch, without
+):
+    """q's column given at 20 times its size (as a Jacobian far off away from the answer,
+    where a model has events): each chord step with it moves q a twentieth of the way,
+    and the rise it reports stays far above the profile's. The exact profile rises by
+    c d^2 (c the Schur complement of q). The secant corrects q's column after one step,
+    and the check re-linearises at the first doubling past the limit: either finds the
+    exact end, 0.5 search units. With neither, the end is found well short of it."""
+    problem, a, _, _ = _chord(scale=20.0)
+    a0, a1 = a[:, 0], a[:, 1]
+    c = a0 @ a0 - (a0 @ a1) ** 2 / (a1 @ a1)
+    limit = c * 0.5**2
+    if without in ("secant", "both"):
+        monkeypatch.setattr(profile._Secant, "update", _keep_last)
+    if without in ("checks", "both"):
+        monkeypatch.setattr(profile, "CHECKS", 0)
+    off, found = profile._end(problem, 0, 1.0, 0.05, limit)
+    assert found
+    if without == "both":
+        assert off < 0.4
+    else:
+        assert off == pytest.approx(0.5, rel=1e-6)
+
+
+class _Events(_Linear):
+    """The linear residuals plus events: a step of ``eps`` along a fixed shape each time
+    q crosses a multiple of ``pi w`` (a square wave), as dry friction's stick-slip
+    timing moves the residuals in small jumps."""
+
+    def __init__(self, space, a, y, eps, w):
+        super().__init__(space, a, y)
+        self.eps, self.w = eps, w
+        self.shape = np.cos(np.linspace(0.0, 7.0, a.shape[0]))
+
+    def evaluate(self, rows, progress=None):
+        ev = super().evaluate(rows, progress)
+        for r, s in zip(ev.residuals, self.asked[-len(rows) :], strict=True):
+            r += self.eps * np.sign(np.sin(s[1] / self.w)) * self.shape
+        ev.costs[:, 0] = [float(r @ r) for r in ev.residuals]
+        return ev
+
+
+@pytest.mark.parametrize("w", [1e-3, 2e-5])
+def test_the_check_re_linearises_with_a_step_shorter_than_the_events(monkeypatch, w):
+    """The 20-times-off Jacobian of the test above, the secant off, and events in q
+    spaced 3e-3 and 6e-5 search units apart: a forward difference across one adds
+    2 eps / h to q's column. With CHECK_STEP the check sees the smooth part and the end
+    is within 1 % of the events-free one, 0.5; with the sensitivities' step of 2e-3, or
+    with 1e-4, the end is found short by 8-34 %."""
+    problem, a, y, _ = _chord(scale=20.0)
+    problem.evaluator = _Events(problem.space, a, y, 3e-3, w)
+    a0, a1 = a[:, 0], a[:, 1]
+    limit = (a0 @ a0 - (a0 @ a1) ** 2 / (a1 @ a1)) * 0.5**2
+    monkeypatch.setattr(profile._Secant, "update", _keep_last)
+    off, _ = profile._end(problem, 0, 1.0, 0.05, limit)
+    assert off == pytest.approx(0.5, rel=0.01)
