@@ -646,6 +646,25 @@ def test_only_the_lowest_cost_earlier_answer_that_embeds_is_embedded():
     assert runs == sum(ev.nfev for ev in evs.pool.values()) > 0
 
 
+def test_where_the_best_earlier_answer_does_not_embed_no_other_is_tried(monkeypatch):
+    from tsid_fmu.search import candidates
+
+    measured = _data(a=2.0, b=1.3, c=0.3, on=1)
+    study = _study()
+    worse = _toy_candidate(study, measured, 0.0, {"a": 1.0, "b": 2.0, "c": 0.5}, "worse")
+    better = _toy_candidate(study, measured, 0.0, {"a": 2.1, "b": 1.2, "c": 0.5}, "better")
+    tried = []
+
+    def embed(ev, study, small, active, x):
+        tried.append(small.label)
+        return small.label == "worse", dict(x)  # only the worse answer would embed
+
+    monkeypatch.setattr(candidates, "embed", embed)
+    evs = _Evaluators(measured, {"on": 1.0})
+    found, _ = candidates.embedded_answers(study, [worse, better], ["a", "b", "c"], None, evs)
+    assert found == [] and tried == ["better"]
+
+
 def test_among_earlier_answers_as_good_as_the_best_the_simplest_is_embedded():
     import dataclasses
 
