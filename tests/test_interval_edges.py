@@ -208,12 +208,12 @@ def test_the_re_fit_takes_chord_steps_until_one_gains_under_1_percent_of_the_lim
     of each excess) stay above 1 % of the limit: all CHORD_STEPS + 1 = 7 simulations
     run."""
     _no_secant(monkeypatch)
-    problem, a, y, pinv = _chord()
+    problem, a, y, secant = _chord()
     a0, a1 = a[:, 0], a[:, 1]
     limit = 0.1
     shift = -(a1 @ a0) / (a1 @ a1)
     delta = math.sqrt(100 * limit / (a1 @ a1)) / abs(0.5 * shift)  # first excess 100 limit
-    best = profile._refit(problem, 0, delta, pinv, limit)
+    best = profile._refit(problem, 0, delta, secant, limit)
     assert len(problem.evaluator.asked) == profile.CHORD_STEPS + 1 == 7
     exact = problem.s0 + np.array([delta, shift * delta])
     r = a @ exact - y
@@ -260,8 +260,8 @@ def test_the_re_fit_goes_on_from_the_bound_it_clipped_to(sign):
     at = 1.0 + 2 * (s1 + 1.3 * shift)  # the bound, in values (1 + 2 s)
     bounds = (at, math.inf) if shift < 0 else (-math.inf, at)
     assert bool(shift < 0) == (sign > 0)
-    problem, _, _, pinv = _chord(scale=0.6, bounds=bounds)
-    profile._refit(problem, 0, delta, pinv, 1e-9)  # a fresh secant: the given Jacobian
+    problem, _, _, secant = _chord(scale=0.6, bounds=bounds)
+    profile._refit(problem, 0, delta, secant, 1e-9)  # a fresh secant: the given Jacobian
     asked_q = [s[1] for s in problem.evaluator.asked]
     assert asked_q[0] == pytest.approx(s1 + 1.3 * shift, abs=1e-12)
     assert asked_q[1] == pytest.approx(s1 + 0.8 * shift, rel=1e-9)
@@ -314,8 +314,8 @@ def test_a_ratio_exactly_ratio_gain_times_better_is_not_grouped():
 def _exact():
     """The linear problem with the exact Jacobian: each re-fit is exact, so the rise at
     an offset d of p is ``c d^2`` and does not depend on the limit."""
-    problem, _, _, pinv = _chord(scale=1.0)
-    return problem, pinv
+    problem, _, _, secant = _chord(scale=1.0)
+    return problem, secant
 
 
 def test_a_step_or_bisection_point_rising_exactly_by_the_limit_is_the_end(monkeypatch):
@@ -411,8 +411,8 @@ def test_an_end_within_the_first_step_keeps_the_outer_end_of_its_bracket():
     """A first step of 1/8 past the end (a limit equal to the rise at 0.1): the bracket
     (3/32, 7/64) lies within the first step, below what the simulations may resolve, and
     its outer end 7/64 is the end returned (interpolated, it would be 0.1)."""
-    problem, pinv = _exact()
-    limit = profile._refit(problem, 0, 0.1, pinv, 1.0) - problem.cost0
+    problem, secant = _exact()
+    limit = profile._refit(problem, 0, 0.1, secant, 1.0) - problem.cost0
     assert profile._end(problem, 0, 1.0, 0.125, limit) == (0.109375, True)
     # a bisection point rising exactly by the limit is inside: the bracket goes on to
     # (1/16, 5/64), whose outer end is returned
@@ -469,8 +469,8 @@ def test_the_check_re_linearises_with_a_step_shorter_than_the_events(monkeypatch
     """The 20-times-off Jacobian of the test above, the secant off, and events in q
     spaced 3e-3 and 6e-5 search units apart: a forward difference across one adds
     2 eps / h to q's column. With CHECK_STEP the check sees the smooth part and the end
-    is within 1 % of the events-free one, 0.5; with the sensitivities' step of 2e-3, or
-    with 1e-4, the end is found short by 8-34 %."""
+    is within 1 % of the events-free one, 0.5. With the sensitivities' step of 2e-3 it
+    was found 14 % short at the wider spacing, with 1e-4 34 % short at the narrower."""
     problem, a, y, _ = _chord(scale=20.0)
     problem.evaluator = _Events(problem.space, a, y, 3e-3, w)
     a0, a1 = a[:, 0], a[:, 1]
