@@ -66,9 +66,9 @@ CHECKS = 3
 
 CHECK_STEP = 1e-6
 """Forward-difference step of a re-linearisation, in search coordinates. Short, to see
-the smooth part of the residuals between events: on the SISO rig (dev seed 103) a check
-with steps of 2e-3 or 1e-4 found rises of 9-12 times the threshold where one with 1e-6
-found 0.35 times, and a full re-fit 0.26 times."""
+the smooth part of the residuals between events: on the SISO rig (dev seed 103, F_vm at
+51.17) a check with steps of 2e-3 or 1e-4 found rises of 3.0 and 2.0 times the threshold
+where one with 1e-6 found 0.35 times, and a full re-fit 0.26 times."""
 
 RESOLUTION = MIN_STEP / 2**BISECTIONS
 """Shortest distance to an interval end the profile can tell, in search coordinates:
