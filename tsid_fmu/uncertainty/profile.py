@@ -58,8 +58,9 @@ BISECTIONS = 3
 SECANT_MIN = 1e-3
 """Shortest step, in search coordinates, whose secant corrects a profile's Jacobian.
 Over much shorter ones the residuals' change is rounding and solver noise: with none,
-the chord's last steps (1e-12 and less) wrecked the Jacobian of exact linear problems
-(tests/test_interval_edges.py). On the SISO rig 1e-9 gave the same ends as 1e-3."""
+the chord's last, tiny steps wrecked the Jacobian of exact linear problems (four tests
+of tests/test_interval_edges.py and test_coverage.py failed). On the SISO rig 1e-9 gave
+the same ends as 1e-3."""
 
 CHECKS = 3
 """Most checks of one side's outer bracket ends by a re-linearised re-fit."""
