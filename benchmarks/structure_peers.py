@@ -9,7 +9,7 @@ without the truth could run instead, each polished by ``least_squares``:
 
 - ``LS centre``: ``least_squares`` from the centre of the first levels;
 - ``DE``: SciPy ``differential_evolution`` over the first levels' box (log scale, popsize
-  15, 12 generations: 1260 simulations), two seeds;
+  15, 12 generations after the first: 1365 simulations), two seeds;
 - ``CMA``: CMA-ES (``cma``) over the same box (``maxfevals`` 960), two seeds.
 
 It prints each one's cost / the reference's and its simulations. Run::
