@@ -86,14 +86,15 @@ def _reproduce(
     if not anywhere:  # the nesting values nearest the answer
         moved = dict(base)
         near = _near_bounds(study, base, extra)
-        rest, gap = _at_bounds(ev, study, moved, near, small.extra["residuals"])
-        if near and gap <= tol:
-            return True, moved
-        free = [n for n in extra if n not in near or n in rest]
-        if free != extra:
-            ok, point = _fit_extra(ev, study, small, moved, free, tol)
-            if ok:
-                return True, point
+        if near:
+            rest, gap = _at_bounds(ev, study, moved, near, small.extra["residuals"])
+            if gap <= tol:
+                return True, moved
+            free = [n for n in extra if n not in near or n in rest]
+            if free != extra:
+                ok, point = _fit_extra(ev, study, small, moved, free, tol)
+                if ok:
+                    return True, point
         return _fit_extra(ev, study, small, base, extra, tol)
     bounds = study.bounds()
     low = {**base, **{n: float(bounds[n][0]) for n in extra}}
@@ -116,12 +117,16 @@ def _near_bounds(study: Study, x: Mapping[str, float], names: list[str]) -> list
     they stay at the nesting point.
     """
     levels, bounds = study.first_levels(), study.bounds()
-    out = []
-    for n in names:
-        lo, span = bounds[n][0], max(levels[n]) - min(levels[n])
-        if math.isfinite(lo) and abs(x[n] - lo) < NESTING_POINT * max(span, 1e-300):
-            out.append(n)
-    return out
+    return [
+        n
+        for n in names
+        if math.isfinite(bounds[n][0]) and _apart(levels[n], x[n], bounds[n][0]) < NESTING_POINT
+    ]
+
+
+def _apart(levels: Sequence[float], a: float, b: float) -> float:
+    """Return ``|a - b|`` as a fraction of the first levels' range (linear: a value may be 0)."""
+    return abs(a - b) / max(max(levels) - min(levels), 1e-300)
 
 
 class _Reproduced(Exception):
@@ -284,9 +289,7 @@ def at_nesting_point(study: Study, small: Candidate, big: Candidate, embedded: M
     """
     levels = study.first_levels()
     extra = [n for n in big.active if n not in small.active]
-    gaps = [
-        abs(big.x[n] - embedded[n]) / max(max(levels[n]) - min(levels[n]), 1e-300) for n in extra
-    ]
+    gaps = [_apart(levels[n], big.x[n], embedded[n]) for n in extra]
     return bool(gaps) and max(gaps) < NESTING_POINT
 
 

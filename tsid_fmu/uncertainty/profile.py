@@ -130,7 +130,6 @@ class _Secant:
     """
 
     def __init__(self, problem: ProfileProblem, j: int) -> None:
-        self.j = j
         self.others = [k for k in range(problem.s0.size) if k != j]
         self.jac = problem.jacobian.copy()
         self.s = problem.s0.copy()  # the last point simulated and its residuals
@@ -150,10 +149,11 @@ class _Secant:
         """Take the point ``s`` with residuals ``r`` as the last one."""
         if self.r is not None:
             ds = s - self.s
-            change = np.outer(r - self.r - self.jac @ ds, ds) / max(ds @ ds, 1e-300)
-            if np.linalg.norm(ds) >= SECANT_MIN and np.isfinite(change).all():
-                self.jac += change
-                self._pinv = None
+            if np.linalg.norm(ds) >= SECANT_MIN:
+                change = np.outer(r - self.r - self.jac @ ds, ds) / (ds @ ds)
+                if np.isfinite(change).all():
+                    self.jac += change
+                    self._pinv = None
         self.s, self.r = s.copy(), np.asarray(r, dtype=float)
 
     def relinearise(self, problem: ProfileProblem) -> bool:
