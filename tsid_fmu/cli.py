@@ -129,8 +129,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     from tsid_fmu.evaluate.serial import SerialEvaluator
     from tsid_fmu.report.plots import fit_plot
-    from tsid_fmu.report.units import study_units
     from tsid_fmu.study import Study, prepare
+    from tsid_fmu.study.units import study_units
 
     study = Study.from_toml(args.study)
     values: dict[str, float] = {}

@@ -26,7 +26,6 @@ from tsid_fmu.report.html import write_html
 from tsid_fmu.report.markdown import markdown_report
 from tsid_fmu.report.render import draw_study
 from tsid_fmu.report.ssp import write_model_ssp
-from tsid_fmu.report.units import study_units
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.search.adaptive import answer_stage, verdict
 from tsid_fmu.search.context import Context
@@ -37,6 +36,7 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structures import StructureResult, run_structure
 from tsid_fmu.study.definition import Study
+from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.folder import NullStore, Trail
 from tsid_fmu.uncertainty.assess import assess, validate
 from tsid_fmu.uncertainty.fidelity import (

@@ -22,8 +22,8 @@ from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
 from tsid_fmu.report.scored import experiment_notes
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
-from tsid_fmu.report.units import study_units
 from tsid_fmu.result import STATUS, IdentificationResult
+from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import atomic_write
 from tsid_fmu.uncertainty.assess import NOISE_SOURCES
 

@@ -159,8 +159,8 @@ def plot_fit(result: Any) -> Any:
     from tsid_fmu.evaluate.serial import SerialEvaluator
     from tsid_fmu.report.fitfig import FitFigure
     from tsid_fmu.report.style import cost_name
-    from tsid_fmu.report.units import study_units
     from tsid_fmu.study.prepare import prepare
+    from tsid_fmu.study.units import study_units
 
     study = _study(result)
     exps = [e.name for e in study.identify_experiments()]
@@ -187,7 +187,7 @@ def plot_main_effects(result: Any, iteration: Any = -1) -> Any:
     """
     from tsid_fmu.report.figures import MainEffects
     from tsid_fmu.report.style import cost_name
-    from tsid_fmu.report.units import study_units
+    from tsid_fmu.study.units import study_units
 
     records = result.iterations
     if isinstance(iteration, int):
@@ -206,7 +206,7 @@ def plot_main_effects(result: Any, iteration: Any = -1) -> Any:
 def plot_parameters(result: Any) -> Any:
     """Return each parameter's best value per iteration with its level window."""
     from tsid_fmu.report.figures import trajectory_figure
-    from tsid_fmu.report.units import study_units
+    from tsid_fmu.study.units import study_units
 
     return trajectory_figure(
         result.iterations, result.names, study_units(result.study), result.params
