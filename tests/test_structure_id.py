@@ -723,3 +723,30 @@ def test_a_richer_candidate_refined_from_one_of_two_equal_answers_is_not_restart
     cands = [cands[0], cands[1], twin]
     consistent(cands, [*studies, studies[0]], [*evs, evs[0]], restart, started={(0, 1)})
     assert not [w for _, w in calls if "which it nests, embedded" in w]
+
+
+@pytest.mark.parametrize("unit_c", ["1/s", ""])
+def test_an_embedding_tries_a_simpler_parameter_of_the_same_unit_as_a_nesting_value(unit_c):
+    """A second decay rate ``c`` adds nothing where it equals the first, ``b`` (as a
+    static friction force equal to the Coulomb one adds no Stribeck effect). In the same
+    unit, ``c = b`` is tried (a run at the start, one at the lower bound, one at ``b``)
+    and reproduces exactly. Without a unit in common, ``c`` is fitted, and ends near
+    ``b`` but not on it, in more runs."""
+    from tsid_fmu.search.nesting import embed
+
+    def model(a, b, c, on):
+        return a * np.exp(-b * T) if not on else 0.5 * a * (np.exp(-b * T) + np.exp(-c * T))
+
+    measured = _data(a=2.0, b=1.3, c=0.0, on=0)
+    study = _study()
+    study.parameters[1] = Parameter("b", [0.5, 1.0, 2.0], 0.01, 10.0, "1/s")
+    study.parameters[2] = Parameter("c", [0.5, 1.0, 2.0], 0.01, 10.0, unit_c)
+    small = _toy_candidate(study, measured, 0.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=0")
+    small.active, small.k = ["a", "b"], 2
+    ev = _Evaluators(measured, {"on": 1.0}, model).get(study.parameter_names, [], {})
+    ok, point = embed(ev, study, small, ["a", "b", "c"], {"a": 1.0, "b": 1.0, "c": 0.5})
+    assert ok and point["a"] == small.x["a"] and point["b"] == small.x["b"]
+    if unit_c:
+        assert point["c"] == small.x["b"] and ev.nfev == 4  # all on bounds, start, bound, b
+    else:
+        assert point["c"] != small.x["b"] and ev.nfev > 4
