@@ -166,7 +166,7 @@ def _fidelity(
     """Check the solver at ``x``; from the start point on, use the interface it chose."""
     if evaluators.given is not None or not study.method.fidelity:
         return None
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     spec = evaluators.spec(study.parameter_names, exps, {})
     check = check_fidelity(
         spec,
@@ -213,7 +213,7 @@ def _report(
         store.write_text("report.md", markdown_report(result))
     figures = None
     if plots and evaluators.given is None:
-        exps = [e.name for e in study.identify_experiments()]
+        exps = study.identify_names()
         spec = evaluators.spec(study.parameter_names, exps, {})
         ev = evaluators.get(study.parameter_names, exps, {})
         figures = draw_study(
@@ -272,7 +272,7 @@ def _finish(
         if isinstance(store, Trail) and status == 2 and evaluators.given is None:
             _report(result, store, evaluators, plots, None, callback)  # for the review
         return _record(result, start, None)
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     spec = evaluators.spec(study.parameter_names, exps, {})
     ev = evaluators.get(study.parameter_names, exps, {})
     # intervals in log10 for every positive-valued parameter: relative precision, positive

@@ -163,7 +163,7 @@ def plot_fit(result: Any) -> Any:
     from tsid_fmu.study.units import study_units
 
     study = _study(result)
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     spec = prepare(study, exps, study.parameter_names)
     with SerialEvaluator(spec) as ev:
         sims = ev.simulate([dict(result.params)], count=False)[0]

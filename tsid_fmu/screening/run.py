@@ -99,7 +99,7 @@ def _console() -> Progress:
 
 def _evaluator(study: Study, runner: dict[str, Any]) -> Evaluator:
     """Return the search's evaluator of every parameter on the identification experiments."""
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     spec = StudyEvaluators(study, runner, None).spec(study.parameter_names, exps, {})
     plain = tuple(dataclasses.replace(e, noisy_inputs=()) for e in spec.experiments)
     return make_evaluator(dataclasses.replace(spec, experiments=plain), **runner)

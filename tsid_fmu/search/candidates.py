@@ -265,7 +265,7 @@ def _sub_study(
 def measure_in(study: Study, evs: Evaluators, x: Mapping[str, float]) -> dict[str, Any]:
     """Measure ``x`` with a structure's evaluators (steps in ``study``'s coordinates)."""
     names = study.parameter_names
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     checks = [e.name for e in study.experiments if e.role == "validate"]
 
     def validate(p: dict[str, float]) -> float | None:
@@ -298,7 +298,7 @@ def identify_candidate(
         stages = run_own(ctx.study, study, make, store, ctx.progress, ctx.control)
         tried = []
     else:
-        exps = [e.name for e in sub.identify_experiments()]
+        exps = sub.identify_names()
         stage, start, _ = warm_start(evs.get(names, exps, {}), short(sub), warm or [], ctx.progress)
         store.write_stage("refinement", stage)
         stages, tried = [stage], [start]
@@ -334,7 +334,7 @@ def embedded_answers(
     after 144 runs, law 2's after 77).
     """
     names = study.parameter_names
-    ev = evs.get(names, [e.name for e in study.identify_experiments()], {})
+    ev = evs.get(names, study.identify_names(), {})
     n0 = ev.nfev
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
     x0 = best if best is not None else space.to_x(space.clip(np.zeros(space.dim)))

@@ -60,7 +60,7 @@ def local_search(
     the handed-over Taguchi stage (``stages[0]``) from its records to its own end.
     """
     study = ctx.study
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     stages.append(refinement(ctx, answer_stage(stages).x, exps))
     if not adaptive:
         return stages
@@ -182,7 +182,7 @@ def _restarts(ctx: Context, stages: list[StageResult], floor: float, exps: list[
 def check(ctx: Context, last: StageResult) -> StageResult:
     """Run the local probe test at an answer no refinement tested (a ``check`` stage)."""
     study = ctx.study
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     done = ctx.store.stage("check")
     x = {n: float(last.x[n]) for n in study.parameter_names}
     if done is not None and done.extra.get("start") == x:

@@ -31,7 +31,6 @@ __all__ = [
     "REPRODUCE",
     "at_nesting_point",
     "embed",
-    "exps",
     "known",
     "nesting",
     "slack",
@@ -56,11 +55,6 @@ shows the nesting, with no fit at the richer answer."""
 
 def _space(study: Study) -> Space:
     return Space(study.first_levels(), study.bounds(), study.method.leveling)
-
-
-def exps(study: Study) -> list[str]:
-    """Return the names of a study's identification experiments."""
-    return [e.name for e in study.identify_experiments()]
 
 
 def _reproduce(
@@ -319,7 +313,7 @@ def nesting(
             if found is not None:
                 cache[key] = (True, found)
         if key not in cache:
-            ev = evs[r].get(studies[r].parameter_names, exps(studies[r]), {})
+            ev = evs[r].get(studies[r].parameter_names, studies[r].identify_names(), {})
             n0 = ev.nfev
             cache[key] = _reproduce(ev, studies[r], small, big)
             big.nfev += ev.nfev - n0

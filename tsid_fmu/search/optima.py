@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.search.context import polish
-from tsid_fmu.search.nesting import exps, nesting, slack
+from tsid_fmu.search.nesting import nesting, slack
 from tsid_fmu.search.refine import refine_stage
 from tsid_fmu.search.selection import Candidate
 from tsid_fmu.search.space import Space
@@ -179,7 +179,7 @@ def follow(
                   study.method.leveling)  # fmt: skip
     limit = 10 * (len(shared) + 1)
     method = dataclasses.replace(study.method, refine_max_nfev=limit)
-    identify, out, nfev = exps(study), dict(x), 0
+    identify, out, nfev = study.identify_names(), dict(x), 0
     for t in np.linspace(0.0, 1.0, PATH_STEPS + 1)[1:]:
         fixed = {n: float((1 - t) * x[n] + t * embedded[n]) for n in rest}
         ev = evs.get(list(shared), identify, fixed)

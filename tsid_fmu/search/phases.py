@@ -86,7 +86,7 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
         experiment.
     """
     opts = study.contribution
-    ident = [e.name for e in study.identify_experiments()]
+    ident = study.identify_names()
     centre = centre_values(study)
     extra: dict[str, Any] = {"input": None, "percent": {}, "groups": {}, "runs": {}}
     order, nfev = list(ident), 0

@@ -124,7 +124,7 @@ def _simulated_sets(records: list[IterationRecord]) -> list[dict[str, float]]:
 
 def _phases(ctx: Context, stages: list[StageResult]) -> list[Phase]:
     study = ctx.study
-    ident = [e.name for e in study.identify_experiments()]
+    ident = study.identify_names()
     if study.phases:
         return [
             Phase(p.parameters, list(p.experiments) or ident, p.name, p.array, p.max_iterations)
@@ -168,7 +168,7 @@ def _run_phased(ctx: Context) -> list[StageResult]:
     missing = sorted(set(study.parameter_names) - {n for p in phases for n in p.parameters})
     if missing:
         raise StudyError(f"no phase identifies {missing}; add them to a [[phases]] entry")
-    ident = [e.name for e in study.identify_experiments()]
+    ident = study.identify_names()
     current, nfev = centre_values(study), sum(s.nfev for s in stages)
     by_name = {p.name: p for p in study.parameters}
     for i, ph in enumerate(phases):
@@ -271,7 +271,7 @@ def _single(
     at once; stopped at a limit, it goes on if the limit now allows. Its arrays run over
     the shared parameters, the per-experiment copies held (:func:`held_copies`).
     """
-    exps = [e.name for e in ctx.study.identify_experiments()]
+    exps = ctx.study.identify_names()
     params = list(ctx.study.shared_parameters)
     held = held_copies(ctx.study)
     limit = ctx.control.max_iterations
@@ -289,7 +289,7 @@ def _run_ungrouped(ctx: Context) -> StageResult:
     The simulations are not part of the study's ``nfev``.
     """
     study, progress = ctx.study, ctx.progress
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     if progress:
         progress("stage", {"name": "ungrouped", "message": "comparison: all parameters at once"})
     stage = _taguchi(

@@ -173,7 +173,7 @@ def _candidates(
 
 def _structure_stage(ctx: Context, factors: list[DiscreteFactor], make: Callable) -> Any:
     study = ctx.study
-    exps = [e.name for e in study.identify_experiments()]
+    exps = study.identify_names()
     names = [*study.parameter_names, *study.choice_names]
     evaluator = make(study).get(names, exps, {})
     run = StructureRun(
@@ -237,7 +237,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         cand, names = cands[i], studies[i].parameter_names
         if start in cand.extra.get("tried", []):
             return False  # refined from there already (the nesting unchanged since)
-        ev = evs[i].get(names, [e.name for e in studies[i].identify_experiments()], {})
+        ev = evs[i].get(names, studies[i].identify_names(), {})
         n_restart = sum(1 for s in all_stages[i] if s.name.startswith("restart")) + 1
         stage = polish(f"restart {n_restart}: {why}", short(studies[i]), start, ev, ctx.progress)
         cand.extra.setdefault("tried", []).append(dict(start))
@@ -251,7 +251,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         return True
 
     owned = {0}
-    names, exps = ctx.study.parameter_names, [e.name for e in ctx.study.identify_experiments()]
+    names, exps = ctx.study.parameter_names, ctx.study.identify_names()
     weighted = ctx.study.method.weighting == "noise"
     while True:
         settled = owned | {i for i, st in enumerate(all_stages) if stationary(st)}

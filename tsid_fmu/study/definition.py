@@ -338,6 +338,10 @@ class Study:
         """Return the experiments that are fitted (role ``identify``)."""
         return [e for e in self.experiments if e.role == "identify"]
 
+    def identify_names(self) -> list[str]:
+        """Return the names of the experiments that are fitted (role ``identify``)."""
+        return [e.name for e in self.identify_experiments()]
+
     @classmethod
     def from_toml(cls, path: str | Path) -> Study:
         """Read a study from a TOML file.
