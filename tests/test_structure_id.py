@@ -750,3 +750,40 @@ def test_an_embedding_tries_a_simpler_parameter_of_the_same_unit_as_a_nesting_va
         assert point["c"] == small.x["b"] and ev.nfev == 4  # all on bounds, start, bound, b
     else:
         assert point["c"] != small.x["b"] and ev.nfev > 4
+
+
+@pytest.mark.parametrize(
+    ("status", "stop", "holds", "calls"),
+    [(1, "ftol", False, 2), (0, "xtol", True, 1), (1, None, False, 1), (1, "ftol", None, 1)],
+)
+def test_a_refinement_stopped_short_of_its_test_is_refined_once_more(
+    monkeypatch, status, stop, holds, calls
+):
+    """A refinement that stopped at its tolerances (``stop``) but whose stationarity test
+    found a lower point (status 1) is refined again from its answer, once; one stopped
+    by its simulation limit (no ``stop``), shown stationary, or without a test, is not."""
+    from tsid_fmu.search import optima
+    from tsid_fmu.search.stage import StageResult
+
+    starts = []
+
+    def polish(name, study, start, ev, progress):
+        starts.append(dict(start))
+        if len(starts) == 1:
+            extra = {"stationarity": {"holds": holds} if holds is not None else {}}
+            if stop:
+                extra["stop"] = stop
+            x = {"a": 2.0, "b": 1.2, "c": 0.4}
+            return StageResult(name, "refinement", x, 5.0, 7, "first", status, extra=extra)
+        x = {"a": 2.0, "b": 1.3, "c": 0.4}
+        extra = {"stationarity": {"holds": True}, "stop": "xtol"}
+        return StageResult(name, "refinement", x, 4.0, 3, "second", 0, extra=extra)
+
+    monkeypatch.setattr(optima, "polish", polish)
+    stage = optima.settle("restart", _study(), {"a": 1.0, "b": 1.0, "c": 0.5}, None)
+    assert len(starts) == calls
+    if calls == 2:
+        assert starts[1] == {"a": 2.0, "b": 1.2, "c": 0.4}  # from the first's answer
+        assert stage.nfev == 10 and stage.cost == 4.0 and stage.status == 0
+    else:
+        assert stage.nfev == 7 and stage.message == "first"

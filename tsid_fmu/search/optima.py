@@ -49,6 +49,7 @@ __all__ = [
     "consistent",
     "follow",
     "measure",
+    "settle",
     "update",
     "warm_start",
 ]
@@ -148,10 +149,35 @@ def warm_start(
     costs = ev.evaluate([p for p, _ in pts]).costs[:, 0]
     finite = [i for i in range(len(pts)) if math.isfinite(costs[i])]
     start, source = pts[min(finite, key=lambda i: costs[i]) if finite else 0]
-    stage = polish(f"refinement from {source}", study, start, ev, progress)
+    stage = settle(f"refinement from {source}", study, start, ev, progress)
     stage.nfev = ev.nfev - n0
     stage.extra["start_from"] = source
     return stage, start, source
+
+
+def settle(
+    name: str, study: Study, start: Mapping[str, float], ev: Any, progress: Any = None
+) -> StageResult:
+    """Refine from ``start``; once more from its answer where its own test found lower.
+
+    A refinement that stops at its tolerances, but whose stationarity test then finds a
+    lower point along the Gauss-Newton step (status 1: not shown to be an optimum), is
+    refined again from its answer, once; its ``nfev`` counts both. Measured on the SISO
+    friction laws (law-2 data, dev seeds 105 and 106): a restart that stopped 1.2e-4 of
+    its cost short of that test left the chosen law not shown optimal, and so gave it a
+    study of its own (about 400 runs) that found nothing lower; refined again, it
+    passed the test in 10 runs.
+    """
+    stage = polish(name, study, start, ev, progress)
+    gate = stage.extra.get("stationarity") or {}
+    if stage.status != 1 or not stage.extra.get("stop") or gate.get("holds", True):
+        return stage
+    x = {n: float(stage.x[n]) for n in study.parameter_names}
+    again = polish(name, study, x, ev, progress)
+    again.nfev += stage.nfev
+    again.message = f"refined twice (the first stopped short of its test): {again.message}"
+    again.extra["start_cost"] = stage.extra.get("start_cost")
+    return again
 
 
 def follow(

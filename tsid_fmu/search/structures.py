@@ -49,9 +49,9 @@ from tsid_fmu.search.candidates import (
     stationary,
     warm_starts,
 )
-from tsid_fmu.search.context import Context, polish
+from tsid_fmu.search.context import Context
 from tsid_fmu.search.nesting import at_nesting_point, known
-from tsid_fmu.search.optima import consistent, update
+from tsid_fmu.search.optima import consistent, settle, update
 from tsid_fmu.search.phases import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate, decide
@@ -239,7 +239,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
             return False  # refined from there already (the nesting unchanged since)
         ev = evs[i].get(names, studies[i].identify_names(), {})
         n_restart = sum(1 for s in all_stages[i] if s.name.startswith("restart")) + 1
-        stage = polish(f"restart {n_restart}: {why}", short(studies[i]), start, ev, ctx.progress)
+        stage = settle(f"restart {n_restart}: {why}", short(studies[i]), start, ev, ctx.progress)
         cand.extra.setdefault("tried", []).append(dict(start))
         cand.nfev += stage.nfev
         if not stage.cost < cand.cost:
