@@ -25,6 +25,9 @@
    warm start and is not shown to be an optimum gets a study of its own, or, where the
    choice is a poor fit, the richest candidate without one
    (:func:`~tsid_fmu.search.candidates.next_own_study`); the comparison is made again.
+6. The chosen answer, where its stationarity test held by a trial alone (a cost made
+   rough by events) and two of its parameters act through their combination, is
+   refined in that combination (:mod:`tsid_fmu.search.combined`), and kept where lower.
 """
 
 from __future__ import annotations
@@ -49,6 +52,7 @@ from tsid_fmu.search.candidates import (
     stationary,
     warm_starts,
 )
+from tsid_fmu.search.combined import refine_in_combinations
 from tsid_fmu.search.context import Context
 from tsid_fmu.search.nesting import at_nesting_point, known
 from tsid_fmu.search.optima import consistent, settle, update
@@ -270,6 +274,14 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         if own_again(ctx, target, cands[target], owns[target], evs[target], all_stages):
             return StructureResult([outcome.stage, *all_stages[target]], studies[target],
                                    target, [], cands, factors, evs[target], True)  # fmt: skip
+    lower, runs = refine_in_combinations(studies[chosen], evs[chosen], all_stages[chosen],
+                                         ctx.progress)  # fmt: skip
+    cands[chosen].nfev += runs
+    if lower is not None:
+        ctx.store.write_stage(f"{cands[chosen].extra['folder']}/combinations", lower)
+        all_stages[chosen].append(lower)
+        update(cands[chosen], measure_in(ctx.study, evs[chosen], lower.x))
+        cands[chosen].origin += "; refined in the combinations the data fix"
     return _result(ctx, outcome, factors, (cands, all_stages, studies, evs), chosen, tied, nested)
 
 
