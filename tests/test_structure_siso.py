@@ -20,14 +20,6 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-LAW3_NOT_AT_OPTIMUM = (
-    "measured 2026-11-26 (benchmarks/structure.py, seed 1): law 3 is chosen and gets a "
-    "study of its own (the naive route's law-3 study), which stops at 1.011x SciPy's "
-    "least-squares cost from the truth, as the naive route does; on dev seed 101 SciPy's "
-    "least_squares from that answer stops at 1.010x too: local minima along the stick-slip "
-    "events (docs/structure-diagnosis.md)"
-)
-
 
 @functools.cache
 def _bench():
@@ -66,14 +58,7 @@ def test_quick_structure_benchmark_chooses_the_true_friction_law(law):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "law",
-    [
-        1,
-        2,
-        pytest.param(3, marks=pytest.mark.xfail(reason=LAW3_NOT_AT_OPTIMUM, strict=True)),
-    ],
-)
+@pytest.mark.parametrize("law", [1, 2, 3])
 def test_quick_structure_benchmark_reaches_the_optimum_within_the_chosen_law(law):
     r = _run(law)
     assert r["chosen"] == law, r
