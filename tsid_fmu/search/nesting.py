@@ -140,10 +140,11 @@ def _at_values(
     Each extra parameter in turn is set (in ``base``, in place) to the one of its
     :func:`_nesting_values` at which the outputs come closest to ``small``'s, where
     that is closer than before (one run a value). Measured on the SISO friction laws
-    (dev seeds 101 to 108, law-1 data): law 1's answer embedded in law 3 (``F_vm = 0``,
-    ``F_sm = F_cm``) in 4 to 6 runs; a least-squares fit of the three extra parameters
-    took 62 to 165, or failed. Returns the parameters not moved and the sum of squares
-    of the outputs' difference at ``base``.
+    (law-1 data): law 1's answer embedded in law 3 (``F_vm = 0``, ``F_sm = F_cm``),
+    exactly, in 7 runs (dev seeds 102 and 107); a least-squares fit of the three extra
+    parameters took 82 and 163 runs (dev seeds 101 and 102), and failed after 121 (107).
+    Returns the parameters not moved and the sum of squares of the outputs' difference
+    at ``base``.
     """
     r_small = small.extra["residuals"]
     now, rest = _gap(ev, base, r_small), []
