@@ -274,15 +274,19 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         if own_again(ctx, target, cands[target], owns[target], evs[target], all_stages):
             return StructureResult([outcome.stage, *all_stages[target]], studies[target],
                                    target, [], cands, factors, evs[target], True)  # fmt: skip
-    lower, runs = refine_in_combinations(studies[chosen], evs[chosen], all_stages[chosen],
-                                         ctx.progress)  # fmt: skip
-    cands[chosen].nfev += runs
-    if lower is not None:
-        ctx.store.write_stage(f"{cands[chosen].extra['folder']}/combinations", lower)
-        all_stages[chosen].append(lower)
-        update(cands[chosen], measure_in(ctx.study, evs[chosen], lower.x))
-        cands[chosen].origin += "; refined in the combinations the data fix"
     return _result(ctx, outcome, factors, (cands, all_stages, studies, evs), chosen, tied, nested)
+
+
+def _combinations(ctx: Context, i: int, found: tuple) -> None:
+    """Refine candidate ``i``'s answer in the combinations the data fix, where lower."""
+    cands, all_stages, studies, evs = found
+    lower, runs = refine_in_combinations(studies[i], evs[i], all_stages[i], ctx.progress)
+    cands[i].nfev += runs
+    if lower is not None:
+        ctx.store.write_stage(f"{cands[i].extra['folder']}/combinations", lower)
+        all_stages[i].append(lower)
+        update(cands[i], measure_in(ctx.study, evs[i], lower.x))
+        cands[i].origin += "; refined in the combinations the data fix"
 
 
 def _result(
@@ -294,7 +298,12 @@ def _result(
     tied: list[int],
     nested: Mapping[tuple[int, int], Any],
 ) -> StructureResult:
-    """Assemble the result: the arrays, the other structures, the comparison, the chosen."""
+    """Assemble the result: the arrays, the other structures, the comparison, the chosen.
+
+    The chosen answer is first refined in the combinations the data fix, where that
+    lowers it (:func:`_combinations`).
+    """
+    _combinations(ctx, chosen, found)
     cands, all_stages, studies, evs = found
     stages = [outcome.stage]
     for i, (cand, st) in enumerate(zip(cands, all_stages, strict=True)):
