@@ -113,15 +113,16 @@ def _reproduce(
     return _fit_extra(ev, study, small, base, extra, tol)
 
 
-def _nesting_values(study: Study, small: Candidate, name: str) -> list[float]:
+def _nesting_values(
+    study: Study, small: Candidate, name: str, units: Mapping[str, str]
+) -> list[float]:
     """Return the values of extra parameter ``name`` that often make a structure a simpler one.
 
     Its finite lower bound (a coefficient of 0 switches a term off), and the simpler
-    answer's values of its parameters in the same unit, within ``name``'s bounds (a
-    static friction force equal to the Coulomb force switches the Stribeck effect off;
-    a second time constant equal to the first adds nothing).
+    answer's values of its parameters in the same unit (``units``), within ``name``'s
+    bounds (a static friction force equal to the Coulomb force switches the Stribeck
+    effect off; a second time constant equal to the first adds nothing).
     """
-    units = study_units(study)
     lo, hi = study.bounds()[name]
     out = [float(lo)] if math.isfinite(lo) else []
     unit = units.get(name)
@@ -146,19 +147,9 @@ def _at_values(
     Returns the parameters not moved and the sum of squares of the outputs' difference
     at ``base``.
     """
-    r_small = small.extra["residuals"]
-    now, rest = _gap(ev, base, r_small), []
-    for n in extra:
-        best = None
-        for v in _nesting_values(study, small, n):
-            g = _gap(ev, {**base, n: v}, r_small) if v != base[n] else math.inf
-            if g < now:
-                now, best = g, v
-        if best is None:
-            rest.append(n)
-        else:
-            base[n] = best
-    return rest, now
+    units = study_units(study)  # the FMU's model description, read once
+    values = {n: _nesting_values(study, small, n, units) for n in extra}
+    return _move(ev, base, values, small.extra["residuals"])
 
 
 def _near_bounds(study: Study, x: Mapping[str, float], names: list[str]) -> list[str]:
@@ -250,15 +241,30 @@ def _at_bounds(
     sum of squares of the outputs' difference at ``base``.
     """
     bounds = study.bounds()
+    values = {n: [float(bounds[n][0])] if math.isfinite(bounds[n][0]) else [] for n in extra}
+    return _move(ev, base, values, r_small)
+
+
+def _move(
+    ev: Any, base: dict[str, float], values: Mapping[str, list[float]], r_small: np.ndarray
+) -> tuple[list[str], float]:
+    """Set each parameter of ``values``, in turn, to its value that reproduces best.
+
+    In ``base`` (in place), where the outputs come closer to ``r_small``'s than before
+    (one run a value, and one at ``base``). Returns the parameters not moved and the sum
+    of squares of the outputs' difference at ``base``.
+    """
     now, rest = _gap(ev, base, r_small), []
-    for n in extra:
-        lo = bounds[n][0]
-        trial = {**base, n: float(lo)} if math.isfinite(lo) and lo != base[n] else None
-        g = _gap(ev, trial, r_small) if trial is not None else math.inf
-        if trial is not None and g < now:
-            base[n], now = float(lo), g
-        else:
+    for n, candidates in values.items():
+        best = None
+        for v in candidates:
+            g = _gap(ev, {**base, n: v}, r_small) if v != base[n] else math.inf
+            if g < now:
+                now, best = g, v
+        if best is None:
             rest.append(n)
+        else:
+            base[n] = best
     return rest, now
 
 
