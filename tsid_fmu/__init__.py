@@ -9,7 +9,7 @@ The flat public API, over the layers of the data flow (see ``docs/architecture.m
   (:class:`ScreeningResult`);
 - :func:`load`: the :class:`IdentificationResult` of a finished study's results folder;
 - :class:`Study` with :class:`Parameter`, :class:`Choice` (a discrete factor),
-  :class:`Experiment` and :class:`Method`,
+  :class:`ModelChoice` (a choice among FMU files), :class:`Experiment` and :class:`Method`,
   built in Python or read with :meth:`Study.from_toml`;
 - the error types, all derived from :class:`TsidError`.
 """
@@ -38,6 +38,7 @@ from tsid_fmu.study import (
     ContributionOptions,
     Experiment,
     Method,
+    ModelChoice,
     Parameter,
     Phase,
     Study,
@@ -55,6 +56,7 @@ __all__ = [
     "FMUError",
     "IdentificationResult",
     "Method",
+    "ModelChoice",
     "Parameter",
     "Phase",
     "ResourceError",

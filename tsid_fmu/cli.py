@@ -154,10 +154,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         spec = dataclasses.replace(spec, interface=interface)
     with SerialEvaluator(spec) as ev:
         simulated = ev.simulate([values], count=False)[0]
-    print(
-        "parameters: "
-        + (", ".join(f"{k}={v:.6g}" for k, v in values.items()) or "the FMU's start values")
-    )
+    chosen = {c.name: c for c in study.choices}  # a choice as its label (model=Drag)
+    shown = [
+        f"{k}={chosen[k].label_of(v) if k in chosen else f'{v:.6g}'}" for k, v in values.items()
+    ]
+    print("parameters: " + (", ".join(shown) or "the FMU's start values"))
     for e, sim in zip(spec.experiments, simulated, strict=True):
         if sim.outputs is None:
             print(f"{e.name}: simulation failed: {sim.error}")

@@ -183,6 +183,12 @@ class DaskEvaluator(MemoEvaluator):
         self.client, self._own_client = _client(scheduler)
         self._open = True
         self.token = ""
+        if spec.variants is not None:  # the workers get one FMU file's bytes
+            self.close()
+            raise StudyError(
+                f"a choice among FMU files ({spec.variants.name}) does not run on a Dask "
+                "scheduler yet; run it with local workers (--workers N)"
+            )
         try:
             fmu_bytes = Path(spec.fmu).read_bytes()
         except OSError as exc:

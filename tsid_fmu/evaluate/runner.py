@@ -25,7 +25,7 @@ import numpy as np
 from tsid_fmu.errors import TsidError
 from tsid_fmu.evaluate.cost import Cost
 from tsid_fmu.evaluate.protocol import Simulated
-from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.fmu.compiled import warm_up
 from tsid_fmu.fmu.delay import delay_input, delayed_inputs, split_delays
@@ -133,33 +133,41 @@ class SetRunner:
         # with per-experiment copies: each experiment's latest outputs, by its own values
         copies = any(e.copies for e in spec.experiments)
         self.reuse: dict[tuple, np.ndarray] | None = {} if copies else None
-        self.sessions: list[FMUSession] = []
+        self.sessions: list[FMUSession] = []  # variant-major: variant k, experiment e
         self.fixed_delays: list[dict[str, float]] = []  # per experiment, by input name
+        variants = spec.variants
         try:
-            for i, e in enumerate(spec.experiments):
-                # the shared parameters and this experiment's own copies, by FMU variable
-                fmu_parameters = [
-                    n for n in spec.experiment_parameters(i) if delay_input(n) is None
-                ]
-                options: dict = {"hold": dict(e.hold)} if e.hold else {}
-                start, delays = split_delays({**spec.start_values, **e.start_values})
-                self.fixed_delays.append(delays)
-                self.sessions.append(
-                    FMUSession(
-                        spec.fmu,
-                        inputs=e.input_names,
-                        outputs=e.output_names,
-                        parameters=fmu_parameters,
-                        interface=spec.interface,  # type: ignore[arg-type]
-                        step_size=spec.step_size,
-                        tolerance=spec.tolerance,
-                        start_values=start,
-                        **options,
-                    )
-                )
+            for k in range(1 if variants is None else len(variants.fmus)):
+                for i, e in enumerate(spec.experiments):
+                    self.sessions.append(self._open(k, i, e))
         except BaseException:
             self.close()
             raise
+
+    def _open(self, k: int, i: int, e: PreparedExperiment) -> FMUSession:
+        """Open experiment ``i``'s session of variant ``k`` (the spec's FMU without variants)."""
+        spec, variants = self.spec, self.spec.variants
+        # the shared parameters and this experiment's own copies, by FMU variable
+        names = [n for n in spec.experiment_parameters(i) if delay_input(n) is None]
+        start, delays = split_delays({**spec.start_values, **e.start_values})
+        fmu = spec.fmu
+        if variants is not None:  # only what this variant has (the choice is none of it)
+            fmu, names = variants.fmus[k], variants.names(k, names)
+            start = variants.keep(k, start)
+        if k == 0:
+            self.fixed_delays.append(delays)
+        options: dict = {"hold": dict(e.hold)} if e.hold else {}
+        return FMUSession(
+            fmu,
+            inputs=e.input_names,
+            outputs=e.output_names,
+            parameters=names,
+            interface=spec.interface,  # type: ignore[arg-type]
+            step_size=spec.step_size,
+            tolerance=spec.tolerance,
+            start_values=start,
+            **options,
+        )
 
     def _simulate(self, e: int, r: int, params: Mapping[str, float]) -> np.ndarray:
         experiment = self.spec.experiments[e]
@@ -172,6 +180,12 @@ class SetRunner:
             # copy moved (the Jacobian's block-sparse columns), not this one's inputs
             self.reuse[key] = self.reuse.pop(key)
             return self.reuse[key].copy()
+        session = self.sessions[e]
+        variants = self.spec.variants
+        if variants is not None:  # the variant the set (or a fixed value) names
+            k = variants.index({**self.spec.start_values, **params})
+            session = self.sessions[k * len(self.spec.experiments) + e]
+            own = variants.keep(k, own)
         self.started += 1
         self.monitor.started(e, r, self.started)
         values, delays = split_delays(own)
@@ -182,7 +196,7 @@ class SetRunner:
             {**self.fixed_delays[e], **delays},
         )
         try:
-            y = self.sessions[e].simulate(experiment.time, inputs, values)
+            y = session.simulate(experiment.time, inputs, values)
         finally:
             self.monitor.finished()
         if key is not None and self.reuse is not None:

@@ -22,6 +22,7 @@ import numpy as np
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import Cost
+from tsid_fmu.evaluate.variants import Variants
 from tsid_fmu.evaluate.windows import (
     Ranges,
     check_ranges,
@@ -304,6 +305,9 @@ class EvaluationSpec:
         Largest communication step (Co-Simulation) or solver step hint (Model Exchange).
     tolerance : float, optional
         Relative tolerance of the Model Exchange solver (default: the solver's own).
+    variants : Variants, optional
+        A choice among FMU files (:mod:`tsid_fmu.evaluate.variants`): each set is then
+        simulated by the variant its value of the choice names (``fmu`` is the first).
 
     Raises
     ------
@@ -319,6 +323,7 @@ class EvaluationSpec:
     interface: str = "auto"
     step_size: float | None = None
     tolerance: float | None = None
+    variants: Variants | None = None
 
     def __post_init__(self) -> None:
         put = object.__setattr__

@@ -61,7 +61,7 @@ def write_result_files(result: IdentificationResult, out: Path) -> None:
     if result.jac is not None:
         data["jac"] = _write_jacobian(result.jac, out)
     if study is not None:
-        data = {"study": study.name, "fmu": str(study.fmu), **data}
+        data = {"study": study.name, "fmu": str(study.simulated_fmu), **data}
         if study.source is not None:  # the folder the paths of the copied study.toml start at
             data["study_folder"] = str(Path(study.source).resolve().parent)
     write_json(out / "result.json", seal(data))

@@ -44,7 +44,7 @@ def fmu_label(study: Any) -> str:
     """
     if study is None:
         return "-"
-    path = Path(study.fmu)
+    path = Path(getattr(study, "simulated_fmu", study.fmu))
     digest = _sha256(path)
     if digest is None:
         return path.name

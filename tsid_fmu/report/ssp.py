@@ -235,7 +235,10 @@ def write_model_ssp(result: IdentificationResult, out: Path) -> Path | None:
     }
     desc = {k: f"identified, unit {units[k]}" if units.get(k) else "identified" for k in values}
     desc.update(dict.fromkeys(study.start_values, "fixed in the study"))
-    return write_ssp(out / "model.ssp", study.fmu, values, name=study.name, descriptions=desc)
+    values = study.fmu_values(values)  # a choice among FMU files: its variant's own values
+    return write_ssp(
+        out / "model.ssp", study.simulated_fmu, values, name=study.name, descriptions=desc
+    )
 
 
 def validate_ssp(path: str | Path) -> list[str]:

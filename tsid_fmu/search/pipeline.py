@@ -95,7 +95,7 @@ def _taguchi(
         experiments=list(exps),
         starts=start_points(
             space,
-            ctx.study.fmu if method.start == "fmu" else None,
+            ctx.study.simulated_fmu if method.start == "fmu" else None,
             current if set(names) <= set(current) else None,
         ),
         handover=handover,

@@ -7,7 +7,7 @@
 """
 
 from tsid_fmu.study import schema
-from tsid_fmu.study.choice import Choice
+from tsid_fmu.study.choice import Choice, ModelChoice
 from tsid_fmu.study.definition import Study, load_study
 from tsid_fmu.study.prepare import load_experiment, prepare, serial_evaluator
 from tsid_fmu.study.schema import *  # noqa: F403 (the parts, listed once in schema.__all__)
@@ -15,6 +15,7 @@ from tsid_fmu.study.schema import *  # noqa: F403 (the parts, listed once in sch
 __all__ = [
     *schema.__all__,
     "Choice",
+    "ModelChoice",
     "Study",
     "load_experiment",
     "load_study",

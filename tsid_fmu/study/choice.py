@@ -5,12 +5,19 @@ A :class:`Choice` is written in a study's ``[parameters]`` table as::
     friction = { choices = ["coulomb", "stribeck"] }   # Enumeration item names
     damping_on = { choices = [true, false] }            # a Boolean
     n_masses = { choices = [1, 2] }                     # an Integer
+    model = { fmus = ["one_mass.fmu", "two_mass.fmu"] } # a choice among FMU files
 
 Its choices are the levels of its column in the orthogonal arrays (never re-leveled
 numerically: a choice stays one of the candidates until the structure procedure of
 :mod:`tsid_fmu.search.structure` fixes it). :func:`resolve_choices` checks each against
 the FMU's model description and turns the choices into the numbers the FMU is set to
 (Booleans 0/1, Enumeration items their declared integer values).
+
+A :class:`ModelChoice` is a choice among FMU files (model variants): its column's levels
+are the variants, numbered 0, 1, ... in the order given, and each parameter set is
+simulated by the variant its number names, with the parameters that variant has (a
+parameter another variant lacks has no effect in it: the structure procedure finds it
+not free there). Its name is not an FMU variable.
 """
 
 from __future__ import annotations
@@ -22,7 +29,7 @@ from typing import Any
 
 from tsid_fmu.errors import FMUError, StudyError
 
-__all__ = ["Choice", "resolve_choices"]
+__all__ = ["Choice", "ModelChoice", "resolve_choices"]
 
 _SETTABLE = ("parameter", "structuralParameter")
 
@@ -104,6 +111,54 @@ class Choice:
         return f"{value:g}"
 
 
+@dataclass
+class ModelChoice(Choice):
+    """A discrete factor whose candidates are FMU files (model variants).
+
+    Parameters
+    ----------
+    name : str
+        The factor's name (``model``); it must not be a variable of any variant.
+    choices : list of str or pathlib.Path
+        Two to five distinct ``.fmu`` files, each with the study's inputs and outputs.
+
+    Attributes
+    ----------
+    values : list of float
+        ``0, 1, ...``: the variant's position in ``choices``.
+    """
+
+    def __post_init__(self) -> None:
+        where = f"parameter {self.name!r}"
+        if isinstance(self.choices, str | bytes | Path) or not hasattr(self.choices, "__iter__"):
+            raise StudyError(f"{where}: fmus must be a list of FMU files, got {self.choices!r}")
+        given = list(self.choices)
+        if not all(isinstance(c, str | Path) and str(c) for c in given):
+            raise StudyError(f"{where}: fmus must be file names, got {given!r}")
+        self.choices = [str(Path(c).resolve()) for c in given]
+        # the checks of a Choice (count, distinct, at most 5) on the file names
+        Choice.__post_init__(self)
+        stems = [Path(c).stem for c in self.choices]
+        if len(set(stems)) != len(stems):
+            raise StudyError(f"{where}: two FMU files share a name {stems}; rename one")
+        self.values = [float(i) for i in range(len(self.choices))]
+
+    @property
+    def paths(self) -> list[Path]:
+        """The variants' FMU files, in order."""
+        return [Path(c) for c in self.choices]
+
+    @property
+    def labels(self) -> list[str]:
+        """The variants as a person reads them: the FMU files' names without ``.fmu``."""
+        return [Path(c).stem for c in self.choices]
+
+    def label_of(self, value: float) -> str:
+        """Return the variant whose number is ``value``."""
+        i = round(value)
+        return self.labels[i] if 0 <= i < len(self.choices) and i == value else f"{value:g}"
+
+
 def label(choice: Any) -> str:
     """Return a choice as a study file writes it, without quotes."""
     if isinstance(choice, bool):
@@ -153,6 +208,15 @@ def resolve_choices(fmu: Path, choices: list[Choice]) -> None:
         The FMU has no such variable, it is a Real (give levels), it cannot be set, or
         a choice is not a value of its type (the message names the parameter).
     """
+    models = [c for c in choices if isinstance(c, ModelChoice)]
+    choices = [c for c in choices if not isinstance(c, ModelChoice)]
+    if len(models) > 1:
+        raise StudyError(
+            f"parameters {', '.join(repr(m.name) for m in models)}: one choice among FMU "
+            "files (fmus = [...]) per study"
+        )
+    for m in models:
+        _check_variants(m)
     if not choices:
         return
     from tsid_fmu.fmu.info import read_fmu_description
@@ -188,3 +252,22 @@ def resolve_choices(fmu: Path, choices: list[Choice]) -> None:
         c.values = [_number(x, v, where) for x in c.choices]
         if len(set(c.values)) != len(c.values):
             raise StudyError(f"{where}: two choices set the same value {c.values}")
+
+
+def _check_variants(model: ModelChoice) -> None:
+    """Check that each variant is a readable FMU and that no variant has the name."""
+    from tsid_fmu.fmu.info import read_fmu_description
+
+    for path in model.paths:
+        where = f"parameter {model.name!r}: {path.name}"
+        if not path.is_file():
+            raise StudyError(f"{where}: no such file {path}")
+        try:
+            md = read_fmu_description(path)
+        except FMUError as exc:
+            raise StudyError(f"{where}: {exc}") from None
+        if any(v.name == model.name for v in md.modelVariables):
+            raise StudyError(
+                f"{where} has a variable named {model.name!r}; name the choice among FMU "
+                "files otherwise (it selects the file, it is not set in the FMU)"
+            )

@@ -25,6 +25,7 @@ one from a TOML file such as::
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,7 +33,7 @@ from typing import Any
 from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.errors import ArrayError, StudyError
 from tsid_fmu.study.checks import check_choice, check_number, check_text
-from tsid_fmu.study.choice import Choice, resolve_choices
+from tsid_fmu.study.choice import Choice, ModelChoice, resolve_choices
 from tsid_fmu.study.copies import Copy, expand, plan_copies
 from tsid_fmu.study.schema import (
     IDENTIFY,
@@ -90,6 +91,11 @@ class Study:
         chosen from the data with the Real parameters (structure identification,
         :mod:`tsid_fmu.search.structure`). A :class:`Choice` given among ``parameters``
         is moved here.
+    variants : ModelChoice, optional
+        The choice among FMU files, kept where the structure is fixed (``choices``
+        emptied, its number in ``start_values``); set from ``choices`` where it is one.
+        ``fmu`` is then the file the model description is read from (default: the
+        first variant).
     **method_options
         Method settings given directly (``cost="sse"``, ``replicates=2``, ...) replace
         those of ``method``; they read back as properties (``study.cost``). An unknown
@@ -108,6 +114,7 @@ class Study:
     phases: list[Phase] = field(default_factory=list)
     contribution: ContributionOptions = field(default_factory=ContributionOptions)
     choices: list[Choice] = field(default_factory=list)
+    variants: ModelChoice | None = None
 
     def __init__(
         self,
@@ -123,6 +130,7 @@ class Study:
         phases: list[Phase] | None = None,
         contribution: ContributionOptions | None = None,
         choices: list[Choice] | None = None,
+        variants: ModelChoice | None = None,
         **method_options: Any,
     ) -> None:
         unknown = sorted(set(method_options) - _METHOD_FIELDS)
@@ -142,6 +150,8 @@ class Study:
         )
         moved = [p for p in given if isinstance(p, Choice)] if isinstance(given, list) else []
         self.choices = [*moved, *(choices or [])]
+        models = [c for c in self.choices if isinstance(c, ModelChoice)]
+        self.variants = models[0] if models else variants
         self.experiments = experiments
         self.method = method
         self.start_values = dict(start_values or {})
@@ -216,6 +226,7 @@ class Study:
                 )
         self._check_phases(names, exp_names)
         self._check_choices(names)
+        self._check_variants()
         self._check_copies()
         factors = [len(p.levels) for p in self.shared_parameters]  # the arrays' factors
         select_array(factors + [len(c.choices) for c in self.choices], name=self.method.array)
@@ -267,6 +278,8 @@ class Study:
                 "[contribution] yet: identify the structure first, then fix it in start_values"
             )
         resolve_choices(self.fmu, self.choices)
+        if sum(isinstance(c, ModelChoice) for c in self.choices) > 1:
+            raise StudyError("one choice among FMU files (fmus = [...]) per study")
         try:
             select_array(
                 [len(p.levels) for p in self.parameters] + [len(c.choices) for c in self.choices]
@@ -276,6 +289,20 @@ class Study:
                 f"{exc}; with choices, give the Real parameters 3 levels (L18 and L36 take "
                 "2- and 3-level columns together, L50 one 2-level column beside 5-level ones)"
             ) from None
+
+    def _check_variants(self) -> None:
+        """Check a fixed choice among FMU files: its number, a start value, names a variant."""
+        v = self.variants
+        if v is None or v in self.choices:
+            return
+        if not isinstance(v, ModelChoice):
+            raise StudyError(f"variants must be a ModelChoice, got {type(v).__name__}")
+        value = self.start_values.get(v.name)
+        if value not in v.values:
+            raise StudyError(
+                f"the FMU variant is fixed: [study] start_values {v.name} must be one of "
+                f"{[int(x) for x in v.values]} ({', '.join(v.labels)}), got {value!r}"
+            )
 
     def _check_phases(self, names: list[str], exp_names: list[str]) -> None:
         for i, ph in enumerate(self.phases):
@@ -320,6 +347,28 @@ class Study:
     def identified_parameters(self) -> list[Parameter]:
         """Return the parameters identified: each per-experiment one replaced by its copies."""
         return expand(self.parameters, self.copies)
+
+    @property
+    def simulated_fmu(self) -> Path:
+        """The FMU file that simulates the study: the fixed variant's, else ``fmu``."""
+        v = self.variants
+        if v is None or v.name not in self.start_values:
+            return self.fmu
+        return v.paths[round(self.start_values[v.name])]
+
+    def fmu_values(self, values: Mapping[str, float]) -> dict[str, float]:
+        """Return ``values`` as :attr:`simulated_fmu` takes them.
+
+        Without a fixed choice among FMU files, ``values`` as they are; with one, without
+        the choice's number and the values of variables that variant does not have.
+        """
+        v = self.variants
+        if v is None or v.name not in self.start_values:
+            return dict(values)
+        from tsid_fmu.evaluate.variants import variants_of
+
+        index = round(self.start_values[v.name])
+        return variants_of(v.name, v.paths).keep(index, values)
 
     @property
     def choice_names(self) -> list[str]:

@@ -11,6 +11,7 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import NOISE_POWER, noise_level
 from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
+from tsid_fmu.evaluate.variants import variants_of
 from tsid_fmu.evaluate.windows import select, window_ranges
 from tsid_fmu.fmu.delay import delay_input
 from tsid_fmu.study.definition import Study
@@ -202,6 +203,7 @@ def prepare(
         indices = [by_name[n] for n in experiments]
     interface, step = solver_settings(study)
     names = tuple(study.parameter_names if parameters is None else parameters)
+    model = study.variants
     return EvaluationSpec(
         fmu=study.fmu,
         parameter_names=names,
@@ -211,6 +213,7 @@ def prepare(
         interface=interface,
         step_size=step,
         tolerance=study.method.tolerance,
+        variants=None if model is None else variants_of(model.name, model.paths),
     )
 
 

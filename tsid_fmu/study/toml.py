@@ -21,7 +21,7 @@ from typing import Any
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import StudyError
 from tsid_fmu.study.checks import parse_toml
-from tsid_fmu.study.choice import Choice
+from tsid_fmu.study.choice import Choice, ModelChoice
 from tsid_fmu.study.schema import ContributionOptions, Experiment, Method, Parameter, Phase
 
 __all__ = ["read_study_file", "study_from_document", "write_study_file"]
@@ -58,7 +58,7 @@ _DATA = {
     "window_weights",
     "initial",
 }
-_PARAM = {"levels", "min", "max", "unit", "choices", "per_experiment"}
+_PARAM = {"levels", "min", "max", "unit", "choices", "fmus", "per_experiment"}
 _PHASE = {"name", "parameters", "experiments", "array", "max_iterations"}
 _METHOD_TYPES: dict[str, type] = {
     "array": str,
@@ -232,6 +232,24 @@ def _experiments(doc: Mapping[str, Any], base: Path, where: _Where) -> list[Expe
     return [_experiment(e, base, where, f"[[experiments]] #{i + 1}", i) for i, e in enumerate(raw)]
 
 
+def _model_choice(
+    name: str, spec: Mapping[str, Any], base: Path, where: _Where, label: str
+) -> ModelChoice:
+    extra = sorted(set(spec) - {"fmus"})
+    if extra:
+        raise where.error(
+            label, f"gives fmus and {', '.join(extra)}: a choice among FMU files has fmus only"
+        )
+    files = _get(spec, "fmus", list, where, label)
+    if not all(isinstance(f, str) and f for f in files):
+        raise where.error(label, f"fmus must be a list of FMU file names, got {files!r}")
+    paths = [Path(f) if Path(f).is_absolute() else (base / f).resolve() for f in files]
+    for f, path in zip(files, paths, strict=True):
+        if not path.is_file():
+            raise where.error(label, f"fmus: no such file {f!r} ({path})")
+    return _build(where, "", ModelChoice, name=name, choices=paths)
+
+
 def _choice(name: str, spec: Mapping[str, Any], where: _Where, label: str) -> Choice:
     extra = sorted(set(spec) - {"choices"})
     if extra:
@@ -241,7 +259,7 @@ def _choice(name: str, spec: Mapping[str, Any], where: _Where, label: str) -> Ch
     return _build(where, "", Choice, name=name, choices=_get(spec, "choices", list, where, label))
 
 
-def _parameters(doc: Mapping[str, Any], where: _Where) -> list[Parameter | Choice]:
+def _parameters(doc: Mapping[str, Any], base: Path, where: _Where) -> list[Parameter | Choice]:
     out: list[Parameter | Choice] = []
     for name, spec in _table(doc, "parameters", where, True).items():
         label = f"[parameters] {name}"
@@ -252,6 +270,9 @@ def _parameters(doc: Mapping[str, Any], where: _Where) -> list[Parameter | Choic
         _check_keys(spec, _PARAM, where, label)
         if "choices" in spec:
             out.append(_choice(name, spec, where, label))
+            continue
+        if "fmus" in spec:
+            out.append(_model_choice(name, spec, base, where, label))
             continue
         levels = _get(spec, "levels", list, where, label)
         if levels is None:
@@ -330,23 +351,33 @@ def study_from_document(doc: Mapping[str, Any], base: Path, source: str) -> dict
     """
     where = _Where(source)
     _check_keys(doc, _TOP, where, "the top level")
-    st = _table(doc, "study", where, required=True)
+    params = doc.get("parameters")
+    fmus = isinstance(params, dict) and any(
+        isinstance(v, dict) and "fmus" in v for v in params.values()
+    )  # a choice among FMU files names the files: [study] may be left out
+    st = _table(doc, "study", where, required=not fmus)
     _check_keys(st, _STUDY, where, "[study]")
+    parameters = _parameters(doc, base, where)
     fmu_name = _get(st, "fmu", str, where, "[study]")
-    if fmu_name is None:
+    models = [c for c in parameters if isinstance(c, ModelChoice)]
+    if fmu_name is None and not models:
         raise where.error("[study]", "is missing the key 'fmu'")
-    fmu = Path(fmu_name) if Path(fmu_name).is_absolute() else (base / fmu_name).resolve()
+    if fmu_name is None:  # a choice among FMU files: the first variant's description
+        fmu = models[0].paths[0]
+    else:
+        fmu = Path(fmu_name) if Path(fmu_name).is_absolute() else (base / fmu_name).resolve()
     if not fmu.is_file():
         raise where.error("[study]", f"fmu: no such file {fmu}")
     return {
         "fmu": fmu,
-        "parameters": _parameters(doc, where),
+        "parameters": parameters,
         "experiments": _experiments(doc, base, where),
         "method": _method(doc, where),
         "start_values": _map(st, "start_values", float, where, "[study]"),
         "interface": _get(st, "interface", str, where, "[study]", "auto"),
         "step_size": _get(st, "step_size", float, where, "[study]"),
-        "name": _get(st, "name", str, where, "[study]", fmu.stem),
+        # the study file's name where the FMU is one of several variants
+        "name": _get(st, "name", str, where, "[study]", Path(source).stem if models else fmu.stem),
         "phases": _phases(doc, where),
         "contribution": _contribution(doc, where),
     }
@@ -452,7 +483,10 @@ def _document(fields: Mapping[str, Any], base: Path, stem: str) -> dict[str, Any
             spec["per_experiment"] = True
         params[p.name] = spec
     for c in fields.get("choices") or []:
-        params[c.name] = {"choices": list(c.choices)}
+        if isinstance(c, ModelChoice):
+            params[c.name] = {"fmus": [_relative(f, base) for f in c.paths]}
+        else:
+            params[c.name] = {"choices": list(c.choices)}
     doc: dict[str, Any] = {"study": study, "method": method}
     if leveling:
         doc["leveling"] = leveling

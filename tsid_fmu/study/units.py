@@ -31,6 +31,12 @@ def study_units(study: Any) -> dict[str, str]:
     if study is None:
         return {}
     units = fmu_units(study.fmu)
+    variants = getattr(study, "variants", None)
+    for path in [] if variants is None else variants.paths:  # every variant's, in order
+        units = {**fmu_units(path), **units}
+    simulated = getattr(study, "simulated_fmu", study.fmu)
+    if simulated != study.fmu:  # a fixed variant's own units first
+        units.update(fmu_units(simulated))
     units.update({p.name: p.unit for p in study.parameters if p.unit})
     # a per-experiment parameter's copies in its variable's unit
     units.update({c.name: units[c.variable] for c in study.copies if units.get(c.variable)})

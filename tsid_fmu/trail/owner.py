@@ -130,6 +130,9 @@ def fingerprint(study: Study) -> dict[str, Any]:
     _flatten("contribution", _plain(study.contribution), items)
     if study.choices:  # only where there are some: older folders keep their fingerprint
         items["choices"] = {c.name: [str(v) for v in c.choices] for c in study.choices}
+    if study.variants is not None:  # a choice among FMU files: each file's contents
+        for path in study.variants.paths:
+            items[f"variants.{path.name}.sha256"] = _file_hash(path)
     return items
 
 

@@ -109,9 +109,11 @@ class Deviation:
 
 
 def available_interfaces(spec: EvaluationSpec) -> tuple[str, ...]:
-    """Return the interfaces the spec's FMU declares, Co-Simulation first."""
-    md = read_fmu_description(spec.fmu)
-    return tuple(k for k, d in (("cs", md.coSimulation), ("me", md.modelExchange)) if d)
+    """Return the interfaces the spec's FMU (every variant) declares, Co-Simulation first."""
+    paths = spec.variants.fmus if spec.variants is not None else (spec.fmu,)
+    mds = [read_fmu_description(p) for p in paths]
+    kinds = (("cs", "coSimulation"), ("me", "modelExchange"))
+    return tuple(k for k, attr in kinds if all(getattr(md, attr) for md in mds))
 
 
 def output_noise(
@@ -158,10 +160,14 @@ def simulate_solver(
     e = spec.experiments[index]
     start, fixed = split_delays({**spec.start_values, **e.start_values})
     values, delays = split_delays(spec.experiment_values(index, x))
+    fmu, variants = spec.fmu, spec.variants
+    if variants is not None:  # the variant the set names, with the values it has
+        v = variants.index({**spec.start_values, **x})
+        fmu, start, values = variants.fmus[v], variants.keep(v, start), variants.keep(v, values)
     u = delayed_inputs(e.time, e.inputs, e.input_names, {**fixed, **delays})
     t, u = (e.time, u) if k == 1 else _finer_grid(e, u, k)
     with FMUSession(
-        spec.fmu,
+        fmu,
         e.input_names,
         e.output_names,
         parameters=list(values),
