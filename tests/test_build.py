@@ -117,6 +117,16 @@ def test_friction_switch_is_an_integer_parameter_and_law_2_is_lsea_siso(rebuilt,
     np.testing.assert_allclose(run(friction=3, F_sm=88.5), ref, rtol=1e-12, atol=1e-9)
     for law in (1, 3):
         assert np.max(np.abs(run(friction=law) - ref)) > 5.0
+    # parameter Integer damping: 1 (default) is LSEA_SISO, 0 is the spring without B_s
+    assert v["damping"].type == ("Integer" if version == 2 else "Int32")
+    assert v["damping"].causality == "parameter" and int(v["damping"].start) == 1
+    for law in (1, 2, 3):
+        off = run(friction=law, damping=0)
+        np.testing.assert_allclose(off, run(friction=law, B_s=0.0), rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(
+            off, run(friction=law, damping=0, B_s=7.0), rtol=1e-12, atol=1e-9
+        )
+        assert np.max(np.abs(off - run(friction=law))) > 1.0  # B_s = 2.5 acts when on
 
 
 def test_build_is_byte_reproducible_and_selects_versions(rebuilt, tmp_path):
