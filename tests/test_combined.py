@@ -112,3 +112,26 @@ def test_a_pairs_ratio_is_measured_again_with_steps_matched_to_it():
     r0 = ev.residuals(START)
     i, j, a = matched_ratio(ev, START, ["v", "b"], r0, (0, 1, 1.3))
     assert (i, j) == (0, 1) and abs(a - 1.0) < 1e-4 and ev.nfev == 4
+
+
+def test_a_least_squares_that_cannot_go_on_leaves_the_best_set_so_far(monkeypatch):
+    """SciPy's trust-region step can fail on a Jacobian it cannot factor (measured: law-3
+    dev seed 114, "array must not contain infs or NaNs" in its SVD). The refinement then
+    answers with the lowest set it scored, untested, instead of raising."""
+    import scipy.optimize
+
+    real = scipy.optimize.least_squares
+
+    def failing(fun, x0, **kwargs):
+        kwargs["max_nfev"] = 4
+        real(fun, x0, **kwargs)  # a few steps along the valley, then SciPy's failure
+        raise ValueError("array must not contain infs or NaNs")
+
+    monkeypatch.setattr(scipy.optimize, "least_squares", failing)
+    ev = CurveEvaluator(_model, MEASURED, 0.001)
+    r0 = ev.residuals(START)
+    pairs = parallel_pairs(physical_jacobian(ev, START, ["v", "b"], r0))
+    start_cost = ev.cost(**START)
+    x, cost, runs, gate = combined_refinement(ev, SPACE, START, pairs, 60)
+    assert gate is None and 0 < runs and cost < start_cost
+    assert cost == pytest.approx(ev.cost(**x)) and ev.cost(**x) < start_cost

@@ -188,7 +188,7 @@ def combined_refinement(
         scored = ev.evaluate([p])
         r = scored.residuals[0] if scored.residuals else None
         cost = float(scored.costs[0, 0])
-        if r is None or not math.isfinite(cost):
+        if r is None or not math.isfinite(cost) or not np.isfinite(r).all():
             return np.full(r0.size if r0 is not None else 1, _FAILED)
         r0 = np.asarray(r, float) if r0 is None else r0
         if cost < best[0]:
@@ -200,6 +200,10 @@ def combined_refinement(
             fun, np.array(z0), method="trf", x_scale="jac", ftol=_FTOL, max_nfev=limit
         )
     except StopIteration:
+        return best[1], float(best[0]), ev.nfev - n0, None
+    except (ValueError, np.linalg.LinAlgError):
+        # SciPy's trust-region step failed (a Jacobian it cannot factor: failed runs
+        # beside finite ones): the best set so far is the answer, with no test
         return best[1], float(best[0]), ev.nfev - n0, None
     inf = [math.inf] * (2 * len(pairs))
     lower = np.array([space.s_lower[k] for k in rest] + [-v for v in inf])
