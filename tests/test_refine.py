@@ -73,3 +73,22 @@ def test_refinement_simulates_the_start_when_the_caller_has_no_residuals():
     assert len(ev.asked) == result.nfev == with_start.nfev + 1
     assert ev.asked[0] == pytest.approx(start, rel=1e-12)
     assert result.cost == with_start.cost
+
+
+def test_a_least_squares_that_cannot_go_on_keeps_the_best_set_and_says_why(monkeypatch):
+    """SciPy's step can fail on a Jacobian it cannot factor; the stage then answers with
+    the lowest set scored, not shown to be an optimum (status 1), instead of raising."""
+    import scipy.optimize
+
+    real = scipy.optimize.least_squares
+
+    def failing(fun, x0, **kwargs):
+        kwargs["max_nfev"] = 3
+        real(fun, x0, **kwargs)
+        raise ValueError("array must not contain infs or NaNs")
+
+    monkeypatch.setattr(scipy.optimize, "least_squares", failing)
+    result, ev, start = _stage()
+    assert result.status == 1 and "could not go on" in result.message
+    assert result.cost < ResidualEvaluator().cost(**start)  # the steps it took are kept
+    assert result.cost == pytest.approx(ev.cost(**result.x))

@@ -539,6 +539,28 @@ def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_f
     assert ev.nfev <= 25  # run on to its end, the fit takes 36 runs here (limit 40)
 
 
+def test_an_embedding_fit_that_scipy_cannot_go_on_with_is_not_reproduced(monkeypatch):
+    """SciPy's step can fail on a Jacobian it cannot factor: the fit then says "not
+    reproduced" (the embedding's other routes follow), instead of raising."""
+    import scipy.optimize
+
+    from tsid_fmu.search.nesting import REPRODUCE, _fit_extra
+
+    def failing(fun, x0, **kwargs):
+        fun(x0)
+        raise ValueError("array must not contain infs or NaNs")
+
+    monkeypatch.setattr(scipy.optimize, "least_squares", failing)
+    measured = _data(a=2.0, b=1.3, c=0.0, on=0)
+    study = _study()
+    small = _toy_candidate(study, measured, 0.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=0")
+    big = _toy_candidate(study, measured, 1.0, {"a": 2.0, "b": 1.3, "c": 0.5}, "on=1")
+    ev = _Evaluators(measured, {"on": 1.0}).get(study.parameter_names, [], {})
+    base = {**big.x, "a": small.x["a"], "b": small.x["b"]}
+    ok, point = _fit_extra(ev, study, small, base, ["c"], REPRODUCE * small.chi2 / small.n)
+    assert not ok and point["c"] == pytest.approx(base["c"])
+
+
 def test_a_nesting_check_puts_extra_parameters_near_their_bounds_on_them_first():
     """The check at the answers: c's nesting value, 0, is its lower bound, which log
     coordinates reach only at minus infinity. The richer answer's c = 0.005 lies within

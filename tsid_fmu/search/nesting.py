@@ -220,6 +220,8 @@ def _fit_extra(
         )
     except _Reproduced as done:
         return True, at(np.asarray(done.args[0]))
+    except (ValueError, np.linalg.LinAlgError):  # SciPy could not go on: not reproduced
+        return False, at(np.clip(start, lo, hi))
     return 2 * float(fit.cost) <= tol, at(fit.x)
 
 

@@ -223,6 +223,8 @@ def _solve(
         return 0, f"least squares: {stop}; stopped before another Jacobian"
     except _Budget:
         return 1, f"simulation limit ({limit}) of the refinement reached"
+    except (ValueError, np.linalg.LinAlgError) as exc:  # the best set so far is kept
+        return 1, f"least squares could not go on ({exc})"
 
 
 def refine_stage(
