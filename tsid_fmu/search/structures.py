@@ -38,6 +38,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from tsid_fmu.search.boundary import score_step, significant
 from tsid_fmu.search.candidates import (
     best_point,
     embedded_answers,
@@ -254,9 +255,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         cand.origin += f"; restarted {why}"
         return True
 
-    owned = {0}
-    names, exps = ctx.study.parameter_names, ctx.study.identify_names()
-    weighted = ctx.study.method.weighting == "noise"
+    owned, left = {0}, set()  # left: the (simpler, richer) pairs whose point was tested
     while True:
         settled = owned | {i for i, st in enumerate(all_stages) if stationary(st)}
         nested = consistent(
@@ -265,8 +264,10 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         started |= set(nested)
         degenerate = {(s, r) for (s, r), e in nested.items()
                       if at_nesting_point(ctx.study, cands[s], cands[r], e)}  # fmt: skip
+        if _leave(ctx, (cands, studies, evs), degenerate, left, restart):
+            continue  # a richer answer moved off its nesting point: compare again
         chosen, tied = decide(cands, set(nested), degenerate)
-        floor = noise_floor(evs[chosen].get(names, exps, {}), weighted)
+        floor = _floor(ctx.study, evs[chosen])
         target = next_own_study(chosen, owned, all_stages, cands, floor)
         if target is None:
             break
@@ -275,6 +276,40 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
             return StructureResult([outcome.stage, *all_stages[target]], studies[target],
                                    target, [], cands, factors, evs[target], True)  # fmt: skip
     return _result(ctx, outcome, factors, (cands, all_stages, studies, evs), chosen, tied, nested)
+
+
+def _floor(study: Study, evs: Evaluators) -> float:
+    """Return the noise floor of a structure's cost (every Real parameter, fitted data)."""
+    ev = evs.get(study.parameter_names, study.identify_names(), {})
+    return noise_floor(ev, study.method.weighting == "noise")
+
+
+def _leave(
+    ctx: Context, found: tuple, degenerate: set[tuple[int, int]], left: set, restart: Callable
+) -> bool:
+    """Test each richer answer at a nesting point for a lower point off it; refine there.
+
+    The score test of :mod:`~tsid_fmu.search.boundary`, once per pair: where moving off
+    the nesting point predicts a decrease beyond BIC's charge for one parameter, the
+    richer candidate is restarted from that step (kept where lower). Returns whether one
+    moved.
+    """
+    cands, studies, evs = found
+    moved = False
+    for s, r in sorted(degenerate - left):
+        left.add((s, r))
+        big, small, sub = cands[r], cands[s], studies[r]
+        names = sub.parameter_names
+        extra = [n for n in big.active if n not in small.active]
+        ev = evs[r].get(names, sub.identify_names(), {})
+        gap, point, runs = score_step(
+            ev, names, big.x, big.extra["residuals"], extra, sub.first_levels(), sub.bounds()
+        )
+        big.nfev += runs
+        if significant(gap, big.chi2, big.n):
+            why = f"off {small.label}'s nesting point (score test: chi2 {gap:.3g} lower)"
+            moved = restart(r, point, why) or moved
+    return moved
 
 
 def _combinations(ctx: Context, i: int, found: tuple) -> None:

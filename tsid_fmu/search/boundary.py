@@ -1,0 +1,105 @@
+"""Leaving a nesting point: whether a richer structure gains by moving off the simpler fit.
+
+A richer candidate refined from a simpler one's answer embedded starts where its extra
+parameters make it the simpler structure (a damping coefficient of 0). Where such a
+value is a lower bound, the search's logarithmic coordinates put it three decades below
+the first levels, where a step in the coordinate hardly moves the value: the refinement
+stays, its stationarity test holds there (the gradient per coordinate is tiny), and the
+comparison then reads the richer answer as the simpler structure ("never wins").
+Measured on the SISO plant with spring damping (``B_s`` = 2.5 on data of an independent
+simulator, dev seed 101): the damped structure stopped at ``B_s`` = 1e-4, while least
+squares at it lies 341 below the undamped fit in chi-square.
+
+The test here is the score (Lagrange multiplier) test of the nesting point, made in the
+parameters' own units: the Gauss-Newton step within the bounds from the richer answer
+(SciPy's ``lsq_linear`` on the linearised residuals, every parameter together), with
+forward differences scaled to each extra parameter's first levels (not to its value,
+which may be 0). It predicts the decrease of chi-square that moving off the nesting
+point gives; where that exceeds what BIC charges for one parameter (``ln n`` noise
+variances, ``chi2 / n`` each), the richer candidate is refined again from that step.
+Under the simpler structure the statistic is about chi-square with one degree of freedom,
+which exceeds ``ln n`` (about 10 for 20 000 residuals) with a probability near 0.2 %.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from tsid_fmu.search.combined import _residuals
+
+__all__ = ["RELATIVE_STEP", "SPAN_STEP", "score_step", "significant"]
+
+RELATIVE_STEP = 1e-6
+"""Forward-difference step of a shared parameter, relative to its value."""
+SPAN_STEP = 1e-4
+"""Forward-difference step of an extra parameter, as a fraction of its first levels' range
+(its value at the nesting point may be 0 or 1e-4: a step relative to it measures nothing)."""
+
+
+def score_step(
+    ev: Any,
+    names: Sequence[str],
+    x: Mapping[str, float],
+    r0: np.ndarray,
+    extra: Sequence[str],
+    levels: Mapping[str, Sequence[float]],
+    bounds: Mapping[str, tuple[float, float]],
+) -> tuple[float, dict[str, float], int]:
+    """Return the score test's predicted decrease at ``x``, the step's point, and the runs.
+
+    Parameters
+    ----------
+    ev : Evaluator
+        The richer structure's evaluator of ``names`` (noise-weighted residuals).
+    names : sequence of str
+        Its Real parameters.
+    x, r0 : mapping, numpy.ndarray
+        Its answer at the nesting point and the residuals there.
+    extra : sequence of str
+        The parameters it has beyond the simpler structure.
+    levels, bounds : mapping
+        First levels and physical bounds by parameter.
+
+    Returns
+    -------
+    gap : float
+        The decrease of chi-square the projected Gauss-Newton step predicts (>= 0).
+    point : dict
+        ``x`` moved by that step (within the bounds).
+    runs : int
+        Simulations spent (one per parameter).
+    """
+    z = np.array([float(x[n]) for n in names])
+    lower = np.array([bounds[n][0] for n in names], dtype=float)
+    upper = np.array([bounds[n][1] for n in names], dtype=float)
+    steps = []
+    for k, n in enumerate(names):
+        h = RELATIVE_STEP * max(abs(z[k]), 1e-12)
+        if n in extra:
+            h = max(h, SPAN_STEP * (max(levels[n]) - min(levels[n])))
+        steps.append(h if z[k] + h <= upper[k] else -h)
+    sets = [{**x, n: float(z[k] + steps[k])} for k, n in enumerate(names)]
+    n0 = ev.nfev
+    cols = _residuals(ev, sets, r0.size)
+    jac = np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
+    if not np.isfinite(jac).all():
+        return 0.0, dict(x), ev.nfev - n0
+    # the Gauss-Newton step within the bounds, all parameters together: at a nesting
+    # value on a bound, the extra parameter's own gradient may point out of the bounds
+    # while a step with the others compensating lowers the cost (B_s up, F_vm down)
+    r = np.asarray(r0, float)
+    step = lsq_linear(jac, -r, bounds=(lower - z, upper - z)).x
+    gap = float(r @ r) - float(np.sum((r + jac @ step) ** 2))
+    moved = np.clip(z + step, lower, upper)
+    point = {**x, **{n: float(v) for n, v in zip(names, moved, strict=True)}}
+    return max(gap, 0.0), point, ev.nfev - n0
+
+
+def significant(gap: float, chi2: float, n: int) -> bool:
+    """Whether a predicted decrease exceeds BIC's charge for one parameter (``ln n`` variances)."""
+    return n > 1 and math.isfinite(chi2) and gap > math.log(n) * chi2 / n
