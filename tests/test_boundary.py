@@ -69,3 +69,20 @@ def test_a_nesting_point_the_data_support_is_left_alone():
 def test_significant_means_more_than_bics_charge_for_one_parameter(gap, expected):
     """ln(800) = 6.68 noise variances of chi2 / n = 1 each."""
     assert significant(gap, 800.0, 800) is expected
+
+
+def test_a_prediction_the_steps_own_cost_does_not_bear_out_moves_nothing():
+    """The score test's forward differences carry a model's event noise; only a step
+    whose own cost is lower by the threshold is refined from (two runs check it)."""
+    from tsid_fmu.search.boundary import tried
+
+    ev = CurveEvaluator(_model, MEASURED, SIGMA)
+    r0 = ev.residuals(AT_NESTING)
+    chi2 = float(r0 @ r0)
+    _, point, _ = score_step(ev, NAMES, AT_NESTING, r0, ["b"], LEVELS, BOUNDS)
+    best, cost, runs = tried(ev, AT_NESTING, point)
+    assert runs == 2 and significant(chi2 - cost, chi2, r0.size) and best["b"] > 0.5
+    # a wrong prediction (b up without v down: the motion worsens) is not borne out
+    wrong = {"v": 54.0, "b": 2.5}
+    _, cost, _ = tried(ev, AT_NESTING, wrong)
+    assert not significant(chi2 - cost, chi2, r0.size)

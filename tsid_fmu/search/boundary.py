@@ -16,7 +16,8 @@ parameters' own units: the Gauss-Newton step within the bounds from the richer a
 forward differences scaled to each extra parameter's first levels (not to its value,
 which may be 0). It predicts the decrease of chi-square that moving off the nesting
 point gives; where that exceeds what BIC charges for one parameter (``ln n`` noise
-variances, ``chi2 / n`` each), the richer candidate is refined again from that step.
+variances, ``chi2 / n`` each), the step and its half are simulated (:func:`tried`), and
+where one of them is lower by as much, the richer candidate is refined again from it.
 Under the simpler structure the statistic is about chi-square with one degree of freedom,
 which exceeds ``ln n`` (about 10 for 20 000 residuals) with a probability near 0.2 %.
 """
@@ -32,7 +33,7 @@ from scipy.optimize import lsq_linear
 
 from tsid_fmu.search.combined import _residuals
 
-__all__ = ["RELATIVE_STEP", "SPAN_STEP", "score_step", "significant"]
+__all__ = ["RELATIVE_STEP", "SPAN_STEP", "score_step", "significant", "tried"]
 
 RELATIVE_STEP = 1e-6
 """Forward-difference step of a shared parameter, relative to its value."""
@@ -98,6 +99,24 @@ def score_step(
     moved = np.clip(z + step, lower, upper)
     point = {**x, **{n: float(v) for n, v in zip(names, moved, strict=True)}}
     return max(gap, 0.0), point, ev.nfev - n0
+
+
+def tried(
+    ev: Any, x: Mapping[str, float], point: Mapping[str, float]
+) -> tuple[dict[str, float], float, int]:
+    """Score the step's point and its half (two runs); return the lower, its cost, the runs.
+
+    On a model with events the forward differences of the score test carry the events'
+    noise, and its prediction with them: measured on the SISO plant on Coulomb-friction
+    data, it predicted 180 to 450 at law 2's and law 3's nesting points, where the
+    refinements from its step found nothing lower (about 150 runs spent). Only a step
+    whose own cost is lower by more than the test's threshold is refined from.
+    """
+    half = {n: 0.5 * (float(x[n]) + float(point[n])) for n in point}
+    n0 = ev.nfev
+    costs = ev.evaluate([dict(point), half]).costs[:, 0]
+    k = int(np.argmin(costs))
+    return ([dict(point), half][k], float(costs[k]), ev.nfev - n0)
 
 
 def significant(gap: float, chi2: float, n: int) -> bool:

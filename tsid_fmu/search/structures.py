@@ -38,7 +38,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from tsid_fmu.search.boundary import score_step, significant
+from tsid_fmu.search.boundary import score_step, significant, tried
 from tsid_fmu.search.candidates import (
     best_point,
     embedded_answers,
@@ -290,9 +290,9 @@ def _leave(
     """Test each richer answer at a nesting point for a lower point off it; refine there.
 
     The score test of :mod:`~tsid_fmu.search.boundary`, once per pair: where moving off
-    the nesting point predicts a decrease beyond BIC's charge for one parameter, the
-    richer candidate is restarted from that step (kept where lower). Returns whether one
-    moved.
+    the nesting point predicts a decrease beyond BIC's charge for one parameter, and
+    the step (or its half) gives one, the richer candidate is restarted from there (kept
+    where lower). Returns whether one moved.
     """
     cands, studies, evs = found
     moved = False
@@ -306,8 +306,12 @@ def _leave(
             ev, names, big.x, big.extra["residuals"], extra, sub.first_levels(), sub.bounds()
         )
         big.nfev += runs
-        if significant(gap, big.chi2, big.n):
-            why = f"off {small.label}'s nesting point (score test: chi2 {gap:.3g} lower)"
+        if not significant(gap, big.chi2, big.n):
+            continue
+        point, cost, runs = tried(ev, big.x, point)  # the prediction, checked by two runs
+        big.nfev += runs
+        if significant(big.cost - cost, big.cost, big.n):
+            why = f"off {small.label}'s nesting point (score test: {big.cost - cost:.3g} lower)"
             moved = restart(r, point, why) or moved
     return moved
 
