@@ -1,0 +1,258 @@
+"""Structure identification on the SISO plant: spring damping on or off, from the data.
+
+    python benchmarks/structure_damping.py [--seeds 10] [--first-seed 1] [--workers K]
+                                           [--joint] [--no-naive] [--out FILE]
+
+Data: ``examples/lsea_siso/friction_laws.py`` (the independent simulator, piecewise exact
+for law 2) of the SISO rig (load cells 4 N each, encoder 1 um), friction law 2, with the
+spring damping on (``B_s`` = 2.5 N.s/m, Table IV) or off (``B_s`` = 0), over noise seeds.
+Model: ``fmus/LSEA_SISO_Friction.fmu`` (``parameter Integer damping``, 1 on, 0 off).
+
+For each data set:
+
+* **structure**: one study with ``damping = { choices = [0, 1] }`` beside law 2's Real
+  parameters (``benchmarks/structure.py``'s first levels), friction fixed at law 2;
+  with ``--joint`` also ``friction = { choices = [1, 2, 3] }`` and law 3's parameters
+  (six candidate structures);
+* **naive**: the same study with damping fixed (and only that structure's parameters),
+  once per choice, the lowest BIC its choice;
+* **reference**: SciPy ``least_squares`` at the chosen structure from the truth (where
+  the true one is chosen) or from tsid's answer, in the same cost.
+
+Printed: the confusion matrix (true damping against the chosen one), the worst relative
+error of the true structure's parameters, the cost over the reference's, and the
+simulations of the structure study and the naive route, with their ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import statistics
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import structure as base
+
+from tsid_fmu import Choice, Experiment, Parameter, Study, identify
+from tsid_fmu.search.selection import information
+
+laws = base.laws
+#: Law 2's Real parameters with damping on; off, B_s has no effect.
+PARAMS = {1: base.LAW_PARAMS[2], 0: [n for n in base.LAW_PARAMS[2] if n != "B_s"]}
+
+
+def truth(on: int) -> dict[str, float]:
+    """The true parameters: Table IV, with B_s = 0 where the damping is off."""
+    return {**laws.TRUTH[2], **({} if on else {"B_s": 0.0})}
+
+
+def study(on: int, seed: int, fixed: int | None = None, joint: bool = False) -> Study:
+    """The structure study on damping-``on`` data (``fixed``: the naive study of one)."""
+    data = laws.make_data(2, seed, truth(on))
+    names = PARAMS[fixed] if fixed is not None else (base.LAW_PARAMS[3] if joint else PARAMS[1])
+    levels = base.LEVELS
+    params: list = [Parameter(n, levels[n][0], min=levels[n][1], max=math.inf) for n in names]
+    start: dict[str, float] = {"V_z": laws.base.V_Z}
+    if fixed is not None:
+        start.update(damping=fixed, friction=2)
+    else:
+        params.append(Choice("damping", [0, 1]))
+        if joint:
+            params.append(Choice("friction", [1, 2, 3]))
+        else:
+            start["friction"] = 2
+    exp = Experiment(
+        data,
+        inputs={"F_m": "F_m"},
+        outputs={"F_o": "F_o", "x_m": "x_m"},
+        derived={"F_o": "F_of - F_or"},
+        noise={"x_m": base.ENCODER_SIGMA},
+        name="measured",
+    )
+    return Study(
+        fmu=base.FMU, parameters=params, experiments=[exp], start_values=start,
+        method=base.METHOD,
+        name=f"damping{on}_seed{seed}" + ("" if fixed is None else f"_fixed{fixed}"),
+    )  # fmt: skip
+
+
+def reference(on: int, seed: int, chosen: int, start: dict[str, float]) -> float:
+    """SciPy least_squares at damping ``chosen`` (law 2) from ``start``: its chi2."""
+    from scipy.optimize import least_squares
+
+    res, ev = base.residuals_of(study(on, seed, fixed=chosen))
+    names = PARAMS[chosen]
+    lo = np.array([base.LEVELS[n][1] for n in names])
+    x0 = np.maximum(np.array([start[n] for n in names], dtype=float), lo + 1e-9)
+    scale = np.abs(x0) + 1e-6
+    out = least_squares(
+        lambda s: res(dict(zip(names, s * scale, strict=True))),
+        x0 / scale,
+        bounds=(lo / scale, np.inf),
+        method="trf",
+        x_scale="jac",
+    )
+    ev.close()
+    return float(out.fun @ out.fun)
+
+
+def structure_route(on: int, seed: int, joint: bool) -> dict:
+    """The structure study on one data set, with the reference at its choice."""
+    t0 = time.perf_counter()
+    out = identify(study(on, seed, joint=joint), workers=1, plots=False)
+    s = out.extra["structure"]
+    chosen = int(s["values"]["damping"])
+    law = int(s["values"].get("friction", 2))
+    x = {k: float(v) for k, v in out.params.items() if k not in ("damping", "friction")}
+    right = chosen == on and law == 2
+    ratio, err = math.nan, math.nan
+    if law == 2:  # the cost at the chosen damping, over least squares there
+        fixed = study(on, seed, fixed=chosen)
+        chi2, _ = base.chi2_at(fixed, {n: x[n] for n in PARAMS[chosen]})
+        start = truth(on) if right else x
+        ratio = chi2 / reference(on, seed, chosen, {**x, **start})
+    if right:
+        err = max(abs(x[k] / truth(on)[k] - 1) for k in PARAMS[on])
+    return {
+        "on": on, "seed": seed, "chosen": chosen, "law": law,
+        "tied": bool(s.get("indistinguishable")), "why": s.get("why", ""),
+        "error": err, "ratio": ratio, "nfev": out.nfev,
+        "stages": {st.name: st.nfev for st in out.stages},
+        "seconds": time.perf_counter() - t0,
+    }  # fmt: skip
+
+
+def naive_route(on: int, seed: int, cand: int) -> dict:
+    """The naive study of damping ``cand`` on one data set: its simulations and BIC."""
+    t0 = time.perf_counter()
+    nst = study(on, seed, fixed=cand)
+    nout = identify(nst, workers=1, plots=False)
+    c2, n = base.chi2_at(nst, {k: float(nout.params[k]) for k in PARAMS[cand]})
+    bic = information(c2, n, len(PARAMS[cand]))[1]
+    return {"nfev": nout.nfev, "bic": bic, "seconds": time.perf_counter() - t0}
+
+
+def _task(task: tuple) -> tuple[tuple, dict]:
+    kind, on, seed, cand, joint = task
+    if kind == "structure":
+        return task, structure_route(on, seed, joint)
+    return task, naive_route(on, seed, cand)
+
+
+def line(r: dict) -> str:
+    """One data set's result as a line."""
+    return (
+        f"damping {r['on']} seed {r['seed']}: chose damping {r['chosen']} law {r['law']}"
+        f"{' (indist.)' if r['tied'] else ''}, naive {r.get('naive')}, error "
+        f"{100 * r['error']:.3g} %, cost ratio {r['ratio']:.6f}, sims {r['nfev']} vs naive "
+        f"{r.get('naive_nfev', 0)} ({r['seconds']:.0f} s): {r['why']}\n    simulations by "
+        "stage: " + ", ".join(f"{k} {v}" for k, v in r["stages"].items())
+    )
+
+
+def table(rows: list[dict]) -> list[str]:
+    """The printed (Markdown) tables."""
+    lines = [
+        "| true damping | chosen off | chosen on | other law | indist. | naive (BIC) off / on |",
+        "|---|---|---|---|---|---|",
+    ]
+    for on in (0, 1):
+        rs = [r for r in rows if r["on"] == on]
+        if not rs:
+            continue
+        pick = [sum(1 for r in rs if not r["tied"] and r["law"] == 2 and r["chosen"] == c)
+                for c in (0, 1)]  # fmt: skip
+        other = sum(1 for r in rs if r["law"] != 2)
+        naive = "/".join(str(sum(1 for r in rs if r.get("naive") == c)) for c in (0, 1))
+        tied = sum(1 for r in rs if r["tied"])
+        name = "on (B_s 2.5)" if on else "off (B_s 0)"
+        lines.append(f"| {name} | {pick[0]} | {pick[1]} | {other} | {tied} | {naive} |")
+    lines += [
+        "",
+        "| true damping | seeds | worst error | cost / least_squares (median, max) | <= 1.001 x "
+        "| simulations: structure | naive (2 studies) | structure / naive (seeds with fewer) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for on in (0, 1):
+        rs = [r for r in rows if r["on"] == on]
+        if not rs:
+            continue
+        errs = [r["error"] for r in rs if not math.isnan(r["error"])]
+        ratios = [r["ratio"] for r in rs if not math.isnan(r["ratio"])]
+        s_n = statistics.mean(r["nfev"] for r in rs)
+        n_n = statistics.mean(r.get("naive_nfev", 0) for r in rs)
+        fewer = sum(1 for r in rs if r["nfev"] < r.get("naive_nfev", 0))
+        lines.append(
+            f"| {on} | {len(rs)} | {100 * max(errs):.3g} % | "
+            + (f"{statistics.median(ratios):.6f}, {max(ratios):.6g}" if ratios else "n/a")
+            + f" | {sum(1 for x in ratios if x <= 1.001)}/{len(rs)} | {s_n:.0f} | "
+            + (f"{n_n:.0f} | {s_n / n_n:.2f} ({fewer}/{len(rs)})" if n_n else "not run | -")
+            + " |"
+        )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    """Run the benchmark and print its tables; return the rows."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", type=int, default=10, help="noise seeds per true variant")
+    ap.add_argument("--first-seed", type=int, default=1, help="tune on 101 and up")
+    ap.add_argument("--damping", type=int, nargs="*", default=[0, 1], help="true variants")
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--joint", action="store_true", help="friction law chosen too")
+    ap.add_argument("--no-naive", action="store_true", help="skip the naive route")
+    ap.add_argument("--out", type=Path, help="also write the tables to this file")
+    args = ap.parse_args(argv)
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    cands = () if args.no_naive else (0, 1)
+    tasks = [
+        t
+        for s in seeds
+        for on in args.damping
+        for t in [("structure", on, s, -1, args.joint),
+                  *[("naive", on, s, c, args.joint) for c in cands]]
+    ]  # fmt: skip
+    t0 = time.perf_counter()
+    done: dict[tuple, dict] = {}
+    rows: list[dict] = []
+    with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
+        for fut in as_completed([pool.submit(_task, t) for t in tasks]):
+            task, res = fut.result()
+            done[task] = res
+            _, on, seed, _, joint = task
+            parts = [
+                ("structure", on, seed, -1, joint),
+                *[("naive", on, seed, c, joint) for c in cands],
+            ]
+            if all(p in done for p in parts):
+                naive = {p[3]: done[p] for p in parts[1:]}
+                row = dict(done[parts[0]])
+                if naive:
+                    bics = {c: naive[c]["bic"] for c in naive}
+                    row["naive"] = min(bics, key=lambda k: (bics[k], k))
+                    row["naive_nfev"] = sum(n["nfev"] for n in naive.values())
+                    row["seconds"] += sum(n["seconds"] for n in naive.values())
+                rows.append(row)
+                print(line(row), flush=True)
+    rows.sort(key=lambda r: (r["on"], r["seed"]))
+    wall = time.perf_counter() - t0
+    head = (
+        f"{datetime.date.today()}: python benchmarks/structure_damping.py "
+        f"{' '.join(sys.argv[1:] if argv is None else argv)} ({wall:.0f} s wall)"
+    )
+    text = "\n".join([head, "", *table(rows), "", *(line(r) for r in rows)])
+    print("\n" + text)
+    if args.out is not None:
+        args.out.write_text(text + "\n", encoding="utf-8")
+    return rows
+
+
+if __name__ == "__main__":
+    main()
