@@ -277,9 +277,7 @@ class Study:
                 "choices (structure identification) cannot be combined with [[phases]] or "
                 "[contribution] yet: identify the structure first, then fix it in start_values"
             )
-        resolve_choices(self.fmu, self.choices)
-        if sum(isinstance(c, ModelChoice) for c in self.choices) > 1:
-            raise StudyError("one choice among FMU files (fmus = [...]) per study")
+        resolve_choices(self.fmu, self.choices)  # one choice among FMU files at most
         try:
             select_array(
                 [len(p.levels) for p in self.parameters] + [len(c.choices) for c in self.choices]
