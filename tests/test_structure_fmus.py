@@ -18,11 +18,10 @@ import zipfile
 from pathlib import Path
 
 import jsonschema
-import numpy as np
 import pandas as pd
 import pytest
 from fmu_factory import build_c_fmu, pythonfmu_available
-from scipy.integrate import solve_ivp
+from test_structure_vendor import TRUTH, _data  # the same drag truth and data
 
 from tsid_fmu import Study
 from tsid_fmu.errors import StudyError
@@ -30,7 +29,6 @@ from tsid_fmu.evaluate.variants import Variants
 from tsid_fmu.study.choice import ModelChoice
 
 ROOT = Path(__file__).resolve().parents[1]
-TRUTH = {"tau": 0.4, "q": 0.8}
 
 SLAVE = '''
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
@@ -82,22 +80,6 @@ tau = { levels = [0.2, 0.5, 1.0], min = 0.01 }
 q = { levels = [0.1, 0.4, 1.0], min = 0, max = 5 }
 model = { fmus = ["Linear.fmu", "Drag.fmu"] }
 """
-
-
-def _data(folder: Path) -> None:
-    """The truth simulated by SciPy (input held over each sample), plus noise."""
-    t = np.arange(0.0, 3.0 + 1e-9, 0.01)
-    u = np.where((t % 1.0) < 0.5, 2.0, -1.0)
-    v, out = 0.0, [0.0]
-    for k in range(len(t) - 1):
-
-        def f(_, y, uk=u[k]):
-            return [(uk - y[0] - TRUTH["q"] * y[0] * abs(y[0])) / TRUTH["tau"]]
-
-        v = solve_ivp(f, (t[k], t[k + 1]), [v], rtol=1e-11, atol=1e-13).y[0, -1]
-        out.append(v)
-    y = np.array(out) + np.random.default_rng(5).normal(0.0, 0.01, t.size)
-    pd.DataFrame({"time": t, "u": u, "v": y}).to_csv(folder / "d.csv", index=False)
 
 
 def _build(folder: Path, name: str, drag: bool) -> None:

@@ -22,12 +22,17 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @functools.cache
-def _bench():
-    path = ROOT / "benchmarks" / "structure.py"
-    spec = importlib.util.spec_from_file_location("bench_structure_siso", path)
+def _load(script: str):
+    """Import ``benchmarks/<script>.py`` as a module (once)."""
+    path = ROOT / "benchmarks" / f"{script}.py"
+    spec = importlib.util.spec_from_file_location(f"bench_{script}_siso", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     return bench
+
+
+def _bench():
+    return _load("structure")
 
 
 @functools.cache
@@ -66,13 +71,8 @@ def test_quick_structure_benchmark_reaches_the_optimum_within_the_chosen_law(law
     assert math.isfinite(r["error"])
 
 
-@functools.cache
 def _damping():
-    path = ROOT / "benchmarks" / "structure_damping.py"
-    spec = importlib.util.spec_from_file_location("bench_structure_damping", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    return bench
+    return _load("structure_damping")
 
 
 @pytest.mark.slow
