@@ -175,6 +175,10 @@ def test_the_cli_chooses_among_fmu_files(tmp_path):
     assert "resources/Drag.fmu" in names and not any("Linear" in n for n in names)
     assert 'name="q"' in ssv and 'name="model"' not in ssv  # the number is no FMU value
     assert json.loads((out / "result.json").read_text())["fmu"].endswith("Drag.fmu")
+    from tsid_fmu import load
+
+    back = load(out)  # the folder read back, its study with the choice among the files
+    assert back.params["model"] == 1.0 and back.extra["structure"]["chosen"] == "model=Drag"
     again = subprocess.run(
         [sys.executable, "-m", "tsid_fmu", "simulate", str(tmp_path / "study.toml"),
          "--result", str(out), "--plot", str(tmp_path / "fit.png")],
