@@ -38,6 +38,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from tsid_fmu.search.boundary import score_step, significant, tried
 from tsid_fmu.search.candidates import (
     best_point,
@@ -299,6 +301,8 @@ def _leave(
     for s, r in sorted(degenerate - left):
         left.add((s, r))
         big, small, sub = cands[r], cands[s], studies[r]
+        if not np.size(big.extra.get("residuals", [])) or not math.isfinite(big.cost):
+            continue  # a failed answer: nothing to test from
         names = sub.parameter_names
         extra = [n for n in big.active if n not in small.active]
         ev = evs[r].get(names, sub.identify_names(), {})
