@@ -319,15 +319,22 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 rows.append(one(law, seed, 1, not args.no_naive))
                 print(line(rows[-1]), flush=True)
     wall = time.perf_counter() - t0
-    head = (
-        f"{datetime.date.today()}: python benchmarks/structure.py {' '.join(sys.argv[1:])}"
-        f" ({wall:.0f} s wall, {sum(r['seconds'] for r in rows):.0f} s in the tasks)"
+    tasks = f", {sum(r['seconds'] for r in rows):.0f} s in the tasks"
+    report(
+        "structure.py", f"{wall:.0f} s wall{tasks}", table(rows), [line(r) for r in rows], args.out
     )
-    text = "\n".join([head, "", *table(rows), "", *(line(r) for r in rows)])
-    print("\n" + text)
-    if args.out is not None:
-        args.out.write_text(text + "\n", encoding="utf-8")
     return rows
+
+
+def report(script: str, timing: str, tables: list[str], lines: list[str], out: Path | None) -> None:
+    """Print a run's head, tables and lines; also write them to ``out`` where given."""
+    head = (
+        f"{datetime.date.today()}: python benchmarks/{script} {' '.join(sys.argv[1:])} ({timing})"
+    )
+    text = "\n".join([head, "", *tables, "", *lines])
+    print("\n" + text)
+    if out is not None:
+        out.write_text(text + "\n", encoding="utf-8")
 
 
 if __name__ == "__main__":

@@ -27,7 +27,6 @@ simulations of the structure study and the naive route, with their ratio.
 from __future__ import annotations
 
 import argparse
-import datetime
 import math
 import statistics
 import sys
@@ -243,14 +242,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 print(line(row), flush=True)
     rows.sort(key=lambda r: (r["on"], r["seed"]))
     wall = time.perf_counter() - t0
-    head = (
-        f"{datetime.date.today()}: python benchmarks/structure_damping.py "
-        f"{' '.join(sys.argv[1:] if argv is None else argv)} ({wall:.0f} s wall)"
-    )
-    text = "\n".join([head, "", *table(rows), "", *(line(r) for r in rows)])
-    print("\n" + text)
-    if args.out is not None:
-        args.out.write_text(text + "\n", encoding="utf-8")
+    base.report("structure_damping.py", f"{wall:.0f} s wall", table(rows),
+                [line(r) for r in rows], args.out)  # fmt: skip
     return rows
 
 
