@@ -61,11 +61,18 @@ def rebuilt(tmp_path_factory):
 
 
 def test_find_models():
-    assert list(find_models(MODELS)) == ["LSEA_MISO", "LSEA_SISO", "LSEA_SISO_Friction"]
+    assert list(find_models(MODELS)) == [
+        "LSEA_MISO",
+        "LSEA_MISO_OneMass",
+        "LSEA_SISO",
+        "LSEA_SISO_Friction",
+    ]
 
 
 @pytest.mark.parametrize("version", [2, 3])
-@pytest.mark.parametrize("name", ["LSEA_SISO", "LSEA_MISO", "LSEA_SISO_Friction"])
+@pytest.mark.parametrize(
+    "name", ["LSEA_SISO", "LSEA_MISO", "LSEA_SISO_Friction", "LSEA_MISO_OneMass"]
+)
 def test_rebuilt_fmus_simulate_identically_to_committed(rebuilt, name, version):
     sub = "" if version == 2 else "fmi3/"
     new, old = rebuilt / f"{sub}{name}.fmu", FMUS / f"{sub}{name}.fmu"

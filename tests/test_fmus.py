@@ -24,6 +24,7 @@ SISO = FMUS / "LSEA_SISO.fmu"
 MISO = FMUS / "LSEA_MISO.fmu"
 SISO3 = FMUS / "fmi3" / "LSEA_SISO.fmu"
 MISO3 = FMUS / "fmi3" / "LSEA_MISO.fmu"
+ONE_MASS = FMUS / "LSEA_MISO_OneMass.fmu"
 ALL_FMUS = [SISO, MISO, SISO3, MISO3]
 ALL_IDS = ["SISO", "MISO", "SISO-fmi3", "MISO-fmi3"]
 N = 10_000  # 10 s at 1 kHz
@@ -277,6 +278,31 @@ def test_miso_matches_independent_solution(miso, case):
     ref = miso_reference(np.column_stack([U[k] for k in ("F_m", "x_o", "v_o", "a_o")]), MISO_P)
     err = np.max(np.abs(Y - ref))
     assert err <= 0.005 * np.ptp(ref), (err, np.ptp(ref))
+
+
+@pytest.mark.parametrize("case", ["motion", "combined"])
+def test_one_mass_load_side_is_the_two_mass_model_without_m2_and_c2(tmp_path, case):
+    """LSEA_MISO_OneMass: the load cells carry the spring force (m2 = C_2 = 0 of LSEA_MISO).
+
+    Against the independent solution with ``m2 = C_2 = 0``; the same inputs with the
+    two-mass defaults differ by far more, so the check tells the two load sides apart.
+    """
+    one = Runner(ONE_MASS, tmp_path)
+    try:
+        t = np.arange(N) * DT
+        force = 40.0 * np.where((t % 1.0) < 0.5, 1.0, -1.0) * (case == "combined")
+        U = {"F_m": force, **stage_motion(amp=2e-2, f=2.0)}
+        Y = one.run(U, ["F_o"])[:, 0]
+        cols = np.column_stack([U[k] for k in ("F_m", "x_o", "v_o", "a_o")])
+        ref = miso_reference(cols, {**MISO_P, "m2": 0.0, "C_2": 0.0})
+        two = miso_reference(cols, MISO_P)
+        err = np.max(np.abs(Y - ref))
+        assert err <= 0.005 * np.ptp(ref), (err, np.ptp(ref))
+        assert np.max(np.abs(two - ref)) > 20 * err
+        names = {v.name for v in one.md.modelVariables if v.causality == "parameter"}
+        assert {"m1", "K_s", "C_d", "C_1"} <= names and not names & {"m2", "C_2"}
+    finally:
+        one.close()
 
 
 def _damped_frequency(y: np.ndarray, dt: float) -> float:
