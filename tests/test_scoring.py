@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 
@@ -32,6 +34,15 @@ def test_weights_and_non_finite():
     assert Cost("sse")(t, y, s) == np.inf
     with pytest.raises(StudyError, match="weights"):
         Cost("sse", weights=(1,))(t, y, np.ones((5, 2)))
+
+
+def test_a_finite_simulation_whose_square_overflows_costs_inf_without_a_warning():
+    t = np.arange(3.0)
+    huge = np.array([1e200, -1e200, 0.0])  # finite, but its square is not
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning would fail the test
+        assert Cost("sse")(t, np.zeros(3), huge) == np.inf
+        assert Cost("ise")(t, np.zeros(3), huge) == np.inf
 
 
 def test_unknown_cost_is_named():

@@ -95,10 +95,16 @@ class Cost:
     def per_output(
         self, time: np.ndarray, measured: np.ndarray, simulated: np.ndarray
     ) -> np.ndarray:
-        """Return the unweighted cost of each output column."""
+        """Return the unweighted cost of each output column (``inf`` where it overflows).
+
+        A finite simulation far from the data (a set that nearly diverged) can square
+        past the largest float: that cost is ``inf``, as for a diverged one, without
+        NumPy's overflow warning on the user's console.
+        """
         y = _as_2d(measured)
         e = _as_2d(simulated) - y
-        return COSTS[self.kind](np.asarray(time, dtype=float), e, y)
+        with np.errstate(over="ignore"):
+            return COSTS[self.kind](np.asarray(time, dtype=float), e, y)
 
     def __call__(self, time: np.ndarray, measured: np.ndarray, simulated: np.ndarray) -> float:
         """Return the weighted total cost; ``inf`` if the simulation is not finite."""
