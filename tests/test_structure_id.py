@@ -231,6 +231,18 @@ def test_data_with_an_offset_choose_the_richer_structure():
     assert by["on=1"].x["c"] == pytest.approx(0.3, abs=0.01)
 
 
+def test_the_answer_has_the_parameters_of_the_chosen_structure_only():
+    """A parameter with no effect in the chosen structure gets no value and no interval."""
+    from tsid_fmu.identify import _of_structure
+
+    simple = _identify(_data(a=2.0, b=1.3, c=0.0, on=0))
+    assert [p.name for p in _of_structure(_study(), simple)] == ["a", "b"]  # no offset c
+    rich = _identify(_data(a=2.0, b=1.3, c=0.3, on=1))
+    assert [p.name for p in _of_structure(_study(), rich)] == ["a", "b", "c"]
+    simple.paused = True  # a paused search keeps them all, to go on from
+    assert [p.name for p in _of_structure(_study(), simple)] == ["a", "b", "c"]
+
+
 def test_information_criteria_and_the_decision_by_hand():
     n = 100
     a = Candidate("A", {"s": 0.0}, {}, 1.0, 100.0, n, 2, ["x", "y"])

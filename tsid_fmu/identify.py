@@ -366,9 +366,25 @@ def _stages(
 
     found = run_structure(Context(study, evaluators, store, callback, control), make)
     final = dataclasses.replace(
-        study, choices=[], start_values={**study.start_values, **found.values}
+        study,
+        choices=[],
+        parameters=_of_structure(study, found),
+        start_values={**study.start_values, **found.values},
     )
     return final, found.stages, found.evaluators, found
+
+
+def _of_structure(study: Study, found: StructureResult) -> list:
+    """Return the Real parameters of the chosen structure: those that change its outputs.
+
+    A parameter with no effect there (a Stribeck velocity under Coulomb friction, or one
+    the chosen FMU file does not have) is no parameter of the answer: it gets no value,
+    no interval and no row in the report. A paused search keeps them all.
+    """
+    if found.paused or not found.candidates:
+        return list(study.parameters)
+    active = set(found.candidates[found.chosen].active)
+    return [p for p in study.parameters if p.name in active] or list(study.parameters)
 
 
 def identify(
