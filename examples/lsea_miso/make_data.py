@@ -211,13 +211,16 @@ def experiment_inputs(name: str, t: np.ndarray) -> tuple[np.ndarray, Stage | Non
     return force, stage
 
 
-def make_data(seed: int = 7) -> dict[str, pd.DataFrame]:
+def make_data(seed: int = 7, truth: dict[str, float] | None = None) -> dict[str, pd.DataFrame]:
     """Return the three experiments, 10 s at 1 kHz each, as the rig logs them.
 
     Parameters
     ----------
     seed : int
         Seed of the sensor noise (the commands are always the same).
+    truth : dict, optional
+        The true parameters (default :data:`TRUTH`); ``m2 = C_2 = 0`` gives the one-mass
+        load side (``LSEA_MISO_OneMass``), whose load cells carry the spring force.
 
     Returns
     -------
@@ -230,7 +233,7 @@ def make_data(seed: int = 7) -> dict[str, pd.DataFrame]:
     frames = {}
     for name in EXPERIMENTS:
         f_m, stage = experiment_inputs(name, t)
-        f_o = simulate(t, f_m, stage, TRUTH)
+        f_o = simulate(t, f_m, stage, TRUTH if truth is None else truth)
         x_o = np.zeros_like(t) if stage is None else stage(t)[0]
         front, rear = load_cells(f_o, NOISE["F_of"], NOISE["F_or"], rng)
         frames[name] = pd.DataFrame(

@@ -30,6 +30,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -376,9 +377,20 @@ def _message(check: Fidelity, chosen: str) -> str:
 
 
 def start_point(study: Study) -> dict[str, float]:
-    """Return the centre of a study's first levels (search coordinates 0)."""
+    """Return the centre of a study's first levels (search coordinates 0).
+
+    With an open choice among FMU files, the point names the study's ``fmu`` among them
+    (the first file where ``fmu`` is none of them): a set simulates only in the variant
+    it names, and the check runs in that one.
+    """
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    return space.to_x(np.zeros(space.dim))
+    x = space.to_x(np.zeros(space.dim))
+    v = study.variants
+    if v is not None and v.name not in study.start_values:
+        paths = [Path(p).resolve() for p in v.paths]
+        here = Path(study.fmu).resolve()
+        x[v.name] = float(paths.index(here)) if here in paths else v.values[0]
+    return x
 
 
 def study_noise(study: Study) -> dict[str, dict[str, float]]:
