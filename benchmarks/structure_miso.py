@@ -130,10 +130,13 @@ def reference(masses: int, seed: int, chosen: int, start: dict[str, float]) -> f
     return float(out.fun @ out.fun)
 
 
-def structure_route(masses: int, seed: int) -> dict:
-    """The structure study on one data set, with the reference at its choice."""
+def structure_route(masses: int, seed: int, folder: Path | None = None) -> dict:
+    """The structure study on one data set, with the reference at its choice.
+
+    ``folder``: also write its output folder there (report, tables, ``model.ssp``).
+    """
     t0 = time.perf_counter()
-    out = identify(study(masses, seed), workers=1, plots=False)
+    out = identify(study(masses, seed), folder, workers=1, plots=False)
     s = out.extra["structure"]
     chosen = int(s["values"]["model"]) + 1
     x = {k: float(v) for k, v in out.params.items() if k != "model"}

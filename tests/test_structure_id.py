@@ -239,6 +239,12 @@ def test_the_answer_has_the_parameters_of_the_chosen_structure_only():
     assert [p.name for p in _of_structure(_study(), simple)] == ["a", "b"]  # no offset c
     rich = _identify(_data(a=2.0, b=1.3, c=0.3, on=1))
     assert [p.name for p in _of_structure(_study(), rich)] == ["a", "b", "c"]
+    pick = rich.candidates[rich.chosen]
+    assert "c" in pick.extra["free"]  # free where the arrays saw it
+    pick.active.remove("c")  # as on a bound that log coordinates cannot leave
+    assert [p.name for p in _of_structure(_study(), rich)] == ["a", "b", "c"]
+    pick.extra["free"].remove("c")
+    assert [p.name for p in _of_structure(_study(), rich)] == ["a", "b"]
     simple.paused = True  # a paused search keeps them all, to go on from
     assert [p.name for p in _of_structure(_study(), simple)] == ["a", "b", "c"]
 

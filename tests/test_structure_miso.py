@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import zipfile
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
+from tsid_fmu import load
+from tsid_fmu.report.notebook import parameter_rows
 from tsid_fmu.uncertainty.fidelity import start_point
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,16 +48,33 @@ def test_the_start_point_names_the_study_fmu_among_the_files():
     assert other["model"] == 1.0
 
 
-@functools.cache
-def _run(masses: int) -> dict:
-    return _bench().structure_route(masses, 1)
+@pytest.fixture(scope="module")
+def routes(tmp_path_factory):
+    """Each true load side's structure route, run once, with its output folder."""
+    done: dict[int, tuple[dict, Path]] = {}
+
+    def run(masses: int) -> tuple[dict, Path]:
+        if masses not in done:
+            folder = tmp_path_factory.mktemp(f"masses{masses}")
+            done[masses] = (_bench().structure_route(masses, 1, folder), folder)
+        return done[masses]
+
+    return run
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("masses", [1, 2])
-def test_the_true_load_side_is_chosen_with_the_optimum_of_its_parameters(masses):
-    r = _run(masses)
+def test_the_true_load_side_is_chosen_with_the_optimum_of_its_parameters(routes, masses):
+    r, folder = routes(masses)
     assert r["chosen"] == masses and not r["tied"], r
     assert r["ratio"] <= 1.001, r
-    # the answer has the chosen file's parameters only (and the choice's number)
-    assert r["params"] == sorted([*_bench().PARAMS[masses], "model"]), r
+    # the answer has the chosen file's parameters only (and the choice's number) ...
+    names = _bench().PARAMS[masses]
+    assert r["params"] == sorted([*names, "model"]), r
+    # ... and so have the tables a person reads: parameters.csv, the report, the CLI's
+    table = pd.read_csv(folder / "parameters.csv")
+    assert list(table["parameter"]) == names
+    assert [row[0] for row in parameter_rows(load(folder))] == [*names, "model"]
+    with zipfile.ZipFile(folder / "model.ssp") as ssp:
+        packed = [n for n in ssp.namelist() if n.endswith(".fmu")]
+    assert packed == [f"resources/{_bench().FMUS[masses].name}"]

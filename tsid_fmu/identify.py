@@ -379,11 +379,15 @@ def _of_structure(study: Study, found: StructureResult) -> list:
 
     A parameter with no effect there (a Stribeck velocity under Coulomb friction, or one
     the chosen FMU file does not have) is no parameter of the answer: it gets no value,
-    no interval and no row in the report. A paused search keeps them all.
+    no interval and no row in the report. One that changes them at the arrays' best
+    point (``free``) stays, though it has none at the answer: a viscous coefficient on
+    its bound 0, which logarithmic coordinates cannot move off. A paused search keeps
+    them all.
     """
     if found.paused or not found.candidates:
         return list(study.parameters)
-    active = set(found.candidates[found.chosen].active)
+    pick = found.candidates[found.chosen]
+    active = set(pick.active) | set(pick.extra.get("free", ()))
     return [p for p in study.parameters if p.name in active] or list(study.parameters)
 
 

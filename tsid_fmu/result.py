@@ -480,7 +480,7 @@ class IdentificationResult:
 
         rows = []
         params = self.study.identified_parameters() if self.study else []
-        for p in params:
+        for p in (p for p in params if p.name in self.params):  # those of the structure
             low, high = self.intervals.get(p.name, [None, None])
             se = self.uncertainty.relative.get(p.name, math.nan) if self.uncertainty else math.nan
             rows.append(

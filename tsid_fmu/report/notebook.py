@@ -91,7 +91,11 @@ def parameter_rows(result: Any) -> list[list[Any]]:
     """
     rows = []
     params = result.study.identified_parameters() if result.study else []
-    names = [p.name for p in params] or result.names
+    # a parameter with no effect in the chosen structure is not in the answer: no row
+    names = [p.name for p in params if p.name in result.params] or result.names
+    structure = result.extra.get("structure") or {}
+    factors = structure.get("factors", [])
+    names = [n for n in names if n not in {f["name"] for f in factors}]  # rows of their own
     units = {p.name: p.unit for p in params}
     first = {p.name: f"{fmt(min(p.levels))} .. {fmt(max(p.levels))}" for p in params}
     for name in names:
@@ -109,8 +113,7 @@ def parameter_rows(result: Any) -> list[list[Any]]:
                 result.weak.get(name, ""),
             ]
         )
-    structure = result.extra.get("structure") or {}
-    for f in structure.get("factors", []):  # discrete factors: the chosen choice
+    for f in factors:  # discrete factors: the chosen choice
         chosen = structure.get("choices", {}).get(f["name"], "")
         rows.append(
             [f["name"], chosen, "", "chosen structure", math.nan, " | ".join(f["labels"]), ""]

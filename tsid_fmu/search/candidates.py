@@ -391,7 +391,7 @@ def probe(
     sub = _sub_study(study, values, levels, best)
     evs = make(sub)
     if best is None:
-        return sub, evs, None, 0, 0
+        return sub, evs, None, [], 0
     found = measure_in(study, evs, {n: float(best[n]) for n in study.parameter_names})
     active = list(found["active"]) if math.isfinite(found["cost"]) else []
     return sub, evs, best, active, found["nfev"]

@@ -233,6 +233,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         )
         cand.nfev += n_probe + n_embed
         cand.label = _label(factors, values)
+        cand.extra["free"] = list(active)  # free at the arrays' best point, off any bound
         cands.append(cand)
         all_stages.append(stages)
         studies.append(sub)
