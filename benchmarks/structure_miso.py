@@ -146,13 +146,22 @@ def structure_route(masses: int, seed: int, folder: Path | None = None) -> dict:
     start = truth(masses) if right else x
     ratio = chi2 / reference(masses, seed, chosen, {**x, **start})
     err = max(abs(x[k] / truth(masses)[k] - 1) for k in PARAMS[masses]) if right else math.nan
+    held = [n for n in PARAMS[masses] if right and _holds(out.intervals.get(n), truth(masses)[n])]
+    open_ = [n for n in PARAMS[masses] if None in (out.intervals.get(n) or [None])]
     return {
         "masses": masses, "seed": seed, "chosen": chosen,
         "tied": bool(s.get("indistinguishable")), "why": s.get("why", ""),
-        "error": err, "ratio": ratio, "nfev": out.nfev, "params": sorted(out.params),
+        "error": err, "held": held, "open": open_, "ratio": ratio, "nfev": out.nfev,
+        "params": sorted(out.params),
         "stages": {st.name: st.nfev for st in out.stages},
         "seconds": time.perf_counter() - t0,
     }  # fmt: skip
+
+
+def _holds(interval: list | None, value: float) -> bool:
+    """Whether a 95 % interval (``None`` for an open end) holds ``value``."""
+    low, high = interval or [None, None]
+    return (low is None or low <= value) and (high is None or value <= high)
 
 
 def naive_route(masses: int, seed: int, cand: int) -> dict:
@@ -177,8 +186,9 @@ def line(r: dict) -> str:
     return (
         f"{r['masses']} mass(es) seed {r['seed']}: chose {r['chosen']}"
         f"{' (indist.)' if r['tied'] else ''}, naive {r.get('naive')}, error "
-        f"{100 * r['error']:.3g} %, cost ratio {r['ratio']:.6f}, sims {r['nfev']} vs naive "
-        f"{r.get('naive_nfev', 0)} ({r['seconds']:.0f} s): {r['why']}\n    simulations by "
+        f"{100 * r['error']:.3g} %, truth in {len(r['held'])} intervals (open: "
+        f"{', '.join(r['open']) or 'none'}), cost ratio {r['ratio']:.6f}, sims {r['nfev']} "
+        f"vs naive {r.get('naive_nfev', 0)} ({r['seconds']:.0f} s): {r['why']}\n    simulations by "
         "stage: " + ", ".join(f"{k} {v}" for k, v in r["stages"].items())
     )
 
@@ -201,9 +211,10 @@ def table(rows: list[dict]) -> list[str]:
         lines.append(f"| {name} | {pick[0]} | {pick[1]} | {tied} | {naive} |")
     lines += [
         "",
-        "| true load side | seeds | worst error | cost / least_squares (median, max) | <= 1.001 x "
+        "| true load side | seeds | worst error | truth in its 95 % interval (open ones) "
+        "| cost / least_squares (median, max) | <= 1.001 x "
         "| simulations: structure | naive (2 studies) | structure / naive (seeds with fewer) |",
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for m in (1, 2):
         rs = [r for r in rows if r["masses"] == m]
@@ -214,10 +225,13 @@ def table(rows: list[dict]) -> list[str]:
         s_n = statistics.mean(r["nfev"] for r in rs)
         n_n = statistics.mean(r.get("naive_nfev", 0) for r in rs)
         fewer = sum(1 for r in rs if r["nfev"] < r.get("naive_nfev", 0))
+        held = sum(len(r["held"]) for r in rs if r["chosen"] == m)
+        total = len(PARAMS[m]) * sum(1 for r in rs if r["chosen"] == m)
+        opens = sum(len(r["open"]) for r in rs if r["chosen"] == m)
         lines.append(
             f"| {m} | {len(rs)} | "
             + (f"{100 * max(errs):.3g} %" if errs else "n/a")
-            + " | "
+            + f" | {held}/{total} ({opens}) | "
             + (f"{statistics.median(ratios):.6f}, {max(ratios):.6g}" if ratios else "n/a")
             + f" | {sum(1 for x in ratios if x <= 1.001)}/{len(rs)} | {s_n:.0f} | "
             + (f"{n_n:.0f} | {s_n / n_n:.2f} ({fewer}/{len(rs)})" if n_n else "not run | -")
