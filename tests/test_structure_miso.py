@@ -11,14 +11,19 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import json
+import os
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
-from tsid_fmu import load
+from tsid_fmu import Study, load
 from tsid_fmu.report.notebook import parameter_rows
+from tsid_fmu.study.choice import ModelChoice
 from tsid_fmu.uncertainty.fidelity import start_point
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -78,3 +83,38 @@ def test_the_true_load_side_is_chosen_with_the_optimum_of_its_parameters(routes,
     with zipfile.ZipFile(folder / "model.ssp") as ssp:
         packed = [n for n in ssp.namelist() if n.endswith(".fmu")]
     assert packed == [f"resources/{_bench().FMUS[masses].name}"]
+
+
+EXAMPLE = ROOT / "examples" / "lsea_miso" / "load_side.toml"
+
+
+def test_the_load_side_example_is_the_benchmarks_study():
+    """``examples/lsea_miso/load_side.toml``: the two files, levels and bounds benchmarked."""
+    study = Study.from_toml(EXAMPLE)
+    (model,) = study.choices
+    assert isinstance(model, ModelChoice)
+    assert model.labels == ["LSEA_MISO_OneMass", "LSEA_MISO"]
+    bench = _bench()
+    assert [Path(p) for p in model.paths] == [bench.FMUS[1].resolve(), bench.FMUS[2].resolve()]
+    assert {p.name: (list(p.levels), p.bounds[0]) for p in study.parameters} == {
+        n: (levels, low) for n, (levels, low) in bench.LEVELS.items()
+    }
+    assert [(e.name, e.role) for e in study.experiments] == [
+        ("force only", "identify"), ("motion only", "identify"), ("both inputs", "validate")
+    ]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_the_load_side_example_chooses_two_masses_through_the_cli(tmp_path):
+    """The example as a user runs it: the example data have two masses (m2 = 0.2 kg)."""
+    out = tmp_path / "out"
+    run = subprocess.run(
+        [sys.executable, "-m", "tsid_fmu", "identify", str(EXAMPLE), "--out", str(out),
+         "--json", "-q", "--workers", "1"],
+        capture_output=True, text=True, check=False, timeout=900,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    summary = json.loads(run.stdout)
+    assert summary["structure"]["chosen"] == "model=LSEA_MISO", summary["structure"]
+    assert set(summary["parameters"]) == {*_bench().PARAMS[2], "model"}
