@@ -39,6 +39,7 @@ import math
 import statistics
 import sys
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -201,12 +202,53 @@ def one(law: int, seed: int, workers: int, naive: bool = True) -> dict:
     )
 
 
-def _task(task: tuple) -> tuple[tuple, dict]:
+def _task(key: tuple[int, int], cand: int | None) -> dict:
     """Run one task of :func:`run_all` (in a worker process)."""
-    kind, law, seed, cand = task
-    if kind == "structure":
-        return task, structure_route(law, seed)
-    return task, naive_route(law, seed, cand)
+    law, seed = key
+    return structure_route(law, seed) if cand is None else naive_route(law, seed, cand)
+
+
+def run_data_sets(
+    keys: Sequence[tuple],
+    cands: Sequence[int],
+    workers: int,
+    task: Callable[[tuple, int | None], dict],
+    join: Callable[[dict, dict[int, dict]], dict],
+    show: Callable[[dict], str],
+) -> list[dict]:
+    """Each data set's structure route and naive studies, in ``workers`` processes.
+
+    ``keys`` name the data sets, in order: their tasks are submitted together, so a run
+    cut short still gives whole data sets for the first ones. ``task(key, cand)`` runs
+    the structure route (``cand`` None) or the naive study of ``cand`` (a module-level
+    function, to run in a worker); ``join(row, naive)`` makes a data set's row once its
+    tasks are in, and ``show(row)`` the line then printed.
+    """
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    parts = (None, *cands)
+    done: dict[tuple, dict] = {}
+    rows = []
+    with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+        futures = {pool.submit(task, k, c): (k, c) for k in keys for c in parts}
+        for fut in as_completed(futures):
+            key, cand = futures[fut]
+            done[(key, cand)] = fut.result()
+            if all((key, c) in done for c in parts):
+                rows.append(join(done[(key, None)], {c: done[(key, c)] for c in cands}))
+                print(show(rows[-1]), flush=True)
+    return rows
+
+
+def join_naive(row: dict, naive: dict[int, dict]) -> dict:
+    """A data set's structure row with its naive studies: the BIC's choice, their runs."""
+    row = dict(row)
+    if naive:
+        bics = {c: naive[c]["bic"] for c in naive}
+        row["naive"] = min(bics, key=lambda k: (bics[k], k))
+        row["naive_nfev"] = sum(n["nfev"] for n in naive.values())
+        row["seconds"] += sum(n["seconds"] for n in naive.values())
+    return row
 
 
 def line(r: dict) -> str:
@@ -224,28 +266,8 @@ def line(r: dict) -> str:
 
 def run_all(laws_: list[int], seeds: list[int], processes: int, naive: bool = True) -> list[dict]:
     """Every data set's structure and naive routes, in ``processes`` processes."""
-    cands = (1, 2, 3) if naive else ()
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    # seed by seed, each data set's four tasks together: a run cut short still gives
-    # whole data sets for the first seeds
-    tasks = [
-        t
-        for s in seeds
-        for law in laws_
-        for t in [("structure", law, s, 0), *[("naive", law, s, c) for c in cands]]
-    ]
-    done: dict[tuple, dict] = {}
-    rows = []
-    with ProcessPoolExecutor(max_workers=processes) as pool:
-        for fut in as_completed([pool.submit(_task, t) for t in tasks]):
-            task, res = fut.result()
-            done[task] = res
-            _, law, seed, _ = task
-            parts = [("structure", law, seed, 0), *[("naive", law, seed, c) for c in cands]]
-            if all(p in done for p in parts):
-                rows.append(merge(done[parts[0]], {p[3]: done[p] for p in parts[1:]}))
-                print(line(rows[-1]), flush=True)
+    keys = [(law, s) for s in seeds for law in laws_]
+    rows = run_data_sets(keys, (1, 2, 3) if naive else (), processes, _task, merge, line)
     return sorted(rows, key=lambda r: (r["law"], r["seed"]))
 
 

@@ -31,7 +31,6 @@ import math
 import statistics
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -138,11 +137,10 @@ def naive_route(on: int, seed: int, cand: int) -> dict:
     return {"nfev": nout.nfev, "bic": bic, "seconds": time.perf_counter() - t0}
 
 
-def _task(task: tuple) -> tuple[tuple, dict]:
-    kind, on, seed, cand, joint = task
-    if kind == "structure":
-        return task, structure_route(on, seed, joint)
-    return task, naive_route(on, seed, cand)
+def _task(key: tuple[int, int, bool], cand: int | None) -> dict:
+    """One task of a data set (in a worker process): its structure route, or a naive study."""
+    on, seed, joint = key
+    return structure_route(on, seed, joint) if cand is None else naive_route(on, seed, cand)
 
 
 def line(r: dict) -> str:
@@ -211,35 +209,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
     args = ap.parse_args(argv)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     cands = () if args.no_naive else (0, 1)
-    tasks = [
-        t
-        for s in seeds
-        for on in args.damping
-        for t in [("structure", on, s, -1, args.joint),
-                  *[("naive", on, s, c, args.joint) for c in cands]]
-    ]  # fmt: skip
+    keys = [(on, s, args.joint) for s in seeds for on in args.damping]
     t0 = time.perf_counter()
-    done: dict[tuple, dict] = {}
-    rows: list[dict] = []
-    with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
-        for fut in as_completed([pool.submit(_task, t) for t in tasks]):
-            task, res = fut.result()
-            done[task] = res
-            _, on, seed, _, joint = task
-            parts = [
-                ("structure", on, seed, -1, joint),
-                *[("naive", on, seed, c, joint) for c in cands],
-            ]
-            if all(p in done for p in parts):
-                naive = {p[3]: done[p] for p in parts[1:]}
-                row = dict(done[parts[0]])
-                if naive:
-                    bics = {c: naive[c]["bic"] for c in naive}
-                    row["naive"] = min(bics, key=lambda k: (bics[k], k))
-                    row["naive_nfev"] = sum(n["nfev"] for n in naive.values())
-                    row["seconds"] += sum(n["seconds"] for n in naive.values())
-                rows.append(row)
-                print(line(row), flush=True)
+    rows = base.run_data_sets(keys, cands, args.workers, _task, base.join_naive, line)
     rows.sort(key=lambda r: (r["on"], r["seed"]))
     wall = time.perf_counter() - t0
     base.report("structure_damping.py", f"{wall:.0f} s wall", table(rows),

@@ -35,7 +35,6 @@ import math
 import statistics
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -174,11 +173,10 @@ def naive_route(masses: int, seed: int, cand: int) -> dict:
     return {"nfev": nout.nfev, "bic": bic, "seconds": time.perf_counter() - t0}
 
 
-def _task(task: tuple) -> tuple[tuple, dict]:
-    kind, masses, seed, cand = task
-    if kind == "structure":
-        return task, structure_route(masses, seed)
-    return task, naive_route(masses, seed, cand)
+def _task(key: tuple[int, int], cand: int | None) -> dict:
+    """One task of a data set (in a worker process): its structure route, or a naive study."""
+    masses, seed = key
+    return structure_route(masses, seed) if cand is None else naive_route(masses, seed, cand)
 
 
 def line(r: dict) -> str:
@@ -252,31 +250,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
     args = ap.parse_args(argv)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     cands = () if args.no_naive else (1, 2)
-    tasks = [
-        t
-        for s in seeds
-        for m in args.masses
-        for t in [("structure", m, s, -1), *[("naive", m, s, c) for c in cands]]
-    ]
+    keys = [(m, s) for s in seeds for m in args.masses]
     t0 = time.perf_counter()
-    done: dict[tuple, dict] = {}
-    rows: list[dict] = []
-    with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
-        for fut in as_completed([pool.submit(_task, t) for t in tasks]):
-            task, res = fut.result()
-            done[task] = res
-            _, m, seed, _ = task
-            parts = [("structure", m, seed, -1), *[("naive", m, seed, c) for c in cands]]
-            if all(p in done for p in parts):
-                naive = {p[3]: done[p] for p in parts[1:]}
-                row = dict(done[parts[0]])
-                if naive:
-                    bics = {c: naive[c]["bic"] for c in naive}
-                    row["naive"] = min(bics, key=lambda k: (bics[k], k))
-                    row["naive_nfev"] = sum(n["nfev"] for n in naive.values())
-                    row["seconds"] += sum(n["seconds"] for n in naive.values())
-                rows.append(row)
-                print(line(row), flush=True)
+    rows = base.run_data_sets(keys, cands, args.workers, _task, base.join_naive, line)
     rows.sort(key=lambda r: (r["masses"], r["seed"]))
     wall = time.perf_counter() - t0
     base.report("structure_miso.py", f"{wall:.0f} s wall", table(rows),
