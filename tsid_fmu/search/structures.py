@@ -199,10 +199,9 @@ def _structure_stage(ctx: Context, factors: list[DiscreteFactor], make: Callable
 
 
 def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> StructureResult:
-    """Identify structure and parameters (see the module docstring).
+    """Identify structure and parameters; ``make(study)`` gives a study's evaluators.
 
-    ``make(study)`` returns the evaluators of a study (for the mixed arrays, the
-    study itself; for a candidate, the study with the structure's values fixed).
+    (The mixed arrays' own study, or a candidate's, with the structure's values fixed.)
     """
     factors = discrete_factors(ctx.study)
     outcome = _structure_stage(ctx, factors, make)
