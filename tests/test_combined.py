@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.optimize
 from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
@@ -75,6 +76,34 @@ def test_the_toys_columns_are_parallel_and_the_sum_is_refined_along_its_valley()
     x0, _, runs0, gate0 = combined_refinement(ev, SPACE, START, [], 60)
     assert runs0 == 60 and abs(x0["b"] / 2.5 - 1) > 0.2  # measured: b = 1.45 after 60
     assert gate0 is None  # stopped by its limit: no test
+
+
+def test_a_pair_member_near_its_bound_of_0_is_scaled_by_its_first_levels_not_its_value(
+    monkeypatch,
+):
+    """Spring damping trapped at 0.0007 by logarithmic coordinates, on the valley's floor
+    (SISO law-3 dev seeds 122 and 134: 1.019 x the least-squares cost). Scaled by its own
+    value, the coordinate along the valley is thousands of units long and least squares
+    stopped where it started; scaled by its lowest first level (0.1), it walks the valley.
+    """
+    ev = CurveEvaluator(_model, MEASURED, 0.001)
+    start = {"v": 54.0 - 7e-4, "b": 7e-4}
+    r0 = ev.residuals(start)
+    pairs = parallel_pairs(physical_jacobian(ev, start, ["v", "b"], r0))
+    assert [(i, j) for i, j, _ in pairs] == [(0, 1)]
+    start_cost = ev.cost(**start)
+    seen = []
+    real = scipy.optimize.least_squares
+
+    def spy(fun, x0, **kw):
+        seen.append(np.array(x0, float))
+        return real(fun, x0, **kw)
+
+    monkeypatch.setattr(scipy.optimize, "least_squares", spy)
+    x, cost, _, _ = combined_refinement(ev, SPACE, start, pairs, 60)
+    assert cost < 0.3 * start_cost and abs(x["b"] / 2.5 - 1) < 0.01
+    # b's coordinate: its value over its lowest first level (0.1), not over itself (1.0)
+    assert seen[0][-1] == pytest.approx(7e-4 / 0.1)
 
 
 class _Evs:

@@ -154,7 +154,10 @@ def combined_refinement(
     paired = {k for i, j, _ in pairs for k in (i, j)}
     rest = [k for k in range(len(names)) if k not in paired]
     x0 = {n: float(x[n]) for n in names}
-    scale = {k: max(abs(x0[names[k]]), 1e-12) for k in paired}
+    # a pair's coordinates scaled by its values, but not below its lowest first level: a
+    # value near a bound of 0 (spring damping at 0.0007, trapped there by logarithmic
+    # coordinates) scaled by itself makes the valley along it thousands of units long
+    scale = {k: max(abs(x0[names[k]]), abs(space.value(k, -0.5)), 1e-12) for k in paired}
     n0, best = ev.nfev, [math.inf, dict(x0)]
 
     def to_x(z: np.ndarray) -> dict[str, float] | None:
