@@ -9,6 +9,7 @@ that the search's logarithmic coordinates bend. Each test fails with its rule re
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from tsid_fmu.search.combined import (
 )
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.verdict import LOWER_TRIED
 
 T = np.linspace(0.0, 10.0, 400)
 
@@ -116,19 +118,43 @@ class _Evs:
 
 class _Study:
     parameter_names = ("v", "b")
+    method = types.SimpleNamespace(leveling=LevelingOptions())
 
     def identify_names(self):
         return ["measured"]
 
+    def first_levels(self):
+        return {"v": [1.0, 10.0, 80.0], "b": [0.1, 5.0, 20.0]}  # SPACE's
+
+    def bounds(self):
+        return {"v": (0.0, math.inf), "b": (0.0, math.inf)}
+
 
 def test_only_an_answer_whose_test_held_by_a_trial_alone_is_refined_in_combinations():
     ev = CurveEvaluator(_model, MEASURED, 0.001)
-    for test in ("projected Gauss-Newton", "local probes"):
-        gate = {"holds": True, "test": test}
+    failed = "the projected Gauss-Newton step predicts a decrease of 40 (0.002 ...)"
+    for gate in (
+        {"holds": True, "test": "projected Gauss-Newton"},
+        {"holds": True, "test": "local probes"},
+        {"holds": False, "test": "projected Gauss-Newton", "detail": failed},  # no trial
+    ):
         stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 5, "",
                             extra={"stationarity": gate})  # fmt: skip
         assert refine_in_combinations(_Study(), _Evs(ev), [stage]) == (None, 0)
     assert ev.nfev == 0
+
+
+def test_an_answer_whose_failed_test_found_a_lower_point_is_refined_in_combinations():
+    """A refinement stopped at its tolerances in the valley, its test's step lower (SISO
+    law-3 dev seed 116: ``B_s`` 0.82 of 2.5, 1.009 x the least-squares cost)."""
+    ev = CurveEvaluator(_model, MEASURED, 0.001)
+    detail = f"the projected Gauss-Newton step predicts a decrease of 40; {LOWER_TRIED} 55"
+    gate = {"holds": False, "test": "projected Gauss-Newton", "detail": detail}
+    stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 5, "",
+                        extra={"stationarity": gate})  # fmt: skip
+    lower, runs = refine_in_combinations(_Study(), _Evs(ev), [stage])
+    assert lower is not None and runs > 0 and lower.cost < 0.3 * stage.cost
+    assert abs(lower.x["b"] / 2.5 - 1) < 0.01
 
 
 def test_a_pairs_ratio_is_measured_again_with_steps_matched_to_it():

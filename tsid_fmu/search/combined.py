@@ -33,7 +33,7 @@ from tsid_fmu.search.candidates import short
 from tsid_fmu.search.optima import settle
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.verdict import GATE_RTOL, Stationarity, gauss_newton_step
+from tsid_fmu.search.verdict import GATE_RTOL, LOWER_TRIED, Stationarity, gauss_newton_step
 from tsid_fmu.study.definition import Study
 
 __all__ = [
@@ -238,7 +238,7 @@ def _gate(
     except StopIteration:
         return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
     if best[0] < cost:
-        detail += f"; tried, the step lowered the cost by {cost - best[0]:.3g}"
+        detail += f"; {LOWER_TRIED} {cost - best[0]:.3g}"
         return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
     detail += "; tried, the step and its half raise the cost: no lower point there"
     return Stationarity(True, "projected Gauss-Newton, step tried", gap, cost, detail)
@@ -251,7 +251,9 @@ def refine_in_combinations(
 
     Only where the answer's stationarity test held by a trial alone ("step tried": the
     first-order model does not hold this close to the answer, as on a cost made rough
-    by events) and its Jacobian (``p`` runs) has parallel columns (:func:`parallel_pairs`,
+    by events), or failed with its step, simulated, lower (a refinement that stopped at
+    its tolerances in a valley: law-3 dev seed 116, ``B_s`` at 0.82 of 2.5, 1.009 x the
+    least-squares cost), and its Jacobian (``p`` runs) has parallel columns (:func:`parallel_pairs`,
     each pair's ratio measured again, :func:`matched_ratio`): then
     :func:`combined_refinement` (at most 5 runs per parameter + 1). A lower end whose
     stationarity test holds there is the answer; otherwise a refinement in the usual
@@ -261,7 +263,8 @@ def refine_in_combinations(
     """
     answer = answer_stage(stages)
     gate = answer.extra.get("stationarity") or {}
-    if gate.get("test") != "projected Gauss-Newton, step tried":
+    lower = not gate.get("holds", True) and LOWER_TRIED in str(gate.get("detail", ""))
+    if gate.get("test") != "projected Gauss-Newton, step tried" and not lower:
         return None, 0
     names = list(study.parameter_names)
     ev = evs.get(names, study.identify_names(), {})

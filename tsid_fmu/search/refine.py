@@ -29,7 +29,7 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.verdict import GATE_RTOL, Stationarity, gauss_newton_step
+from tsid_fmu.search.verdict import GATE_RTOL, LOWER_TRIED, Stationarity, gauss_newton_step
 from tsid_fmu.study.schema import Method
 
 __all__ = ["FD_STEP", "refine_stage"]
@@ -158,7 +158,7 @@ class _Problem:
             return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
         if self.best[0] < cost:
             found = cost - self.best[0]
-            detail += f"; tried, the step lowered the cost by {found:.3g}"
+            detail += f"; {LOWER_TRIED} {found:.3g}"
             return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
         detail += "; tried, the step and its half raise the cost: no lower point there"
         return Stationarity(True, "projected Gauss-Newton, step tried", gap, cost, detail)

@@ -36,6 +36,7 @@ from tsid_fmu.search.space import Space
 
 __all__ = [
     "GATE_RTOL",
+    "LOWER_TRIED",
     "POOR_FIT",
     "Stationarity",
     "gauss_newton_gap",
@@ -48,6 +49,9 @@ __all__ = [
 GATE_RTOL = 1e-4
 """Largest decrease of the cost, relative to itself, that the local model may still
 predict at an answer called stationary."""
+
+LOWER_TRIED = "tried, the step lowered the cost by"
+"""How a failed stationarity test says that its step, simulated, found a lower point."""
 
 POOR_FIT = 20.0
 """An answer whose cost exceeds the noise floor by this factor is a poor fit. On the
