@@ -114,14 +114,17 @@ def residuals_of(st: Study):
     return res, ev
 
 
-def reference(law: int, seed: int, chosen: int, start: dict[str, float]) -> tuple[float, int]:
-    """SciPy least_squares at law ``chosen`` from ``start``: its chi2 and simulations."""
+def least_squares_at(
+    st: Study, names: list[str], lower: dict[str, float], start: dict[str, float]
+) -> tuple[float, int]:
+    """SciPy least_squares of ``st``'s ``names`` from ``start``: its chi2 and simulations.
+
+    Each parameter scaled by its start (``x_scale="jac"``), bounded below by ``lower``.
+    """
     from scipy.optimize import least_squares
 
-    st = study(law, seed, fixed=chosen)
-    names = LAW_PARAMS[chosen]
     res, ev = residuals_of(st)
-    lo = np.array([LEVELS[n][1] for n in names])
+    lo = np.array([lower[n] for n in names])
     x0 = np.maximum(np.array([start[n] for n in names], dtype=float), lo + 1e-9)
     scale = np.abs(x0) + 1e-6
 
@@ -129,10 +132,15 @@ def reference(law: int, seed: int, chosen: int, start: dict[str, float]) -> tupl
         return res(dict(zip(names, s * scale, strict=True)))
 
     out = least_squares(f, x0 / scale, bounds=(lo / scale, np.inf), method="trf", x_scale="jac")
-    chi2 = float(out.fun @ out.fun)
     n = ev.nfev
     ev.close()
-    return chi2, n
+    return float(out.fun @ out.fun), n
+
+
+def reference(law: int, seed: int, chosen: int, start: dict[str, float]) -> tuple[float, int]:
+    """SciPy least_squares at law ``chosen`` from ``start``: its chi2 and simulations."""
+    lower = {n: LEVELS[n][1] for n in LAW_PARAMS[chosen]}
+    return least_squares_at(study(law, seed, fixed=chosen), LAW_PARAMS[chosen], lower, start)
 
 
 def chi2_at(st: Study, x: dict[str, float]) -> tuple[float, int]:
@@ -238,6 +246,24 @@ def run_data_sets(
                 rows.append(join(done[(key, None)], {c: done[(key, c)] for c in cands}))
                 print(show(rows[-1]), flush=True)
     return rows
+
+
+def variant_cells(rs: list[dict]) -> list[str]:
+    """A true variant's summary cells over its seeds: worst error, cost over the reference
+    (median, max), within 1.001 x, mean simulations of both routes, and their ratio."""
+    errs = [r["error"] for r in rs if not math.isnan(r["error"])]
+    ratios = [r["ratio"] for r in rs if not math.isnan(r["ratio"])]
+    s_n = statistics.mean(r["nfev"] for r in rs)
+    n_n = statistics.mean(r.get("naive_nfev", 0) for r in rs)
+    fewer = sum(1 for r in rs if r["nfev"] < r.get("naive_nfev", 0))
+    return [
+        f"{100 * max(errs):.3g} %" if errs else "n/a",
+        f"{statistics.median(ratios):.6f}, {max(ratios):.6g}" if ratios else "n/a",
+        f"{sum(1 for x in ratios if x <= 1.001)}/{len(rs)}",
+        f"{s_n:.0f}",
+        f"{n_n:.0f}" if n_n else "not run",
+        f"{s_n / n_n:.2f} ({fewer}/{len(rs)})" if n_n else "-",
+    ]
 
 
 def join_naive(row: dict, naive: dict[int, dict]) -> dict:

@@ -28,12 +28,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import statistics
 import sys
 import time
 from pathlib import Path
-
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import structure as base
@@ -83,22 +80,8 @@ def study(on: int, seed: int, fixed: int | None = None, joint: bool = False) -> 
 
 def reference(on: int, seed: int, chosen: int, start: dict[str, float]) -> float:
     """SciPy least_squares at damping ``chosen`` (law 2) from ``start``: its chi2."""
-    from scipy.optimize import least_squares
-
-    res, ev = base.residuals_of(study(on, seed, fixed=chosen))
-    names = PARAMS[chosen]
-    lo = np.array([base.LEVELS[n][1] for n in names])
-    x0 = np.maximum(np.array([start[n] for n in names], dtype=float), lo + 1e-9)
-    scale = np.abs(x0) + 1e-6
-    out = least_squares(
-        lambda s: res(dict(zip(names, s * scale, strict=True))),
-        x0 / scale,
-        bounds=(lo / scale, np.inf),
-        method="trf",
-        x_scale="jac",
-    )
-    ev.close()
-    return float(out.fun @ out.fun)
+    lower = {n: base.LEVELS[n][1] for n in PARAMS[chosen]}
+    return base.least_squares_at(study(on, seed, fixed=chosen), PARAMS[chosen], lower, start)[0]
 
 
 def structure_route(on: int, seed: int, joint: bool) -> dict:
@@ -181,18 +164,7 @@ def table(rows: list[dict]) -> list[str]:
         rs = [r for r in rows if r["on"] == on]
         if not rs:
             continue
-        errs = [r["error"] for r in rs if not math.isnan(r["error"])]
-        ratios = [r["ratio"] for r in rs if not math.isnan(r["ratio"])]
-        s_n = statistics.mean(r["nfev"] for r in rs)
-        n_n = statistics.mean(r.get("naive_nfev", 0) for r in rs)
-        fewer = sum(1 for r in rs if r["nfev"] < r.get("naive_nfev", 0))
-        lines.append(
-            f"| {on} | {len(rs)} | {100 * max(errs):.3g} % | "
-            + (f"{statistics.median(ratios):.6f}, {max(ratios):.6g}" if ratios else "n/a")
-            + f" | {sum(1 for x in ratios if x <= 1.001)}/{len(rs)} | {s_n:.0f} | "
-            + (f"{n_n:.0f} | {s_n / n_n:.2f} ({fewer}/{len(rs)})" if n_n else "not run | -")
-            + " |"
-        )
+        lines.append("| " + " | ".join([str(on), str(len(rs)), *base.variant_cells(rs)]) + " |")
     return lines
 
 

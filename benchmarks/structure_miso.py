@@ -32,12 +32,9 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import math
-import statistics
 import sys
 import time
 from pathlib import Path
-
-import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -111,22 +108,8 @@ def study(masses: int, seed: int, fixed: int | None = None) -> Study:
 
 def reference(masses: int, seed: int, chosen: int, start: dict[str, float]) -> float:
     """SciPy least_squares at load side ``chosen`` from ``start``: its chi2."""
-    from scipy.optimize import least_squares
-
-    res, ev = base.residuals_of(study(masses, seed, fixed=chosen))
-    names = PARAMS[chosen]
-    lo = np.array([LEVELS[n][1] for n in names])
-    x0 = np.maximum(np.array([start[n] for n in names], dtype=float), lo + 1e-9)
-    scale = np.abs(x0) + 1e-6
-    out = least_squares(
-        lambda s: res(dict(zip(names, s * scale, strict=True))),
-        x0 / scale,
-        bounds=(lo / scale, np.inf),
-        method="trf",
-        x_scale="jac",
-    )
-    ev.close()
-    return float(out.fun @ out.fun)
+    lower = {n: LEVELS[n][1] for n in PARAMS[chosen]}
+    return base.least_squares_at(study(masses, seed, fixed=chosen), PARAMS[chosen], lower, start)[0]
 
 
 def structure_route(masses: int, seed: int, folder: Path | None = None) -> dict:
@@ -218,23 +201,12 @@ def table(rows: list[dict]) -> list[str]:
         rs = [r for r in rows if r["masses"] == m]
         if not rs:
             continue
-        errs = [r["error"] for r in rs if not math.isnan(r["error"])]
-        ratios = [r["ratio"] for r in rs if not math.isnan(r["ratio"])]
-        s_n = statistics.mean(r["nfev"] for r in rs)
-        n_n = statistics.mean(r.get("naive_nfev", 0) for r in rs)
-        fewer = sum(1 for r in rs if r["nfev"] < r.get("naive_nfev", 0))
         held = sum(len(r["held"]) for r in rs if r["chosen"] == m)
         total = len(PARAMS[m]) * sum(1 for r in rs if r["chosen"] == m)
         opens = sum(len(r["open"]) for r in rs if r["chosen"] == m)
-        lines.append(
-            f"| {m} | {len(rs)} | "
-            + (f"{100 * max(errs):.3g} %" if errs else "n/a")
-            + f" | {held}/{total} ({opens}) | "
-            + (f"{statistics.median(ratios):.6f}, {max(ratios):.6g}" if ratios else "n/a")
-            + f" | {sum(1 for x in ratios if x <= 1.001)}/{len(rs)} | {s_n:.0f} | "
-            + (f"{n_n:.0f} | {s_n / n_n:.2f} ({fewer}/{len(rs)})" if n_n else "not run | -")
-            + " |"
-        )
+        error, *rest = base.variant_cells(rs)
+        cells = [str(m), str(len(rs)), error, f"{held}/{total} ({opens})", *rest]
+        lines.append("| " + " | ".join(cells) + " |")
     return lines
 
 
