@@ -142,7 +142,8 @@ def combined_refinement(
     """Least squares from ``x`` with each pair ``(i, j, a)`` as ``p_i + a p_j`` and ``p_j``.
 
     The other parameters stay in the search coordinates of ``space``; a pair's two
-    coordinates are its values scaled by their magnitudes at ``x``. Returns the best
+    coordinates are its values scaled by their magnitudes at ``x`` (at least their
+    lowest first levels: see the comment at ``scale``). Returns the best
     set evaluated (``x`` if none is lower), its cost, the simulations spent (at most
     ``limit``, and two for the test), and the stationarity test at SciPy's end (None
     where the limit stopped it).
@@ -154,9 +155,7 @@ def combined_refinement(
     paired = {k for i, j, _ in pairs for k in (i, j)}
     rest = [k for k in range(len(names)) if k not in paired]
     x0 = {n: float(x[n]) for n in names}
-    # a pair's coordinates scaled by its values, but not below its lowest first level: a
-    # value near a bound of 0 (spring damping at 0.0007, trapped there by logarithmic
-    # coordinates) scaled by itself makes the valley along it thousands of units long
+    # not below the lowest first level: B_s at 0.0007 made the valley 1e4 units long
     scale = {k: max(abs(x0[names[k]]), abs(space.value(k, -0.5)), 1e-12) for k in paired}
     n0, best = ev.nfev, [math.inf, dict(x0)]
 
