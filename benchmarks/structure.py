@@ -266,6 +266,15 @@ def variant_cells(rs: list[dict]) -> list[str]:
     ]
 
 
+def route_tail(r: dict) -> str:
+    """The end of a data set's line: its runs against the naive route's, why, and by stage."""
+    return (
+        f"sims {r['nfev']} vs naive {r.get('naive_nfev', 0)} ({r['seconds']:.0f} s): "
+        f"{r['why']}\n    simulations by stage: "
+        + ", ".join(f"{k} {v}" for k, v in r["stages"].items())
+    )
+
+
 def join_naive(row: dict, naive: dict[int, dict]) -> dict:
     """A data set's structure row with its naive studies: the BIC's choice, their runs."""
     row = dict(row)

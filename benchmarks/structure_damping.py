@@ -131,9 +131,7 @@ def line(r: dict) -> str:
     return (
         f"damping {r['on']} seed {r['seed']}: chose damping {r['chosen']} law {r['law']}"
         f"{' (indist.)' if r['tied'] else ''}, naive {r.get('naive')}, error "
-        f"{100 * r['error']:.3g} %, cost ratio {r['ratio']:.6f}, sims {r['nfev']} vs naive "
-        f"{r.get('naive_nfev', 0)} ({r['seconds']:.0f} s): {r['why']}\n    simulations by "
-        "stage: " + ", ".join(f"{k} {v}" for k, v in r["stages"].items())
+        f"{100 * r['error']:.3g} %, cost ratio {r['ratio']:.6f}, " + base.route_tail(r)
     )
 
 

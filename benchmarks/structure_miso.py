@@ -168,30 +168,18 @@ def line(r: dict) -> str:
         f"{r['masses']} mass(es) seed {r['seed']}: chose {r['chosen']}"
         f"{' (indist.)' if r['tied'] else ''}, naive {r.get('naive')}, error "
         f"{100 * r['error']:.3g} %, truth in {len(r['held'])} intervals (open: "
-        f"{', '.join(r['open']) or 'none'}), cost ratio {r['ratio']:.6f}, sims {r['nfev']} "
-        f"vs naive {r.get('naive_nfev', 0)} ({r['seconds']:.0f} s): {r['why']}\n    simulations by "
-        "stage: " + ", ".join(f"{k} {v}" for k, v in r["stages"].items())
+        f"{', '.join(r['open']) or 'none'}), cost ratio {r['ratio']:.6f}, " + base.route_tail(r)
     )
 
 
 def table(rows: list[dict]) -> list[str]:
     """The printed (Markdown) tables."""
-    lines = [
+    picks = [
         "| true load side | chosen one mass | chosen two masses | indist. "
         "| naive (BIC) one / two |",
         "|---|---|---|---|---|",
     ]
-    for m in (1, 2):
-        rs = [r for r in rows if r["masses"] == m]
-        if not rs:
-            continue
-        pick = [sum(1 for r in rs if not r["tied"] and r["chosen"] == c) for c in (1, 2)]
-        naive = "/".join(str(sum(1 for r in rs if r.get("naive") == c)) for c in (1, 2))
-        tied = sum(1 for r in rs if r["tied"])
-        name = "one mass (m2 = C_2 = 0)" if m == 1 else "two masses (m2 0.2, C_2 2)"
-        lines.append(f"| {name} | {pick[0]} | {pick[1]} | {tied} | {naive} |")
-    lines += [
-        "",
+    cells = [
         "| true load side | seeds | worst error | truth in its 95 % interval (open ones) "
         "| cost / least_squares (median, max) | <= 1.001 x "
         "| simulations: structure | naive (2 studies) | structure / naive (seeds with fewer) |",
@@ -201,12 +189,18 @@ def table(rows: list[dict]) -> list[str]:
         rs = [r for r in rows if r["masses"] == m]
         if not rs:
             continue
-        held = sum(len(r["held"]) for r in rs if r["chosen"] == m)
-        total = len(PARAMS[m]) * sum(1 for r in rs if r["chosen"] == m)
-        opens = sum(len(r["open"]) for r in rs if r["chosen"] == m)
+        pick = [sum(1 for r in rs if not r["tied"] and r["chosen"] == c) for c in (1, 2)]
+        naive = "/".join(str(sum(1 for r in rs if r.get("naive") == c)) for c in (1, 2))
+        tied = sum(1 for r in rs if r["tied"])
+        name = "one mass (m2 = C_2 = 0)" if m == 1 else "two masses (m2 0.2, C_2 2)"
+        picks.append(f"| {name} | {pick[0]} | {pick[1]} | {tied} | {naive} |")
+        right = [r for r in rs if r["chosen"] == m]
+        held = sum(len(r["held"]) for r in right)
+        opens = sum(len(r["open"]) for r in right)
         error, *rest = base.variant_cells(rs)
-        cells = [str(m), str(len(rs)), error, f"{held}/{total} ({opens})", *rest]
-        lines.append("| " + " | ".join(cells) + " |")
+        row = [str(m), str(len(rs)), error, f"{held}/{len(PARAMS[m]) * len(right)} ({opens})"]
+        cells.append("| " + " | ".join([*row, *rest]) + " |")
+    lines = [*picks, "", *cells]
     return lines
 
 

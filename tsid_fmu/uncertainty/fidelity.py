@@ -30,7 +30,6 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -386,10 +385,8 @@ def start_point(study: Study) -> dict[str, float]:
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
     x = space.to_x(np.zeros(space.dim))
     v = study.variants
-    if v is not None and v.name not in study.start_values:
-        paths = [Path(p).resolve() for p in v.paths]
-        here = Path(study.fmu).resolve()
-        x[v.name] = float(paths.index(here)) if here in paths else v.values[0]
+    if v is not None and v.name not in study.start_values:  # both already resolved
+        x[v.name] = float(v.paths.index(study.fmu)) if study.fmu in v.paths else v.values[0]
     return x
 
 
