@@ -190,3 +190,41 @@ def test_a_least_squares_that_cannot_go_on_leaves_the_best_set_so_far(monkeypatc
     x, cost, runs, gate = combined_refinement(ev, SPACE, START, pairs, 60)
     assert gate is None and 0 < runs and cost < start_cost
     assert cost == pytest.approx(ev.cost(**x)) and ev.cost(**x) < start_cost
+
+
+class _Store:
+    def __init__(self):
+        self.kept = {}
+
+    def stage(self, key):
+        return self.kept.get(key)
+
+    def write_stage(self, key, result):
+        self.kept[key] = result
+
+
+@pytest.mark.parametrize("adaptive", [False, True])
+def test_a_study_of_one_structure_is_refined_in_its_combinations_too(monkeypatch, adaptive):
+    """Not only the structure route: a plain study whose refinement's test held by a trial
+    in the valley (SISO law 3's own study, dev seed 122: 1.021 x the optimum, "converged")
+    ends refined in the combination, read back from its trail when run again."""
+    from tsid_fmu.search import local
+    from tsid_fmu.search.context import Context, Control
+
+    ev = CurveEvaluator(_model, MEASURED, 0.001)
+    gate = {"holds": True, "test": "projected Gauss-Newton, step tried", "detail": ""}
+    held = StageResult("refinement", "refinement", dict(START), ev.cost(**START), 9, "",
+                       extra={"stationarity": gate})  # fmt: skip
+    monkeypatch.setattr(local, "refinement", lambda *a, **k: held)  # the valley's stop
+    study = _Study()
+    study.method = types.SimpleNamespace(leveling=LevelingOptions(), weighting="noise")
+    store = _Store()
+    ctx = Context(study, _Evs(ev), store, None, Control())
+    arrays = StageResult("taguchi", "taguchi", dict(START), held.cost, 50, "")
+    stages = local.local_search(ctx, [arrays], adaptive, resume=None)
+    last = stages[-1]
+    assert "pairs" in last.extra and last.cost < 0.3 * held.cost
+    assert last.experiments == ["measured"] and store.kept["combinations"] is last
+    runs = ev.nfev
+    again = local.local_search(ctx, [arrays], adaptive, resume=None)
+    assert again[-1] is last and ev.nfev == runs  # read back: no simulation

@@ -38,7 +38,7 @@ from tsid_fmu.search.adaptive import answer_stage, verdict
 from tsid_fmu.search.context import Context
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.nesting import embed, slack
-from tsid_fmu.search.optima import measure, update, warm_start
+from tsid_fmu.search.optima import measure, short, update, warm_start
 from tsid_fmu.search.phases import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.selection import Candidate
@@ -64,23 +64,6 @@ __all__ = [
     "stationary",
     "warm_starts",
 ]
-
-
-WARM_NFEV = 10
-"""Simulations per (Real parameter + 1) of a refinement from warm starts and of a restart
-(the study's own limit where lower). A candidate chosen from a warm start that stopped
-short of an optimum gets a study of its own (:func:`needs_own_study`); measured on the
-SISO friction laws, warm refinements and restarts that ran to the default limit (30 per
-parameter + 1) spent 200 to 750 simulations per structure, most of them on structures
-the comparison then rejected by 1e5 in BIC."""
-
-
-def short(study: Study) -> Study:
-    """Return ``study`` with the refinement limited to :data:`WARM_NFEV` per parameter."""
-    limit = WARM_NFEV * (len(study.parameters) + 1)
-    own = study.method.refine_max_nfev
-    method = dataclasses.replace(study.method, refine_max_nfev=min(own or limit, limit))
-    return dataclasses.replace(study, method=method)
 
 
 def simplest_first(free: Sequence[int]) -> list[int]:

@@ -29,8 +29,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.search.adaptive import answer_stage
-from tsid_fmu.search.candidates import short
-from tsid_fmu.search.optima import settle
+from tsid_fmu.search.optima import settle, short
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.verdict import GATE_RTOL, LOWER_TRIED, Stationarity, gauss_newton_step
@@ -261,6 +260,8 @@ def refine_in_combinations(
     counts them all).
     """
     answer = answer_stage(stages)
+    if "pairs" in answer.extra:
+        return None, 0  # refined in its combinations already (a study of its own)
     gate = answer.extra.get("stationarity") or {}
     lower = not gate.get("holds", True) and LOWER_TRIED in str(gate.get("detail", ""))
     if gate.get("test") != "projected Gauss-Newton, step tried" and not lower:

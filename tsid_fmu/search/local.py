@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.adaptive import AGREE, HORIZONS, answer_stage, restart_start
+from tsid_fmu.search.combined import refine_in_combinations
 from tsid_fmu.search.context import Context, note, polish, refinement
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
@@ -31,7 +32,7 @@ def _unsettled(stages: list[StageResult], floor: float) -> str | None:
     test = answer.extra.get("stationarity") or {}
     if not test.get("holds", False):
         return f"the refined answer is not shown to be an optimum ({test.get('detail', '')})"
-    if answer.cost > POOR_FIT * floor:
+    if floor > 0 and answer.cost > POOR_FIT * floor:
         return (
             f"the refined answer is a poor fit (cost {answer.cost:.6g}, "
             f"{answer.cost / floor:.3g} times the noise floor)"
@@ -63,7 +64,7 @@ def local_search(
     exps = study.identify_names()
     stages.append(refinement(ctx, answer_stage(stages).x, exps))
     if not adaptive:
-        return stages
+        return _in_combinations(ctx, stages, exps)
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
     floor = noise_floor(evaluator, study.method.weighting == "noise")
     first = stages[0]
@@ -78,7 +79,7 @@ def local_search(
             name = "refinement after the Taguchi stage went on"
             stages.append(refinement(ctx, stages[0].x, exps, "refinement_02", name))
     restarts = _restarts(ctx, stages, floor, exps) if _horizons(ctx, stages, floor, exps) else 0
-    answer = answer_stage(stages)
+    answer = answer_stage(_in_combinations(ctx, stages, exps))
     if floor > 0 and answer.cost > POOR_FIT * floor:
         ratio = answer.cost / floor
         agreed = any(s.extra.get("agrees") for s in stages)
@@ -88,6 +89,32 @@ def local_search(
             "restarts": restarts,
             "horizons_agree": agreed,
         }
+    return stages
+
+
+def _in_combinations(ctx: Context, stages: list[StageResult], exps: list[str]) -> list[StageResult]:
+    """Refine the answer in the combinations the data fix, where that lowers it.
+
+    :func:`~tsid_fmu.search.combined.refine_in_combinations`: only where the answer's
+    test held by a trial alone or found a lower point, and two parameters act through
+    their combination. Measured on the SISO plant's law 3 (its own study, dev seed 122):
+    the refinement's test held by a trial at 1.021 x the optimum, in the valley along
+    ``F_vm + B_s``; refined in that combination, 0.99825 x the least-squares reference
+    in 97 runs. A finished one from the same answer is read back.
+    """
+    answer = answer_stage(stages)
+    start = {n: float(answer.x[n]) for n in ctx.study.parameter_names}
+    done = ctx.store.stage("combinations")
+    if done is not None and done.extra.get("start") == start:
+        stages.append(done)
+        return stages
+    lower, _ = refine_in_combinations(ctx.study, ctx.evaluators, stages, ctx.progress)
+    if lower is None or lower.status == 2:
+        return stages
+    lower.experiments = list(exps)
+    lower.extra["start"] = start
+    ctx.store.write_stage("combinations", lower)
+    stages.append(lower)
     return stages
 
 
