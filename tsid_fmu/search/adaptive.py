@@ -25,7 +25,10 @@ sequence of stages:
    start points first (where a local method alone would start), then from the next-best
    run of the arrays that lies away from every start and answer so far (the MISO
    paper's re-run from the next-best run);
-6. the answer is the lowest-cost set of every stage, and the study has converged only
+6. where the answer's test held by a trial alone, or its simulated step was lower, and
+   two parameters act through one combination, the refinement in that combination
+   (:mod:`tsid_fmu.search.combined`), kept where lower;
+7. the answer is the lowest-cost set of every stage, and the study has converged only
    where a stationarity test holds there (:mod:`tsid_fmu.search.verdict`). A poor fit
    that no restart improved is a warning, not a verdict: the optima of a model that
    does not quite explain the data, or of strongly coloured noise, are far above the

@@ -102,6 +102,8 @@ def _in_combinations(ctx: Context, stages: list[StageResult], exps: list[str]) -
     ``F_vm + B_s``; refined in that combination, 0.99825 x the least-squares reference
     in 97 runs. A finished one from the same answer is read back.
     """
+    if stages[-1].status == 2:
+        return stages  # paused: nothing more runs
     answer = answer_stage(stages)
     start = {n: float(answer.x[n]) for n in ctx.study.parameter_names}
     done = ctx.store.stage("combinations")
@@ -109,11 +111,12 @@ def _in_combinations(ctx: Context, stages: list[StageResult], exps: list[str]) -
         stages.append(done)
         return stages
     lower, _ = refine_in_combinations(ctx.study, ctx.evaluators, stages, ctx.progress)
-    if lower is None or lower.status == 2:
+    if lower is None:
         return stages
     lower.experiments = list(exps)
     lower.extra["start"] = start
-    ctx.store.write_stage("combinations", lower)
+    if lower.status != 2:  # a paused one is run again on --resume
+        ctx.store.write_stage("combinations", lower)
     stages.append(lower)
     return stages
 
