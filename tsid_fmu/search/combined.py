@@ -280,10 +280,13 @@ def refine_in_combinations(
     if not pairs:
         return None, ev.nfev - n0
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    what = ", ".join(f"{names[i]} + {a:.4g} {names[j]}" for i, j, a in pairs)
+    if progress:
+        message = f"refining in the combinations the data fix: {what} ..."
+        progress("rerun", {"message": message})
     xb, cost, _, gate = combined_refinement(ev, space, x, pairs, 5 * (len(names) + 1))
     if not cost < answer.cost:
         return None, ev.nfev - n0
-    what = ", ".join(f"{names[i]} + {a:.4g} {names[j]}" for i, j, a in pairs)
     name = f"refinement in the combinations the data fix: {what}"
     if gate is not None and gate.holds:
         message = f"least squares in the combinations; stationary: {gate.detail}"
