@@ -228,3 +228,14 @@ def test_a_study_of_one_structure_is_refined_in_its_combinations_too(monkeypatch
     runs = ev.nfev
     again = local.local_search(ctx, [arrays], adaptive, resume=None)
     assert again[-1] is last and ev.nfev == runs  # read back: no simulation
+
+
+def test_an_answer_refined_in_its_combinations_is_not_refined_in_them_again():
+    """A structure's own study ends refined in its combinations; the structure route's
+    chosen answer is then not refined in them a second time (no run)."""
+    ev = CurveEvaluator(_model, MEASURED, 0.001)
+    gate = {"holds": True, "test": "projected Gauss-Newton, step tried", "detail": ""}
+    stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 5, "",
+                        extra={"stationarity": gate, "pairs": [["v", "b", 1.0]]})  # fmt: skip
+    assert refine_in_combinations(_Study(), _Evs(ev), [stage]) == (None, 0)
+    assert ev.nfev == 0
