@@ -30,6 +30,7 @@ import numpy as np
 
 from tsid_fmu.search.adaptive import answer_stage
 from tsid_fmu.search.optima import settle, short
+from tsid_fmu.search.parallel import PARALLEL, parallel_pairs
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.verdict import GATE_RTOL, LOWER_TRIED, Stationarity, gauss_newton_step
@@ -44,19 +45,15 @@ __all__ = [
     "refine_in_combinations",
 ]
 
-PARALLEL = 1e-2
-"""Two Jacobian columns are taken as parallel where ``1 - |cos|`` of their angle is below
-this. Measured on the SISO plant at law 3's answers (dev seeds 101 to 103), with relative
-forward-difference steps: viscous friction and spring damping 1.7e-4 to 1.0e-3 (event
-noise: their different steps shift different events; with steps matched to their sum,
-4e-9 to 6e-8), every other pair 0.03 or more. A pair taken wrongly costs the runs of
-:func:`combined_refinement`, whose answer is kept only where it is lower."""
-
 _STEP = 1e-6
 """Relative forward-difference step of :func:`physical_jacobian` (the columns of the
 SISO pair stayed parallel for steps from 1e-6 to 1e-2)."""
 
 _FAILED = 1e10
+
+_MATCHED = 1e-4
+"""A round of :func:`matched_ratio` that moves the ratio by less than this fraction of
+itself is its last."""
 
 _FTOL = 1e-4
 """SciPy's ``ftol`` for :func:`combined_refinement`: it stops where a step lowers the cost
@@ -84,28 +81,6 @@ def physical_jacobian(
     return np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
 
 
-def parallel_pairs(jac: np.ndarray, tol: float = PARALLEL) -> list[tuple[int, int, float]]:
-    """Return disjoint pairs ``(i, j, a)`` of parallel columns, ``jac[:, j] ~ a jac[:, i]``.
-
-    The most nearly parallel first; each column in one pair at most.
-    """
-    norms = np.linalg.norm(jac, axis=0)
-    found = []
-    for i in range(jac.shape[1]):
-        for j in range(i + 1, jac.shape[1]):
-            if norms[i] > 0 and norms[j] > 0:
-                cos = float(jac[:, i] @ jac[:, j]) / (norms[i] * norms[j])
-                if 1.0 - abs(cos) < tol:
-                    found.append((1.0 - abs(cos), i, j))
-    used: set[int] = set()
-    out = []
-    for _, i, j in sorted(found):
-        if i not in used and j not in used:
-            used |= {i, j}
-            out.append((i, j, float(jac[:, i] @ jac[:, j]) / float(jac[:, i] @ jac[:, i])))
-    return out
-
-
 def matched_ratio(
     ev: Any, x: Mapping[str, float], names: list[str], r0: np.ndarray, pair: tuple
 ) -> tuple[int, int, float]:
@@ -117,7 +92,8 @@ def matched_ratio(
     Measured on the SISO pair at law 3's answer (dev seed 103): ``a`` = 1.0234 from
     relative steps, against 1.0000 for the sum; refined in that wrong combination, the
     answer stayed at 1.0123 x the reference, in the right one it fell to 0.9996 x.
-    Two rounds.
+    Two rounds, the second only where the first moved ``a`` by more than ``_MATCHED``
+    of itself (its steps would otherwise be the first round's, to that fraction).
     """
     i, j, a = pair
     for _ in range(2):
@@ -127,7 +103,10 @@ def matched_ratio(
         dj, di = moved[0] - r0, moved[1] - r0
         if not float(di @ di) > 0:
             break
-        a *= float(di @ dj) / float(di @ di)
+        factor = float(di @ dj) / float(di @ di)
+        a *= factor
+        if abs(factor - 1.0) < _MATCHED:
+            break
     return i, j, a
 
 
@@ -137,15 +116,19 @@ def combined_refinement(
     x: Mapping[str, float],
     pairs: list[tuple[int, int, float]],
     limit: int,
+    start: tuple[np.ndarray, float] | None = None,
 ) -> tuple[dict[str, float], float, int, Stationarity | None]:
     """Least squares from ``x`` with each pair ``(i, j, a)`` as ``p_i + a p_j`` and ``p_j``.
 
     The other parameters stay in the search coordinates of ``space``; a pair's two
     coordinates are its values scaled by their magnitudes at ``x`` (at least their
-    lowest first levels: see the comment at ``scale``). Returns the best
-    set evaluated (``x`` if none is lower), its cost, the simulations spent (at most
-    ``limit``, and two for the test), and the stationarity test at SciPy's end (None
-    where the limit stopped it).
+    lowest first levels: see the comment at ``scale``). ``start``, the residuals and cost
+    at ``x`` where the caller has them, saves their run. Jacobians are SciPy's
+    ``"2-point"`` differences, each one batch of runs (so they run in parallel), the
+    last at SciPy's answer for the stationarity test there. Returns the best set
+    evaluated (``x`` if none is lower), its cost, the simulations spent (at most
+    ``limit``, and two for the test), and the stationarity test at the end (None where
+    the limit stopped it, or SciPy could not go on).
     """
     from scipy.optimize import least_squares
 
@@ -156,7 +139,7 @@ def combined_refinement(
     x0 = {n: float(x[n]) for n in names}
     # not below the lowest first level: B_s at 0.0007 made the valley 1e4 units long
     scale = {k: max(abs(x0[names[k]]), abs(space.value(k, -0.5)), 1e-12) for k in paired}
-    n0, best = ev.nfev, [math.inf, dict(x0)]
+    n0 = ev.nfev
 
     def to_x(z: np.ndarray) -> dict[str, float] | None:
         out = dict(x0)
@@ -177,40 +160,94 @@ def combined_refinement(
     z0 = [space.coordinate(k, x0[names[k]]) for k in rest]
     for i, j, a in pairs:
         z0 += [(x0[names[i]] + a * x0[names[j]]) / scale[i], x0[names[j]] / scale[j]]
-    r0 = None
-
-    def fun(z: np.ndarray) -> np.ndarray:
-        nonlocal r0
-        if ev.nfev - n0 >= limit:
-            raise StopIteration
-        p = to_x(z)
-        if p is None:
-            return np.full(r0.size if r0 is not None else 1, _FAILED)
-        scored = ev.evaluate([p])
-        r = scored.residuals[0] if scored.residuals else None
-        cost = float(scored.costs[0, 0])
-        if r is None or not math.isfinite(cost) or not np.isfinite(r).all():
-            return np.full(r0.size if r0 is not None else 1, _FAILED)
-        r0 = np.asarray(r, float) if r0 is None else r0
-        if cost < best[0]:
-            best[:] = [cost, p]
-        return np.asarray(r, float)
-
+    runs = _Runs(ev, to_x, limit, np.array(z0, float), x0, start)
     try:
         out = least_squares(
-            fun, np.array(z0), method="trf", x_scale="jac", ftol=_FTOL, max_nfev=limit
-        )
+            runs.fun, runs.z0, jac=runs.jac, method="trf", x_scale="jac", ftol=_FTOL,
+            max_nfev=limit,
+        )  # fmt: skip
+        z, r, jac = out.x, np.asarray(out.fun), np.asarray(out.jac)
     except StopIteration:
-        return best[1], float(best[0]), ev.nfev - n0, None
+        return runs.best[1], float(runs.best[0]), ev.nfev - n0, None
     except (ValueError, np.linalg.LinAlgError):
         # SciPy's trust-region step failed (a Jacobian it cannot factor: failed runs
         # beside finite ones): the best set so far is the answer, with no test
-        return best[1], float(best[0]), ev.nfev - n0, None
+        return runs.best[1], float(runs.best[0]), ev.nfev - n0, None
     inf = [math.inf] * (2 * len(pairs))
     lower = np.array([space.s_lower[k] for k in rest] + [-v for v in inf])
     upper = np.array([space.s_upper[k] for k in rest] + inf)
-    gate = _gate(fun, out.x, np.asarray(out.fun), np.asarray(out.jac), (lower, upper), best)
-    return best[1], float(best[0]), ev.nfev - n0, gate
+    gate = _gate(runs.fun, z, r, jac, (lower, upper), runs.best)
+    return runs.best[1], float(runs.best[0]), ev.nfev - n0, gate
+
+
+class _Runs:
+    """Residuals and Jacobians in the combined coordinates, keeping the best set scored.
+
+    ``best`` is ``[cost, set]``. A set outside the bounds scores as a failed run.
+    """
+
+    def __init__(
+        self,
+        ev: Any,
+        to_x: Any,
+        limit: int,
+        z0: np.ndarray,
+        x0: dict[str, float],
+        start: tuple[np.ndarray, float] | None,
+    ) -> None:
+        self.ev, self.to_x, self.limit, self.z0, self.n0 = ev, to_x, limit, z0, ev.nfev
+        self.known = np.asarray(start[0], float) if start is not None else None
+        self.size = self.known.size if self.known is not None else 0
+        self.best: list[Any] = [float(start[1]) if start is not None else math.inf, dict(x0)]
+        self.last: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _failed(self) -> np.ndarray:
+        return np.full(self.size or 1, _FAILED)
+
+    def run(self, zs: list[np.ndarray]) -> list[np.ndarray]:
+        """Return the residuals at ``zs``, scored in one batch."""
+        if self.ev.nfev - self.n0 + len(zs) > self.limit:
+            raise StopIteration  # a batch that would pass the limit is not started
+        sets = [self.to_x(z) for z in zs]
+        todo = [p for p in sets if p is not None]
+        scored = self.ev.evaluate(todo) if todo else None
+        res = (scored.residuals or [None] * len(todo)) if scored is not None else []
+        out, k = [], 0
+        for p in sets:
+            if p is None:
+                out.append(self._failed())
+                continue
+            r, cost = res[k], float(scored.costs[k, 0])
+            k += 1
+            if r is None or not math.isfinite(cost) or not np.isfinite(r).all():
+                out.append(self._failed())
+                continue
+            r = np.asarray(r, float)
+            self.size = self.size or r.size
+            if cost < self.best[0]:
+                self.best[:] = [cost, p]  # in place: _gate holds this list
+            out.append(r)
+        return out
+
+    def fun(self, z: np.ndarray) -> np.ndarray:
+        if self.known is not None and np.array_equal(z, self.z0):
+            r = self.known
+        else:
+            r = self.run([z])[0]
+        self.last = (np.array(z, float), r)
+        return r
+
+    def jac(self, z: np.ndarray) -> np.ndarray:
+        """SciPy's ``"2-point"`` Jacobian at ``z`` (its steps), as one batch of runs."""
+        if self.last is None or not np.array_equal(self.last[0], z):
+            self.fun(z)
+        assert self.last is not None
+        r = self.last[1]
+        h = np.finfo(float).eps ** 0.5 * np.where(z >= 0, 1.0, -1.0) * np.maximum(1.0, abs(z))
+        h = (z + h) - z
+        cols = self.run([z + h[k] * np.eye(z.size)[k] for k in range(z.size)])
+        jac = np.column_stack([(c - r) / hk for c, hk in zip(cols, h, strict=True)])
+        return jac
 
 
 def _gate(
@@ -251,11 +288,13 @@ def refine_in_combinations(
     first-order model does not hold this close to the answer, as on a cost made rough
     by events), or failed with its step, simulated, lower (a refinement that stopped at
     its tolerances in a valley: law-3 dev seed 116, ``B_s`` at 0.82 of 2.5, 1.009 x the
-    least-squares cost), and its Jacobian (``p`` runs) has parallel columns (:func:`parallel_pairs`,
+    least-squares cost), and its Jacobian has parallel columns (:func:`parallel_pairs`,
     each pair's ratio measured again, :func:`matched_ratio`): then
     :func:`combined_refinement` (at most 5 runs per parameter + 1). A lower end whose
     stationarity test holds there is the answer; otherwise a refinement in the usual
     coordinates from it gives the verdict (:func:`~tsid_fmu.search.optima.settle`).
+    The Jacobian is the refinement's last (its ``extra["parallel"]``, no run), or ``p``
+    runs at the answer where a stage has none (one read back from an older trail).
     Returns that stage, or None, and the simulations spent here (the stage's ``nfev``
     counts them all).
     """
@@ -267,15 +306,20 @@ def refine_in_combinations(
     if gate.get("test") != "projected Gauss-Newton, step tried" and not lower:
         return None, 0
     names = list(study.parameter_names)
+    found = answer.extra.get("parallel")  # from the refinement's last Jacobian
+    if found is not None:
+        found = [(names.index(a), names.index(b), r) for a, b, r in found if {a, b} <= {*names}]
+        if not found:
+            return None, 0
     ev = evs.get(names, study.identify_names(), {})
     n0 = ev.nfev
     x = {n: float(answer.x[n]) for n in names}
     scored = ev.evaluate([x])
     r0 = scored.residuals[0] if scored.residuals else None
-    if r0 is None:
+    if r0 is None or not math.isfinite(float(scored.costs[0, 0])):
         return None, ev.nfev - n0
     r0 = np.asarray(r0, float)
-    pairs = parallel_pairs(physical_jacobian(ev, x, names, r0))
+    pairs = found if found is not None else parallel_pairs(physical_jacobian(ev, x, names, r0))
     pairs = [matched_ratio(ev, x, names, r0, p) for p in pairs]
     if not pairs:
         return None, ev.nfev - n0
@@ -284,7 +328,9 @@ def refine_in_combinations(
     if progress:
         message = f"refining in the combinations the data fix: {what} ..."
         progress("rerun", {"message": message})
-    xb, cost, _, gate = combined_refinement(ev, space, x, pairs, 5 * (len(names) + 1))
+    limit = 5 * (len(names) + 1)
+    start = (r0, float(scored.costs[0, 0]))
+    xb, cost, _, gate = combined_refinement(ev, space, x, pairs, limit, start)
     if not cost < answer.cost:
         return None, ev.nfev - n0
     name = f"refinement in the combinations the data fix: {what}"

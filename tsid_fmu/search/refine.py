@@ -27,6 +27,7 @@ import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.iteration import ProgressCallback
+from tsid_fmu.search.parallel import named_pairs
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.verdict import GATE_RTOL, LOWER_TRIED, Stationarity, gauss_newton_step
@@ -285,6 +286,11 @@ def refine_stage(
     cost, x = problem.best
     nfev = evaluator.nfev - problem.start
     extra["stationarity"] = gate.to_dict()
+    if problem.jacobian is not None and (
+        gate.test.endswith("step tried") or LOWER_TRIED in gate.detail
+    ):  # what the refinement in combinations reads: no runs spent again on a Jacobian
+        s_lin, _, jac = problem.jacobian
+        extra["parallel"] = named_pairs(space, space.to_x(s_lin), jac)
     if status == 0 and not gate.holds:
         status = 1
         message += f"; not shown to be an optimum: {gate.detail}"
