@@ -14,7 +14,9 @@ squares with their sum as one coordinate ended at 0.99908 x in 93 runs, while re
 with forward-difference steps from 1e-8 to 1e-2 and in the Jacobian's eigen-coordinates
 all stopped at 1.0078 to 1.017 x.
 
-:func:`parallel_pairs` finds such pairs in a Jacobian; :func:`combined_refinement` refines
+:func:`~tsid_fmu.search.parallel.parallel_pairs` finds such pairs in a Jacobian (the
+refinement's last one, kept in its stage: :mod:`~tsid_fmu.search.parallel`);
+:func:`matched_ratio` measures each pair's ratio again; :func:`combined_refinement` refines
 with each pair ``(i, j)`` re-parametrised as ``c = p_i + a p_j`` (``a`` from
 the columns) and ``p_j``, the valley then along an axis. Bounds of ``p_i`` become a
 constraint: a set outside them scores as a failed simulation.
