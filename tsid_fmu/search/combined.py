@@ -248,8 +248,7 @@ class _Runs:
         h = np.finfo(float).eps ** 0.5 * np.where(z >= 0, 1.0, -1.0) * np.maximum(1.0, abs(z))
         h = (z + h) - z
         cols = self.run([z + h[k] * np.eye(z.size)[k] for k in range(z.size)])
-        jac = np.column_stack([(c - r) / hk for c, hk in zip(cols, h, strict=True)])
-        return jac
+        return np.column_stack([(c - r) / hk for c, hk in zip(cols, h, strict=True)])
 
 
 def _gate(
