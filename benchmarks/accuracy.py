@@ -22,6 +22,7 @@ alone got. Run::
     python benchmarks/accuracy.py                 # every problem
     python benchmarks/accuracy.py --de-budget 1000 --markdown   # and the README's table
     python benchmarks/accuracy.py siso_encoder dc_motor --workers 1
+    python benchmarks/accuracy.py --tsid-only     # tsid's rows only (a search change)
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -262,15 +264,34 @@ MARKDOWN_HEADER = [
 ]
 
 
-def benchmark(name: str, workers: int | None, de_budget: int) -> tuple[list[dict], float]:
+def tsid_rows(name: str, workers: int | None) -> tuple[list[dict], Any]:
+    """tsid's rows of one problem: the Taguchi stage alone, the whole study, and the
+    whole study with ``refine = "least_squares"``; and the whole study's result."""
     prob = PROBLEMS[name]()
-    study = study_of(prob, METHOD)
-    rows, res = run_tsid(study, prob.truth, workers)
+    rows, res = run_tsid(study_of(prob, METHOD), prob.truth, workers)
     # the procedure of the round before, in the same run: the Taguchi stage to its own end
     whole = study_of(prob, dataclasses.replace(METHOD, refine="least_squares"))
     row = run_tsid(whole, prob.truth, workers)[0][1]
     row["method"] = 'tsid: refine = "least_squares" (arrays to their end)'
     rows.append(row)
+    return rows, res
+
+
+def tsid_only(name: str, workers: int | None) -> None:
+    """Print tsid's rows of one problem with their costs (``--tsid-only``: the peers' rows
+    do not depend on tsid's code, so a change to the search needs only these again)."""
+    prob = PROBLEMS[name]()
+    rows, res = tsid_rows(name, workers)
+    print(f"\n## {name} (tsid only)")
+    for r in rows:
+        print(f"{r['method']:<54} {r['nfev']:>6d} {r['cost']:>16.10g} {r['error']:>11.3g}%")
+    print(intervals_line(res, prob.truth))
+
+
+def benchmark(name: str, workers: int | None, de_budget: int) -> tuple[list[dict], float]:
+    prob = PROBLEMS[name]()
+    study = study_of(prob, METHOD)
+    rows, res = tsid_rows(name, workers)
     scorer = Scorer(dataclasses.replace(study, method=dataclasses.replace(METHOD)), workers)
     try:
         truth_cost = scorer.cost(scorer.space.to_s(prob.truth))
@@ -331,10 +352,17 @@ def main() -> None:
     parser.add_argument(
         "--markdown", action="store_true", help="end with the README's table of these problems"
     )
+    parser.add_argument(
+        "--tsid-only", action="store_true", help="tsid's rows only, with their costs (no peers)"
+    )
     args = parser.parse_args()
     unknown = sorted(set(args.problems) - set(PROBLEMS))
     if unknown:
         parser.error(f"unknown problem(s) {unknown}; choose from {', '.join(PROBLEMS)}")
+    if args.tsid_only:
+        for name in args.problems or list(PROBLEMS):
+            tsid_only(name, args.workers)
+        return
     table = list(MARKDOWN_HEADER)
     for name in args.problems or list(PROBLEMS):
         rows, best = benchmark(name, args.workers, args.de_budget)
