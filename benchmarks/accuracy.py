@@ -264,10 +264,9 @@ MARKDOWN_HEADER = [
 ]
 
 
-def tsid_rows(name: str, workers: int | None) -> tuple[list[dict], Any]:
+def tsid_rows(prob: Any, workers: int | None) -> tuple[list[dict], Any]:
     """tsid's rows of one problem: the Taguchi stage alone, the whole study, and the
     whole study with ``refine = "least_squares"``; and the whole study's result."""
-    prob = PROBLEMS[name]()
     rows, res = run_tsid(study_of(prob, METHOD), prob.truth, workers)
     # the procedure of the round before, in the same run: the Taguchi stage to its own end
     whole = study_of(prob, dataclasses.replace(METHOD, refine="least_squares"))
@@ -281,7 +280,7 @@ def tsid_only(name: str, workers: int | None) -> None:
     """Print tsid's rows of one problem with their costs (``--tsid-only``: the peers' rows
     do not depend on tsid's code, so a change to the search needs only these again)."""
     prob = PROBLEMS[name]()
-    rows, res = tsid_rows(name, workers)
+    rows, res = tsid_rows(prob, workers)
     print(f"\n## {name} (tsid only)")
     for r in rows:
         print(f"{r['method']:<54} {r['nfev']:>6d} {r['cost']:>16.10g} {r['error']:>11.3g}%")
@@ -291,7 +290,7 @@ def tsid_only(name: str, workers: int | None) -> None:
 def benchmark(name: str, workers: int | None, de_budget: int) -> tuple[list[dict], float]:
     prob = PROBLEMS[name]()
     study = study_of(prob, METHOD)
-    rows, res = tsid_rows(name, workers)
+    rows, res = tsid_rows(prob, workers)
     scorer = Scorer(dataclasses.replace(study, method=dataclasses.replace(METHOD)), workers)
     try:
         truth_cost = scorer.cost(scorer.space.to_s(prob.truth))

@@ -35,7 +35,13 @@ from tsid_fmu.search.optima import settle, short
 from tsid_fmu.search.parallel import PARALLEL, parallel_pairs
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.verdict import GATE_RTOL, LOWER_TRIED, Stationarity, gauss_newton_step
+from tsid_fmu.search.verdict import (
+    GATE_RTOL,
+    LOWER_TRIED,
+    Stationarity,
+    decided_by_trial,
+    gauss_newton_step,
+)
 from tsid_fmu.study.definition import Study
 
 __all__ = [
@@ -64,13 +70,23 @@ SISO pair for the last 0.01 %: dev seeds 101 and 102 were within 0.1 % of their 
 32 to 48 runs)."""
 
 
-def _residuals(ev: Any, sets: list[dict[str, float]], size: int) -> list[np.ndarray]:
-    out = ev.evaluate(sets)
+def _scored(ev: Any, sets: list[dict[str, float]], size: int) -> list[tuple[np.ndarray, float]]:
+    """Residuals and cost of each set, one batch; a failed run's residuals are ``_FAILED``."""
+    out = ev.evaluate(sets) if sets else None
+    if out is None:
+        return []
     res = out.residuals or [None] * len(sets)
-    return [
-        np.asarray(r, float) if r is not None and math.isfinite(c) else np.full(size, _FAILED)
-        for r, c in zip(res, out.costs[:, 0], strict=True)
-    ]
+    scored = []
+    for r, c in zip(res, out.costs[:, 0], strict=True):
+        if r is not None and math.isfinite(c) and np.isfinite(r).all():
+            scored.append((np.asarray(r, float), float(c)))
+        else:
+            scored.append((np.full(size, _FAILED), math.inf))
+    return scored
+
+
+def _residuals(ev: Any, sets: list[dict[str, float]], size: int) -> list[np.ndarray]:
+    return [r for r, _ in _scored(ev, sets, size)]
 
 
 def physical_jacobian(
@@ -211,23 +227,13 @@ class _Runs:
         if self.ev.nfev - self.n0 + len(zs) > self.limit:
             raise StopIteration  # a batch that would pass the limit is not started
         sets = [self.to_x(z) for z in zs]
-        todo = [p for p in sets if p is not None]
-        scored = self.ev.evaluate(todo) if todo else None
-        res = (scored.residuals or [None] * len(todo)) if scored is not None else []
-        out, k = [], 0
+        scored = iter(_scored(self.ev, [p for p in sets if p is not None], self.size or 1))
+        out = []
         for p in sets:
-            if p is None:
-                out.append(self._failed())
-                continue
-            r, cost = res[k], float(scored.costs[k, 0])
-            k += 1
-            if r is None or not math.isfinite(cost) or not np.isfinite(r).all():
-                out.append(self._failed())
-                continue
-            r = np.asarray(r, float)
-            self.size = self.size or r.size
+            r, cost = next(scored) if p is not None else (self._failed(), math.inf)
             if cost < self.best[0]:
                 self.best[:] = [cost, p]  # in place: _gate holds this list
+            self.size = self.size or (r.size if math.isfinite(cost) else 0)
             out.append(r)
         return out
 
@@ -247,7 +253,7 @@ class _Runs:
         r = self.last[1]
         h = np.finfo(float).eps ** 0.5 * np.where(z >= 0, 1.0, -1.0) * np.maximum(1.0, abs(z))
         h = (z + h) - z
-        cols = self.run([z + h[k] * np.eye(z.size)[k] for k in range(z.size)])
+        cols = self.run(list(z + np.diag(h)))  # row k: z with coordinate k stepped
         return np.column_stack([(c - r) / hk for c, hk in zip(cols, h, strict=True)])
 
 
@@ -302,9 +308,7 @@ def refine_in_combinations(
     answer = answer_stage(stages)
     if "pairs" in answer.extra:
         return None, 0  # refined in its combinations already (a study of its own)
-    gate = answer.extra.get("stationarity") or {}
-    lower = not gate.get("holds", True) and LOWER_TRIED in str(gate.get("detail", ""))
-    if gate.get("test") != "projected Gauss-Newton, step tried" and not lower:
+    if not decided_by_trial(answer.extra.get("stationarity") or {}):
         return None, 0
     names = list(study.parameter_names)
     found = answer.extra.get("parallel")  # from the refinement's last Jacobian

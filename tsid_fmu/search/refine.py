@@ -30,7 +30,13 @@ from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.parallel import named_pairs
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.verdict import GATE_RTOL, LOWER_TRIED, Stationarity, gauss_newton_step
+from tsid_fmu.search.verdict import (
+    GATE_RTOL,
+    LOWER_TRIED,
+    Stationarity,
+    decided_by_trial,
+    gauss_newton_step,
+)
 from tsid_fmu.study.schema import Method
 
 __all__ = ["FD_STEP", "refine_stage"]
@@ -286,9 +292,8 @@ def refine_stage(
     cost, x = problem.best
     nfev = evaluator.nfev - problem.start
     extra["stationarity"] = gate.to_dict()
-    if problem.jacobian is not None and (
-        gate.test.endswith("step tried") or LOWER_TRIED in gate.detail
-    ):  # what the refinement in combinations reads: no runs spent again on a Jacobian
+    if problem.jacobian is not None and decided_by_trial(extra["stationarity"]):
+        # what the refinement in combinations reads: no runs spent again on a Jacobian
         s_lin, _, jac = problem.jacobian
         extra["parallel"] = named_pairs(space, space.to_x(s_lin), jac)
     if status == 0 and not gate.holds:

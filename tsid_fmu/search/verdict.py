@@ -53,6 +53,19 @@ predict at an answer called stationary."""
 LOWER_TRIED = "tried, the step lowered the cost by"
 """How a failed stationarity test says that its step, simulated, found a lower point."""
 
+
+def decided_by_trial(gate: Mapping[str, Any]) -> bool:
+    """Whether a test (its ``to_dict`` form) was decided by simulating its step.
+
+    It held by a trial alone ("step tried": the first-order model does not hold this
+    close to the answer), or it failed with its step, simulated, lower: where the
+    refinement in combinations (:mod:`~tsid_fmu.search.combined`) runs.
+    """
+    if gate.get("test") == "projected Gauss-Newton, step tried":
+        return True
+    return not gate.get("holds", True) and LOWER_TRIED in str(gate.get("detail", ""))
+
+
 POOR_FIT = 20.0
 """An answer whose cost exceeds the noise floor by this factor is a poor fit. On the
 generalisation benchmark's dev seeds the optima of mismatched models sit at up to about
