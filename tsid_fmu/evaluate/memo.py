@@ -6,7 +6,9 @@ one method its subclasses provide, :meth:`MemoEvaluator._run_jobs`, which runs
 processes, a Dask cluster) and reports each result. Everything that decides what is
 simulated and what is counted happens here, in the calling process, before and after the
 jobs run -- never in the order they finish -- so results and counters do not depend on
-how many workers there are or how they are scheduled.
+how many workers there are or how they are scheduled. The caches take a batch's results
+in the order of its jobs once the batch ends, so what they drop does not depend on the
+order the jobs finished in either.
 
 Memo keys are :meth:`EvaluationSpec.key`: the exact float values in parameter order.
 
@@ -160,11 +162,14 @@ class MemoEvaluator:
                 result.costs.flags.writeable = False
                 self._costs[k] = (result.costs, result.error)
             fresh[k] = result.residuals  # the LRU may drop it before this batch ends
-            if result.residuals is not None:
-                self._residuals.put(k, result.residuals)
             done = self._report(progress, done, len(keys), len(where[k]))
 
-        self._run(jobs, on_result)
+        try:
+            self._run(jobs, on_result)
+        finally:  # into the LRU in the jobs' order, not the order they finished in
+            for k, _ in jobs:
+                if fresh.get(k) is not None:
+                    self._residuals.put(k, fresh[k])
         costs = np.zeros((len(keys), self.n_replicates))
         for i, k in enumerate(keys):
             costs[i] = self._costs[k][0]
@@ -205,11 +210,14 @@ class MemoEvaluator:
         def on_result(index: int, result: SimResult) -> None:
             if count:
                 self._nfev += result.nfev
-            k = jobs[index][0]
-            found[k] = result.simulated  # the LRU may drop it before this batch ends
-            self._outputs.put(k, result.simulated)
+            found[jobs[index][0]] = result.simulated
 
-        self._run(jobs, on_result)
+        try:
+            self._run(jobs, on_result)
+        finally:  # into the LRU in the jobs' order, not the order they finished in
+            for k, _ in jobs:
+                if k in found:
+                    self._outputs.put(k, found[k])
         return [list(found[k]) for k in keys]
 
     def mark_known(self, parameter_sets: Sequence[Mapping[str, float]]) -> None:
