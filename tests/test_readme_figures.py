@@ -1,14 +1,31 @@
-"""The README's figures match a fresh run of the commands beside them (issue 26).
+"""The README's figures match a fresh run of the commands beside them (issues 26, 49).
 
 Each test reads the command and the figures out of ``README.md`` and runs the command
 (the SISO example, about 20 s each on 2 shared cores), so it fails when either drifts:
 
-* "Set up and run": the first command's stdout, line for line (the numbers included),
-  its exit status, the stage counts, the errors against the truth and "every 95 %
-  interval holds the truth" of the paragraph after it;
+* "Set up and run": the first command's stdout, line for line, its exit status, the
+  stage counts, the errors against the truth and "every 95 % interval holds the truth"
+  of the paragraph after it;
 * the progress capture: each of its lines is a line ``identify(..., progress=True)``
   prints, in order, with the timings (``2.4 s``) left out of the comparison; the status
   bar (drawn only on a terminal) is not compared.
+
+The text around the numbers must match exactly. The numbers are compared to what the
+data determine, because another machine (another BLAS kernel, another CPU) moves the
+answer along the directions the data leave open (issue 49):
+
+* a parameter's value and interval to 0.1 %, or to half its relative standard error
+  where that is larger (F_vm moves along F_vm + B_s); a value whose interval is open is
+  not compared at all (B_s), only its interval's holding the truth;
+* standard errors to 10 %, a profile's resolution to 50 %;
+* costs to 1e-4 of themselves;
+* simulation and iteration counts to 10 % (at least 2): they are the same from run to
+  run on one machine (``tests/test_determinism.py``), not from one machine to another;
+* the decrease a stationarity test predicts is only held below the test's threshold
+  (:data:`~tsid_fmu.search.verdict.GATE_RTOL` of the cost): it is the last digits of a
+  cost at its minimum;
+* a solver's distance from Model Exchange and its effect, in noise and standard errors,
+  to 50 %; everything else exactly.
 """
 
 from __future__ import annotations
@@ -22,10 +39,12 @@ import pytest
 
 from tsid_fmu import identify, load
 from tsid_fmu.cli import main
+from tsid_fmu.search.verdict import GATE_RTOL
 
 REPO = Path(__file__).resolve().parents[1]
 README = (REPO / "README.md").read_text(encoding="utf-8")
 FIRST = "The first command prints progress on stderr and this on stdout"
+NUMBER = r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?"
 
 
 def _code_after(marker: str, start: int = 0) -> tuple[str, int]:
@@ -54,8 +73,79 @@ def _timeless(line: str) -> str:
     return re.sub(r"\b\d+(\.\d+)? s\b", "T s", line)
 
 
-def _numbers(text: str) -> list[str]:
-    return re.findall(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?", text)
+# (pattern, kind): a number in a group of the pattern is compared as its kind says
+ROLES = [
+    (rf"cost ({NUMBER})", "cost"),
+    (rf"best cost ({NUMBER})", "cost"),
+    (rf"({NUMBER}) simulations", "count"),
+    (rf"({NUMBER}) (?:Taguchi )?iterations,", "count"),
+    (rf"predicts a decrease of ({NUMBER}) \(({NUMBER}) of the cost\)", "free gate"),
+    (rf"by ~x({NUMBER})", "ratio"),
+    (rf"to ({NUMBER}) x the noise", "solver"),
+    (rf"by ({NUMBER}) standard errors", "solver"),
+]
+
+
+def _roles(line: str) -> dict[int, str]:
+    """The kind of each number of ``line`` that is not compared exactly, by its start."""
+    out: dict[int, str] = {}
+    for pattern, kinds in ROLES:
+        for m in re.finditer(pattern, line):
+            for g, kind in enumerate(kinds.split(), start=1):
+                out[m.start(g)] = kind
+    return out
+
+
+def _row_kinds(line: str, names: set[str]) -> list[str] | None:
+    """The kinds of a parameter table row's numbers, in order (None: not such a row)."""
+    words = line.split()
+    if not words or words[0] not in names:
+        return None
+    n = len(re.findall(NUMBER, line))
+    if "not determined" in line:  # value, first levels: the value along an open interval
+        return ["free"] + ["exact"] * (n - 1)
+    std = re.search(r"\.\.\s+\S+\s+(\S+)", line)
+    rel = float(std[1]) / 100 if std and re.fullmatch(NUMBER, std[1]) else 0.0
+    value = f"value {max(1e-3, rel / 2)!r}"
+    spread = "resolution" if "resolution" in line else "stderr"
+    return [value] * 3 + [spread] + ["exact"] * (n - 4)
+
+
+def _close(kind: str, want: str, got: str) -> bool:
+    a, b = float(want), float(got)
+    if kind == "exact":
+        return want == got
+    if kind == "free":
+        return True
+    if kind == "gate":
+        return b <= GATE_RTOL and a <= GATE_RTOL
+    if kind == "count":
+        return abs(a - b) <= max(2, 0.10 * abs(a))
+    rel = {"cost": 1e-4, "stderr": 0.10, "resolution": 0.5, "ratio": 0.05, "solver": 0.5}
+    tol = float(kind.split()[1]) if kind.startswith("value") else rel[kind]
+    return math.isclose(a, b, rel_tol=tol, abs_tol=0.0)
+
+
+def figure_mismatches(expected: str, printed: str, names: set[str]) -> list[str]:
+    """How ``printed`` differs from the README's ``expected`` line, beyond the tolerances.
+
+    The text must match word for word once numbers are set aside; each number is then
+    compared as the module's docstring says. Returns one message per difference.
+    """
+    skeleton = [re.sub(NUMBER, "#", " ".join(x.split())) for x in (expected, printed)]
+    if skeleton[0] != skeleton[1]:
+        return [f"text differs:\n  README: {expected}\n  run:    {printed}"]
+    want = list(re.finditer(NUMBER, expected))
+    got = [m.group() for m in re.finditer(NUMBER, printed)]
+    kinds = _row_kinds(expected, names)
+    if kinds is None:
+        roles = _roles(expected)
+        kinds = [roles.get(m.start(), "exact") for m in want]
+    return [
+        f"{kind} figure {w.group()} printed as {g}: {expected.split()[0]} ..."
+        for w, g, kind in zip(want, got, kinds, strict=True)
+        if not _close(kind, w.group(), g)
+    ]
 
 
 @pytest.fixture
@@ -66,39 +156,88 @@ def workdir(tmp_path, monkeypatch):
     return tmp_path
 
 
+def _first_block() -> tuple[list[str], int]:
+    expected, end = _code_after(FIRST)
+    return expected.rstrip("\n").splitlines(), end
+
+
+SISO_NAMES = {"F_cm", "F_vm", "M_m", "K_s", "B_s"}
+
+
+def test_the_figure_checks_pass_along_the_valley_and_fail_off_it():
+    """A deliberate perturbation of the README's own block (issue 49)."""
+    lines, _ = _first_block()
+    assert all(figure_mismatches(x, x, SISO_NAMES) == [] for x in lines)
+
+    def edit(line_start: str, old: str, new: str) -> list[str]:
+        at = next(i for i, x in enumerate(lines) if x.startswith(line_start))
+        assert old in lines[at], (old, lines[at])
+        return figure_mismatches(lines[at], lines[at].replace(old, new, 1), SISO_NAMES)
+
+    row = {x.split()[0]: x for x in lines if x.split() and x.split()[0] in SISO_NAMES}
+    f_vm, b_s = row["F_vm"].split()[1], row["B_s"].split()[1]
+    # along F_vm + B_s: what another platform printed (issue 49), and further along
+    assert edit("F_vm", f_vm, "51.7604") == []
+    assert edit("F_vm", f_vm, f"{float(f_vm) * 1.008:.5g}") == []
+    assert edit("B_s", b_s, "2.2398") == []
+    assert edit("B_s", b_s, "3.1") == []
+    assert edit("converged", "of 0.00767 (4.1e-07", "of 0.0293 (1.6e-06") == []
+    assert edit("stage refinement (refinement)", "18 simulations", "17 simulations") == []
+    # off it: a determined value, an interval, a cost, a count, the text
+    k_s = row["K_s"].split()[1]
+    assert edit("K_s", k_s, f"{float(k_s) * 1.01:.6g}")
+    assert edit("F_vm", f_vm, f"{float(f_vm) * 1.03:.5g}")  # beyond half its std error
+    assert edit("M_m", "4.299 ..", "4.2 ..")
+    assert edit("cost (SSE", "18511", "18530")
+    assert edit("stage taguchi", "388 simulations", "450 simulations")
+    assert edit("converged", "(4.1e-07 of the cost)", "(0.0003 of the cost)")
+    assert edit("weakly determined", "B_s", "F_vm")
+    assert edit("B_s", "not determined", "1.2 .. 3.4")
+
+
 @pytest.mark.slow
 def test_the_first_commands_output_is_the_readmes(workdir, capsys):
     argv = _readme_command()
     assert argv[:2] == ["tsid", "identify"] and "--out" in argv, argv
-    expected, end = _code_after(FIRST)
-    status = int(re.search(r"\(exit status (\d)\)", expected).group(1))
+    expected, end = _first_block()
+    status = int(re.search(r"\(exit status (\d)\)", "\n".join(expected)).group(1))
     assert main(argv[1:]) == status
     printed = capsys.readouterr().out.splitlines()
     printed = [line for line in printed if not line.startswith("report: ")]  # its path
-    # the numbers first, for a short message; then the text
-    assert _numbers("\n".join(printed)) == _numbers(expected)
-    assert printed == expected.rstrip("\n").splitlines()
+    res = load(argv[argv.index("--out") + 1])
+    names = set(res.names)
+    assert len(printed) == len(expected), "\n".join(printed)
+    misses = [
+        m for e, p in zip(expected, printed, strict=True) for m in figure_mismatches(e, p, names)
+    ]
+    assert misses == [], "\n".join([*misses, "", *printed])
     # the paragraph after it: stage counts, errors against the truth, the intervals
     text = _prose(end)
-    res = load(argv[argv.index("--out") + 1])
     taguchi = res.stages[0]
     found = re.search(r"\((\d+) iterations, (\d+) simulations", text)
-    assert (int(found[1]), int(found[2])) == (len(taguchi.records), taguchi.nfev), text
+    assert _close("count", found[1], str(len(taguchi.records))), text
+    assert _close("count", found[2], str(taguchi.nfev)), text
     found = re.search(r"the refinement does not lower the cost \((\d+) simulations\)", text)
-    assert found and int(found[1]) == res.stages[1].nfev, text
-    assert res.stages[1].cost == taguchi.cost
+    assert found and _close("count", found[1], str(res.stages[1].nfev)), text
+    assert res.stages[1].cost >= taguchi.cost * (1 - 1e-6)
     found = re.search(r"predicts a decrease of ([\d.e-]+) of the cost", text)
-    assert found and f"({found[1]} of the cost" in "\n".join(printed), text
+    assert found and _close("gate", found[1], found[1]), text
     stated = text[text.index("Truth:") : text.index("The answer is")]
     truth = {m[1]: float(m[2]) for m in re.finditer(r"(\w+) ([\d.]+) [\w./]+[,.]", stated)}
-    assert set(truth) == set(res.names), truth
+    assert set(truth) == names, truth
     answer = text[text.index("The answer is") :]
+    std = res.to_pandas()
     for name, value in truth.items():
-        quoted = re.search(rf"{name} ([-+]?\d+\.(\d+)) %", answer)
+        quoted = re.search(rf"{name} (?:about )?([-+]?\d+(?:\.(\d+))?) %", answer)
         assert quoted, (name, answer)
-        error = f"{100 * (res.params[name] / value - 1):.{len(quoted[2])}f}"
-        error = error.lstrip("-") if float(error) == 0 else error
-        assert error == quoted[1].lstrip("+"), (name, error, quoted[1])
+        error = 100 * (res.params[name] / value - 1)
+        low, high = res.intervals[name]
+        if low is None or high is None:  # along an open interval: not compared
+            continue
+        rel_std = (high - low) / (2 * 1.96 * abs(res.params[name]))
+        # half a unit of the quoted precision, or half the standard error if larger
+        tol = max(0.5 * 10.0 ** -len(quoted[2] or ""), 50 * rel_std if rel_std > 0.01 else 0)
+        assert abs(error - float(quoted[1])) <= tol + 1e-12, (name, error, quoted[1], std)
     assert "every 95 % interval holds the truth" in text
     said_open = {(m[1], m[2]) for m in re.finditer(r"(\w+)'s (lower|upper)\s+end is open", text)}
     for name, value in truth.items():
@@ -130,8 +269,15 @@ def test_the_progress_capture_is_what_identify_prints(workdir, capsys):
     printed = [_timeless(line) for line in capsys.readouterr().err.splitlines()]
     position = 0
     for line in expected:
-        # "..." in a quoted line stands for text left out
-        pattern = ".*?".join(map(re.escape, _timeless(line).split(" ... ")))
-        hits = [i for i in range(position, len(printed)) if re.fullmatch(pattern, printed[i])]
+        # "..." in a quoted line stands for text left out; the figures as for the output
+        parts = _timeless(line).split(" ... ")
+        pattern = ".*?".join(re.escape(re.sub(NUMBER, "#", p)) for p in parts)
+        pattern = pattern.replace("\\#", "#").replace("#", NUMBER)
+        hits = [
+            i
+            for i in range(position, len(printed))
+            if re.fullmatch(pattern, printed[i])
+            and (" ... " in line or not figure_mismatches(_timeless(line), printed[i], set()))
+        ]
         assert hits, f"README line not printed (in order): {line!r}\n" + "\n".join(printed)
         position = hits[0] + 1
