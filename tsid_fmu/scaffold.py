@@ -27,7 +27,6 @@ The file runs as written: ``tsid identify study.toml``.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import shlex
@@ -47,16 +46,13 @@ from tsid_fmu.fmu.variables import (
     variable_info,
 )
 from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, numerical_setting
+from tsid_fmu.study.tomltext import toml_key, toml_string
 
 __all__ = ["decade_levels", "init_study"]
 
 
-def _key(name: str) -> str:
-    return name if re.fullmatch(r"[A-Za-z0-9_-]+", name) else json.dumps(name)
-
-
 def _inline(mapping: Mapping[str, str]) -> str:
-    return "{ " + ", ".join(f"{_key(k)} = {json.dumps(v)}" for k, v in mapping.items()) + " }"
+    return "{ " + ", ".join(f"{toml_key(k)} = {toml_string(v)}" for k, v in mapping.items()) + " }"
 
 
 @dataclass
@@ -116,9 +112,9 @@ def _entry(v: VariableInfo) -> tuple[str, bool]:
         for key, b in (("min", low), ("max", high))
         if b is not None
     )
-    unit = f", unit = {json.dumps(v.unit)}" if v.unit else ""
+    unit = f", unit = {toml_string(v.unit)}" if v.unit else ""
     text = ", ".join(repr(x) for x in levels)
-    entry = f"{_key(v.name)} = {{ levels = [{text}]{bounds}{unit} }}"
+    entry = f"{toml_key(v.name)} = {{ levels = [{text}]{bounds}{unit} }}"
     return entry, levels != decade_levels(start)
 
 
@@ -134,7 +130,7 @@ def _choice_line(v: VariableInfo) -> str:
         first = int(float(start)) if start.lstrip("-").replace(".", "", 1).isdigit() else 0
         hint, what = f"[{first}, {first + 1}]", "list the values to compare"
     return (
-        f"# {_key(v.name)} = {{ choices = {hint} }}  # {v.type} (start {start or 'none'}): "
+        f"# {toml_key(v.name)} = {{ choices = {hint} }}  # {v.type} (start {start or 'none'}): "
         f"{what} (structure identification); uncomment to identify it, with [method] array "
         '= "L50" for one 2-level choice beside 5-level parameters (more choices: parameters '
         'of 3 levels and "L18" or "L36")'
@@ -189,12 +185,12 @@ def _header(fmu: Path, data: Path, m: _Match, time: str, derived: Mapping[str, s
         "# Check the levels and mappings, then run: tsid identify THIS_FILE --out DIR",
         "",
         "[study]",
-        f"name = {json.dumps(f'{fmu.stem} from {data.name}')}",
-        f"fmu = {json.dumps(fmu.as_posix())}",
+        f"name = {toml_string(f'{fmu.stem} from {data.name}')}",
+        f"fmu = {toml_string(fmu.as_posix())}",
         "",
         "[data]",
-        f"file = {json.dumps(data.as_posix())}",
-        f"time = {json.dumps(time)}",
+        f"file = {toml_string(data.as_posix())}",
+        f"time = {toml_string(time)}",
     ]
     if derived:
         lines.append(f"derived = {_inline(derived)}")

@@ -20,6 +20,7 @@ from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.checks import parse_toml
+from tsid_fmu.study.tomltext import toml_key, toml_string
 
 __all__ = ["read_next_levels", "write_next_levels"]
 
@@ -28,32 +29,37 @@ def _fmt(values: Any) -> str:
     return "[" + ", ".join(repr(float(v)) for v in values) + "]"
 
 
+def _comment(text: str) -> str:
+    """``text`` on one line, fit for a TOML comment (a name may hold a line break)."""
+    return " ".join(str(text).split()).translate({c: "?" for c in [*range(32), 127]})
+
+
 def write_next_levels(
     path: Path, record: IterationRecord, space: Space, frame: Frame, note: str
 ) -> str:
     """Return the text of ``next_levels.toml`` for ``frame`` (proposed after ``record``)."""
     head = (
-        f"# Levels for iteration {record.index + 1} of {record.stage}: {note}.\n"
+        f"# Levels for iteration {record.index + 1} of {record.stage}: {_comment(note)}.\n"
         "# Edit them if your judgement differs (a [levels] table of parameter values may\n"
         "# replace everything below), then continue with: tsid identify STUDY --out DIR --resume\n"
     )
     reasons = {d.name: f"{d.case}: {d.reason}" for d in record.decision.parameters}
     if frame.axis_aligned:
         body = "[levels]\n" + "".join(
-            f"{f.name} = {_fmt(f.values)}"
-            + (f"  # {reasons[f.name]}" if f.name in reasons else "")
+            f"{toml_key(f.name)} = {_fmt(f.values)}"
+            + (f"  # {_comment(reasons[f.name])}" if f.name in reasons else "")
             + "\n"
             for f in frame.factors
         )
         return head + body
     centre = frame.coords(space).to_x(frame.centre)
-    body = "[centre]\n" + "".join(f"{n} = {centre[n]!r}\n" for n in space.names)
+    body = "[centre]\n" + "".join(f"{toml_key(n)} = {float(centre[n])!r}\n" for n in space.names)
     for f in frame.factors:
         direction = ", ".join(
-            f"{n} = {float(c)!r}" for n, c in zip(space.names, f.direction, strict=True)
+            f"{toml_key(n)} = {float(c)!r}" for n, c in zip(space.names, f.direction, strict=True)
         )
         body += (
-            f"\n[[factors]]  # {frame.describe(space, f)}\nname = {f.name!r}\n"
+            f"\n[[factors]]  # {_comment(frame.describe(space, f))}\nname = {toml_string(f.name)}\n"
             f"direction = {{ {direction} }}\noffsets = {_fmt(f.offsets)}\n"
         )
     return (
