@@ -11,11 +11,12 @@ traceback, and exits with 70, so that a script never takes a crash for a result.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import os
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -423,6 +424,41 @@ def _quiet_stdout() -> None:
         pass
 
 
+@contextlib.contextmanager
+def _native_output_to_stderr() -> Iterator[None]:
+    """Keep stdout for tsid's results: what the FMU prints natively goes to stderr.
+
+    An FMU's runtime may ``printf`` to file descriptor 1 (OpenModelica's ``assert |
+    debug | division by zero ...``), in this process or in the workers, which inherit
+    it; on stdout that broke ``--json``. Descriptor 1 is pointed at stderr for the
+    command's length, and :data:`sys.stdout` writes to a copy of the real stdout.
+    Nothing changes where stdout has no descriptor (a test's captured stdout).
+    """
+    try:
+        sys.stdout.flush()
+        fd, err = sys.stdout.fileno(), sys.stderr.fileno()
+        saved = os.dup(fd)
+    except (OSError, ValueError, AttributeError):
+        yield
+        return
+    before = sys.stdout
+    sys.stdout = open(  # closed below, after the descriptor is restored
+        saved, "w", encoding=before.encoding, errors=before.errors, closefd=False
+    )
+    os.dup2(err, fd)
+    try:
+        yield
+    finally:
+        try:
+            sys.stdout.flush()
+        finally:
+            os.dup2(saved, fd)
+            with contextlib.suppress(OSError):  # a closed pipe: said once, by the flush
+                sys.stdout.close()
+            os.close(saved)
+            sys.stdout = before
+
+
 def _error(message: str, status: int) -> int:
     """Print ``tsid: error: <message>`` on stderr; return the exit status ``status``."""
     print(f"tsid: error: {message}", file=sys.stderr)
@@ -449,7 +485,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Ctrl-C and SIGTERM neither lost nor raised inside an import
         with terminated_as_interrupt() as terminated, delivered_interrupts():
             args = make_parser().parse_args(argv)
-            status = int(args.func(args))
+            with _native_output_to_stderr():
+                status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit
         return status
     except ResourceError as exc:  # a TsidError, but the machine's fault, not the input's
