@@ -249,6 +249,9 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     (void)c; (void)vr; (void)n; (void)o; (void)v; return fmi2Error; }
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean ns) {
     (void)ns;
+#ifdef CHATTY  /* as OpenModelica's runtime does: straight to descriptor 1 */
+    if (t == 0) { printf("chatty FMU | debug | first step, tau=%g\n", M->tau); fflush(stdout); }
+#endif
     switch (model_step(M, t, h)) {
     case 1: LOG(fmi2Error, "tau must be positive, got %g", M->tau); return fmi2Error;
     case 2: LOG(fmi2Error, "time limit t_fail=%g exceeded at t=%g", M->t_fail, t + h);
@@ -574,8 +577,12 @@ def build_c_fmu(
     fmi_version: str = "2.0",
     interfaces: Sequence[str] = ("cs", "me"),
     link_library: Path | None = None,
+    chatty: bool = False,
 ) -> Path:
     """Build the first-order-lag FMU ``<tmp_dir>/<name>.fmu`` and return its path.
+
+    ``chatty`` (FMI 2): the FMU prints a line on its native stdout at each run's first
+    step, as OpenModelica's runtime prints its asserts.
 
     ``fmi_version`` is ``"2.0"`` (Co-Simulation and/or Model Exchange, per ``interfaces``)
     or ``"3.0"`` (Co-Simulation only).  ``link_library`` (from :func:`build_stub_library`)
@@ -591,7 +598,7 @@ def build_c_fmu(
         source, xml = _C_FMI3, _model_description_fmi3(name, guid)
     else:
         raise ValueError(f"unsupported FMI version {fmi_version}")
-    defines: list[str] = []
+    defines: list[str] = ["-DCHATTY"] if chatty else []
     libs: list[str] = []
     if link_library is not None:
         link_library = Path(link_library)
