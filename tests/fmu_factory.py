@@ -151,6 +151,18 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
     (void)type; (void)res; (void)visible; (void)loggingOn;
     if (strcmp(guid, GUID) != 0) return NULL;
+#ifdef NEEDS_RESOURCES  /* as JModelica.org's FMUs: no resources folder, no instance */
+    if (res == NULL || strncmp(res, "file://", 7) != 0) return NULL;
+    {
+        const char *path = res + 7;
+        char probe[4096];
+        if (strncmp(path, "localhost/", 10) == 0) path += 9;
+        snprintf(probe, sizeof probe, "%s/.", path);
+        FILE *f = fopen(probe, "r");
+        if (f == NULL) return NULL;
+        fclose(f);
+    }
+#endif
     Model *m = (Model *)calloc(1, sizeof(Model));
     m->cb = *cb;
     m->name = name;
@@ -578,11 +590,14 @@ def build_c_fmu(
     interfaces: Sequence[str] = ("cs", "me"),
     link_library: Path | None = None,
     chatty: bool = False,
+    needs_resources: bool = False,
 ) -> Path:
     """Build the first-order-lag FMU ``<tmp_dir>/<name>.fmu`` and return its path.
 
     ``chatty`` (FMI 2): the FMU prints a line on its native stdout at each run's first
-    step, as OpenModelica's runtime prints its asserts.
+    step, as OpenModelica's runtime prints its asserts. ``needs_resources`` (FMI 2): the
+    FMU fails to instantiate unless its resources folder exists, as JModelica.org's do;
+    the archive then holds that folder as an empty member.
 
     ``fmi_version`` is ``"2.0"`` (Co-Simulation and/or Model Exchange, per ``interfaces``)
     or ``"3.0"`` (Co-Simulation only).  ``link_library`` (from :func:`build_stub_library`)
@@ -599,14 +614,19 @@ def build_c_fmu(
     else:
         raise ValueError(f"unsupported FMI version {fmi_version}")
     defines: list[str] = ["-DCHATTY"] if chatty else []
+    defines += ["-DNEEDS_RESOURCES"] if needs_resources else []
     libs: list[str] = []
     if link_library is not None:
         link_library = Path(link_library)
         defines.append("-DLINK_DEP")
         libs = [f"-L{link_library.parent}", f"-l{link_library.stem.removeprefix('lib')}"]
-    return pack_c_fmu(
+    fmu = pack_c_fmu(
         tmp_dir, name, source, xml, guid, platform_dir=platform_dir, defines=defines, libs=libs
     )
+    if needs_resources:  # an empty folder is a member of its own, as JModelica.org packs it
+        with zipfile.ZipFile(fmu, "a") as zf:
+            zf.writestr(zipfile.ZipInfo("resources/"), b"")
+    return fmu
 
 
 def copy_without(fmu: Path, dest: Path, prefix: str) -> Path:

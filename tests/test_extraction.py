@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmu_factory import build_c_fmu
+from fmu_factory import build_c_fmu, copy_without
 
 import tsid_fmu.fmu.extraction as extraction
 from tsid_fmu.errors import FMUError
@@ -203,3 +203,20 @@ def test_an_fmu_without_a_binary_here_keeps_its_sources_and_every_binary(tmp_pat
     assert not (out / "documentation").exists()
     full = safe_extract(fmu, tmp_path / "all")
     assert (full / "documentation/index.html").is_file()
+
+
+def test_an_fmu_that_needs_its_empty_resources_folder_runs(tmp_path):
+    """JModelica.org's FMUs fail to instantiate without ``resources/`` (issue 43).
+
+    The FMU's archive holds the folder as an empty member; the extraction for running
+    kept only files, so the folder was missing and the instance was never made.
+    """
+    fmu = build_c_fmu(tmp_path, "NeedsRes", interfaces=("cs",), needs_resources=True)
+    t = np.arange(0, 1.0 + 1e-9, 0.01)
+    with FMUSession(fmu, ["u"], ["y"], parameters=["tau"]) as session:
+        y = session.simulate(t, np.ones((t.size, 1)), {"tau": 0.3})
+    assert np.isfinite(y).all() and y[-1, 0] > 0.9
+    # without the folder in the archive at all, it runs too: the standard hands it over
+    bare = copy_without(fmu, tmp_path / "Bare.fmu", "resources")
+    with FMUSession(bare, ["u"], ["y"], parameters=["tau"]) as session:
+        assert np.isfinite(session.simulate(t, np.ones((t.size, 1)), {"tau": 0.3})).all()

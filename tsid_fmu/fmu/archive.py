@@ -234,7 +234,8 @@ def _for_running(
 ) -> list[tuple[zipfile.ZipInfo, PurePosixPath]]:
     """Keep the members a simulation on this machine reads.
 
-    ``modelDescription.xml``, ``resources/`` and ``extra/``; the binaries of this platform
+    ``modelDescription.xml``, ``resources/`` (its folder even when empty: JModelica.org's
+    FMUs fail to instantiate without it) and ``extra/``; the binaries of this platform
     (FMI 2's ``linux64``, FMI 3's ``x86_64-linux``, ...) where the FMU has them, else
     every binary and the sources (to compile, or to name what is there). Documentation,
     icons, other platforms' binaries and stray files at the root are checked but not
@@ -251,8 +252,10 @@ def _for_running(
     keep = []
     for info, rel in plan:
         head = rel.parts[0]
-        if len(rel.parts) == 1:
-            wanted = head == "modelDescription.xml"
+        if len(rel.parts) == 1:  # a folder of its own (resources/, even empty) or the XML
+            wanted = head == "modelDescription.xml" or (
+                info.is_dir() and head not in (*NOT_RUN, "binaries", "sources")
+            )
         elif head == "binaries":
             wanted = binary_here(rel) or not has_binary
         elif head == "sources":
@@ -337,4 +340,16 @@ def safe_extract(
             written += _extract_member(fmu, archive, info, target, limit - written)
             if written > limit:
                 raise _too_big(fmu, f"member {info.filename!r}", written, limit)
+        if running:  # the standard hands every FMU its resources folder's URI
+            _make_folder(fmu, root / "resources")
     return root
+
+
+def _make_folder(fmu: Path, folder: Path) -> None:
+    """Create ``folder`` unless it exists (a file of that name is the FMU's fault)."""
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise FMUError(f"{fmu}: {folder.name} is not a folder; refusing the FMU")
+    try:
+        folder.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise ResourceError(f"cannot create {folder}: {exc.strerror or exc}") from None
