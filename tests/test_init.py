@@ -106,7 +106,12 @@ def _var(name: str, description: str | None = None, unit: str | None = None) -> 
      _var("w", "Smoothing width of the tanh friction", "m/s"),
      _var("V_z", "Velocity below which the motor side is considered at rest", "m/s"),
      _var("F_thr", "Switching threshold of the contact model", "N"),
-     _var("n_iter", "Newton iterations of the numerical solver")],
+     _var("n_iter", "Newton iterations of the numerical solver"),
+     # as tools export them (issue 43): JModelica.org's internals, OpenModelica's nominals
+     _var("_cs_rel_tol"), _var("_nle_jacobian_finite_difference_delta"),
+     _var("_nle_solver_max_residual_scaling_factor"), _var("_events_default_tol"),
+     _var("sub._private"),
+     _var("damper.s_nominal", "Nominal value of s_rel (used for scaling)", "m")],
     ids=lambda v: v.name,
 )  # fmt: skip
 def test_numerical_settings_are_recognised(v):
@@ -120,7 +125,13 @@ def test_numerical_settings_are_recognised(v):
      _var("F_brk", "Breakaway friction threshold", "N"), _var("h", "Drop height", "m"),
      _var("T", "Time constant of the lag", "s"), _var("tau", None, "s"), _var("e"),
      _var("J", "Rotor inertia", "kg.m2"), _var("stepHeight", "Height of a stair step", "m"),
-     _var("R", "Winding resistance", "Ohm"), _var("K_s"), _var("B_s")],
+     _var("R", "Winding resistance", "Ohm"), _var("K_s"), _var("B_s"),
+     # OpenModelica's and JModelica.org's physical parameters stay free
+     _var("mass.m", "Mass of the sliding mass", "kg"), _var("spring.c", "Spring constant"),
+     _var("damper.d", "Damping constant", "N.s/m"), _var("ampl[0]"), _var("a_b_"),
+     _var("C", "Heat capacity of element (= cp*m)", "J/K"),
+     _var("R1", "Constant thermal resistance of material", "K/W"),
+     _var("V_nominal", "Nominal voltage of the motor", "V")],
     ids=lambda v: v.name,
 )  # fmt: skip
 def test_physical_parameters_stay_free(v):

@@ -31,7 +31,8 @@ _TIME_STEP_WORDS = frozenset({"dt", "h", "ts", "step", "sample", "sampling"})
 """Words of a name that, with the unit ``s``, make it a time step."""
 _STRONG = re.compile(
     r"\btolerances?\b|\bepsilon\b|\bregulari[sz]\w*|\bsmoothing\b|\bstep[ -]?size\b|"
-    r"\bsolver\b|\bintegrator\b|\bnumerical(?:ly)?\b|\bsampl(?:e|ing) (?:time|period)\b",
+    r"\bsolver\b|\bintegrator\b|\bnumerical(?:ly)?\b|\bsampl(?:e|ing) (?:time|period)\b|"
+    r"\b(?:used )?for scaling\b|\bscaling (?:factor|nominal)\b",
     re.IGNORECASE,
 )
 """Words of a description that make a parameter a numerical setting."""
@@ -68,12 +69,17 @@ def numerical_setting(v: VariableInfo) -> str | None:
     - a word of the name: ``tol``, ``eps``, ``epsilon``, ``threshold``, ``rtol``, ...,
       or ``step`` followed by ``size``;
     - a time step: ``dt``, ``h``, ``Ts``, ``step``, ``sample`` in the name, with unit ``s``;
+    - a tool's internal setting: the last part of its name starts with ``_``
+      (JModelica.org's ``_cs_rel_tol``, ``_nle_solver_max_residual_scaling_factor``);
     - the description says tolerance, epsilon, regularisation, smoothing, step size,
-      solver, integrator, numerical or sampling time;
+      solver, integrator, numerical, sampling time or scaling (OpenModelica's
+      ``damper.s_nominal``, "Nominal value of s_rel (used for scaling)");
     - the description says threshold, or "below which ... is considered ...", "considered
       at rest", unless it also names a physical property (mass, stiffness, friction,
       damping, ...).
     """
+    if v.name.rsplit(".", 1)[-1].startswith("_"):
+        return "a tool's internal setting (its name starts with '_')"
     words = _words(v.name)
     joined = {a + b for a, b in itertools.pairwise(words)}
     hit = next((w for w in words if w in _NAME_WORDS), None) or (
