@@ -83,6 +83,11 @@ def whole(folder) -> dict:
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)  # the FMU's own prints never reach stdout
     assert summary["status"] == 0
+    # the units the FMU declares, where the hand study gives none
+    assert summary["parameters"]["mass.m"]["unit"] == "kg"
+    assert summary["parameters"]["spring.c"]["unit"] == "N/m"
+    table = pd.read_csv(folder / "whole" / "parameters.csv", index_col=0)
+    assert table.loc["damper.d", "unit"] == "N.s/m"
     return _result(folder, "whole")
 
 

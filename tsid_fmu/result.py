@@ -21,6 +21,7 @@ from tsid_fmu.errors import TsidError
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
+from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import strict
 from tsid_fmu.uncertainty.intervals import Uncertainty
 from tsid_fmu.uncertainty.sampled import Sampled
@@ -339,7 +340,7 @@ class IdentificationResult:
         (name, kind, cost, simulations, iterations, status, message), the ``warnings``
         and ``out_dir``. Non-finite numbers are ``null``.
         """
-        units = {p.name: p.unit for p in self.study.identified_parameters()} if self.study else {}
+        units = study_units(self.study)  # the study's, else the FMU's declared ones
         params = {
             name: {
                 "value": value,
@@ -480,6 +481,7 @@ class IdentificationResult:
 
         rows = []
         params = self.study.identified_parameters() if self.study else []
+        units = study_units(self.study)  # the study's, else the FMU's declared ones
         for p in (p for p in params if p.name in self.params):  # those of the structure
             low, high = self.intervals.get(p.name, [None, None])
             se = self.uncertainty.relative.get(p.name, math.nan) if self.uncertainty else math.nan
@@ -487,7 +489,7 @@ class IdentificationResult:
                 {
                     "parameter": p.name,
                     "value": self.params[p.name],
-                    "unit": p.unit,
+                    "unit": units.get(p.name, ""),
                     "95% low": math.nan if low is None else low,
                     "95% high": math.nan if high is None else high,
                     "std error [%]": se,

@@ -9,6 +9,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from tsid_fmu.result import IdentificationResult
+from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import atomic_write, write_json
 from tsid_fmu.trail.integrity import seal, sha256_file
 
@@ -68,7 +69,7 @@ def write_result_files(result: IdentificationResult, out: Path) -> None:
     if study is None:
         return
     atomic_write(out / "parameters.csv", result.parameters_frame().to_csv())
-    units = {p.name: p.unit for p in study.parameters}
+    units = study_units(study)  # the study's, else the FMU's declared ones
     # a per-experiment parameter's copies are no FMU variables: one set cannot hold them
     copies = {c.name for c in study.copies}
     values = {k: v for k, v in result.params.items() if k not in copies}

@@ -15,6 +15,7 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.report.html_tables import esc, table
 from tsid_fmu.report.style import fmt, fmt_levels
 from tsid_fmu.result import register_views
+from tsid_fmu.study.units import study_units
 
 __all__ = [
     "parameter_columns",
@@ -96,7 +97,7 @@ def parameter_rows(result: Any) -> list[list[Any]]:
     structure = result.extra.get("structure") or {}
     factors = structure.get("factors", [])
     names = [n for n in names if n not in {f["name"] for f in factors}]  # rows of their own
-    units = {p.name: p.unit for p in params}
+    units = study_units(result.study)  # the study's, else the FMU's declared ones
     first = {p.name: f"{fmt(min(p.levels))} .. {fmt(max(p.levels))}" for p in params}
     for name in names:
         value = result.params.get(name, math.nan)

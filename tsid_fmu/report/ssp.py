@@ -29,6 +29,7 @@ from tsid_fmu.errors import FMUError
 from tsid_fmu.fmu.delay import delay_input
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.result import IdentificationResult
+from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import atomic_write
 
 __all__ = ["SSD_NAME", "model_ssp", "validate_ssp", "write_model_ssp", "write_ssp"]
@@ -224,7 +225,7 @@ def write_model_ssp(result: IdentificationResult, out: Path) -> Path | None:
     study = result.study
     if study is None:
         return None
-    units = {p.name: p.unit for p in study.parameters}
+    units = study_units(study)  # the study's, else the FMU's declared ones
     # an input delay is applied to the data by tsid-fmu, not an FMU variable: SSP 1.0
     # has no place for it, so the report names it instead
     copies = {c.name for c in study.copies}  # one value per experiment: no FMU variable
