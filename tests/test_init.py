@@ -23,6 +23,7 @@ from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.variables import VariableInfo, variable_info
 from tsid_fmu.scaffold import init_study
 from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, numerical_setting
+from tsid_fmu.study import load_study
 
 REPO = Path(__file__).resolve().parents[1]
 SISO = REPO / "examples" / "lsea_siso"
@@ -207,3 +208,48 @@ def test_derived_hints_from_names():
         "q_ddot": "der(q_dot)",
     }  # fmt: skip
     assert derived_hints(["F_o"], columns, unused=["F_of"]) == {"F_o": "F_of"}
+
+
+def _many(tmp_path: Path, n: int) -> tuple[Path, Path]:
+    """A model description with ``n`` positive real parameters ``k[1]`` ... (no binaries)."""
+    params = "".join(
+        f'<ScalarVariable name="k[{i}]" valueReference="{i}" causality="parameter" '
+        f'variability="fixed" initial="exact"><Real start="{i}.5"/></ScalarVariable>'
+        for i in range(1, n + 1)
+    )
+    xml = _BALL.replace(_BALL[_BALL.index("    <ScalarVariable name=\"e\"") : _BALL.index(
+        "  </ModelVariables>")], params)  # fmt: skip
+    fmu = tmp_path / f"Many{n}.fmu"
+    with zipfile.ZipFile(fmu, "w") as archive:
+        archive.writestr("modelDescription.xml", xml)
+    data = tmp_path / "ball.csv"
+    t = np.arange(0.0, 2.0, 0.01)
+    pd.DataFrame({"time": t, "h": np.abs(np.sin(3 * t))}).to_csv(data, index=False)
+    return fmu, data
+
+
+@pytest.mark.parametrize(
+    ("n", "array", "levels"), [(11, "L50", 5), (13, "L27", 3), (18, "L81", 3), (45, "L81", 3)]
+)
+def test_init_writes_a_study_that_runs_for_any_number_of_parameters(tmp_path, n, array, levels):
+    """18 parameters gave exit 2 and no file: no five-level array hosts them (issue 43)."""
+    fmu, data = _many(tmp_path, n)
+    text = init_study(fmu, data, tmp_path / "study.toml")
+    study = load_study(tmp_path / "study.toml")
+    assert study.method.array == array
+    assert len(study.parameters) == min(n, 40)
+    assert {len(p.levels) for p in study.parameters} == {levels}
+    beyond = re.findall(r'^# "k\[\d+\]" = .*beyond the 40 parameters', text, re.MULTILINE)
+    assert len(beyond) == max(n - 40, 0)
+
+
+def test_a_bound_tsid_chose_itself_is_said_in_the_file(tmp_path):
+    """min = 0 from a positive start value is tsid's guess, not the FMU's (issue 43)."""
+    fmu, data = _many(tmp_path, 1)
+    text = init_study(fmu, data, tmp_path / "study.toml")
+    line = next(x for x in text.splitlines() if x.startswith('"k[1]"'))
+    assert "min = 0 }" in line and "min = 0 is tsid's (the FMU declares none)" in line
+    fmu, data = _ball(tmp_path)
+    text = init_study(fmu, data, tmp_path / "ball.toml")
+    line = next(x for x in text.splitlines() if x.startswith("e = "))
+    assert "tsid's" not in line  # the FMU declared e's bounds

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tsid_fmu.data.measured import load_data
-from tsid_fmu.doe.arrays import select_array
+from tsid_fmu.doe.arrays import COMPOSITION, select_array
 from tsid_fmu.errors import StudyError
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.variables import (
@@ -95,18 +95,23 @@ def _number(x: float) -> str:
     return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
 
 
-def _entry(v: VariableInfo) -> tuple[str, bool]:
-    """Return a parameter's TOML entry and whether the FMU's bounds moved its levels."""
+def _entry(v: VariableInfo, n: int = 5) -> tuple[str, bool, str]:
+    """Return a parameter's TOML entry, whether bounds moved its levels, a bound's note.
+
+    The note says where tsid chose a bound itself, from the start value's sign ("" if
+    it did not).
+    """
     start = parse_start(v)
     start = start if start is not None else 0.0
     low, high = v.min, v.max
     if low is not None and high is not None and low >= high:
         low = high = None  # bounds that contradict each other are no bounds
-    levels = bounded_levels(start, low, high)
+    levels = bounded_levels(start, low, high, n)
+    own = ""
     if low is None and levels[0] >= 0 and start > 0:
-        low = 0.0
+        low, own = 0.0, "min = 0 is tsid's (the FMU declares none): delete it if it can be < 0"
     if high is None and levels[-1] <= 0 and start < 0:
-        high = 0.0
+        high, own = 0.0, "max = 0 is tsid's (the FMU declares none): delete it if it can be > 0"
     bounds = "".join(
         f", {key} = {_number(float(b))}"
         for key, b in (("min", low), ("max", high))
@@ -115,7 +120,7 @@ def _entry(v: VariableInfo) -> tuple[str, bool]:
     unit = f", unit = {toml_string(v.unit)}" if v.unit else ""
     text = ", ".join(repr(x) for x in levels)
     entry = f"{toml_key(v.name)} = {{ levels = [{text}]{bounds}{unit} }}"
-    return entry, levels != decade_levels(start)
+    return entry, levels != decade_levels(start, n), own
 
 
 def _choice_line(v: VariableInfo) -> str:
@@ -137,7 +142,17 @@ def _choice_line(v: VariableInfo) -> str:
     )
 
 
-def _parameter_lines(variables: Sequence[VariableInfo]) -> tuple[list[str], int]:
+MOST_FREE = 40
+"""Parameters ``tsid init`` frees at most: the 40 three-level columns of L81."""
+
+
+def _parameter_lines(
+    variables: Sequence[VariableInfo], n: int = 5, most: int = MOST_FREE
+) -> tuple[list[str], int]:
+    """Return the ``[parameters]`` lines with ``n`` levels each, and how many are free.
+
+    Past ``most`` free parameters the rest are written commented out, with the reason.
+    """
     lines, count = [], 0
     for v in variables:
         if v.causality != "parameter" or v.variability not in ("fixed", "tunable"):
@@ -145,7 +160,7 @@ def _parameter_lines(variables: Sequence[VariableInfo]) -> tuple[list[str], int]
         if v.type not in REAL_TYPES:
             lines.append(_choice_line(v))
             continue
-        entry, bounded = _entry(v)
+        entry, bounded, own = _entry(v, n)
         reason = numerical_setting(v)
         if reason is not None:
             lines.append(
@@ -153,7 +168,14 @@ def _parameter_lines(variables: Sequence[VariableInfo]) -> tuple[list[str], int]
                 "kept; uncomment to identify it"
             )
             continue
+        if count >= most:
+            lines.append(
+                f"# {entry}  # beyond the {most} parameters the largest standard array "
+                "hosts: the FMU's value is kept; screen them (tsid screen) and swap it in"
+            )
+            continue
         note = f"  # start {v.start}" + (" (levels within the FMU's min/max)" if bounded else "")
+        note += f"; {own}" if own else ""
         lines.append(entry + note + (f": {v.description}" if v.description else ""))
         count += 1
     return lines, count
@@ -276,7 +298,11 @@ def init_study(
     params, count = _parameter_lines(variables)
     if count == 0:
         raise StudyError(f"{fmu}: no real parameter to identify")
-    array, _ = select_array([5] * count)
+    n = 5
+    if count > COMPOSITION["L50"][5]:  # more than a five-level array hosts: three levels
+        n = 3
+        params, count = _parameter_lines(variables, n)
+    array, _ = select_array([n] * count)
     base = out.resolve().parent
     rel = {p: Path(os.path.relpath(p.resolve(), base)) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
@@ -286,7 +312,8 @@ def init_study(
     lines += [
         "",
         "[method]",
-        f'array = "{array.name}"      # the smallest standard array for {count} five-level factors',
+        f'array = "{array.name}"      # the smallest standard array for {count} '
+        f"{'five' if n == 5 else 'three'}-level factors",
         'cost = "sse"         # sum of squared errors ...',
         'weighting = "noise"  # ... each output weighted by 1/noise², noise from the data',
         "replicates = 1       # no input-noise replicates",
@@ -296,7 +323,8 @@ def init_study(
         "# uncertainty_replicates = 100",
         "",
         "[parameters]",
-        "# five log-spaced levels over one decade around the FMU's start value, within the",
+        f"# {'five' if n == 5 else 'three'} log-spaced levels over one decade around the "
+        "FMU's start value, within the",
         "# FMU's min/max; numerical settings (steps, tolerances, thresholds) commented out;",
         "# per_experiment = true in an entry identifies one value per experiment (reported",
         "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
