@@ -39,6 +39,7 @@ from tsid_fmu.study.definition import Study
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.folder import NullStore, Trail
 from tsid_fmu.uncertainty.assess import assess, validate
+from tsid_fmu.uncertainty.bounds import bound_warnings, on_bounds
 from tsid_fmu.uncertainty.fidelity import (
     Fidelity,
     check_fidelity,
@@ -288,8 +289,10 @@ def _finish(
         result.jac = jac[:, [found.sensitivities.names.index(n) for n in result.names]]
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
     result.sampled = _sampled(study, ev, (spec, space, x), found.sensitivities, callback)
+    result.extra["on_bound"] = on_bounds(x, study.bounds(), study.first_levels())
     result.warnings = (
         _poor_fit(answer)
+        + bound_warnings(result.extra["on_bound"], x, study.bounds())
         + found.warnings
         + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
         + result.warnings

@@ -1,0 +1,68 @@
+"""Whether the answer sits on a bound of its range, and what that means for the user.
+
+A parameter pushed onto its bound (``min = 0`` that ``tsid init`` or the user wrote, a
+declared ``max``) is where the data would take it further if they could: its best value
+may lie beyond, and its interval is cut at the bound. An answer there must say so
+(issue 43: ``add.k2`` was returned as 1.8e-18 on a ``min = 0`` for a true -0.4, with
+exit 0 and no word of it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+__all__ = ["ON_BOUND", "bound_warnings", "on_bounds"]
+
+ON_BOUND = 1e-6
+"""A value within this fraction of its first levels' span from a bound is on it."""
+TOWARD_ZERO = 1e-2
+"""A positive value below this fraction of its smallest first level, with ``min = 0``, is
+on that bound: the search moves positive parameters in log10, where 0 lies at minus
+infinity, so a value the data push to 0 stops some decades short of it."""
+
+
+def on_bounds(
+    x: Mapping[str, float],
+    bounds: Mapping[str, tuple[float, float]],
+    levels: Mapping[str, Sequence[float]],
+) -> dict[str, str]:
+    """Return ``{name: "min" or "max"}`` for each parameter of ``x`` on a bound.
+
+    Parameters
+    ----------
+    x : mapping
+        The answer.
+    bounds : mapping
+        ``(min, max)`` by name (infinite where there is none).
+    levels : mapping
+        The first levels by name: their span sets the distance that counts as on, and a
+        positive value under :data:`TOWARD_ZERO` of the smallest one is on ``min = 0``.
+    """
+    out: dict[str, str] = {}
+    for name, value in x.items():
+        if name not in bounds or name not in levels:
+            continue
+        low, high = bounds[name]
+        span = max(levels[name]) - min(levels[name]) or abs(float(value)) or 1.0
+        tol = ON_BOUND * span
+        toward_zero = low == 0 and min(levels[name]) > 0 and value < TOWARD_ZERO * min(levels[name])
+        if value - low <= tol or toward_zero:
+            out[name] = "min"
+        elif high - value <= tol:
+            out[name] = "max"
+    return out
+
+
+def bound_warnings(
+    on: Mapping[str, str], x: Mapping[str, float], bounds: Mapping[str, tuple[float, float]]
+) -> list[str]:
+    """Return one warning per parameter on a bound, naming the bound and what follows."""
+    out = []
+    for name, side in on.items():
+        bound = bounds[name][0 if side == "min" else 1]
+        out.append(
+            f"{name} = {x[name]:.4g} sits on its bound {side} = {bound:g}: the data push it "
+            "there, so its best value may lie beyond (widen the bound if the physics allow) "
+            "and its interval is cut at the bound"
+        )
+    return out
