@@ -253,3 +253,17 @@ def test_a_bound_tsid_chose_itself_is_said_in_the_file(tmp_path):
     text = init_study(fmu, data, tmp_path / "ball.toml")
     line = next(x for x in text.splitlines() if x.startswith("e = "))
     assert "tsid's" not in line  # the FMU declared e's bounds
+
+
+def test_init_writes_paths_as_a_person_would(tmp_path):
+    """An FMU far outside the study's folder was written as ../../../... (issue 43)."""
+    fmu, data = _ball(tmp_path)
+    deep = tmp_path / "a" / "b" / "c"
+    deep.mkdir(parents=True)
+    text = init_study(fmu, data, deep / "study.toml")
+    assert f'fmu = "{fmu.resolve().as_posix()}"' in text  # three folders up: absolute
+    near = tmp_path / "studies"
+    near.mkdir()
+    text = init_study(fmu, data, near / "study.toml")
+    assert 'fmu = "../Ball.fmu"' in text and 'file = "../ball.csv"' in text
+    assert load_study(deep / "study.toml").fmu == fmu.resolve()

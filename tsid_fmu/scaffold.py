@@ -142,6 +142,20 @@ def _choice_line(v: VariableInfo) -> str:
     )
 
 
+def _as_written(path: Path, base: Path) -> Path:
+    """``path`` as a person would write it in a file in ``base``.
+
+    Relative where it lies in ``base``'s tree or one or two folders up (a study beside
+    its data); absolute where the relative path would climb further (``../../../``).
+    """
+    path = path.resolve()
+    try:
+        rel = Path(os.path.relpath(path, base))
+    except ValueError:  # another drive on Windows
+        return path
+    return path if rel.parts[:3] == ("..", "..", "..") else rel
+
+
 MOST_FREE = 40
 """Parameters ``tsid init`` frees at most: the 40 three-level columns of L81."""
 
@@ -304,7 +318,7 @@ def init_study(
         params, count = _parameter_lines(variables, n)
     array, _ = select_array([n] * count)
     base = out.resolve().parent
-    rel = {p: Path(os.path.relpath(p.resolve(), base)) for p in (fmu, data)}
+    rel = {p: _as_written(p, base) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
     lines += _window_hint(float(probe.time[0]), float(probe.time[-1]))
     lines += _initial_hint([v.name for v in variables if initial_state(v)], match.outputs)
