@@ -211,7 +211,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _all_variables(path: Path) -> str:
     """Every variable of an FMU with its causality (locals included), for ``info --all``."""
-    from tsid_fmu.fmu.info import printable, read_fmu_description
+    from tsid_fmu.fmu.info import printable, read_fmu_description, type_text
     from tsid_fmu.fmu.variables import variable_info
 
     infos = [variable_info(v) for v in read_fmu_description(path).modelVariables]
@@ -221,7 +221,7 @@ def _all_variables(path: Path) -> str:
     for v in infos:
         lines.append(
             f"  {v.name:<{width}}  {v.causality or '-':<20} {v.variability or '-':<11} "
-            f"{v.type:<8} {v.unit or ''}".rstrip()
+            f"{type_text(v):<8} {v.unit or ''}".rstrip()
         )
     return "\n".join(printable(line) for line in lines)
 

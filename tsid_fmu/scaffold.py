@@ -83,7 +83,10 @@ def _match(variables: Sequence[VariableInfo], columns: Sequence[str]) -> _Match:
         return found, missing
 
     inputs, missing_in = pick([v.name for v in variables if v.causality == "input"])
-    outputs, missing_out = pick([v.name for v in variables if v.causality == "output"])
+    # an FMI 3 array output is no column: tsid compares scalars (a session refuses it)
+    outputs, missing_out = pick(
+        [v.name for v in variables if v.causality == "output" and not v.shape]
+    )
     local_names = [v.name for v in variables if v.causality == "local" and v.type in REAL_TYPES]
     local_found, _ = pick(local_names)
     outputs.update(local_found)

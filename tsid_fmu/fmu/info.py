@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import FMUError
-from tsid_fmu.fmu.variables import check_fmi_version, variable_info
+from tsid_fmu.fmu.variables import VariableInfo, check_fmi_version, variable_info
 
 __all__ = ["fmu_info", "printable", "read_fmu_description"]
 
@@ -68,6 +68,12 @@ def read_fmu_description(path: Path) -> Any:
         raise FMUError(f"{path}: cannot read modelDescription.xml: {exc}") from exc
 
 
+def type_text(v: VariableInfo) -> str:
+    """``Float64``, or ``Float64[5]`` for an FMI 3 array variable."""
+    dims = ",".join("?" if n < 0 else str(n) for n in v.shape)
+    return f"{v.type}[{dims}]" if v.shape else v.type
+
+
 def _variable_table(md: Any) -> list[str]:
     groups = (
         ("Inputs", lambda v: v.causality == "input"),
@@ -81,9 +87,10 @@ def _variable_table(md: Any) -> list[str]:
         lines.append(f"{title} ({len(chosen)})")
         if chosen:
             width = max(len(v.name) for v in chosen)
+            tw = max(8, *(len(type_text(v)) for v in chosen))
             for v in chosen:
                 lines.append(
-                    f"  {v.name:<{width}}  {v.type:<8} {v.unit or '':<8} "
+                    f"  {v.name:<{width}}  {type_text(v):<{tw}} {v.unit or '':<8} "
                     f"start={v.start if v.start is not None else '-':<10} "
                     f"{v.description or ''}".rstrip()
                 )

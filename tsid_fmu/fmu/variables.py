@@ -61,6 +61,9 @@ class VariableInfo:
         its declared type), or None.
     items : tuple of str
         An Enumeration's item names, in declared order (empty for other types).
+    shape : tuple of int
+        An FMI 3 array variable's dimensions (``-1`` where a structural parameter sets
+        one); empty for a scalar.
     """
 
     name: str
@@ -75,6 +78,7 @@ class VariableInfo:
     min: float | None = None
     max: float | None = None
     items: tuple[str, ...] = ()
+    shape: tuple[int, ...] = ()
 
 
 def _declared_unit(variable: Any) -> str | None:
@@ -113,6 +117,9 @@ def variable_info(variable: Any) -> VariableInfo:
         items=tuple(
             str(i.name)
             for i in getattr(getattr(variable, "declaredType", None), "items", None) or ()
+        ),
+        shape=tuple(
+            -1 if d.start is None else int(d.start) for d in getattr(variable, "dimensions", ())
         ),
     )
 
@@ -214,6 +221,13 @@ def real_reference(
 ) -> int:
     """Return the value reference of a Real variable, checking its causality if given."""
     info = find_variable(variables, fmu, name, role)
+    if info.shape:
+        dims = " x ".join("?" if n < 0 else str(n) for n in info.shape)
+        raise FMUError(
+            f"{fmu}: {role} {name!r} is an array variable ({dims} elements); tsid-fmu "
+            "compares and sets scalar variables only: give the FMU a scalar output per "
+            "measured element"
+        )
     if causality is not None and info.causality != causality:
         raise FMUError(
             f"{fmu}: {role} {name!r} has causality {info.causality!r}, not {causality!r}"
