@@ -164,14 +164,25 @@ MOST_FREE = 40
 
 
 def _parameter_lines(
-    variables: Sequence[VariableInfo], n: int = 5, most: int = MOST_FREE
+    variables: Sequence[VariableInfo],
+    n: int = 5,
+    most: int = MOST_FREE,
+    held: Sequence[str] = (),
 ) -> tuple[list[str], int]:
     """Return the ``[parameters]`` lines with ``n`` levels each, and how many are free.
 
-    Past ``most`` free parameters the rest are written commented out, with the reason.
+    ``held`` names inputs that no data column feeds: held at one value over each run,
+    they are identified like parameters. Past ``most`` free parameters the rest are
+    written commented out, with the reason.
     """
     lines, count = [], 0
     for v in variables:
+        if v.name in held and v.type in REAL_TYPES and not v.shape:
+            entry, _, own = _entry(v, n)
+            note = "  # an input without a data column, held at one value over each run"
+            lines.append(entry + note + (f"; {own}" if own else ""))
+            count += 1
+            continue
         if v.causality != "parameter" or v.variability not in ("fixed", "tunable"):
             continue
         if v.type not in REAL_TYPES:
@@ -236,8 +247,8 @@ def _header(fmu: Path, data: Path, m: _Match, time: str, derived: Mapping[str, s
     lines.append("# FMU variable = data column (matched by name, case-insensitively)")
     lines.append(f"inputs = {_inline(m.inputs)}")
     if m.missing_inputs:
-        lines.append(f"# FMU inputs without a column (they keep their start value): "
-                     f"{', '.join(m.missing_inputs)}")  # fmt: skip
+        lines.append(f"# FMU inputs without a column (held at one value over each run, "
+                     f"identified in [parameters]): {', '.join(m.missing_inputs)}")  # fmt: skip
     lines.append(f"outputs = {_inline(m.outputs)}")
     if m.locals:
         lines.append(f"# compared as outputs although local in the FMU: {', '.join(m.locals)}")
@@ -312,13 +323,23 @@ def init_study(
             f"columns: {', '.join(columns)}; add one, or give it with --derived NAME=EXPRESSION"
             + "".join(f"\n{line.removeprefix('# ')}" for line in hints)
         )
-    params, count = _parameter_lines(variables)
+    held = match.missing_inputs
+    params, count = _parameter_lines(variables, held=held)
     if count == 0:
-        raise StudyError(f"{fmu}: no real parameter to identify")
+        states = [v.name for v in variables if initial_state(v)]
+        raise StudyError(
+            f"{fmu}: no real parameter to identify, and every input has a data column"
+            + (
+                f"; initial states that could be identified: {', '.join(states)} "
+                '(initial = { NAME = "identify" } in the study)'
+                if states
+                else ""
+            )
+        )
     n = 5
     if count > COMPOSITION["L50"][5]:  # more than a five-level array hosts: three levels
         n = 3
-        params, count = _parameter_lines(variables, n)
+        params, count = _parameter_lines(variables, n, held=held)
     array, _ = select_array([n] * count)
     base = out.resolve().parent
     rel = {p: _as_written(p, base) for p in (fmu, data)}

@@ -195,6 +195,11 @@ class FMUSession:
         if not self.output_names:
             raise FMUError(f"{self.path}: at least one output is needed")
         for pname in self.parameter_names:
+            if pname in self.input_names:
+                raise FMUError(
+                    f"{name}: {pname!r} is both an input taken from the data and a "
+                    "parameter; an input is identified only where no data column feeds it"
+                )
             self._setter(pname, role="parameter")
         self._start_values: dict[str, float] = {}
         for sname, value in start_values.items():

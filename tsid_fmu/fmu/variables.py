@@ -268,7 +268,9 @@ def setter_kind(
     info = find_variable(variables, fmu, name, role)
     if info.variability == "constant":
         raise FMUError(f"{fmu}: {role} {name!r} is a constant and cannot be set")
-    settable = ("parameter", "structuralParameter")
+    # an input without data is held at the value set before initialization: a constant
+    # the FMU exposes as an input (OpenModelica's MassSpringSystem: masses, stiffnesses)
+    settable = ("parameter", "structuralParameter", "input")
     if role == "parameter" and info.causality not in settable and not initial_state(info):
         hint = (
             " (a calculated parameter is computed by the FMU)"
@@ -276,8 +278,8 @@ def setter_kind(
             else ""
         )
         raise FMUError(
-            f"{fmu}: parameter {name!r} has causality {info.causality!r}, not 'parameter', "
-            f"and is no continuous variable with initial 'exact'; it cannot be "
+            f"{fmu}: parameter {name!r} has causality {info.causality!r}, not 'parameter' "
+            f"or 'input', and is no continuous variable with initial 'exact'; it cannot be "
             f"identified{hint}"
         )
     if info.causality == "independent" or (
