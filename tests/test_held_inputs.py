@@ -59,5 +59,5 @@ def test_the_held_input_is_identified_with_the_parameters(held, tmp_path):
 
 
 def test_an_input_fed_by_data_cannot_also_be_a_parameter(held):
-    with pytest.raises(FMUError, match="'u' is both an input taken from the data and a parameter"):
+    with pytest.raises(FMUError, match="'u' is both an input from the data and a parameter"):
         FMUSession(held[0], ["u"], ["y"], parameters=["u", "tau"])

@@ -11,17 +11,23 @@ traceback, and exits with 70, so that a script never takes a crash for a result.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import errno
-import os
 import signal
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tsid_fmu.cli_exits import (
+    environment,
+    error,
+    interrupted,
+    native_output_to_stderr,
+    quiet_stdout,
+)
 from tsid_fmu.cli_screen import add_screen_parser
 from tsid_fmu.cli_values import (
+    choice_value,
+    iteration_count,
     not_parameters,
     parse_assignments,
     saved_result,
@@ -140,7 +146,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         saved = saved_result(Path(args.result))
         values.update(saved["x"])
         interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
+    chosen = {c.name: c for c in study.choices}  # a choice as its label (model=Drag)
     for name, text in parse_assignments(args.set, "--set").items():
+        if name in chosen:
+            values[name] = choice_value(chosen[name], name, text)
+            continue
         try:
             values[name] = float(text)
         except ValueError:
@@ -149,13 +159,18 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     unknown = sorted(set(values) - set(names))
     if unknown:
         raise StudyError(not_parameters(unknown, names))
+    for c in chosen.values():
+        if c is study.variants and c.name not in values:
+            raise StudyError(
+                f"the study chooses among FMU files: say which with --set {c.name}=VARIANT "
+                f"({', '.join(c.labels)})"
+            )
     # parameters not given keep the FMU's start values
     spec = prepare(study, None, [n for n in names if n in values])
     if interface is not None:
         spec = dataclasses.replace(spec, interface=interface)
     with SerialEvaluator(spec) as ev:
         simulated = ev.simulate([values], count=False)[0]
-    chosen = {c.name: c for c in study.choices}  # a choice as its label (model=Drag)
     shown = [
         f"{k}={chosen[k].label_of(v) if k in chosen else f'{v:.6g}'}" for k, v in values.items()
     ]
@@ -263,17 +278,19 @@ def _identify_parser(sub: Any) -> None:
     p.add_argument("study", help="study file (TOML)")
     p.add_argument("--out", help="output folder (default: results/ beside the study)")
     p.add_argument("--resume", action="store_true", help="continue the study in --out")
-    p.add_argument("--max-iterations", type=int, metavar="N", help="override the study's limit")
+    p.add_argument(
+        "--max-iterations", type=iteration_count, metavar="N", help="override the study's limit"
+    )
     p.add_argument(
         "--pause-after",
-        type=int,
+        type=iteration_count,
         metavar="N",
         help="stop after N iterations of this run (with --resume: N more) to review/edit "
         "next_levels.toml, then --resume",
     )
     p.add_argument(
         "--continue-from-run",
-        type=int,
+        type=iteration_count,
         metavar="N",
         help="with --resume: centre the next levels on run N of the last iteration",
     )
@@ -404,106 +421,35 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _environment(exc: OSError) -> str:
-    """One line for an environment error, naming the path."""
-    reason = exc.strerror or type(exc).__name__
-    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
-        reason += " (the disk is full)"
-    elif exc.errno == errno.EROFS:
-        reason += " (the folder is on a read-only file system)"
-    where = exc.filename if exc.filename is not None else "(path not known)"
-    return f"cannot write or read {os.fsdecode(where)!s}: {reason}"
-
-
-def _quiet_stdout() -> None:
-    """After a broken pipe: send what is left of stdout nowhere (no second error)."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError):  # pragma: no cover - stdout without a descriptor
-        pass
-
-
-@contextlib.contextmanager
-def _native_output_to_stderr() -> Iterator[None]:
-    """Keep stdout for tsid's results: what the FMU prints natively goes to stderr.
-
-    An FMU's runtime may ``printf`` to file descriptor 1 (OpenModelica's ``assert |
-    debug | division by zero ...``), in this process or in the workers, which inherit
-    it; on stdout that broke ``--json``. Descriptor 1 is pointed at stderr for the
-    command's length, and :data:`sys.stdout` writes to a copy of the real stdout.
-    Nothing changes where stdout has no descriptor (a test's captured stdout).
-    """
-    try:
-        sys.stdout.flush()
-        fd, err = sys.stdout.fileno(), sys.stderr.fileno()
-        saved = os.dup(fd)
-    except (OSError, ValueError, AttributeError):
-        yield
-        return
-    before = sys.stdout
-    sys.stdout = open(  # closed below, after the descriptor is restored
-        saved, "w", encoding=before.encoding, errors=before.errors, closefd=False
-    )
-    os.dup2(err, fd)
-    try:
-        yield
-    finally:
-        try:
-            sys.stdout.flush()
-        finally:
-            os.dup2(saved, fd)
-            with contextlib.suppress(OSError):  # a closed pipe: said once, by the flush
-                sys.stdout.close()
-            os.close(saved)
-            sys.stdout = before
-
-
-def _error(message: str, status: int) -> int:
-    """Print ``tsid: error: <message>`` on stderr; return the exit status ``status``."""
-    print(f"tsid: error: {message}", file=sys.stderr)
-    return status
-
-
-def _interrupted(terminated: bool) -> int:
-    """Say how an interrupted command line ends; return 130 (Ctrl-C) or 143 (SIGTERM)."""
-    what = "terminated (SIGTERM)" if terminated else "interrupted"
-    print(
-        f"\ntsid: {what}; finished iterations are kept - continue with --resume",
-        file=sys.stderr,
-    )
-    return 143 if terminated else 130
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (see :data:`EXIT_STATUSES`)."""
     held = take_startup_interrupt()  # Ctrl-C or SIGTERM while the package was imported
     if held is not None:
-        return _interrupted(held == signal.SIGTERM)
+        return interrupted(held == signal.SIGTERM, argv)
     terminated: list[int] = []
     try:
         # Ctrl-C and SIGTERM neither lost nor raised inside an import
         with terminated_as_interrupt() as terminated, delivered_interrupts():
             args = make_parser().parse_args(argv)
-            with _native_output_to_stderr():
+            with native_output_to_stderr():
                 status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit
         return status
     except ResourceError as exc:  # a TsidError, but the machine's fault, not the input's
-        return _error(str(exc), 4)
+        return error(str(exc), 4)
     except TsidError as exc:
-        return _error(str(exc), 2)
+        return error(str(exc), 2)
     except RecursionError:
-        return _error("an input file is nested too deeply to read", 2)
+        return error("an input file is nested too deeply to read", 2)
     except BrokenPipeError:
-        _quiet_stdout()
+        quiet_stdout()
         return 141
     except OSError as exc:
-        return _error(_environment(exc), 4)
+        return error(environment(exc), 4)
     except MemoryError:
-        return _error("out of memory", 4)
+        return error("out of memory", 4)
     except KeyboardInterrupt:
-        return _interrupted(bool(terminated))
+        return interrupted(bool(terminated), argv)
     except Exception:  # a bug: the traceback is what a report of it needs
         import traceback
 

@@ -84,6 +84,8 @@ def _print(result: Any, files: list[Path]) -> None:
               f"{', '.join(result.contribution_set_apart) or none}")  # fmt: skip
     for note in result.disagreements():
         print(f"disagree: {note}")
+    for warning in result.warnings:
+        print(f"warning: {warning}")
     print("wrote " + ", ".join(str(p) for p in files))
 
 

@@ -17,6 +17,8 @@ from typing import Any
 from tsid_fmu.errors import StudyError
 
 __all__ = [
+    "choice_value",
+    "iteration_count",
     "not_parameters",
     "parse_assignments",
     "saved_result",
@@ -44,6 +46,25 @@ def worker_count(text: str) -> int:
     return n
 
 
+def iteration_count(text: str) -> int:
+    """Return the value of ``--max-iterations``, ``--pause-after`` or ``--continue-from-run``.
+
+    A whole number, at least 1 (runs and iterations count from 1, as the trail does).
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Anything else (argparse names the option and exits with status 2).
+    """
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return n
+
+
 def timeout_seconds(text: str) -> float:
     """Return the value of ``--timeout``: seconds per simulation, or 0 for no limit.
 
@@ -63,6 +84,31 @@ def timeout_seconds(text: str) -> float:
             f"automatic limit), got {text!r}"
         )
     return seconds
+
+
+def choice_value(choice: Any, name: str, text: str) -> float:
+    """Return the number ``--set NAME=TEXT`` sets a choice to: by label or by value.
+
+    ``model=Drag`` names an FMU variant, ``friction=coulomb`` an Enumeration item,
+    ``friction=2`` a value; anything that is not one of the study's choices is refused.
+
+    Raises
+    ------
+    StudyError
+        ``text`` is none of the choices, naming them.
+    """
+    labels = [str(x) for x in choice.labels]
+    if text in labels:
+        return float(choice.values[labels.index(text)])
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if value in choice.values:
+        return value
+    raise StudyError(
+        f"--set {name}={text}: not one of the study's choices for {name} ({', '.join(labels)})"
+    )
 
 
 def parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:

@@ -11,7 +11,7 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
-from tsid_fmu.evaluate.factory import in_process, make_evaluator
+from tsid_fmu.evaluate.factory import check_runner, in_process, make_evaluator
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.evaluate.timelimit import TimeLimit
@@ -25,6 +25,8 @@ class StudyEvaluators:
     """One evaluator per sub-problem (parameters, experiments, fixed values), shared."""
 
     def __init__(self, study: Study, runner: dict[str, Any], given: Evaluator | None) -> None:
+        workers, timeout = check_runner(runner.get("workers"), runner.get("timeout"))
+        runner = {**runner, "workers": workers, "timeout": timeout}
         self.study, self.runner, self.given = study, runner, given
         self.pool: dict[tuple, Evaluator] = {}
         self.specs: dict[tuple, EvaluationSpec] = {}

@@ -465,6 +465,8 @@ def identify(
         study, {"workers": workers, "timeout": timeout, "scheduler": scheduler}, evaluator
     )
     control = Control(pause_after, max_iterations, continue_from_run)
+    if control.pause_after is not None and study.choices:  # its arrays do not pause
+        raise StudyError("pause_after: a study with choices runs whole; it cannot pause yet")
     return _run(study, out, resume, evaluators, control, progress, plots)
 
 

@@ -38,7 +38,11 @@ from tsid_fmu.uncertainty.sampled import Sampled
 
 __all__ = ["load"]
 
-_OLD = "result.json has no checksum (an older tsid-fmu wrote it): not verified"
+_OLD = (
+    "result.json has no checksum (an older tsid-fmu wrote it, or the checksum was "
+    "removed): its content is not verified; a checksum detects damage and careless edits, "
+    "not a forger"
+)
 
 
 def _number(value: Any) -> float:

@@ -479,9 +479,8 @@ class IdentificationResult:
         """
         import pandas as pd
 
-        rows = []
+        rows, units = [], study_units(self.study)  # the study's, else the FMU's units
         params = self.study.identified_parameters() if self.study else []
-        units = study_units(self.study)  # the study's, else the FMU's declared ones
         for p in (p for p in params if p.name in self.params):  # those of the structure
             low, high = self.intervals.get(p.name, [None, None])
             se = self.uncertainty.relative.get(p.name, math.nan) if self.uncertainty else math.nan

@@ -145,6 +145,17 @@ def _choice_line(v: VariableInfo) -> str:
     )
 
 
+def _nothing_free(fmu: Path, variables: Sequence[VariableInfo]) -> str:
+    """Say that an FMU has nothing ``init`` can free, and which states could be."""
+    states = [v.name for v in variables if initial_state(v)]
+    return f"{fmu}: no real parameter to identify, and every input has a data column" + (
+        f"; initial states that could be identified: {', '.join(states)} "
+        '(initial = { NAME = "identify" } in the study)'
+        if states
+        else ""
+    )
+
+
 def _as_written(path: Path, base: Path) -> Path:
     """``path`` as a person would write it in a file in ``base``.
 
@@ -326,16 +337,7 @@ def init_study(
     held = match.missing_inputs
     params, count = _parameter_lines(variables, held=held)
     if count == 0:
-        states = [v.name for v in variables if initial_state(v)]
-        raise StudyError(
-            f"{fmu}: no real parameter to identify, and every input has a data column"
-            + (
-                f"; initial states that could be identified: {', '.join(states)} "
-                '(initial = { NAME = "identify" } in the study)'
-                if states
-                else ""
-            )
-        )
+        raise StudyError(_nothing_free(fmu, variables))
     n = 5
     if count > COMPOSITION["L50"][5]:  # more than a five-level array hosts: three levels
         n = 3

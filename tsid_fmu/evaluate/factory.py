@@ -2,15 +2,74 @@
 
 from __future__ import annotations
 
+import math
+import os
 from typing import Any
 
+import numpy as np
+
+from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.dask import DaskEvaluator
 from tsid_fmu.evaluate.pool import PoolEvaluator, available_cores
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 
-__all__ = ["available_cores", "in_process", "make_evaluator"]
+__all__ = ["MAX_WORKERS_ENV", "WORKERS_PER_CORE", "available_cores", "check_runner", "in_process",
+           "make_evaluator"]  # fmt: skip
+
+WORKERS_PER_CORE = 4
+"""Most local worker processes per available core, unless :data:`MAX_WORKERS_ENV` allows
+more: each worker holds its own FMU instance, and 30 workers for a 25-run array on two
+cores took 4 GB and ran no faster."""
+MAX_WORKERS_ENV = "TSID_FMU_MAX_WORKERS"
+"""Environment variable: the most local worker processes allowed (overrides the cap)."""
+
+
+def _whole(value: Any, what: str) -> int:
+    """Return ``value`` as an int (NumPy integers too); TypeError for anything else."""
+    if isinstance(value, np.integer):
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError(f"{what} must be a whole number, got {value!r}")
+    return value
+
+
+def check_runner(workers: Any, timeout: Any) -> tuple[int | None, float | None]:
+    """Return ``workers`` and ``timeout`` checked, as :func:`make_evaluator` takes them.
+
+    Raises
+    ------
+    TypeError
+        ``workers`` is not a whole number, or ``timeout`` is not a number (both None
+        allowed: the defaults).
+    StudyError
+        ``workers`` below 1, or above :data:`WORKERS_PER_CORE` per available core
+        (unless :data:`MAX_WORKERS_ENV` allows it); ``timeout`` negative or not finite.
+    """
+    if workers is not None:
+        workers = _whole(workers, "workers")
+        if workers < 1:
+            raise StudyError(f"workers must be at least 1, got {workers}")
+        cores = available_cores()
+        allowed = os.environ.get(MAX_WORKERS_ENV, "")
+        most = int(allowed) if allowed.isdigit() else WORKERS_PER_CORE * cores
+        if workers > most:
+            raise StudyError(
+                f"workers {workers} is more than {most} ({WORKERS_PER_CORE} per available "
+                f"core, {cores} cores): each worker holds its own FMU instance; set "
+                f"{MAX_WORKERS_ENV}={workers} to allow it"
+            )
+    if timeout is not None:
+        if isinstance(timeout, np.generic):
+            timeout = timeout.item()
+        if isinstance(timeout, bool) or not isinstance(timeout, int | float):
+            raise TypeError(f"timeout must be a number of seconds (0: none), got {timeout!r}")
+        if not (math.isfinite(timeout) and timeout >= 0):
+            raise StudyError(
+                f"timeout must be 0 (none) or a positive number of seconds, got {timeout}"
+            )
+    return workers, timeout
 
 
 def make_evaluator(

@@ -379,6 +379,13 @@ class LocalPool:
             except (EOFError, OSError):
                 break
             _seq, index = w.inflight.popleft()
+            limit = self.limit.seconds()
+            longest = max(reply[2].durations, default=0.0)
+            if limit is not None and longest > limit and getattr(reply[2], "error", None) is None:
+                # it finished before the next check: past the limit all the same, as a
+                # simulation killed at the limit (the same rule whatever the timing)
+                reason = f"{self.limit.exceeded()} (it took {longest:.3g} s)"
+                reply = (*reply[:2], failed_result(self.spec, jobs[index][0], reason))
             self.limit.observe(reply[2].durations)
             if index in self._first and getattr(reply[2], "error", None) is None:
                 self.retried.append(

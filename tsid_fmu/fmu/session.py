@@ -194,12 +194,9 @@ class FMUSession:
         )
         if not self.output_names:
             raise FMUError(f"{self.path}: at least one output is needed")
-        for pname in self.parameter_names:
+        for pname in self.parameter_names:  # an input is a parameter only without data
             if pname in self.input_names:
-                raise FMUError(
-                    f"{name}: {pname!r} is both an input taken from the data and a "
-                    "parameter; an input is identified only where no data column feeds it"
-                )
+                raise FMUError(f"{name}: {pname!r} is both an input from the data and a parameter")
             self._setter(pname, role="parameter")
         self._start_values: dict[str, float] = {}
         for sname, value in start_values.items():

@@ -55,6 +55,8 @@ class ScreeningResult:
     failed : int
         Points whose simulation failed; their quantities count as the largest finite
         value seen (a failure is as strong an effect as any).
+    warnings : list of str
+        What makes the indices less than trustworthy (too few Sobol samples).
     """
 
     method: str
@@ -74,6 +76,7 @@ class ScreeningResult:
     nfev_screen: int = 0
     nfev_contribution: int = 0
     failed: int = 0
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def index_name(self) -> str:

@@ -127,7 +127,31 @@ def _check(study: Study, method: str, n: Any) -> tuple[str, int]:
         return method, default_n(method)
     if isinstance(n, bool) or not isinstance(n, int | np.integer):
         raise StudyError(f"screening n must be a whole number, got {n!r}")
+    k = len(study.identified_parameters())
+    runs = int(n) * (k + (1 if method == "morris" else 2))
+    if runs > MAX_SCREEN_SETS:
+        raise StudyError(
+            f"screening n = {n} asks for {runs:,} parameter sets ({method}, {k} parameters), "
+            f"more than {MAX_SCREEN_SETS:,}: give a smaller n"
+        )
     return method, int(n)
+
+
+def _size_warnings(method: str, n: int) -> list[str]:
+    """Return what makes a screening of this size untrustworthy."""
+    if method == "sobol" and n < SOBOL_MIN_N:
+        return [
+            f"Sobol with n = {n} base samples: the indices are noise at this size (ST "
+            f"can exceed 1); use n >= {SOBOL_MIN_N}, or Morris for a cheap screening"
+        ]
+    return []
+
+
+MAX_SCREEN_SETS = 100_000
+"""Most parameter sets one screening runs (``n (k + 1)`` Morris, ``n (k + 2)`` Sobol)."""
+SOBOL_MIN_N = 64
+"""Below this many Sobol base samples the indices are noise (an ``ST`` of 1.38 at n = 2):
+the result says so."""
 
 
 def _threshold(method: str, threshold: float | None) -> float:
@@ -188,8 +212,7 @@ def screen(
     method, n = _check(study, method, n)
     params = study.identified_parameters()  # a per-experiment parameter: each copy
     space = Space({p.name: p.levels for p in params}, study.bounds(), study.method.leveling)
-    names = list(space.names)
-    x = design(method, names, n, seed)
+    x = design(method, names := list(space.names), n, seed)
     show = _console() if progress is True else (progress or None)
     runner = {"workers": workers, "timeout": timeout, "scheduler": scheduler}
     ev = evaluator if evaluator is not None else _evaluator(study, runner)
@@ -210,6 +233,7 @@ def screen(
             nfev=nfev,
             nfev_screen=nfev,
             failed=failed,
+            warnings=_size_warnings(method, n),
         )
         if contribution:
             _contribution(out, ev, space, layout, show)

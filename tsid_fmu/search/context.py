@@ -11,6 +11,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
+
+from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import ProgressCallback
@@ -51,6 +54,19 @@ class Control:
     pause_after: int | None = None
     max_iterations: int | None = None
     continue_from_run: int | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("pause_after", "max_iterations", "continue_from_run"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if isinstance(value, np.integer):
+                value = int(value)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise TypeError(f"{name} must be a whole number (from 1), got {value!r}")
+            if value < 1:
+                raise StudyError(f"{name} must be at least 1, got {value}")
+            setattr(self, name, value)
 
 
 @dataclass

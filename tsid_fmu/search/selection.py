@@ -234,10 +234,17 @@ def decide(
     tied = [
         i for i, c in enumerate(cands) if i != pick and i not in decided and _close(c, cands[pick])
     ]
-    simpler = min([pick, *tied], key=lambda i: (cands[i].k, cands[i].bic))
-    if tied and simpler != pick:
-        pick = simpler
-    _explain(cands, pick, why, tied, barred, degenerate)
+    pick = min([pick, *tied], key=lambda i: (cands[i].k, cands[i].bic))
+    # the reason says what decided among the tied: fewer free parameters, or only the BIC
+    fewest = all(cands[pick].k < cands[j].k for j in tied)
+    tie = (
+        "the simpler is reported"
+        if fewest
+        else (
+            f"as simple ({cands[pick].k} free parameters each or fewer): the lowest BIC is reported"
+        )
+    )
+    _explain(cands, pick, why, tied, barred, degenerate, tie)
     return pick, tied
 
 
@@ -248,8 +255,12 @@ def _explain(
     tied: list[int],
     barred: set[int],
     degenerate: set[tuple[int, int]],
+    tie: str = "the simpler is reported",
 ) -> None:
-    """Mark the chosen candidate and write each candidate's ``why``."""
+    """Mark the chosen candidate and write each candidate's ``why``.
+
+    ``tie`` says what chose among the indistinguishable ones.
+    """
     for i, c in enumerate(cands):
         c.chosen = i == pick
         if i == pick:
@@ -260,7 +271,7 @@ def _explain(
                     "indistinguishable from "
                     + ", ".join(cands[j].label for j in tied)
                     + f" (BIC within {BIC_CLOSE:g}, costs within noise): the data do not decide; "
-                    "the simpler is reported"
+                    + tie
                 )
             )
         elif i in tied:

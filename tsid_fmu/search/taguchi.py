@@ -17,7 +17,7 @@ from typing import Protocol
 
 import numpy as np
 
-from tsid_fmu.errors import SimulationError
+from tsid_fmu.errors import SimulationError, StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.timelimit import timed_out
 from tsid_fmu.search.frame import Frame
@@ -118,7 +118,18 @@ def _next_best(
 
 
 def frame_from_run(record: IterationRecord, run: int, space: Space, method: Method) -> Frame:
-    """Make the next frame of ``record`` centred on its run ``run`` (0-based) instead."""
+    """Make the next frame of ``record`` centred on its run ``run`` (0-based) instead.
+
+    Raises
+    ------
+    StudyError
+        ``record`` has no such run (the message counts from 1, as the trail does).
+    """
+    if not 0 <= run < len(record.sets):
+        raise StudyError(
+            f"continue from run {run + 1}: iteration {record.index} of {record.stage} has "
+            f"runs 1 to {len(record.sets)}"
+        )
     x = {n: float(v) for n, v in zip(record.parameters, record.sets[run], strict=True)}
     label = f"iteration {record.index}, run {run + 1}"
     _, frame = next_frame(

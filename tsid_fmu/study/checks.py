@@ -10,6 +10,8 @@ import math
 import tomllib
 from typing import Any
 
+import numpy as np
+
 from tsid_fmu.errors import StudyError
 
 __all__ = [
@@ -24,6 +26,7 @@ __all__ = [
     "check_whole",
     "check_windows",
     "parse_toml",
+    "plain",
 ]
 
 INT64 = (-(2**63), 2**63 - 1)
@@ -33,6 +36,8 @@ UNCERTAINTY = ("analytic", "bootstrap", "monte_carlo")
 """``[method] uncertainty``: the covariance and profile intervals alone (``analytic``), or
 also sampled ones (:mod:`tsid_fmu.uncertainty.sampled`)."""
 
+DEFAULT_SAMPLED = 100
+"""``[method] uncertainty_replicates`` when it is not given."""
 MAX_SAMPLED = 100_000
 """Most re-fits of ``[method] uncertainty_replicates``."""
 
@@ -95,14 +100,26 @@ def parse_toml(text: str, source: str) -> dict[str, Any]:
     return doc
 
 
+def plain(value: Any) -> Any:
+    """Return a NumPy scalar as the Python number it holds; anything else as it is.
+
+    ``np.int64(1000)`` and ``np.float32(0.5)`` are numbers to every SciPy user, and a
+    ``np.bool_`` is a boolean (refused where a number is needed, as ``True`` is).
+    """
+    return value.item() if isinstance(value, np.generic) else value
+
+
 def check_number(value: Any, what: str) -> float:
     """Return ``value`` as a float, refusing booleans, strings and non-finite values.
+
+    NumPy scalars are taken as the Python numbers they hold (:func:`plain`).
 
     Raises
     ------
     StudyError
         Naming ``what``.
     """
+    value = plain(value)
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise StudyError(f"{what} must be a number, got {value!r}")
     number = _as_float(value, what)
@@ -113,6 +130,7 @@ def check_number(value: Any, what: str) -> float:
 
 def check_bound(value: Any, what: str, default: float) -> float:
     """Return a bound: a number, ``None`` (the default) or an infinity, never NaN."""
+    value = plain(value)
     if value is None:
         return default
     if isinstance(value, bool) or not isinstance(value, int | float):
@@ -125,6 +143,7 @@ def check_bound(value: Any, what: str, default: float) -> float:
 
 def check_whole(value: Any, what: str, low: int, high: int | None = None) -> int:
     """Return an integer in ``[low, high]``, refusing booleans and floats."""
+    value = plain(value)
     if isinstance(value, bool) or not isinstance(value, int) or value < low:
         raise StudyError(f"{what} must be an integer >= {low}, got {value!r}")
     if high is not None and value > high:
@@ -192,7 +211,23 @@ def check_windows(
         )
     if any(w < 0 for w in checked) or not any(checked):
         raise StudyError(f"{where}: window_weights must be >= 0 and not all 0")
+    check_weight_size(checked, f"{where}: window_weights")
     return spans, warm, checked
+
+
+MAX_WEIGHT = 1e12
+"""Largest weight of an output or a window: weights are relative, and one of 1e308
+made every cost overflow to infinity ("all 25 runs failed")."""
+
+
+def check_weight_size(weights: Any, what: str) -> None:
+    """Refuse a weight above :data:`MAX_WEIGHT`, naming ``what``."""
+    big = [w for w in weights if w > MAX_WEIGHT]
+    if big:
+        raise StudyError(
+            f"{what}: {big[0]:g} is above {MAX_WEIGHT:g}; weights are relative and such a "
+            "weight overflows the cost: scale them to about 1"
+        )
 
 
 def check_uncertainty(kind: Any, replicates: Any, cost: str) -> tuple[str, int]:
@@ -203,6 +238,12 @@ def check_uncertainty(kind: Any, replicates: Any, cost: str) -> tuple[str, int]:
     """
     kind = check_choice(kind, "uncertainty", UNCERTAINTY)
     replicates = check_whole(replicates, "uncertainty_replicates", 20, MAX_SAMPLED)
+    if kind == "analytic" and replicates != DEFAULT_SAMPLED:
+        raise StudyError(
+            f"uncertainty_replicates = {replicates} has no effect with uncertainty = "
+            '"analytic" (the default): give uncertainty = "bootstrap" or "monte_carlo" '
+            "beside it, or leave it out"
+        )
     if kind != "analytic" and cost != "sse":
         raise StudyError(
             f"uncertainty = {kind!r} re-fits by least squares, which minimises the sse cost; "

@@ -196,16 +196,57 @@ def _number(choice: Any, variable: Any, where: str) -> float:
         return float(choice)
     if isinstance(choice, bool | str):
         raise StudyError(f"{where}: an {vtype} variable takes integers, got {choice!r}")
+    low, high = _int_range(vtype)
+    if not low <= choice <= high:
+        raise StudyError(
+            f"{where}: {choice!r} does not fit an FMI {vtype} ({low} .. {high}); the FMU "
+            "would be set to a wrapped value"
+        )
+    from tsid_fmu.fmu.variables import variable_info
+
+    info = variable_info(variable)
+    if (info.min is not None and choice < info.min) or (info.max is not None and choice > info.max):
+        raise StudyError(
+            f"{where}: {choice!r} is outside the range the FMU declares "
+            f"({'-inf' if info.min is None else f'{info.min:g}'} .. "
+            f"{'inf' if info.max is None else f'{info.max:g}'})"
+        )
     return float(choice)
 
 
-def resolve_choices(fmu: Path, choices: list[Choice]) -> None:
-    """Check each choice against the FMU's model description; fill its ``values``.
+def _int_range(vtype: str) -> tuple[int, int]:
+    """Return the values an FMI integer type holds (FMI 2's Integer is 32-bit)."""
+    bits = {"Integer": 32, "Int8": 8, "Int16": 16, "Int32": 32, "Int64": 64}
+    if vtype in bits:
+        return -(2 ** (bits[vtype] - 1)), 2 ** (bits[vtype] - 1) - 1
+    if vtype.startswith("UInt") and vtype[4:].isdigit():
+        return 0, 2 ** int(vtype[4:]) - 1
+    return -(2**31), 2**31 - 1
+
+
+def variables_of(fmus: list[Path]) -> set[str]:
+    """Return the names of every variable of any of ``fmus`` (unreadable ones: none)."""
+    from tsid_fmu.fmu.info import read_fmu_description
+
+    names: set[str] = set()
+    for path in fmus:
+        try:
+            names.update(v.name for v in read_fmu_description(Path(path)).modelVariables)
+        except FMUError:
+            continue
+    return names
+
+
+def resolve_choices(fmus: Path | list[Path], choices: list[Choice]) -> None:
+    """Check each choice against the FMUs' model descriptions; fill its ``values``.
+
+    ``fmus`` is the study's FMU, or its variants: a choice's variable is read from the
+    first variant that has it (whatever their order), and the others lack it.
 
     Raises
     ------
     StudyError
-        The FMU has no such variable, it is a Real (give levels), it cannot be set, or
+        No FMU has such a variable, it is a Real (give levels), it cannot be set, or
         a choice is not a value of its type (the message names the parameter).
     """
     models = [c for c in choices if isinstance(c, ModelChoice)]
@@ -222,17 +263,22 @@ def resolve_choices(fmu: Path, choices: list[Choice]) -> None:
     from tsid_fmu.fmu.info import read_fmu_description
     from tsid_fmu.fmu.variables import suggest
 
-    try:
-        md = read_fmu_description(Path(fmu))
-    except FMUError as exc:
-        raise StudyError(f"choices need the FMU's model description: {exc}") from None
-    variables = {v.name: v for v in md.modelVariables}
+    paths = [Path(f) for f in (fmus if isinstance(fmus, list) else [fmus])]
+    variables: dict[str, Any] = {}
+    for path in reversed(paths):  # the first variant that has a variable gives it
+        try:
+            md = read_fmu_description(path)
+        except FMUError as exc:
+            raise StudyError(f"choices need the FMU's model description: {exc}") from None
+        variables.update({v.name: v for v in md.modelVariables})
     for c in choices:
         where = f"parameter {c.name!r}"
         v = variables.get(c.name)
         if v is None:
+            files = ", ".join(p.name for p in paths)
+            who = f"no FMU variant ({files}) has a" if len(paths) > 1 else "the FMU has no"
             raise StudyError(
-                f"{where}: the FMU has no variable of that name.{suggest(c.name, list(variables))}"
+                f"{where}: {who} variable of that name.{suggest(c.name, list(variables))}"
             )
         if v.type in ("Real", "Float64", "Float32"):
             raise StudyError(

@@ -33,7 +33,7 @@ from typing import Any
 from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.errors import ArrayError, StudyError
 from tsid_fmu.study.checks import check_choice, check_number, check_text
-from tsid_fmu.study.choice import Choice, ModelChoice, resolve_choices
+from tsid_fmu.study.choice import Choice, ModelChoice, resolve_choices, variables_of
 from tsid_fmu.study.copies import Copy, expand, plan_copies
 from tsid_fmu.study.schema import (
     IDENTIFY,
@@ -54,6 +54,20 @@ def fields_of(study: Study) -> dict[str, Any]:
 
 
 _METHOD_FIELDS = frozenset(f.name for f in dataclasses.fields(Method))
+
+
+def _list_of(value: Any, kinds: tuple[type, ...], what: str) -> list[Any]:
+    """Return ``value`` as a list of ``kinds``; TypeError naming ``what`` otherwise."""
+    names = " or ".join(k.__name__ for k in kinds)
+    if isinstance(value, str | bytes | Mapping) or not hasattr(value, "__iter__"):
+        raise TypeError(f"Study {what} must be a list of {names}, got {value!r}")
+    items = list(value)
+    for item in items:
+        if not isinstance(item, kinds):
+            raise TypeError(
+                f"Study {what} must be a list of {names}, got a {type(item).__name__}: {item!r}"
+            )
+    return items
 
 
 @dataclass(init=False)
@@ -144,6 +158,8 @@ class Study:
                 where = f"{source}: " if source else ""
                 raise StudyError(f"{where}{exc}") from None
         self.fmu = Path(fmu)
+        parameters = _list_of(parameters, (Parameter, Choice, ModelChoice), "parameters")
+        experiments = _list_of(experiments, (Experiment,), "experiments")
         given = list(parameters) if isinstance(parameters, list | tuple) else parameters
         self.parameters = (
             [p for p in given if not isinstance(p, Choice)] if isinstance(given, list) else given
@@ -224,6 +240,12 @@ class Study:
                     f"experiment {e.name!r}: initial {', '.join(map(repr, clash))} is set from "
                     "the data and also identified; give one of them"
                 )
+            fixed = sorted(n for n in set(e.initial) & set(self.start_values))
+            if fixed:  # an experiment's own start_values are refused the same way
+                raise StudyError(
+                    f"experiment {e.name!r}: initial {', '.join(map(repr, fixed))} is also "
+                    "fixed in [study] start_values; give one of them"
+                )
         self._check_phases(names, exp_names)
         self._check_choices(names)
         self._check_variants()
@@ -277,7 +299,9 @@ class Study:
                 "choices (structure identification) cannot be combined with [[phases]] or "
                 "[contribution] yet: identify the structure first, then fix it in start_values"
             )
-        resolve_choices(self.fmu, self.choices)  # one choice among FMU files at most
+        # a variable a choice sets may be any variant's (the others lack it: no effect)
+        models = [c for c in self.choices if isinstance(c, ModelChoice)]
+        resolve_choices(models[0].paths if models else [self.fmu], self.choices)
         try:
             select_array(
                 [len(p.levels) for p in self.parameters] + [len(c.choices) for c in self.choices]
@@ -289,9 +313,29 @@ class Study:
             ) from None
 
     def _check_variants(self) -> None:
-        """Check a fixed choice among FMU files: its number, a start value, names a variant."""
+        """Check a choice among FMU files against the study.
+
+        ``[study] fmu``, where given, is one of the variants; every parameter is a
+        variable of at least one variant (each variant sets those it has). A fixed
+        choice (no longer among the choices) is a start value naming a variant.
+        """
         v = self.variants
-        if v is None or v in self.choices:
+        if v is None:
+            return
+        if isinstance(v, ModelChoice):
+            if self.fmu not in [p.resolve() for p in v.paths]:
+                raise StudyError(
+                    f"[study] fmu {self.fmu.name} is not one of the FMU variants of "
+                    f"{v.name!r} ({', '.join(p.name for p in v.paths)}): leave it out, or "
+                    "name one of them"
+                )
+            unknown = sorted(set(self.parameter_names) - variables_of(v.paths))
+            if unknown:
+                raise StudyError(
+                    f"unknown parameter(s) {', '.join(map(repr, unknown))}: no FMU variant "
+                    f"of {v.name!r} has such a variable ({', '.join(p.name for p in v.paths)})"
+                )
+        if v in self.choices:
             return
         if not isinstance(v, ModelChoice):
             raise StudyError(f"variants must be a ModelChoice, got {type(v).__name__}")

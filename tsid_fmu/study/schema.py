@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,11 +18,13 @@ from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.cost import COSTS
 from tsid_fmu.study.checks import (
+    DEFAULT_SAMPLED,
     check_bound,
     check_choice,
     check_number,
     check_text,
     check_uncertainty,
+    check_weight_size,
     check_whole,
     check_windows,
 )
@@ -190,6 +193,21 @@ class Experiment:
     initial: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.data, str | os.PathLike) and not hasattr(self.data, "columns"):
+            raise TypeError(
+                f"Experiment data must be a file path or a pandas DataFrame, got {self.data!r}"
+            )
+        for key in ("inputs", "outputs", "derived", "start_values", "hold", "noise", "initial"):
+            value = getattr(self, key)
+            if value is None:  # None for "none", as a Python user writes it
+                setattr(self, key, {})
+            elif not isinstance(value, Mapping):
+                raise TypeError(
+                    f"Experiment {key} must be a mapping (dict), got {type(value).__name__}: "
+                    f"{value!r}"
+                )
+            else:
+                setattr(self, key, dict(value))
         if isinstance(self.data, str | os.PathLike):
             # one spelling per file, so that equal studies compare equal (and the TOML
             # written by Study.to_toml reads back to the same study)
@@ -207,6 +225,7 @@ class Experiment:
             }
             if any(v < 0 for v in self.weights.values()):
                 raise StudyError(f"{where}: weights must be >= 0, got {self.weights}")
+            check_weight_size(self.weights.values(), f"{where}: weights")
             unknown = set(self.weights) - set(self.outputs)
             if unknown:
                 raise StudyError(
@@ -391,7 +410,7 @@ class Method:
     tolerance: float = 1e-10
     fidelity: bool = True
     uncertainty: str = "analytic"
-    uncertainty_replicates: int = 100
+    uncertainty_replicates: int = DEFAULT_SAMPLED
     leveling: LevelingOptions = field(default_factory=LevelingOptions)
 
     def __post_init__(self) -> None:
