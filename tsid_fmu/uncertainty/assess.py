@@ -16,6 +16,7 @@ from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.prepare import data_noise
 from tsid_fmu.uncertainty.intervals import Uncertainty, quantile, scale_groups, uncertainty
+from tsid_fmu.uncertainty.probe import probe_combinations
 from tsid_fmu.uncertainty.profile import ProfileProblem, profile_intervals
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian, sensitivities
 
@@ -113,7 +114,11 @@ def assess(
         out.uncertainty = uncertainty(sens, space, varied)
         out.sensitivities = sens
     if out.uncertainty is not None and sens is not None and spec.cost == "sse":
-        _widen_by_profile(evaluator, spec, space, sens, out.uncertainty, x=varied, cost=fun)
+        rise = _widen_by_profile(evaluator, spec, space, sens, out.uncertainty, x=varied, cost=fun)
+        jac = residual_jacobian(sens, spec)
+        out.warnings += probe_combinations(
+            evaluator, space, out.uncertainty, varied, fun, rise, jac
+        )
     if out.uncertainty is not None:
         out.uncertainty.scale_groups = scale_groups(out.uncertainty, space)
     if out.uncertainty is not None and out.uncertainty.coloured:
@@ -136,11 +141,12 @@ def _widen_by_profile(
     *,
     x: dict[str, float],
     cost: float,
-) -> None:
+) -> float:
     """Make every interval of ``u`` at least as wide as the parameter's profile one.
 
     ``sens`` holds the Jacobian at the answer ``x``, whose cost is ``cost``. Each
-    parameter's threshold carries its own HAC inflation and degrees of freedom.
+    parameter's threshold carries its own HAC inflation and degrees of freedom. Returns
+    the rise of the cost that bounds a 95 % interval of a combination.
     """
     jacobian = residual_jacobian(sens, spec)
     n, p = jacobian.shape
@@ -183,6 +189,7 @@ def _widen_by_profile(
         "bound) and the profile likelihood, both with Student t quantiles of Satterthwaite "
         "degrees of freedom"
     )
+    return threshold
 
 
 def _inflation(u: Uncertainty, name: str) -> float:

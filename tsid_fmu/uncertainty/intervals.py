@@ -247,7 +247,13 @@ def _combinations(space: Space, values: np.ndarray, vectors: np.ndarray, cov: np
             else math.nan
         )
         out.append(
-            {"terms": terms, "std_error": se, "percent": percent, "determined": se < UNDETERMINED}
+            {
+                "terms": terms,
+                "std_error": se,
+                "percent": percent,
+                "determined": se < UNDETERMINED,
+                "direction": [float(c) for c in v],  # in the search coordinates
+            }
         )
     return out
 

@@ -1,0 +1,89 @@
+"""An exact symmetry is reported as not determined, never with finite intervals (issue 45).
+
+OpenModelica's ``MassSpringSubSystem1`` depends on its masses and stiffnesses only
+through their ratios, as modestpy's ``Simple2R1C`` on R1, R2 and C through R1 C and R2 C.
+Finite differences see a little sensitivity along the exact null direction, so the
+covariance gave it a finite standard error, called it "determined", and the intervals
+excluded the truth. :func:`~tsid_fmu.uncertainty.probe.probe_combinations` profiles each
+loose combination; here a cost that is exactly flat along ``lg a - lg b`` stands in for
+the FMU, with the combination the differences report tilted 3 degrees off it.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty.intervals import Uncertainty
+from tsid_fmu.uncertainty.probe import FLAT, probe_combinations
+
+WEIGHTS = np.linspace(1.0, 2.0, 10)
+
+
+class _Flat:
+    """Residuals ``w (s_a - s_b)``: exactly flat along (1, 1), steep across it."""
+
+    def __init__(self, space: Space, curved: float) -> None:
+        self.space, self.curved, self.calls = space, curved, 0
+
+    def residuals(self, s: np.ndarray) -> np.ndarray:
+        across = 30.0 * WEIGHTS * (s[0] - s[1])
+        along = self.curved * WEIGHTS * (s[0] + s[1])  # 0: an exact symmetry
+        return np.concatenate([across, along])
+
+    def evaluate(self, sets):
+        self.calls += len(sets)
+        rs = [self.residuals(self.space.to_s(x)) for x in sets]
+        costs = np.array([[float(r @ r)] for r in rs])
+        return SimpleNamespace(costs=costs, residuals=rs)
+
+
+def _case(curved: float):
+    space = Space({"a": [1.0, 10.0], "b": [1.0, 10.0]}, {"a": (0.0, math.inf),
+                  "b": (0.0, math.inf)}, LevelingOptions())  # fmt: skip
+    x = {"a": 3.0, "b": 3.0}
+    ev = _Flat(space, curved)
+    s0 = space.to_s(x)
+    h = 1e-6
+    jac = np.column_stack([(ev.residuals(s0 + h * e) - ev.residuals(s0)) / h for e in np.eye(2)])
+    u = Uncertainty(values=dict(x))
+    u.intervals = {"a": [2.0, 4.5], "b": [2.0, 4.5]}  # what the covariance said
+    u.std_error, u.relative = {"a": 0.6, "b": 0.6}, {"a": 20.0, "b": 20.0}
+    u.dof = {"a": 50.0, "b": 50.0}
+    tilt = math.radians(3.0)
+    along = [math.cos(math.pi / 4 + tilt), math.sin(math.pi / 4 + tilt)]
+    u.combinations = [
+        {"terms": {"lg a": 0.707, "lg b": -0.707}, "std_error": 1e-4, "percent": 0.02,
+         "determined": True, "direction": [0.707, -0.707]},
+        {"terms": {"lg a": 0.68, "lg b": 0.73}, "std_error": 0.1, "percent": 30.0,
+         "determined": True, "direction": along},
+    ]  # fmt: skip
+    return space, x, ev, jac, u
+
+
+def test_a_flat_combination_the_covariance_calls_determined_gets_open_intervals():
+    space, x, ev, jac, u = _case(curved=0.0)
+    warnings = probe_combinations(ev, space, u, x, 0.0, 4.0, jac)
+    assert u.intervals == {"a": [None, None], "b": [None, None]}
+    assert u.combinations[1]["determined"] is False and u.combinations[0]["determined"]
+    assert len(warnings) == 1 and "a, b have open intervals" in warnings[0]
+    assert ev.calls <= 6  # at most REFITS per side, for the one loose combination
+
+
+def test_a_curved_combination_stays_determined():
+    space, x, ev, jac, u = _case(curved=20.0)
+    before = dict(u.intervals)
+    assert probe_combinations(ev, space, u, x, 0.0, 4.0, jac) == []
+    assert u.intervals == before and u.combinations[1]["determined"]
+
+
+def test_without_the_refit_the_tilt_would_hide_the_symmetry():
+    """Straight along the tilted direction the cost rises steeply: why the probe re-fits."""
+    space, x, ev, _, u = _case(curved=0.0)
+    v = np.array(u.combinations[1]["direction"])
+    s = space.to_s(x) + 2 * 2.0 * 0.1 * v
+    assert float(ev.evaluate([space.to_x(s)]).costs[0, 0]) > FLAT * 4.0

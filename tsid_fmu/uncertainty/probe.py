@@ -1,0 +1,120 @@
+"""Test the loose combinations the covariance calls determined, by profiling along them.
+
+A Fisher matrix computed by finite differences sees a little sensitivity even along an
+exact symmetry (the integrator's and the differences' own noise), so a direction the
+outputs do not depend on at all can come out with a finite standard error: OpenModelica's
+``MassSpringSubSystem1`` (masses and stiffnesses scaled together) was reported with
+finite intervals that excluded the truth, its scale called "determined" (issue 45).
+
+So each combination that the covariance determines only loosely (a relative standard
+error of :data:`LOOSE` % or more) is profiled at two points, one each side of the
+answer, :data:`SPAN` of its 95 % half-widths away: the point along its direction, then
+re-fitted across it by up to :data:`REFITS` Gauss-Newton steps with the answer's
+Jacobian (the direction the differences give is tilted off an exact null direction,
+and across it the cost is steep). Were the profile quadratic, as the covariance says,
+it would rise by ``SPAN**2`` times the 95 % threshold; if it rises by less than
+:data:`FLAT` of that threshold on both sides, the covariance saw noise, not the data:
+the combination is marked not determined, the parameters in it get open intervals, and
+a warning names it. At most ``2 * REFITS`` simulations per loose combination; none
+where every combination is well determined.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty.intervals import Uncertainty, quantile
+
+__all__ = ["FLAT", "LOOSE", "REFITS", "SPAN", "probe_combinations"]
+
+LOOSE = 10.0
+"""Relative standard error (%) from which a combination is probed."""
+SPAN = 2.0
+"""How many 95 % half-widths along the combination each probe goes."""
+FLAT = 0.25
+"""The largest profile rise, as a fraction of the 95 % threshold, of a direction found
+not determined (a quadratic profile rises by ``SPAN**2`` = 4 thresholds there)."""
+REFITS = 3
+"""Simulations per side: the point along the combination, then Gauss-Newton re-fits."""
+MEMBER = 0.3
+"""A parameter whose share of the combination's unit direction reaches this is in it."""
+
+
+def _loose(c: Mapping) -> bool:
+    se, percent = c.get("std_error", math.inf), c.get("percent", math.nan)
+    return (
+        bool(c.get("determined"))
+        and math.isfinite(se)
+        and "direction" in c
+        and math.isfinite(percent)
+        and percent >= LOOSE
+    )
+
+
+def _profile(
+    evaluator: Evaluator, space: Space, s: np.ndarray, across: np.ndarray, jac: np.ndarray
+) -> float:
+    """Return the lowest cost found from ``s`` re-fitted along the columns of ``across``."""
+    step = np.linalg.pinv(jac @ across)
+    z, best = np.zeros(across.shape[1]), math.inf
+    for _ in range(REFITS):
+        point = np.clip(s + across @ z, space.s_lower, space.s_upper)
+        ev = evaluator.evaluate([space.to_x(point)])
+        cost, r = float(ev.costs[0, 0]), ev.residuals[0] if ev.residuals else None
+        if not math.isfinite(cost):
+            break
+        best = min(best, cost)
+        if r is None:
+            break
+        z = z - step @ r
+    return best
+
+
+def probe_combinations(
+    evaluator: Evaluator,
+    space: Space,
+    u: Uncertainty,
+    x: Mapping[str, float],
+    cost: float,
+    rise: float,
+    jac: np.ndarray,
+) -> list[str]:
+    """Profile ``u``'s loose combinations at the answer ``x``; mark those that are flat.
+
+    ``cost`` is the answer's, ``rise`` the increase that bounds a 95 % interval, ``jac``
+    the answer's residual Jacobian in ``space``'s coordinates. Returns a warning per
+    combination found not determined; ``u`` is changed in place (the combination, and
+    its members' intervals and standard errors).
+    """
+    loose = [c for c in u.combinations if _loose(c)]
+    if not loose or not math.isfinite(cost) or jac.shape[1] != space.dim:
+        return []
+    t = quantile(max(min(u.dof.values(), default=1.0), 1.0))
+    s0 = space.to_s(dict(x))
+    warnings = []
+    for c in loose:
+        v = np.asarray(c["direction"], dtype=float)
+        v = v / np.linalg.norm(v)
+        across = np.linalg.svd(np.eye(space.dim) - np.outer(v, v))[0][:, : space.dim - 1]
+        step = SPAN * t * float(c["std_error"])
+        found = [_profile(evaluator, space, s0 + sign * step * v, across, jac) for sign in (1, -1)]
+        finite = [f for f in found if math.isfinite(f)]
+        if not finite or max(finite) - cost > FLAT * rise:
+            continue
+        c["determined"], c["std_error"], c["percent"] = False, math.inf, math.inf
+        members = [n for j, n in enumerate(space.names) if abs(v[j]) >= MEMBER]
+        for name in members:
+            u.intervals[name] = [None, None]
+            u.std_error[name] = u.relative[name] = math.inf
+        terms = " ".join(f"{k:+.2f} {name}" for name, k in c["terms"].items())
+        warnings.append(
+            f"the data do not determine {terms}: profiled {step:.3g} search units along it, "
+            f"both ways, the cost rises by less than the noise; {', '.join(members)} have "
+            "open intervals (only the combinations across it are fixed)"
+        )
+    return warnings
