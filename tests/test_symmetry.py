@@ -87,3 +87,13 @@ def test_without_the_refit_the_tilt_would_hide_the_symmetry():
     v = np.array(u.combinations[1]["direction"])
     s = space.to_s(x) + 2 * 2.0 * 0.1 * v
     assert float(ev.evaluate([space.to_x(s)]).costs[0, 0]) > FLAT * 4.0
+
+
+def test_a_combination_the_covariance_leaves_open_opens_its_parameters_intervals():
+    """MassSpringSubSystem2: the scale 'not determined', yet k3 and m2 had finite
+    intervals that excluded the truth."""
+    space, x, ev, jac, u = _case(curved=0.0)
+    u.combinations[1].update(determined=False, std_error=0.53, percent=122.0)
+    warnings = probe_combinations(ev, space, u, x, 0.0, 4.0, jac)
+    assert u.intervals == {"a": [None, None], "b": [None, None]} and ev.calls == 0
+    assert len(warnings) == 1 and "its standard error is 0.53 search units" in warnings[0]

@@ -14,9 +14,10 @@ Jacobian (the direction the differences give is tilted off an exact null directi
 and across it the cost is steep). Were the profile quadratic, as the covariance says,
 it would rise by ``SPAN**2`` times the 95 % threshold; if it rises by less than
 :data:`FLAT` of that threshold on both sides, the covariance saw noise, not the data:
-the combination is marked not determined, the parameters in it get open intervals, and
-a warning names it. At most ``2 * REFITS`` simulations per loose combination; none
-where every combination is well determined.
+the combination is marked not determined. The parameters in every combination not
+determined (so found, or by the covariance) get open intervals, and a warning names
+it. At most ``2 * REFITS`` simulations per loose combination; none where every
+combination is well determined.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.space import Space
 from tsid_fmu.uncertainty.intervals import Uncertainty, quantile
 
-__all__ = ["FLAT", "LOOSE", "REFITS", "SPAN", "probe_combinations"]
+__all__ = ["FLAT", "LOOSE", "REFITS", "SPAN", "open_undetermined", "probe_combinations"]
 
 LOOSE = 10.0
 """Relative standard error (%) from which a combination is probed."""
@@ -93,7 +94,7 @@ def probe_combinations(
     """
     loose = [c for c in u.combinations if _loose(c)]
     if not loose or not math.isfinite(cost) or jac.shape[1] != space.dim:
-        return []
+        return open_undetermined(space, u)
     t = quantile(max(min(u.dof.values(), default=1.0), 1.0))
     s0 = space.to_s(dict(x))
     warnings = []
@@ -107,14 +108,37 @@ def probe_combinations(
         if not finite or max(finite) - cost > FLAT * rise:
             continue
         c["determined"], c["std_error"], c["percent"] = False, math.inf, math.inf
+        c["why"] = (
+            f"profiled {step:.3g} search units along it, both ways, the cost rises by less "
+            "than the noise"
+        )
+    return warnings + open_undetermined(space, u)
+
+
+def open_undetermined(space: Space, u: Uncertainty) -> list[str]:
+    """Open the intervals of the parameters in each combination that is not determined.
+
+    A parameter's interval cannot be finite along a direction the data leave open: the
+    scale of masses and stiffnesses that only act through their ratios had finite
+    intervals, excluding the truth, while the combination said "not determined".
+    Returns one warning per combination that opened an interval.
+    """
+    warnings = []
+    for c in u.combinations:
+        if c.get("determined") is not False or "direction" not in c:
+            continue
+        v = np.asarray(c["direction"], dtype=float)
+        v = v / max(float(np.linalg.norm(v)), 1e-300)
         members = [n for j, n in enumerate(space.names) if abs(v[j]) >= MEMBER]
+        opened = [n for n in members if u.intervals.get(n) != [None, None]]
         for name in members:
             u.intervals[name] = [None, None]
             u.std_error[name] = u.relative[name] = math.inf
-        terms = " ".join(f"{k:+.2f} {name}" for name, k in c["terms"].items())
-        warnings.append(
-            f"the data do not determine {terms}: profiled {step:.3g} search units along it, "
-            f"both ways, the cost rises by less than the noise; {', '.join(members)} have "
-            "open intervals (only the combinations across it are fixed)"
-        )
+        if opened:
+            terms = " ".join(f"{k:+.2f} {name}" for name, k in c["terms"].items())
+            why = c.get("why") or f"its standard error is {c['std_error']:.3g} search units"
+            warnings.append(
+                f"the data do not determine {terms} ({why}): {', '.join(members)} have open "
+                "intervals; only the combinations across it are fixed"
+            )
     return warnings
