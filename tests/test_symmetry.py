@@ -97,3 +97,13 @@ def test_a_combination_the_covariance_leaves_open_opens_its_parameters_intervals
     warnings = probe_combinations(ev, space, u, x, 0.0, 4.0, jac)
     assert u.intervals == {"a": [None, None], "b": [None, None]} and ev.calls == 0
     assert len(warnings) == 1 and "its standard error is 0.53 search units" in warnings[0]
+
+
+def test_a_combination_the_fisher_matrix_does_not_see_opens_nothing_more():
+    """Mass_Damper: m, c and d determined beside offsets that act only through their
+    sum; their combination with a trace of the offsets has an infinite standard error,
+    which is not a reason to open m, c and d."""
+    space, x, ev, jac, u = _case(curved=0.0)
+    u.combinations[1].update(determined=False, std_error=math.inf, percent=math.nan)
+    assert probe_combinations(ev, space, u, x, 0.0, 4.0, jac) == []
+    assert u.intervals == {"a": [2.0, 4.5], "b": [2.0, 4.5]}

@@ -120,12 +120,20 @@ def open_undetermined(space: Space, u: Uncertainty) -> list[str]:
 
     A parameter's interval cannot be finite along a direction the data leave open: the
     scale of masses and stiffnesses that only act through their ratios had finite
-    intervals, excluding the truth, while the combination said "not determined".
+    intervals, excluding the truth, while the combination said "not determined". The
+    combinations counted are those the profile found flat, and those whose finite
+    standard error is too large to determine them.
     Returns one warning per combination that opened an interval.
     """
     warnings = []
     for c in u.combinations:
         if c.get("determined") is not False or "direction" not in c:
+            continue
+        if not (c.get("why") or math.isfinite(c.get("std_error", math.inf))):
+            # an infinite standard error: a direction the Fisher matrix does not see at
+            # all, whose parameters' own variances are infinite already; a combination
+            # only touching them (a determined m / c beside undetermined offsets) is not
+            # a reason to open the others
             continue
         v = np.asarray(c["direction"], dtype=float)
         v = v / max(float(np.linalg.norm(v)), 1e-300)
