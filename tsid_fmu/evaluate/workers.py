@@ -385,7 +385,8 @@ class LocalPool:
                 # it finished before the next check: past the limit all the same, as a
                 # simulation killed at the limit (the same rule whatever the timing)
                 reason = f"{self.limit.exceeded()} (it took {longest:.3g} s)"
-                reply = (*reply[:2], failed_result(self.spec, jobs[index][0], reason))
+                done = failed_result(self.spec, jobs[index][0], reason, nfev=reply[2].nfev)
+                reply = (*reply[:2], done)
             self.limit.observe(reply[2].durations)
             if index in self._first and getattr(reply[2], "error", None) is None:
                 self.retried.append(
