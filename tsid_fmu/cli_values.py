@@ -27,6 +27,17 @@ __all__ = [
 ]
 
 
+def _at_least_1(text: str, what: str, note: str) -> int:
+    """Return ``text`` as a whole number of at least 1; ArgumentTypeError otherwise."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number{what}, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1{note}, got {text!r}")
+    return n
+
+
 def worker_count(text: str) -> int:
     """Return the value of ``--workers``: a whole number of processes, at least 1.
 
@@ -35,15 +46,7 @@ def worker_count(text: str) -> int:
     argparse.ArgumentTypeError
         Anything else (argparse names the option and exits with status 2).
     """
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"must be a whole number of worker processes (1 = serial), got {text!r}"
-        ) from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1 (1 = serial), got {text!r}")
-    return n
+    return _at_least_1(text, " of worker processes (1 = serial)", " (1 = serial)")
 
 
 def iteration_count(text: str) -> int:
@@ -56,13 +59,7 @@ def iteration_count(text: str) -> int:
     argparse.ArgumentTypeError
         Anything else (argparse names the option and exits with status 2).
     """
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
-    return n
+    return _at_least_1(text, "", "")
 
 
 def timeout_seconds(text: str) -> float:
