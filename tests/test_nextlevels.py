@@ -300,23 +300,3 @@ def test_an_axis_aligned_frame_rotated_without_a_run_centre_is_anchored_at_its_c
     _, f = next_frame(frame, space, sn, None, LevelingOptions(), {}, axes)
     assert not f.axis_aligned
     assert f.anchor == pytest.approx({"p": 2.0, "q": 100.0}, rel=1e-12)
-
-
-def test_a_rotated_row_never_sets_a_log_parameter_with_bound_0_to_0():
-    """OpenModelica's Mass_Damper was run with mass.m = 0 exactly: a row of rotated factors
-    past min = 0 was clipped onto it (issue 43). Rows stay three decades below the first
-    levels instead; the bound itself is kept for the refinements."""
-    from tsid_fmu.search.frame import ZERO_FLOOR_DECADES, above_zero
-
-    space = Space({"m": [0.5, 8.0], "c": [1000.0, 40000.0]}, {"m": (0.0, math.inf),
-                  "c": (0.0, math.inf)}, LevelingOptions())  # fmt: skip
-    off = np.array([-5.0, 0.0, 5.0])  # far past the bound along the first factor
-    frame = Frame(
-        np.zeros(2),
-        [Factor("A1", np.array([1.0, 0.0]), off), Factor("A2", np.array([0.0, 1.0]), off)],
-        anchor={"m": 0.6, "c": 2000.0},
-    )
-    rows = frame.parameter_sets(space, np.array([[0, 1], [1, 0], [2, 2]]))
-    assert all(r["m"] > 0 and r["c"] > 0 for r in rows)
-    assert min(r["m"] for r in rows) == pytest.approx(0.5 * 10**-ZERO_FLOOR_DECADES, rel=1e-6)
-    assert above_zero(space, {"m": 0.0, "c": 5.0})["c"] == 5.0  # only what is below

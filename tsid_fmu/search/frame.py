@@ -25,29 +25,6 @@ from tsid_fmu.search.space import Space
 __all__ = ["Factor", "Frame"]
 
 
-ZERO_FLOOR_DECADES = 3.0
-"""How far below its smallest first level a rotated row may take a log parameter whose
-bound is 0: the decades :meth:`Space.coordinate` maps a value of 0 to."""
-
-
-def above_zero(space: Space, x: dict[str, float]) -> dict[str, float]:
-    """Keep a rotated row's log parameters off a bound of 0.
-
-    Rotated factors move in linear coordinates about their centre (so a valley along a
-    sum stays straight), and a row past a bound is clipped onto it: OpenModelica's
-    ``Mass_Damper`` was run with ``mass.m = 0`` exactly (a division by zero in every such
-    run, issue 43). A parameter the stage works in log10 (its first levels positive)
-    stays at least :data:`ZERO_FLOOR_DECADES` decades below its smallest first level.
-    The refinements are not held off 0: a nesting value there is an answer.
-    """
-    out = dict(x)
-    for j, name in enumerate(space.names):
-        if space.log[j] and space.bounds[name][0] <= 0:
-            floor = 10.0 ** (space.origin[j] - 0.5 * space.width[j] - ZERO_FLOOR_DECADES)
-            out[name] = max(out[name], floor)
-    return out
-
-
 @dataclass
 class Factor:
     """One factor of an iteration.
@@ -164,7 +141,7 @@ class Frame:
                 sets.append({f.name: float(f.values[row[k]]) for k, f in enumerate(self.factors)})  # type: ignore[index]
             else:
                 z = np.array([f.offsets[row[k]] for k, f in enumerate(self.factors)])
-                sets.append(above_zero(space, self.coords(space).to_x(self.point(z))))
+                sets.append(self.coords(space).to_x(self.point(z)))
         return sets
 
     def at_offsets(self, space: Space, z: np.ndarray) -> dict[str, float]:
@@ -173,8 +150,7 @@ class Frame:
         For parameters the values are interpolated in the working domain between the
         exact levels.
         """
-        x = self.coords(space).to_x(self.point(z))
-        return x if self.anchor is None else above_zero(space, x)
+        return self.coords(space).to_x(self.point(z))
 
     def coordinates(self, s: np.ndarray) -> np.ndarray:
         """Offsets along each factor of the point ``s`` (least squares if not square)."""
