@@ -15,19 +15,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from tsid_fmu.cli_values import timeout_seconds, worker_count
+from tsid_fmu.cli_values import timeout_seconds, whole_at_least, worker_count
 
 __all__ = ["add_screen_parser", "plot_screening", "write_screening"]
 
 
 def _whole(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"expected at least 2, got {value}")
-    return value
+    """``--n``: a whole number of at least 2."""
+    return whole_at_least(text, 2)
 
 
 def plot_screening(result: Any, path: Path) -> Path:

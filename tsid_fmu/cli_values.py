@@ -23,18 +23,22 @@ __all__ = [
     "parse_assignments",
     "saved_result",
     "timeout_seconds",
+    "whole_at_least",
     "worker_count",
 ]
 
 
-def _at_least_1(text: str, what: str, note: str) -> int:
-    """Return ``text`` as a whole number of at least 1; ArgumentTypeError otherwise."""
+def whole_at_least(text: str, low: int, what: str = "", note: str = "") -> int:
+    """Return ``text`` as a whole number of at least ``low``; ArgumentTypeError otherwise.
+
+    ``what`` follows "a whole number" and ``note`` follows "at least N" in the message.
+    """
     try:
         n = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be a whole number{what}, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1{note}, got {text!r}")
+    if n < low:
+        raise argparse.ArgumentTypeError(f"must be at least {low}{note}, got {text!r}")
     return n
 
 
@@ -46,7 +50,7 @@ def worker_count(text: str) -> int:
     argparse.ArgumentTypeError
         Anything else (argparse names the option and exits with status 2).
     """
-    return _at_least_1(text, " of worker processes (1 = serial)", " (1 = serial)")
+    return whole_at_least(text, 1, " of worker processes (1 = serial)", " (1 = serial)")
 
 
 def iteration_count(text: str) -> int:
@@ -59,7 +63,7 @@ def iteration_count(text: str) -> int:
     argparse.ArgumentTypeError
         Anything else (argparse names the option and exits with status 2).
     """
-    return _at_least_1(text, "", "")
+    return whole_at_least(text, 1)
 
 
 def timeout_seconds(text: str) -> float:
