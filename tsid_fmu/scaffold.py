@@ -214,8 +214,8 @@ def _parameter_lines(
             )
             continue
         note = f"  # start {v.start}" + (" (levels within the FMU's min/max)" if bounded else "")
-        note += f"; {own}" if own else ""
-        lines.append(entry + note + (f": {v.description}" if v.description else ""))
+        note += (f": {v.description}" if v.description else "") + (f"; {own}" if own else "")
+        lines.append(entry + note)
         count += 1
     return lines, count
 
