@@ -159,7 +159,11 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
         if (strncmp(path, "localhost/", 10) == 0) path += 9;
         snprintf(probe, sizeof probe, "%s/.", path);
         FILE *f = fopen(probe, "r");
-        if (f == NULL) return NULL;
+        if (f == NULL) {  /* says why only when logging is on, as many exporters do */
+            if (loggingOn && cb->logger) cb->logger(cb->componentEnvironment, name,
+                fmi2Fatal, "logStatusFatal", "cannot open the resources folder %s", path);
+            return NULL;
+        }
         fclose(f);
     }
 #endif

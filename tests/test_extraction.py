@@ -11,10 +11,12 @@ parent's folders.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
 import textwrap
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -220,3 +222,23 @@ def test_an_fmu_that_needs_its_empty_resources_folder_runs(tmp_path):
     bare = copy_without(fmu, tmp_path / "Bare.fmu", "resources")
     with FMUSession(bare, ["u"], ["y"], parameters=["tau"]) as session:
         assert np.isfinite(session.simulate(t, np.ones((t.size, 1)), {"tau": 0.3})).all()
+
+
+def test_a_failed_instantiation_names_the_cause_the_fmu_gives_with_logging_on(tmp_path):
+    """An FMU that refuses silently is asked again with logging on (issue 43).
+
+    Extracted by hand without ``resources/``, the FMU returns no instance; it says why
+    only when ``loggingOn`` is true, as many exporters do.
+    """
+    fmu = build_c_fmu(tmp_path, "NeedsRes", interfaces=("cs",), needs_resources=True)
+    folder = tmp_path / "by_hand"
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(folder)
+    shutil.rmtree(folder / "resources")
+    with pytest.raises(FMUError) as info:
+        FMUSession(folder, ["u"], ["y"], parameters=["tau"])
+    message = str(info.value)
+    assert (
+        "instantiation failed: Failed to instantiate model (asked again with logging on)" in message
+    )
+    assert "[Fatal] logStatusFatal: cannot open the resources folder" in message

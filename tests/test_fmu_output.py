@@ -2,7 +2,9 @@
 
 OpenModelica's runtime ``printf``'s its asserts (``assert | debug | division by zero
 ...``) to descriptor 1, in whichever process runs the FMU; on tsid's stdout they broke
-``--json``. The chatty lag FMU prints such a line at every run's first step.
+``--json``. The chatty lag FMU prints such a line at every run's first step. Each
+run's printed text is kept: on stderr, in the study folder's ``fmu_output.log``, and at
+the end of a failed run's reason.
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ import numpy as np
 import pandas as pd
 import pytest
 from fmu_factory import LAG_TOML, build_c_fmu, lag_response
+
+from tsid_fmu.errors import SimulationError
+from tsid_fmu.fmu import FMUSession
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -41,3 +46,44 @@ def test_json_on_stdout_parses_whatever_the_fmu_prints(study, tmp_path, where):
     summary = json.loads(proc.stdout)  # nothing but the JSON
     assert summary["nfev"] > 0
     assert "chatty FMU | debug | first step" in proc.stderr  # not lost: on stderr
+    log = (tmp_path / "out" / "fmu_output.log").read_text()
+    assert "== parameter set: tau = " in log and "chatty FMU | debug | first step" in log
+
+
+@pytest.fixture(scope="module")
+def chatty(tmp_path_factory) -> Path:
+    return build_c_fmu(tmp_path_factory.mktemp("chatty_fmu"), "Lag", interfaces=("cs",),
+                       chatty=True)  # fmt: skip
+
+
+def _run(fmu: Path, t_fail: float, capture: bool) -> tuple[FMUSession, object]:
+    t = np.linspace(0.0, 1.0, 11)
+    names = ["tau", "t_fail"]
+    session = FMUSession(fmu, ["u"], ["y"], parameters=names, capture_output=capture)
+    try:
+        return session, session.simulate(t, np.ones(11), {"tau": 0.5, "t_fail": t_fail})
+    except SimulationError as exc:
+        return session, exc
+
+
+def test_a_run_keeps_what_the_fmu_printed_and_echoes_it_on_stderr(chatty, capfd):
+    session, y = _run(chatty, 10.0, capture=True)
+    with session:
+        assert isinstance(y, np.ndarray)
+        assert session.printed == "chatty FMU | debug | first step, tau=0.5\n"
+    out, err = capfd.readouterr()
+    assert "first step" not in out and "first step, tau=0.5" in err
+
+
+def test_a_failed_run_quotes_what_the_fmu_printed(chatty):
+    session, exc = _run(chatty, 0.35, capture=True)
+    with session:
+        assert isinstance(exc, SimulationError)
+        assert "t_fail=0.35 exceeded" in str(exc)  # the FMI log, as before
+        assert str(exc).endswith("The FMU printed: chatty FMU | debug | first step, tau=0.5")
+
+
+def test_without_capture_nothing_is_kept(chatty):
+    session, exc = _run(chatty, 0.35, capture=False)
+    with session:
+        assert session.printed == "" and "The FMU printed" not in str(exc)

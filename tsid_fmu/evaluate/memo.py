@@ -31,6 +31,7 @@ import numpy as np
 from tsid_fmu.evaluate.protocol import Evaluation, Progress, Simulated
 from tsid_fmu.evaluate.runner import Job, OnResult, SetResult, SimResult
 from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.fmu import native
 
 __all__ = ["OUTPUT_CACHE", "RESIDUAL_CACHE", "MemoEvaluator"]
 
@@ -229,8 +230,13 @@ class MemoEvaluator:
         self._known.update(self.spec.key(p) for p in parameter_sets)
 
     def _run(self, jobs: list[tuple[Key, Job]], on_result: OnResult) -> None:
+        def recorded(index: int, result: SetResult | SimResult) -> None:
+            if result.printed:  # into the study folder's record, when a study runs
+                native.record(jobs[index][1][1], result.printed)
+            on_result(index, result)
+
         if jobs:
-            self._run_jobs([job for _, job in jobs], on_result)
+            self._run_jobs([job for _, job in jobs], recorded)
             self._batch_done()
 
     @staticmethod

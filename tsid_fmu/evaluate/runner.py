@@ -67,6 +67,9 @@ class SetResult:
         Simulations started for this set (the failed one included).
     durations : list of float
         Seconds each successful simulation took.
+    printed : str
+        What the FMU printed natively in the set's simulations (:mod:`tsid_fmu.fmu.native`),
+        each run's text after a line naming its experiment and replicate; '' if nothing.
     """
 
     costs: np.ndarray
@@ -74,6 +77,7 @@ class SetResult:
     residuals: np.ndarray | None
     nfev: int
     durations: list[float] = field(default_factory=list)
+    printed: str = ""
 
 
 @dataclass
@@ -83,6 +87,7 @@ class SimResult:
     simulated: list[Simulated]
     nfev: int
     durations: list[float] = field(default_factory=list)
+    printed: str = ""
 
 
 OnResult = Callable[[int, SetResult | SimResult], None]
@@ -130,6 +135,7 @@ class SetRunner:
         self.n_replicates = spec.n_replicates
         self.plans = [e.replicate_plan(self.n_replicates) for e in spec.experiments]
         self.started = 0  # simulations started for the current set
+        self.printed: list[str] = []  # what the FMU printed in the current set's runs
         # with per-experiment copies: each experiment's latest outputs, by its own values
         copies = any(e.copies for e in spec.experiments)
         self.reuse: dict[tuple, np.ndarray] | None = {} if copies else None
@@ -166,6 +172,7 @@ class SetRunner:
             step_size=spec.step_size,
             tolerance=spec.tolerance,
             start_values=start,
+            capture_output=True,
             **options,
         )
 
@@ -199,6 +206,8 @@ class SetRunner:
             y = session.simulate(experiment.time, inputs, values)
         finally:
             self.monitor.finished()
+            if session.printed.strip():
+                self.printed.append(f"-- {experiment.name}, replicate {r + 1}:\n{session.printed}")
         if key is not None and self.reuse is not None:
             self.reuse[key] = y.copy()
             while len(self.reuse) > REUSE_PER_EXPERIMENT * len(self.sessions):
@@ -211,7 +220,7 @@ class SetRunner:
         Failures of the FMU (:class:`~tsid_fmu.errors.TsidError`) end the set and are
         returned; any other exception propagates.
         """
-        self.started = 0
+        self.started, self.printed = 0, []
         costs = np.zeros(self.n_replicates)
         residuals: list[np.ndarray] = []
         durations: list[float] = []
@@ -226,7 +235,8 @@ class SetRunner:
                     y = self._simulate(e, r, params)
                 except TsidError as exc:
                     costs[:] = math.inf
-                    return SetResult(costs, f"{experiment.name}: {exc}", None, self.started)
+                    reason = f"{experiment.name}: {exc}"
+                    return SetResult(costs, reason, None, self.started, [], self._printed())
                 if self.started > before:  # not reused: its time counts
                     durations.append(time.monotonic() - t0)
                 per_output = experiment.output_costs(self.cost, y)
@@ -239,11 +249,11 @@ class SetRunner:
             costs[: len(values)] += values
         out = residuals[0] if len(residuals) == 1 else np.concatenate(residuals)
         out.flags.writeable = False
-        return SetResult(costs, None, out, self.started, durations)
+        return SetResult(costs, None, out, self.started, durations, self._printed())
 
     def simulate(self, params: Mapping[str, float]) -> SimResult:
         """Simulate every experiment on its measured inputs (each one even if another fails)."""
-        self.started = 0
+        self.started, self.printed = 0, []
         out: list[Simulated] = []
         durations: list[float] = []
         for e, experiment in enumerate(self.spec.experiments):
@@ -257,7 +267,10 @@ class SetRunner:
                 durations.append(time.monotonic() - t0)
             y.flags.writeable = False
             out.append(Simulated(experiment.name, y, None))
-        return SimResult(out, self.started, durations)
+        return SimResult(out, self.started, durations, self._printed())
+
+    def _printed(self) -> str:
+        return "\n".join(self.printed)
 
     def run_job(self, job: Job) -> SetResult | SimResult:
         """Run a :data:`Job`: :meth:`run` or :meth:`simulate`."""

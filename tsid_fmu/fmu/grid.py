@@ -21,11 +21,13 @@ that are the original samples.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from tsid_fmu.errors import FMUError, SimulationError
+from tsid_fmu.fmu.variables import suggest
 
 __all__ = [
     "HOLDS",
@@ -250,6 +252,57 @@ def check_finite(fmu: str, names: tuple[str, ...], t: np.ndarray, out: np.ndarra
             f"{fmu}: output {names[col]!r} is {out[row, col]} at "
             f"t={t[row]:g} (step {row}); check the parameters of this run"
         )
+
+
+class Checked:
+    """The grids of read-only ``(time, inputs)`` pairs, remembered by identity.
+
+    A study simulates the same (read-only) time and input arrays hundreds of times: the
+    checks and the grid are done once for them. Only arrays that cannot be changed in
+    place (not writeable, already float64 and C-contiguous, :func:`frozen`) are
+    remembered, holding a reference so that the identity cannot be reused. A study
+    alternates between its replicates' inputs, so ``size`` pairs are kept.
+    """
+
+    def __init__(self, size: int = 32) -> None:
+        self.size = size
+        self._pairs: dict[tuple[int, int], tuple[Any, Any, Grid]] = {}
+
+    def get(self, time: np.ndarray, inputs: np.ndarray | None) -> Grid | None:
+        """Return the grid of this very pair of arrays, if remembered."""
+        hit = self._pairs.get((id(time), id(inputs)))
+        if hit is not None and hit[0] is time and hit[1] is inputs:
+            return hit[2]
+        return None
+
+    def put(self, time: np.ndarray, inputs: np.ndarray | None, g: Grid) -> None:
+        """Remember ``g`` for this pair, if neither array can change."""
+        if frozen(time) and (inputs is None or frozen(inputs)):
+            if len(self._pairs) >= self.size:
+                self._pairs.pop(next(iter(self._pairs)))
+            self._pairs[(id(time), id(inputs))] = (time, inputs, g)
+
+
+def check_holds(fmu: str, input_names: Sequence[str], hold: Mapping[str, str]) -> dict[str, str]:
+    """Return the hold of every input (``"previous"`` unless ``hold`` names it).
+
+    Raises
+    ------
+    FMUError
+        ``hold`` names something that is not an input, or a hold that is not one of
+        :data:`HOLDS`.
+    """
+    for name, kind in hold.items():
+        if name not in input_names:
+            raise FMUError(
+                f"{fmu}: hold given for {name!r}, which is not one of the "
+                f"inputs {list(input_names)}.{suggest(name, input_names)}"
+            )
+        if kind not in HOLDS:
+            raise FMUError(
+                f"{fmu}: hold of input {name!r} must be 'previous' or 'linear', not {kind!r}"
+            )
+    return {name: hold.get(name, "previous") for name in input_names}
 
 
 def check_substeps(fmu: str, substeps: Any) -> int:

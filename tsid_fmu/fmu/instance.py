@@ -73,21 +73,35 @@ class Instance:
         self.structure: tuple[tuple[str, float], ...] = ()
 
     def instantiate(self) -> None:
-        """Make a new instance; FMUError if the FMU refuses."""
+        """Make a new instance; FMUError if the FMU refuses.
+
+        An FMU that refuses without a message is asked once more with logging on: many
+        exporters say why only then.
+        """
+        fmu = self.fmu
+        failure = self._try_instantiate(False)
+        if failure is not None and not self.log.messages:
+            failure = self._try_instantiate(True)
+            if failure is not None and self.log.messages:
+                failure = f"{failure} (asked again with logging on)"
+        if failure is not None:
+            raise FMUError(f"{self.name}: instantiation failed{failure}.{self.log.text()}")
+        self.component = fmu.component
+        self.address = int(getattr(fmu.component, "value", fmu.component) or 0)
+        self.instantiations += 1
+
+    def _try_instantiate(self, logging_on: bool) -> str | None:
+        """Instantiate; return None, or how it failed (``": <exception>"`` or ``""``)."""
         fmu = self.fmu
         try:
             if self.major == 2:
                 self._callbacks = fmi2_callbacks(self.log)  # alive as long as the instance
-                fmu.instantiate(callbacks=self._callbacks)
+                fmu.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
             else:
-                fmu.instantiate(logMessage=self.log.fmi3)
+                fmu.instantiate(logMessage=self.log.fmi3, loggingOn=logging_on)
         except Exception as exc:  # FMPy raises bare Exception on a NULL instance
-            raise FMUError(f"{self.name}: instantiation failed: {exc}.{self.log.text()}") from exc
-        if not fmu.component:
-            raise FMUError(f"{self.name}: instantiation failed.{self.log.text()}")
-        self.component = fmu.component
-        self.address = int(getattr(fmu.component, "value", fmu.component) or 0)
-        self.instantiations += 1
+            return f": {exc}"
+        return None if fmu.component else ""
 
     def free(self) -> None:
         """Free the instance (if any)."""

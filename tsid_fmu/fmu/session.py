@@ -44,6 +44,7 @@ from tsid_fmu.fmu.instance import Instance, Values
 from tsid_fmu.fmu.library import load_fmu, loop_functions
 from tsid_fmu.fmu.logs import LogCapture, Logger
 from tsid_fmu.fmu.mesolver import MESolver, me_functions
+from tsid_fmu.fmu.native import NativeOutput
 from tsid_fmu.fmu.variables import (
     VariableInfo,
     choose_interface,
@@ -52,14 +53,10 @@ from tsid_fmu.fmu.variables import (
     real_reference,
     restarts_instance,
     setter_kind,
-    suggest,
     variable_info,
 )
 
 __all__ = ["FMUSession"]
-
-#: read-only (time, inputs) pairs a session remembers as checked
-_MAX_CHECKED = 32
 
 
 class FMUSession:
@@ -103,6 +100,10 @@ class FMUSession:
     tolerance : float, optional
         Model Exchange: relative tolerance (``"rk45"``: default
         :data:`~tsid_fmu.fmu.mesolver.DEFAULT_RTOL`; ``"cvode"``: FMPy's default).
+    capture_output : bool, optional
+        Capture what the FMU prints natively during instantiation and each run
+        (:mod:`tsid_fmu.fmu.native`): it is echoed on stderr, kept as :attr:`printed`,
+        and its tail ends the message of a failed run (default False).
 
     Attributes
     ----------
@@ -138,6 +139,7 @@ class FMUSession:
         substeps: int = 10,
         me_solver: Literal["rk45", "cvode"] = "rk45",
         tolerance: float | None = None,
+        capture_output: bool = False,
     ) -> None:
         self.path = Path(path)
         self.input_names = tuple(inputs)
@@ -147,8 +149,9 @@ class FMUSession:
         self._tempdir: Path | None = None
         self._inst: Instance | None = None
         self._needs_reset = False
-        self._checked: dict[tuple[int, int], tuple[Any, Any, grid.Grid]] = {}
+        self._checked = grid.Checked()
         self._log = LogCapture(logger)
+        self._capture = NativeOutput(enabled=capture_output)
         self._setters: dict[str, tuple[str, int]] = {}
         self._me: MESolver | None = None
         try:
@@ -219,22 +222,11 @@ class FMUSession:
                 rtol=self.tolerance,
                 max_step=self.step_size,
             )
-        self._inst.instantiate()
+        self._capture.call(self._inst.instantiate)
 
     def _set_hold(self, hold: dict[str, str]) -> None:
         """Check the holds; decide how linear inputs reach the FMU."""
-        for name, kind in hold.items():
-            if name not in self.input_names:
-                raise FMUError(
-                    f"{self.path.name}: hold given for {name!r}, which is not one of the "
-                    f"inputs {list(self.input_names)}.{suggest(name, self.input_names)}"
-                )
-            if kind not in grid.HOLDS:
-                raise FMUError(
-                    f"{self.path.name}: hold of input {name!r} must be 'previous' or "
-                    f"'linear', not {kind!r}"
-                )
-        self.hold = {name: hold.get(name, "previous") for name in self.input_names}
+        self.hold = grid.check_holds(self.path.name, self.input_names, hold)
         self._linear = np.array([self.hold[n] == "linear" for n in self.input_names], dtype=bool)
         cs = self.model_description.coSimulation
         #: the FMU interpolates linear inputs from their derivatives (FMI 2.0 only)
@@ -350,32 +342,33 @@ class FMUSession:
             for name, _kind, _vr, value in values
             if restarts_instance(self.variables[name])
         )
-        if self._needs_reset:
-            inst.renew(structure)
-        inst.structure = structure
         self._log.messages.clear()
         self.nfev += 1
-        self._needs_reset = True
-        if self.interface == "cs":
-            out = self._simulate_cs(inst, g, values)
-            t = g.time if g.keep is None else g.time[g.keep]
-        else:
-            t = g.time
-            out = self._simulate_me(inst, g, values)
+        out, t = self._capture.call(self._run, inst, g, values, structure)
         grid.check_finite(self.path.name, self.output_names, t, out)
         return out
 
+    @property
+    def printed(self) -> str:
+        """What the FMU printed natively in the last run ('' unless ``capture_output``)."""
+        return self._capture.text
+
+    def _run(
+        self, inst: Instance, g: grid.Grid, values: Values, structure: tuple
+    ) -> tuple[np.ndarray, np.ndarray]:
+        if self._needs_reset:
+            inst.renew(structure)
+        inst.structure = structure
+        self._needs_reset = True
+        if self.interface == "cs":
+            t = g.time if g.keep is None else g.time[g.keep]
+            return self._simulate_cs(inst, g, values), t
+        return self._simulate_me(inst, g, values), g.time
+
     def _check_arrays(self, time: np.ndarray, inputs: np.ndarray | None) -> grid.Grid:
-        # A study simulates the same (read-only) time and input arrays hundreds of times:
-        # the checks and the grid are done once for them. Only arrays that cannot be
-        # changed in place (not writeable, already float64 and C-contiguous) are
-        # remembered, by identity, holding a reference so that the identity cannot be
-        # reused. A study alternates between its replicates' inputs, so several pairs
-        # are kept.
-        key = (id(time), id(inputs))
-        hit = self._checked.get(key)
-        if hit is not None and hit[0] is time and hit[1] is inputs:
-            return hit[2]
+        hit = self._checked.get(time, inputs)
+        if hit is not None:
+            return hit
         t, u = self._validate_arrays(time, inputs)
         if self.interface == "cs":
             g = grid.refine(
@@ -389,10 +382,7 @@ class FMUSession:
             )
         else:
             g = grid.model_exchange(t, u, self._linear)
-        if grid.frozen(time) and (inputs is None or grid.frozen(inputs)):
-            if len(self._checked) >= _MAX_CHECKED:
-                self._checked.pop(next(iter(self._checked)))
-            self._checked[key] = (time, inputs, g)
+        self._checked.put(time, inputs, g)
         return g
 
     def _validate_arrays(
@@ -448,6 +438,8 @@ class FMUSession:
                 inst.unload()
         finally:
             self._log.release()
+            if getattr(self, "_capture", None) is not None:
+                self._capture.close()
             if self._tempdir is not None:
                 extraction.give_back(self._tempdir)
                 self._tempdir = None

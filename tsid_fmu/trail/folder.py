@@ -33,11 +33,13 @@ holding files tsid-fmu did not write, is refused (:mod:`tsid_fmu.trail.owner`).
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 from collections.abc import Callable
 from pathlib import Path
 
 from tsid_fmu.errors import StudyError
+from tsid_fmu.fmu import native
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
@@ -49,7 +51,10 @@ from tsid_fmu.trail.levels import read_next_levels, write_next_levels
 from tsid_fmu.trail.owner import FolderLock, check_owner, fingerprint, write_fingerprint
 from tsid_fmu.trail.reader import read_record, read_stage
 
-__all__ = ["NullStore", "Trail"]
+__all__ = ["FMU_OUTPUT", "NullStore", "Trail"]
+
+#: the file in a study folder that records what the FMU printed, run by run
+FMU_OUTPUT = "fmu_output.log"
 
 
 class NullStore:
@@ -129,6 +134,9 @@ class Trail:
         except BaseException:
             self._lock.release()
             raise
+        # what the FMU prints natively, run by run, while this trail is open
+        self._recording = contextlib.ExitStack()
+        self._recording.enter_context(native.recording(self.out / FMU_OUTPUT))
 
     def _compare_copy(self, source: Path) -> None:
         """Note a copy ``study.toml`` that differs from the study file being resumed."""
@@ -140,8 +148,11 @@ class Trail:
             )
 
     def close(self) -> None:
-        """Release the folder's lock."""
-        self._lock.release()
+        """Stop recording the FMU's output; release the folder's lock."""
+        try:
+            self._recording.close()
+        finally:
+            self._lock.release()
 
     def __enter__(self) -> Trail:
         return self
