@@ -769,6 +769,29 @@ class {name}(Fmi2Slave):
 '''
 
 
+_PYTHONFMU_COUNTER = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+
+
+class {name}(Fmi2Slave):
+    """A discrete-time accumulator: y += increment * u at every communication step."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.u = 0.0
+        self.y = 0.0
+        self.increment = 1.0
+        self.register_variable(Real("u", causality=Fmi2Causality.input))
+        self.register_variable(Real("y", causality=Fmi2Causality.output))
+        self.register_variable(Real("increment", causality=Fmi2Causality.parameter,
+                                    variability=Fmi2Variability.tunable))
+
+    def do_step(self, current_time, step_size):
+        self.y += self.increment * self.u
+        return True
+'''
+
+
 def pythonfmu_available() -> bool:
     """True when ``pythonfmu`` is importable and this Python has a shared libpython."""
     try:
@@ -778,11 +801,16 @@ def pythonfmu_available() -> bool:
     return bool(sysconfig.get_config_var("Py_ENABLE_SHARED"))
 
 
-def build_pythonfmu(tmp_dir: Path, name: str = "PyLag") -> Path:
-    """Build the lag as a ``pythonfmu`` Co-Simulation FMU and return its path."""
+def build_pythonfmu(tmp_dir: Path, name: str = "PyLag", *, counter: bool = False) -> Path:
+    """Build the lag as a ``pythonfmu`` Co-Simulation FMU and return its path.
+
+    ``counter``: instead, a discrete-time accumulator ``y += increment * u`` once per
+    communication step (as PythonFMU3's ``FMU3Model`` adds ``increment`` per step).
+    """
     tmp_dir = Path(tmp_dir)
     script = tmp_dir / f"{name.lower()}_slave.py"
-    script.write_text(textwrap.dedent(_PYTHONFMU_SLAVE.format(name=name)))
+    source = _PYTHONFMU_COUNTER if counter else _PYTHONFMU_SLAVE
+    script.write_text(textwrap.dedent(source.format(name=name)))
     proc = subprocess.run(
         [sys.executable, "-m", "pythonfmu", "build", "-f", str(script), "-d", str(tmp_dir)],
         capture_output=True,

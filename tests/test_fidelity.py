@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from fmu_factory import build_pythonfmu, pythonfmu_available
 from vdp_factory import build_vdp_fmu, vdp_solution
 
 from tsid_fmu import Experiment, Method, Parameter, Study, identify
@@ -166,7 +167,9 @@ def test_cs_only_fmu_is_compared_with_a_four_times_smaller_step(vdp):
     check = check_fidelity(spec, {"mu": MU})
     assert check.reference.interface == "cs"
     assert check.reference.step == pytest.approx(0.0025, rel=1e-9)
-    assert check.matters and check.interface == "cs" and check.simulations == 2
+    # the study's step, the reference, and a step 4 x smaller still: Euler converges
+    assert check.matters and check.interface == "cs" and check.simulations == 3
+    assert check.converges is True
     assert "differs from Co-Simulation at step 0.0025 s" in check.message
     assert "fix: a smaller communication step, step = 0.0025 or less" in check.message
     # a step 4 x smaller than the study's own; Euler's error falls with the step
@@ -247,3 +250,34 @@ def test_linear_inputs_do_not_make_model_exchange_blame_co_simulation():
     runs = SolverRuns(spec, MISO_TRUTH)
     assert compare(runs, cs, ref, noise, 0.0).ratio < 0.01  # threshold 0: Richardson
     assert runs.count == 5  # held cs and me, then cs, me and me on a twice finer grid
+
+
+@pytest.mark.skipif(not pythonfmu_available(), reason="needs pythonfmu and a shared libpython")
+def test_an_fmu_that_acts_once_per_step_keeps_the_step_and_says_why(tmp_path):
+    """PythonFMU3's FMU3Model adds ``increment`` at every step (issue 43): the check
+    advised a 4 x smaller step, and following it ended at -74 % with a new warning asking
+    for a smaller one still. Outputs that do not converge as the step shrinks are the
+    FMU's design, not a solver error."""
+    fmu = build_pythonfmu(tmp_path, "Counter", counter=True)
+    t = np.round(np.arange(0.0, 2.0 + 1e-9, 0.1), 10)
+    u = 1.0 + 0.5 * np.sin(t)
+    y = np.concatenate([[0.0], np.cumsum(2.0 * u[:-1])])  # y_k+1 = y_k + 2 u_k
+    noisy = y + np.random.default_rng(0).normal(0, 0.02, y.shape)
+    pd.DataFrame({"time": t, "u": u, "y": noisy}).to_csv(tmp_path / "d.csv", index=False)
+    study = Study(
+        fmu=fmu,
+        parameters=[Parameter("increment", [0.5, 1.0, 4.0], min=0.0)],
+        experiments=[Experiment(tmp_path / "d.csv", inputs={"u": "u"}, outputs={"y": "y"})],
+        cost="sse",
+        weighting="noise",
+        replicates=1,
+    )
+    check = check_fidelity(prepare(study), {"increment": 2.0})
+    assert check.converges is False and not check.matters and check.interface == "cs"
+    assert check.alternatives[0].ratio > 2 * check.used.ratio  # it grows as the step shrinks
+    assert "do not converge as the communication step shrinks" in check.message
+    assert "the study keeps its step" in check.message
+    assert "and that from Co-Simulation at step 0.00625 s by" in check.message
+    result = identify(study, progress=False, plots=False)
+    assert result.params["increment"] == pytest.approx(2.0, rel=0.01)
+    assert any("do not converge as the communication step shrinks" in w for w in result.warnings)

@@ -20,6 +20,11 @@ says so in one line with the figures and proposes a fix, after trying the altern
 study uses Model Exchange when Co-Simulation's difference matters at the start point and
 Model Exchange is closer to the reference (:func:`choose_interface`).
 
+A Co-Simulation-only FMU whose outputs do not settle as the step shrinks is not blamed
+(:data:`CONVERGES`): a discrete-time FMU, or one that adds a fixed amount at every
+communication step, *is* its step, and a smaller one would make the answer wrong. The
+study keeps the data's sample interval and the check says why.
+
 The simulations are those of :mod:`tsid_fmu.uncertainty.solvers` (which also corrects
 the Model Exchange reference for inputs held linearly); the noise is each output's known
 sensor noise, else its estimate from the data.
@@ -89,6 +94,13 @@ FINER = 4
 """The Co-Simulation reference of a Co-Simulation-only FMU uses a communication step this
 many times smaller than the study's."""
 
+CONVERGES = 0.5
+"""A Co-Simulation-only FMU converges as its step shrinks when the difference between
+the steps ``h / FINER`` and ``h / FINER**2`` is at most this fraction of the difference
+between ``h`` and ``h / FINER`` (worst output, in noise units). A consistent method of
+order ``p`` gives ``FINER**-p`` (0.25 for explicit Euler), once in its asymptotic range;
+an FMU that adds a fixed amount per step gives ``FINER`` (4)."""
+
 NAMES = {"cs": "Co-Simulation", "me": "Model Exchange"}
 
 
@@ -129,6 +141,9 @@ class Fidelity:
         Their wall time.
     step : float or None
         The study's step (None: the data's sample interval).
+    converges : bool or None
+        A Co-Simulation-only FMU whose difference mattered: whether its outputs
+        settle as the step shrinks (:data:`CONVERGES`); None when not tested.
     """
 
     where: str
@@ -145,6 +160,7 @@ class Fidelity:
     simulations: int = 0
     seconds: float = 0.0
     step: float | None = None
+    converges: bool | None = None
 
     @property
     def checked(self) -> bool:
@@ -173,6 +189,7 @@ class Fidelity:
             "message": self.message,
             "simulations": self.simulations,
             "seconds": self.seconds,
+            "converges": self.converges,
         }
 
 
@@ -319,7 +336,13 @@ def check_fidelity(
         if sensitivities is not None:
             out.bias = solver_bias(out.used, sensitivities)
         out.matters = out.used.ratio > threshold or max(out.bias.values(), default=0) > BIAS_LIMIT
-        if out.matters:
+        if out.matters and reference.interface == "cs":
+            fine = Solver("cs", step=(reference.step or 0.0) / FINER)
+            finer = compare(runs, reference, fine, sigma, threshold)
+            out.alternatives = [finer]
+            out.converges = finer.ratio <= CONVERGES * out.used.ratio
+            out.matters = out.converges
+        elif out.matters:
             out.alternatives = _alternatives(runs, used, reference, available, sigma, threshold)
         out.message = _message(out, choose_interface(out))
     except TsidError as exc:
@@ -358,6 +381,16 @@ def _message(check: Fidelity, chosen: str) -> str:
     used, ref = check.used, check.reference
     assert used is not None and ref is not None
     head = f"solver fidelity ({check.where}): {used.solver.label}"
+    if check.converges is False:
+        finer = Solver("cs", step=(ref.step or 0.0) / FINER)
+        return (
+            f"{head} differs from {ref.label} by {used.ratio:.3g} x the noise, and that from "
+            f"{finer.label} by {check.alternatives[0].ratio:.3g} x: the outputs do not converge as "
+            "the communication step shrinks, so they depend on the step by design (a "
+            "discrete-time FMU, or one that acts once per step); this is no solver error, "
+            "and the study keeps its step. Make sure the data were sampled at the step the "
+            "FMU is meant to run at"
+        )
     if not check.matters:
         return (
             f"{head} matches {ref.label} to {used.ratio:.2g} x the noise "
@@ -412,9 +445,10 @@ def fidelity_warnings(start: Fidelity, answer: Fidelity | None) -> list[str]:
     """Return the warnings of the checks: the answer's, else the start point's.
 
     A difference that ``"auto"`` removed by switching the interface is no warning (it is
-    recorded); a check that could not run is.
+    recorded); a check that could not run is, and so is an FMU whose outputs depend on
+    the step by design (the data must then be sampled at the FMU's step).
     """
     last = answer if answer is not None else start
-    if not last.checked or (last.matters and not last.switched):
+    if not last.checked or (last.matters and not last.switched) or last.converges is False:
         return [last.message]
     return []
