@@ -86,14 +86,15 @@ def test_only_the_windows_samples_are_scored_with_their_weights(lag_fmu, tmp_pat
     first, second = (t >= 0.5) & (t <= 1.5), (t >= 2.0) & (t <= 3.0)
     assert res.residuals[0].size == first.sum() + second.sum() == w.n_scored
     r = (sim[:, 0] - w.measured[:, 0]) / w.scale[0]
-    expected = np.sum(r[first] ** 2) + 4.0 * np.sum(r[second] ** 2)
+    # the weights count relative to the largest (weight_norms): 1/4 and 1
+    expected = (np.sum(r[first] ** 2) + 4.0 * np.sum(r[second] ** 2)) / 4.0
     assert res.costs[0, 0] == pytest.approx(expected, rel=1e-12)
     assert np.sum(res.residuals[0] ** 2) == pytest.approx(expected, rel=1e-12)
     # the integral cost integrates each window alone, never across the gap
     iae = w.output_costs(Cost("iae"), sim)[0]
     one = np.trapezoid(np.abs(sim[first, 0] - w.measured[first, 0]), t[first])
     two = np.trapezoid(np.abs(sim[second, 0] - w.measured[second, 0]), t[second])
-    assert iae == pytest.approx(one + 4.0 * two, rel=1e-12)
+    assert iae == pytest.approx((one + 4.0 * two) / 4.0, rel=1e-12)
 
 
 def test_the_noise_and_weights_come_from_the_scored_samples(lag_fmu, tmp_path):

@@ -26,6 +26,7 @@ __all__ = [
     "prepare_experiment",
     "serial_evaluator",
     "solver_settings",
+    "weight_norms",
 ]
 
 NOISE_FLOOR = 1e-3
@@ -74,12 +75,29 @@ def data_noise(measured: np.ndarray) -> np.ndarray:
     return np.zeros(measured.shape[1] if measured.ndim == 2 else 1)
 
 
+def weight_norms(study: Study) -> tuple[float, float]:
+    """Return the largest output weight and the largest window weight of a study.
+
+    Only the ratios of weights mean something: multiplying every weight by one
+    constant must not change the answer, its intervals or its verdict. The thresholds
+    of the search compare costs with costs, but a few compare them with the noise
+    floor, and SciPy's tolerances hold a few absolute figures; so every output weight
+    is divided by the largest one of the study (every experiment's, 1 where not
+    given), and every window weight likewise. Costs are reported in those units: the
+    largest weight counts 1.
+    """
+    outputs = [float((e.weights or {}).get(n, 1.0)) for e in study.experiments for n in e.outputs]
+    windows = [float(w) for e in study.experiments for w in (e.window_weights or (1.0,))]
+    return max(outputs, default=1.0), max(windows, default=1.0)
+
+
 def _weights_and_scale(
     study: Study, experiment: Experiment, measured: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each output's cost weight and residual scale, from the noise seen in the data."""
     names = list(experiment.outputs)
     user = np.array([(experiment.weights or {}).get(n, 1.0) for n in names], dtype=float)
+    user = user / weight_norms(study)[0]
     sigma = data_noise(measured)
     sigma = np.array([experiment.noise.get(n, s) for n, s in zip(names, sigma, strict=True)])
     rms = np.sqrt(np.mean(measured**2, axis=0))
@@ -159,7 +177,7 @@ def prepare_experiment(
         start_values={**experiment.start_values, **initial_values(study.fmu, experiment, data)},
         hold=dict(experiment.hold),
         windows=windows,
-        window_weights=tuple(experiment.window_weights or ()),
+        window_weights=tuple(w / weight_norms(study)[1] for w in experiment.window_weights or ()),
         copies=copies,
     )
 
