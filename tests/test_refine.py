@@ -12,6 +12,13 @@ from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.search import refine
 from tsid_fmu.search.refine import refine_stage
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.verdict import (
+    GATE_RTOL,
+    LOWER_TRIED,
+    MAX_TRIALS,
+    trial_fractions,
+    trial_reaches_gate,
+)
 from tsid_fmu.study.schema import Method
 
 T = np.linspace(0.0, 4.0, 60)
@@ -92,3 +99,71 @@ def test_a_least_squares_that_cannot_go_on_keeps_the_best_set_and_says_why(monke
     assert result.status == 1 and "could not go on" in result.message
     assert result.cost < ResidualEvaluator().cost(**start)  # the steps it took are kept
     assert result.cost == pytest.approx(ev.cost(**result.x))
+
+
+# -- the stationarity test's trial: halve the step until the model predicts the gate ------
+
+
+def _problem_at(x: dict[str, float], jac_factor: float | np.ndarray):
+    """A refinement problem at ``x`` whose last Jacobian is the true one times a factor."""
+    space = Space(
+        {"a": [1.0, 1.5, 3.0], "k": [0.5, 1.0, 2.0], "c": [0.1, 0.5, 1.0]},
+        {n: (0.0, math.inf) for n in TRUTH},
+        LevelingOptions(),
+    )
+    ev = ResidualEvaluator()
+    problem, _ = refine._problem_at(space, x, ev.cost(**x), ev, 500, None, None)
+    jac = problem.jac(space.to_s(x))  # forward differences at x
+    s, r, _ = problem.jacobian
+    problem.jacobian = (s, r, jac * jac_factor)
+    problem.best, problem.best_r = (ev.cost(**x), dict(x)), r  # the answer is x itself
+    return problem, ev
+
+
+def test_a_step_too_long_for_the_model_is_halved_until_it_lowers_the_cost():
+    """A Jacobian ten times too small makes a step ten times too long: the step and its
+    half raise the cost, and the test used to call the answer stationary on that evidence
+    (Simple2R1C_ic, exit 0 at 1.24 times the noise floor). An eighth of it is lower."""
+    x = {"a": 2.0 * 1.01, "k": 1.3, "c": 0.4}
+    problem, ev = _problem_at(x, 0.1)
+    gate = problem.stationarity()
+    assert not gate.holds and LOWER_TRIED in gate.detail
+    assert problem.best[0] < ev.cost(**x)  # the lower point is the problem's answer now
+    tried = ev.asked[-len(trial_fractions(*_gn(problem))) :]
+    assert ev.cost(**tried[0]) > ev.cost(**x) and ev.cost(**tried[1]) > ev.cost(**x)
+
+
+def _gn(problem):
+    from tsid_fmu.search.verdict import gauss_newton_step
+
+    s, r, jac = problem.jacobian
+    _, step = gauss_newton_step(jac, r, s, problem.space.s_lower, problem.space.s_upper)
+    return jac, r, step, GATE_RTOL * float(r @ r)
+
+
+def test_trial_fractions_halve_down_to_the_gate_and_no_further():
+    r, jac = np.array([1.0, 0.0]), np.array([[-1.0], [0.0]])
+    step = np.array([1.0])  # predicted decrease at f: 2 f - f**2
+    fractions = trial_fractions(jac, r, step, 0.1)
+    assert fractions == [1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125]  # 0.0615 <= 0.1
+    assert trial_reaches_gate(jac, r, step, 0.1, fractions)
+    capped = trial_fractions(jac, r, step, 1e-6)
+    assert len(capped) == MAX_TRIALS and not trial_reaches_gate(jac, r, step, 1e-6, capped)
+
+
+@pytest.mark.parametrize("offset, holds", [(5e-4, True), (1e-2, False)])
+def test_an_answer_no_fraction_lowers_holds_only_where_the_trial_reached_the_gate(offset, holds):
+    """A Jacobian of the wrong sign points uphill: no fraction lowers the cost. Near the
+    optimum its predicted gap reaches the gate in a few halvings, and the answer holds by
+    trial; further off it does not within MAX_TRIALS, and the answer is not shown to be
+    an optimum (it used to hold after the step and its half)."""
+    x = {"a": 2.0 * (1 + offset), "k": 1.3, "c": 0.4}
+    problem, ev = _problem_at(x, -1.0)
+    gate = problem.stationarity()
+    jac, r, step, limit = _gn(problem)
+    fractions = trial_fractions(jac, r, step, limit)
+    assert gate.gap > limit and problem.best[0] == ev.cost(**x)  # tried, none lower
+    assert gate.holds is holds and trial_reaches_gate(jac, r, step, limit, fractions) is holds
+    assert (2 < len(fractions) < MAX_TRIALS) is holds
+    assert ("no lower point there" in gate.detail) is holds
+    assert ("not shown to be an optimum" in gate.detail) is not holds

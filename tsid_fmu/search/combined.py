@@ -41,6 +41,9 @@ from tsid_fmu.search.verdict import (
     Stationarity,
     decided_by_trial,
     gauss_newton_step,
+    trial_detail,
+    trial_fractions,
+    trial_reaches_gate,
 )
 from tsid_fmu.study.definition import Study
 
@@ -274,16 +277,19 @@ def _gate(
     )
     if gap <= GATE_RTOL * cost:
         return Stationarity(True, "projected Gauss-Newton", gap, cost, detail)
+    fractions = trial_fractions(jac, r, step, GATE_RTOL * cost)
     try:
-        for f in (1.0, 0.5):
+        for f in fractions:
             fun(z + f * step)
     except StopIteration:
         return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
     if best[0] < cost:
         detail += f"; {LOWER_TRIED} {cost - best[0]:.3g}"
         return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
-    detail += "; tried, the step and its half raise the cost: no lower point there"
-    return Stationarity(True, "projected Gauss-Newton, step tried", gap, cost, detail)
+    reached = trial_reaches_gate(jac, r, step, GATE_RTOL * cost, fractions)
+    detail += "; " + trial_detail(fractions, reached)
+    test = "projected Gauss-Newton, step tried" if reached else "projected Gauss-Newton"
+    return Stationarity(reached, test, gap, cost, detail)
 
 
 def refine_in_combinations(

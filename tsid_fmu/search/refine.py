@@ -36,6 +36,9 @@ from tsid_fmu.search.verdict import (
     Stationarity,
     decided_by_trial,
     gauss_newton_step,
+    trial_detail,
+    trial_fractions,
+    trial_reaches_gate,
 )
 from tsid_fmu.study.schema import Method
 
@@ -159,16 +162,19 @@ class _Problem:
         )
         if gap <= GATE_RTOL * scale:
             return Stationarity(True, "projected Gauss-Newton", gap, cost, detail)
+        fractions = trial_fractions(jac, r, step, GATE_RTOL * scale)
         try:
-            self._residuals([self.space.to_x(self.space.clip(s + f * step)) for f in (1.0, 0.5)])
+            self._residuals([self.space.to_x(self.space.clip(s + f * step)) for f in fractions])
         except _Budget:
             return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
         if self.best[0] < cost:
             found = cost - self.best[0]
             detail += f"; {LOWER_TRIED} {found:.3g}"
             return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
-        detail += "; tried, the step and its half raise the cost: no lower point there"
-        return Stationarity(True, "projected Gauss-Newton, step tried", gap, cost, detail)
+        reached = trial_reaches_gate(jac, r, step, GATE_RTOL * scale, fractions)
+        detail += "; " + trial_detail(fractions, reached)
+        test = "projected Gauss-Newton, step tried" if reached else "projected Gauss-Newton"
+        return Stationarity(reached, test, gap, cost, detail)
 
 
 def _problem_at(

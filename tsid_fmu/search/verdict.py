@@ -53,6 +53,58 @@ predict at an answer called stationary."""
 LOWER_TRIED = "tried, the step lowered the cost by"
 """How a failed stationarity test says that its step, simulated, found a lower point."""
 
+MAX_TRIALS = 12
+"""Fractions of a Gauss-Newton step a stationarity test simulates at most (1, 1/2, ...,
+1/2**11)."""
+
+
+def trial_fractions(jac: np.ndarray, r: np.ndarray, step: np.ndarray, gate: float) -> list[float]:
+    """Return the fractions of ``step`` to simulate before calling an answer stationary.
+
+    Where the Gauss-Newton model predicts more than ``gate`` but the step, simulated,
+    does not lower the cost, the model may still be right closer in: its predicted
+    decrease falls as the step shrinks (``2 f`` times the gap for small ``f``), and a
+    descent direction lowers the cost at a small enough fraction. So the trial halves
+    the step, 1, 1/2, 1/4, ..., down to the first fraction whose predicted decrease is
+    at most ``gate`` (what the test would accept without a trial), and at most
+    :data:`MAX_TRIALS` of them. An answer is stationary by trial only when none of them
+    is lower and the last one reached the gate (:func:`trial_detail`).
+    """
+    cost = float(r @ r)
+    move = jac @ step
+    out, f = [], 1.0
+    for _ in range(MAX_TRIALS):
+        out.append(f)
+        predicted = r + f * move
+        if cost - float(predicted @ predicted) <= gate:
+            break
+        f /= 2.0
+    return out
+
+
+def trial_reaches_gate(
+    jac: np.ndarray, r: np.ndarray, step: np.ndarray, gate: float, fractions: list[float]
+) -> bool:
+    """Whether the smallest of ``fractions`` predicts a decrease of at most ``gate``."""
+    predicted = r + fractions[-1] * (jac @ step)
+    return float(r @ r) - float(predicted @ predicted) <= gate
+
+
+def trial_detail(fractions: list[float], reached: bool) -> str:
+    """Say, after a failed trial, which fractions raised the cost and what that shows."""
+    if len(fractions) <= 2:
+        tried = "the step and its half raise the cost"
+    else:
+        tried = f"the step and its fractions down to 1/{round(1 / fractions[-1])} raise the cost"
+    if reached:
+        return (
+            f"tried, {tried}, where the model predicts no more than the gate: no lower point there"
+        )
+    return (
+        f"tried, {tried}, but the model still predicts more than the gate there: not "
+        "shown to be an optimum"
+    )
+
 
 def decided_by_trial(gate: Mapping[str, Any]) -> bool:
     """Whether a test (its ``to_dict`` form) was decided by simulating its step.
