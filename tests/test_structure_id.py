@@ -269,6 +269,44 @@ def test_information_criteria_and_the_decision_by_hand():
     assert tied and "indistinguishable" in (a.why if a.chosen else d.why)
 
 
+def test_among_tied_structures_the_one_with_fewer_parameters_is_reported_and_said_so():
+    """Issue 45: a richer answer whose extra term ended switched off (``Tc`` 2e-19) acts
+    as the simpler structure: both count k = 2, and the lower BIC (by 1e-10) chose the
+    richer one, while the reason read "the simpler is reported". The tie-break counts
+    the structure's own parameters after the free ones, and the reason comes from it."""
+    n = 100
+    small = Candidate("friction=0", {"s": 0.0}, {}, 1.0, 100.0, n, 2, ["x", "y"])
+    rich = Candidate("friction=1", {"s": 1.0}, {}, 1.0, 100.0 - 1e-8, n, 2, ["x", "y"])
+    small.extra["free"], rich.extra["free"] = ["x", "y"], ["x", "y", "Tc"]
+    assert rich.parameters == ["x", "y", "Tc"] and small.parameters == ["x", "y"]
+    for order in ([small, rich], [rich, small]):
+        chosen, tied = decide(order)
+        assert order[chosen] is small and tied == [order.index(rich)]
+        assert rich.bic < small.bic  # the BIC alone would pick the richer one
+        assert small.why.endswith("the data do not decide; the simpler is reported")
+        assert small.chosen and not rich.chosen
+    # as simple in both counts: the lowest BIC, and the reason says that instead
+    twin = Candidate("friction=2", {"s": 2.0}, {}, 1.0, 100.0 - 1e-8, n, 2, ["x", "w"])
+    twin.extra["free"] = ["x", "w"]
+    chosen, _ = decide([small, twin])
+    assert chosen == 1 and twin.why.endswith("the lowest BIC is reported")
+
+
+def test_data_of_the_simpler_structure_that_push_the_extra_term_to_its_bound_choose_it():
+    """Issue 45's held-out case in a toy: the data lie a little below what the offset can
+    reach, so on=1's offset c ends on its bound, 0 (2.8e-16 in log coordinates), where
+    it changes nothing. That is on=0: the nesting is recorded, on=0 reported, and its
+    reason says why."""
+    found = _identify(_data(a=2.0, b=1.3, c=0.0, on=0) - 0.004)
+    by = {c.label: c for c in found.candidates}
+    simple, rich = by["on=0"], by["on=1"]
+    assert rich.x["c"] < 1e-9 and simple.k == rich.k == 2  # c acts on nothing there
+    assert found.values == {"on": 0.0} and simple.chosen and not rich.chosen
+    assert found.extra["nested"] == [["on=0", "on=1"]]
+    assert "nested in on=1, whose extra parameter(s) c stay where they make it on=0" in (simple.why)
+    assert "stay where they make it on=0" in rich.why
+
+
 # -- every candidate at its own optimum ----------------------------------------------------
 
 

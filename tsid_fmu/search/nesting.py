@@ -1,6 +1,7 @@
 """Nesting: whether a richer structure reproduces a simpler one's fit, and where.
 
-Structure ``s`` is nested in ``r`` where ``r``'s free parameters include ``s``'s and
+Structure ``s`` is nested in ``r`` where ``r``'s parameters include ``s``'s
+(:attr:`~tsid_fmu.search.selection.Candidate.parameters`) and
 ``r``'s extra parameters reproduce ``s``'s fit; the fit that reproduces it is ``s``'s
 answer **embedded** in ``r`` (:func:`embed` before ``r`` is refined, to start from;
 :func:`nesting` at the answers). The extra parameters are first tried at values that
@@ -81,7 +82,7 @@ def _reproduce(
     fitted from there; where that does not reproduce it, all of them fitted from the
     start.
     """
-    extra = [n for n in big.active if n not in small.active]
+    extra = [n for n in big.parameters if n not in small.active]
     base = {**big.x, **{n: small.x[n] for n in small.active}}
     tol = REPRODUCE * small.chi2 / max(small.n, 1)
     if not anywhere:  # the nesting values nearest the answer
@@ -311,7 +312,9 @@ def nesting(
     pairs = {}
     for s, r in ((s, r) for s in range(len(cands)) for r in range(len(cands)) if s != r):
         small, big = cands[s], cands[r]
-        if not (set(small.active) < set(big.active)) or not small.n or not big.n:
+        # on the structures' parameters, not on those acting at the answers: a richer
+        # answer whose extra term ended switched off acts as the simpler structure
+        if not _richer(small, big) or not small.n or not big.n:
             continue
         answer = tuple(sorted(small.x.items()))
         key = (s, r, answer, tuple(sorted(big.x.items())))
@@ -333,6 +336,11 @@ def nesting(
     return pairs
 
 
+def _richer(small: Candidate, big: Candidate) -> bool:
+    """Whether ``big``'s structure has ``small``'s acting parameters and more."""
+    return set(small.active) <= set(big.parameters) and set(small.parameters) < set(big.parameters)
+
+
 def known(cache: dict, s: int, r: int, small: Candidate, embedded: Mapping[str, float]) -> None:
     """Keep in a :func:`nesting` cache an embedding of ``s``'s answer in ``r`` found before."""
     cache[(s, r, tuple(sorted(small.x.items())))] = dict(embedded)
@@ -347,7 +355,7 @@ def at_nesting_point(study: Study, small: Candidate, big: Candidate, embedded: M
     not from what the extra parameters add.
     """
     levels = study.first_levels()
-    extra = [n for n in big.active if n not in small.active]
+    extra = [n for n in big.parameters if n not in small.active]
     gaps = [_apart(levels[n], big.x[n], embedded[n]) for n in extra]
     return bool(gaps) and max(gaps) < NESTING_POINT
 

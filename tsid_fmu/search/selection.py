@@ -113,6 +113,18 @@ class Candidate:
     why: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def parameters(self) -> list[str]:
+        """The Real parameters of its structure: free where the arrays saw it, or acting.
+
+        ``active`` holds those that change the outputs at the answer; a parameter that
+        ended at the value that switches its term off (a coefficient of 0 reached in
+        logarithmic coordinates, 2e-16) changes nothing there, yet the structure has it.
+        Nesting is judged on these (:mod:`~tsid_fmu.search.nesting`).
+        """
+        free = list(self.extra.get("free", ()))
+        return free + [n for n in self.active if n not in free]
+
     def row(self) -> dict[str, Any]:
         """Return the row of the structures table."""
         return {
@@ -152,7 +164,7 @@ def _nested_step(
     for s, r in sorted(nested):
         small, big = cands[s], cands[r]
         p = 1.0 if (s, r) in degenerate else _lrt(small, big)
-        extra = ", ".join(sorted(set(big.active) - set(small.active)))
+        extra = ", ".join(sorted(set(big.parameters) - set(small.active)))
         if r in barred and pick != r:
             continue  # never chosen: it is a simpler structure's point
         if pick == r and not p < LRT_ALPHA:
@@ -224,19 +236,27 @@ def decide(
     for s, r in sorted(nested, key=lambda pair: (pair in degenerate, pair)):
         p = lrt(s, r)
         if s == pick and not p < LRT_ALPHA and "nested" not in why:
-            extra = ", ".join(sorted(set(cands[r].active) - set(cands[s].active)))
+            extra = ", ".join(sorted(set(cands[r].parameters) - set(cands[s].active)))
             why += f"; nested in {cands[r].label}, whose extra parameter(s) {extra} " + (
                 f"stay where they make it {cands[s].label}"
                 if (s, r) in degenerate
                 else f"the data do not support (LRT p = {p:.3g} >= {LRT_ALPHA:g})"
             )
     decided = {a if b == pick else b for a, b in nested if pick in (a, b) and lrt(a, b) < LRT_ALPHA}
-    tied = [
-        i for i, c in enumerate(cands) if i != pick and i not in decided and _close(c, cands[pick])
+    close = [
+        i
+        for i, c in enumerate(cands)
+        if i != pick and i not in decided and i not in barred and _close(c, cands[pick])
     ]
-    pick = min([pick, *tied], key=lambda i: (cands[i].k, cands[i].bic))
-    # the reason says what decided among the tied: fewer free parameters, or only the BIC
-    fewest = all(cands[pick].k < cands[j].k for j in tied)
+
+    def size(i: int) -> tuple[int, int]:  # free parameters, then the structure's own
+        return cands[i].k, len(cands[i].parameters)
+
+    # one decision: the simplest of the tied, and the reason says what made it so
+    group = [pick, *close]
+    pick = min(group, key=lambda i: (*size(i), cands[i].bic))
+    tied = [i for i in group if i != pick]
+    fewest = all(size(pick) < size(j) for j in tied)
     tie = (
         "the simpler is reported"
         if fewest
