@@ -296,7 +296,7 @@ def test_the_refinements_last_jacobian_names_the_pairs_in_the_parameters_units(m
     from tsid_fmu.study.schema import Method
 
     held = Stationarity(True, "projected Gauss-Newton, step tried", 9.0, 1.0, "")
-    monkeypatch.setattr(refine._Problem, "stationarity", lambda self, floor=0.0: held)
+    monkeypatch.setattr(refine._Problem, "stationarity", lambda self, floor=0.0, probe=0.0: held)
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     stage = refine.refine_stage("r", SPACE, START, ev.cost(**START), ev, Method(refine_max_nfev=20))
     ((v, b, a),) = stage.extra["parallel"]
@@ -305,7 +305,7 @@ def test_the_refinements_last_jacobian_names_the_pairs_in_the_parameters_units(m
     monkeypatch.setattr(
         refine._Problem,
         "stationarity",
-        lambda self, floor=0.0: Stationarity(True, "projected Gauss-Newton", 0.0, 1.0, ""),
+        lambda self, floor=0.0, probe=0.0: Stationarity(True, "projected Gauss-Newton", 0.0, 1.0, ""),
     )
     stage = refine.refine_stage("r", SPACE, START, ev.cost(**START), ev, Method(refine_max_nfev=20))
     assert "parallel" not in stage.extra

@@ -32,10 +32,12 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
+    LOWER_PROBED,
     LOWER_TRIED,
     Stationarity,
     decided_by_trial,
     gauss_newton_step,
+    probe_points,
     trial_detail,
     trial_fractions,
     trial_reaches_gate,
@@ -134,15 +136,18 @@ class _Problem:
         self.jacobian = (s.copy(), r0, jac)
         return jac
 
-    def stationarity(self, floor: float = 0.0) -> Stationarity:
+    def stationarity(self, floor: float = 0.0, probe: float = 0.0) -> Stationarity:
         """Test the answer with the last Jacobian (see :mod:`tsid_fmu.search.verdict`).
 
         At the answer's own residuals where the refinement has them; the Jacobian is the
         last one computed (at the answer, or one accepted step before it). Where the
-        predicted decrease is too large, the predicted step and its half are tried (two
-        simulations): a lower cost there becomes the answer and the test fails; if
-        neither lowers the cost, the first-order model does not hold this close to the
-        answer, and the test holds on that evidence.
+        predicted decrease is too large, the predicted step is tried, halved down to the
+        gate (:func:`~tsid_fmu.search.verdict.trial_fractions`): a lower cost there
+        becomes the answer and the test fails. If none is lower, the first-order model
+        does not hold this close to the answer (events, or a Jacobian the FMU solver's
+        noise made), and it cannot show an optimum: with ``probe`` > 0, the local
+        probes ``probe`` of a first range either side along every parameter decide
+        (:func:`~tsid_fmu.search.verdict.probe_points`, ``2 p`` simulations).
         """
         cost, x = self.best
         if self.jacobian is None or not math.isfinite(cost):
@@ -174,7 +179,17 @@ class _Problem:
         reached = trial_reaches_gate(jac, r, step, GATE_RTOL * scale, fractions)
         detail += "; " + trial_detail(fractions, reached)
         test = "projected Gauss-Newton, step tried" if reached else "projected Gauss-Newton"
-        return Stationarity(reached, test, gap, cost, detail)
+        if not reached or probe <= 0:
+            return Stationarity(reached, test, gap, cost, detail)
+        try:
+            self._residuals(probe_points(self.space, x, probe))
+        except _Budget:
+            return Stationarity(False, test, gap, cost, detail + "; no runs left for probes")
+        if self.best[0] < cost:
+            detail += f"; {LOWER_PROBED} {cost - self.best[0]:.3g} ({probe:g} of a first range)"
+            return Stationarity(False, test, gap, cost, detail)
+        detail += f"; no probe {probe:g} of a first range either side is lower"
+        return Stationarity(True, test, gap, cost, detail)
 
 
 def _problem_at(
@@ -294,7 +309,7 @@ def refine_stage(
         "start_cost": float(start_cost),
     }
     status, message = _solve(problem, s0, space, limit, extra)
-    gate = problem.stationarity(floor)
+    gate = problem.stationarity(floor, method.leveling.tolerance)
     cost, x = problem.best
     nfev = evaluator.nfev - problem.start
     extra["stationarity"] = gate.to_dict()

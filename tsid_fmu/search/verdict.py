@@ -36,6 +36,7 @@ from tsid_fmu.search.space import Space
 
 __all__ = [
     "GATE_RTOL",
+    "LOWER_PROBED",
     "LOWER_TRIED",
     "POOR_FIT",
     "Stationarity",
@@ -52,6 +53,9 @@ predict at an answer called stationary."""
 
 LOWER_TRIED = "tried, the step lowered the cost by"
 """How a failed stationarity test says that its step, simulated, found a lower point."""
+
+LOWER_PROBED = "but a local probe lowered the cost by"
+"""How a failed stationarity test says that, its step failing, a local probe was lower."""
 
 MAX_TRIALS = 12
 """Fractions of a Gauss-Newton step a stationarity test simulates at most (1, 1/2, ...,
@@ -115,7 +119,8 @@ def decided_by_trial(gate: Mapping[str, Any]) -> bool:
     """
     if gate.get("test") == "projected Gauss-Newton, step tried":
         return True
-    return not gate.get("holds", True) and LOWER_TRIED in str(gate.get("detail", ""))
+    detail = str(gate.get("detail", ""))
+    return not gate.get("holds", True) and (LOWER_TRIED in detail or LOWER_PROBED in detail)
 
 
 POOR_FIT = 20.0
