@@ -792,6 +792,33 @@ class {name}(Fmi2Slave):
 '''
 
 
+_PYTHONFMU_RC = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+
+
+class {name}(Fmi2Slave):
+    """First-order lag der(y) = (u - y)/(R C), 20 explicit Euler steps per step."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.u = 0.0
+        self.y = 0.0
+        self.R = 1.0
+        self.C = 1.0
+        self.register_variable(Real("u", causality=Fmi2Causality.input))
+        self.register_variable(Real("y", causality=Fmi2Causality.output))
+        for name in ("R", "C"):
+            self.register_variable(Real(name, causality=Fmi2Causality.parameter,
+                                        variability=Fmi2Variability.tunable))
+
+    def do_step(self, current_time, step_size):
+        h = step_size / 20.0
+        for _ in range(20):
+            self.y += h * (self.u - self.y) / (self.R * self.C)
+        return True
+'''
+
+
 def pythonfmu_available() -> bool:
     """True when ``pythonfmu`` is importable and this Python has a shared libpython."""
     try:
@@ -801,15 +828,20 @@ def pythonfmu_available() -> bool:
     return bool(sysconfig.get_config_var("Py_ENABLE_SHARED"))
 
 
-def build_pythonfmu(tmp_dir: Path, name: str = "PyLag", *, counter: bool = False) -> Path:
+def build_pythonfmu(
+    tmp_dir: Path, name: str = "PyLag", *, counter: bool = False, rc: bool = False
+) -> Path:
     """Build the lag as a ``pythonfmu`` Co-Simulation FMU and return its path.
 
     ``counter``: instead, a discrete-time accumulator ``y += increment * u`` once per
     communication step (as PythonFMU3's ``FMU3Model`` adds ``increment`` per step).
+    ``rc``: instead, the lag with ``tau = R * C`` (parameters ``R`` and ``C``): the
+    outputs depend on their product only, whatever the input (as modestpy's
+    ``Simple2R1C`` on R1 C and R2 C).
     """
     tmp_dir = Path(tmp_dir)
     script = tmp_dir / f"{name.lower()}_slave.py"
-    source = _PYTHONFMU_COUNTER if counter else _PYTHONFMU_SLAVE
+    source = _PYTHONFMU_COUNTER if counter else _PYTHONFMU_RC if rc else _PYTHONFMU_SLAVE
     script.write_text(textwrap.dedent(source.format(name=name)))
     proc = subprocess.run(
         [sys.executable, "-m", "pythonfmu", "build", "-f", str(script), "-d", str(tmp_dir)],

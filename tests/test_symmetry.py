@@ -15,11 +15,22 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+import pandas as pd
+import pytest
+from fmu_factory import build_pythonfmu, pythonfmu_available
 
+from tsid_fmu import Experiment, Parameter, Study
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.search.space import Space
+from tsid_fmu.study.prepare import serial_evaluator
 from tsid_fmu.uncertainty.intervals import Uncertainty
-from tsid_fmu.uncertainty.probe import FLAT, probe_combinations
+from tsid_fmu.uncertainty.probe import (
+    FLAT,
+    fixed_across,
+    open_undetermined,
+    probe_combinations,
+    structural,
+)
 
 WEIGHTS = np.linspace(1.0, 2.0, 10)
 
@@ -107,3 +118,61 @@ def test_a_combination_the_fisher_matrix_does_not_see_opens_nothing_more():
     u.combinations[1].update(determined=False, std_error=math.inf, percent=math.nan)
     assert probe_combinations(ev, space, u, x, 0.0, 4.0, jac) == []
     assert u.intervals == {"a": [2.0, 4.5], "b": [2.0, 4.5]}
+
+
+def test_the_combinations_across_an_open_direction_are_named_with_intervals():
+    """modestpy's Simple2R1C fixes only R1 C and R2 C (issue 45): with C, R1 and R2 open,
+    the report names those products, in the parameters' own terms, with intervals."""
+    levels = {"C": [500.0, 5000.0], "R1": [0.01, 1.0], "R2": [0.05, 2.0]}
+    space = Space(levels, {n: (0.0, math.inf) for n in levels}, LevelingOptions())
+    truth = {"C": 2000.0, "R1": 0.1, "R2": 0.25}
+    v = np.array([-1.0, 1.0, 1.0]) / space.width  # lg C down as lg R1 and lg R2 go up
+    unit = v / np.linalg.norm(v)
+    across = np.linalg.svd(np.eye(3) - np.outer(unit, unit))[0][:, :2]
+    # a covariance huge along the symmetry (the differences' noise), 1e-6 across it
+    u = Uncertainty(values=dict(truth))
+    u.cov = 1e4 * np.outer(unit, unit) + 1e-6 * across @ across.T
+    u.dof = {n: 100.0 for n in levels}
+    fixed = fixed_across(space, u, v, ["C", "R1", "R2"])
+    assert [f["name"] for f in fixed] == ["C R1", "C R2"]
+    assert [f["value"] for f in fixed] == pytest.approx([200.0, 500.0], rel=1e-12)
+    for f, value in zip(fixed, (200.0, 500.0), strict=True):
+        low, high = f["interval"]
+        assert low < value < high and high / low < 1.05  # finite, and narrow
+    # the warning that opens their intervals carries them
+    u.intervals = {n: [0.9 * x, 1.1 * x] for n, x in truth.items()}
+    u.std_error = {n: 0.1 * x for n, x in truth.items()}
+    u.relative = {n: 10.0 for n in truth}
+    u.combinations = [{"terms": {"lg C": -0.58, "lg R1": 0.58, "lg R2": 0.58},
+                       "std_error": math.inf, "percent": math.inf, "determined": False,
+                       "direction": list(v), "why": "profiled: flat"}]  # fmt: skip
+    (warning,) = open_undetermined(space, u)
+    assert "only the combinations across it are fixed: C R1 = 200 (" in warning
+    assert "; C R2 = 500 (" in warning
+    assert u.combinations[0]["fixed"] == fixed
+
+
+@pytest.mark.skipif(not pythonfmu_available(), reason="needs pythonfmu and a shared libpython")
+def test_a_symmetry_that_holds_for_other_inputs_too_is_called_structural(tmp_path):
+    """The lag with tau = R C: scaling R by k and C by 1/k changes nothing for any input,
+    so the report can say that no experiment of this kind separates them (issue 45)."""
+    fmu = build_pythonfmu(tmp_path, "RCLag", rc=True)
+    t = np.round(np.arange(0.0, 2.0 + 1e-9, 0.02), 10)
+    u = np.where(t < 0.7, 1.0, 0.2) + 0.3 * np.sin(5 * t)
+    y = np.zeros_like(t)
+    pd.DataFrame({"time": t, "u": u, "y": y}).to_csv(tmp_path / "d.csv", index=False)
+    study = Study(
+        fmu=fmu,
+        parameters=[Parameter("R", [0.5, 2.0], min=0.0), Parameter("C", [0.1, 0.5], min=0.0)],
+        experiments=[
+            Experiment(tmp_path / "d.csv", inputs={"u": "u"}, outputs={"y": "y"}, noise={"y": 0.01})
+        ],
+        cost="sse",
+        replicates=1,
+    )
+    x = {"R": 1.0, "C": 0.3}
+    with serial_evaluator(study) as ev:
+        level = 0.01  # the residuals' RMS at the answer, in the cost's units
+        assert structural(ev, x, [{"R": 2.0, "C": 0.15}, {"R": 0.5, "C": 0.6}], level) is True
+        assert structural(ev, x, [{"R": 1.1, "C": 0.3}], level) is False  # tau moved 10 %
+        assert structural(ev, x, [], level) is None

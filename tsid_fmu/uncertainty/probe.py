@@ -27,11 +27,21 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from tsid_fmu.errors import TsidError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.space import Space
 from tsid_fmu.uncertainty.intervals import Uncertainty, quantile
 
-__all__ = ["FLAT", "LOOSE", "REFITS", "SPAN", "open_undetermined", "probe_combinations"]
+__all__ = [
+    "FLAT",
+    "LOOSE",
+    "REFITS",
+    "SPAN",
+    "fixed_across",
+    "open_undetermined",
+    "probe_combinations",
+    "structural",
+]
 
 LOOSE = 10.0
 """Relative standard error (%) from which a combination is probed."""
@@ -59,21 +69,62 @@ def _loose(c: Mapping) -> bool:
 
 def _profile(
     evaluator: Evaluator, space: Space, s: np.ndarray, across: np.ndarray, jac: np.ndarray
-) -> float:
-    """Return the lowest cost found from ``s`` re-fitted along the columns of ``across``."""
+) -> tuple[float, dict[str, float] | None]:
+    """Return the lowest cost found from ``s`` re-fitted along ``across``, and its point."""
     step = np.linalg.pinv(jac @ across)
-    z, best = np.zeros(across.shape[1]), math.inf
+    z, best, where = np.zeros(across.shape[1]), math.inf, None
     for _ in range(REFITS):
-        point = np.clip(s + across @ z, space.s_lower, space.s_upper)
-        ev = evaluator.evaluate([space.to_x(point)])
+        point = space.to_x(np.clip(s + across @ z, space.s_lower, space.s_upper))
+        ev = evaluator.evaluate([point])
         cost, r = float(ev.costs[0, 0]), ev.residuals[0] if ev.residuals else None
         if not math.isfinite(cost):
             break
-        best = min(best, cost)
+        if cost < best:
+            best, where = cost, point
         if r is None:
             break
         z = z - step @ r
-    return best
+    return best, where
+
+
+def structural(
+    evaluator: Evaluator, x: Mapping[str, float], points: list[dict], level: float
+) -> bool | None:
+    """Whether points the data cannot tell from ``x`` give its outputs for other inputs too.
+
+    The study's inputs reversed in time are another input of the same kind (range,
+    steps, spectrum); where the outputs at ``points`` (along a direction found flat)
+    still match those at ``x`` to :data:`FLAT` times ``level`` (the RMS of the answer's
+    scaled residuals: the noise, in the cost's units), no input separates them:
+    the model depends on these parameters through fewer combinations whatever the
+    experiment (a structural symmetry). None where it cannot be tried: no spec, no
+    inputs, or a simulation failed. Three simulations per point and experiment.
+    """
+    import dataclasses
+
+    from tsid_fmu.evaluate.serial import SerialEvaluator
+
+    spec = getattr(evaluator, "spec", None)
+    if spec is None or not points or any(e.inputs is None for e in spec.experiments):
+        return None
+    other = [
+        dataclasses.replace(e, inputs=np.ascontiguousarray(e.inputs[::-1]), noisy_inputs=())
+        for e in spec.experiments
+    ]
+    try:
+        with SerialEvaluator(dataclasses.replace(spec, experiments=tuple(other))) as ev:
+            runs = ev.simulate([dict(x), *points], count=False)
+    except TsidError:
+        return None
+    base = runs[0]
+    for run in runs[1:]:
+        for e, a, b in zip(other, base, run, strict=True):
+            if a.outputs is None or b.outputs is None:
+                return None
+            rms = np.sqrt(np.mean(((b.outputs - a.outputs) / e.scale) ** 2, axis=0))
+            if not float(np.max(rms)) <= FLAT * level:
+                return False
+    return True
 
 
 def probe_combinations(
@@ -104,7 +155,7 @@ def probe_combinations(
         across = np.linalg.svd(np.eye(space.dim) - np.outer(v, v))[0][:, : space.dim - 1]
         step = SPAN * t * float(c["std_error"])
         found = [_profile(evaluator, space, s0 + sign * step * v, across, jac) for sign in (1, -1)]
-        finite = [f for f in found if math.isfinite(f)]
+        finite = [f for f, _ in found if math.isfinite(f)]
         if not finite or max(finite) - cost > FLAT * rise:
             continue
         c["determined"], c["std_error"], c["percent"] = False, math.inf, math.inf
@@ -112,6 +163,14 @@ def probe_combinations(
             f"profiled {step:.3g} search units along it, both ways, the cost rises by less "
             "than the noise"
         )
+        level = math.sqrt(cost / max(jac.shape[0], 1))
+        points = [p for _, p in found if p is not None]
+        c["structural"] = structural(evaluator, x, points, level)
+        if c["structural"]:
+            c["why"] += (
+                "; with the inputs reversed in time the outputs there are the same too: no "
+                "input separates these parameters, only another measurement or a known value"
+            )
     return warnings + open_undetermined(space, u)
 
 
@@ -145,8 +204,72 @@ def open_undetermined(space: Space, u: Uncertainty) -> list[str]:
         if opened:
             terms = " ".join(f"{k:+.2f} {name}" for name, k in c["terms"].items())
             why = c.get("why") or f"its standard error is {c['std_error']:.3g} search units"
+            c["fixed"] = fixed_across(space, u, v, members)
+            named = "; ".join(
+                f"{f['name']} = {f['value']:.5g}"
+                + (
+                    f" ({f['interval'][0]:.5g} .. {f['interval'][1]:.5g})"
+                    if f["interval"][0] is not None
+                    else ""
+                )
+                for f in c["fixed"]
+            )
             warnings.append(
                 f"the data do not determine {terms} ({why}): {', '.join(members)} have open "
                 "intervals; only the combinations across it are fixed"
+                + (f": {named}" if named else "")
             )
     return warnings
+
+
+def _exponent(a: float) -> str:
+    """Write an exponent as a person would: 1 and -1 left out, near-integers as integers."""
+    k = round(a)
+    if abs(a - k) < 0.02 * max(abs(a), 1.0) and k != 0:
+        return "" if k == 1 else "^-1" if k == -1 else f"^{k}"
+    return f"^{a:.3g}"
+
+
+def fixed_across(
+    space: Space, u: Uncertainty, v: np.ndarray, members: list[str]
+) -> list[dict[str, object]]:
+    """Name the combinations across an undetermined direction ``v``, with 95 % intervals.
+
+    For an exact symmetry of parameters in logarithmic coordinates (the capacity and the
+    two resistances of a thermal model, scaled by ``k`` and ``1/k``) these are the
+    products the data fix: the first member paired with each other one, with exponents
+    that cancel ``v`` (``R1 C``, ``R2 C``). For parameters in linear coordinates, the
+    sums. Their standard errors come from the covariance with ``v``'s own variance
+    projected out (along ``v`` it measured the solver's noise, not the data). Members
+    of mixed coordinates are not combined.
+    """
+    cov = getattr(u, "cov", None)
+    idx = [space.names.index(n) for n in members]
+    if cov is None or len(idx) < 2 or len({bool(space.log[j]) for j in idx}) > 1:
+        return []
+    log = bool(space.log[idx[0]])
+    change = v * space.width  # how each working-domain value moves along v
+    finite = np.where(np.isfinite(cov), cov, 0.0)
+    unit = v / max(float(np.linalg.norm(v)), 1e-300)
+    keep = np.eye(space.dim) - np.outer(unit, unit)
+    cov_p = keep @ finite @ keep
+    t = quantile(max(min(u.dof.values(), default=1.0), 1.0))
+    first, out = idx[0], []
+    for j in idx[1:]:
+        a = {first: 1.0, j: -float(change[first] / change[j])}
+        names = [space.names[i] for i in a]
+        g = np.zeros(space.dim)
+        for i, coef in a.items():
+            g[i] = coef * space.width[i]
+        se = math.sqrt(max(float(g @ cov_p @ g), 0.0))
+        values = [u.values[n] for n in names]
+        if log and all(x > 0 for x in values):
+            level = sum(coef * math.log10(u.values[space.names[i]]) for i, coef in a.items())
+            name = " ".join(f"{space.names[i]}{_exponent(coef)}" for i, coef in a.items())
+            interval = [10 ** (level - t * se), 10 ** (level + t * se)]
+            out.append({"name": name, "value": 10**level, "interval": interval})
+        elif not log:
+            level = sum(coef * u.values[space.names[i]] for i, coef in a.items())
+            name = " ".join(f"{coef:+.3g} {space.names[i]}" for i, coef in a.items())
+            out.append({"name": name, "value": level, "interval": [level - t * se, level + t * se]})
+    return out
