@@ -46,3 +46,18 @@ def test_an_answer_pushed_onto_min_0_is_said(tmp_path):
     assert said[0] in (tmp_path / "out" / "report.md").read_text(encoding="utf-8")
     summary = res.to_dict()
     assert any("sits on its bound" in w for w in json.loads(json.dumps(summary))["warnings"])
+
+
+def test_intervals_at_an_answer_not_shown_to_be_an_optimum_say_so():
+    """Simple2R1C stopped at a limit 2.2 % off along R1 C, and R1 C's interval (203 ..
+    205) excluded the true 200 with nothing said about the intervals (issue 45)."""
+    from tsid_fmu.uncertainty.bounds import unshown_warnings
+
+    stages = [("taguchi", "Case 3", 0), ("refinement", "simulation limit reached", 1)]
+    intervals = {"R1": [0.1, 0.2], "C": [None, None]}
+    limited = unshown_warnings(stages, 1, intervals)
+    assert limited[0] == "refinement: simulation limit reached"
+    assert limited[1].startswith("the answer is not shown to be an optimum (exit status 1)")
+    assert "intervals of R1 were computed there: they may not hold the truth" in limited[1]
+    assert unshown_warnings(stages, 0, intervals) == ["refinement: simulation limit reached"]
+    assert len(unshown_warnings(stages, 1, {"C": [None, None]})) == 1  # nothing finite

@@ -39,7 +39,7 @@ from tsid_fmu.study.definition import Study
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.folder import NullStore, Trail
 from tsid_fmu.uncertainty.assess import assess, validate
-from tsid_fmu.uncertainty.bounds import bound_warnings, on_bounds
+from tsid_fmu.uncertainty.bounds import bound_warnings, on_bounds, unshown_warnings
 from tsid_fmu.uncertainty.fidelity import (
     Fidelity,
     check_fidelity,
@@ -276,8 +276,7 @@ def _finish(
     exps = study.identify_names()
     spec = evaluators.spec(study.parameter_names, exps, {})
     ev = evaluators.get(study.parameter_names, exps, {})
-    # intervals in log10 for every positive-valued parameter: relative precision, positive
-    # bounds, and combinations that read as products and ratios
+    # in log10 where positive: relative precision, products and ratios as combinations
     log = dataclasses.replace(study.method.leveling, scale="log")
     space = Space(study.first_levels(), study.bounds(), log)
     found = assess(ev, spec, space, x, study_noise(study))
@@ -290,14 +289,15 @@ def _finish(
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
     result.sampled = _sampled(study, ev, (spec, space, x), found.sensitivities, callback)
     result.extra["on_bound"] = on_bounds(x, study.bounds(), study.first_levels())
-    result.warnings = (
-        _poor_fit(answer)
-        + bound_warnings(result.extra["on_bound"], x, study.bounds())
-        + found.warnings
-        + [f"{s.name}: {s.message}" for s in stages if s.status == 1]
-        + result.warnings
-    )
-    result.warnings += evaluators.retried()
+    stopped = [(s.name, s.message, s.status) for s in stages]
+    result.warnings = [
+        *_poor_fit(answer),
+        *bound_warnings(result.extra["on_bound"], x, study.bounds()),
+        *found.warnings,
+        *unshown_warnings(stopped, status, result.intervals),
+        *result.warnings,
+        *evaluators.retried(),
+    ]
     checked = _fidelity(study, evaluators, x, "answer", callback, found.sensitivities)
     _record(result, start, checked)
     result.weak = _weak(result)

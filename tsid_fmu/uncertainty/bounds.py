@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-__all__ = ["ON_BOUND", "bound_warnings", "on_bounds"]
+__all__ = ["ON_BOUND", "bound_warnings", "on_bounds", "unshown_warnings"]
 
 ON_BOUND = 1e-6
 """A value within this fraction of its first levels' span from a bound is on it."""
@@ -64,5 +64,31 @@ def bound_warnings(
             f"{name} = {x[name]:.4g} sits on its bound {side} = {bound:g}: the data push it "
             "there, so its best value may lie beyond (widen the bound if the physics allow) "
             "and its interval is cut at the bound"
+        )
+    return out
+
+
+def unshown_warnings(
+    messages: Sequence[tuple[str, str, int]],
+    status: int,
+    intervals: Mapping[str, Sequence[float | None]],
+) -> list[str]:
+    """Return the warnings of an answer not shown to be an optimum.
+
+    ``messages`` holds each stage's ``(name, message, status)``: every stage that
+    stopped short (status 1) is quoted. Where the study's own status is 1 and some
+    interval is finite, one more says that the intervals were computed there: they
+    describe the cost around a point that is not its minimum, and may miss the truth
+    (modestpy's ``Simple2R1C``, stopped at a limit 2.2 % off along R1 C, gave R1 C an
+    interval of 203 .. 205 around a true 200).
+    """
+    out = [f"{name}: {message}" for name, message, stage in messages if stage == 1]
+    finite = [n for n, iv in intervals.items() if iv and None not in iv]
+    if status == 1 and finite:
+        out.append(
+            "the answer is not shown to be an optimum (exit status 1), and the 95 % "
+            f"intervals of {', '.join(finite)} were computed there: they may not hold the "
+            "truth; continue the study (--resume with higher limits) or read the warnings "
+            "above before using them"
         )
     return out

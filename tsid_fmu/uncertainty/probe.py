@@ -43,8 +43,11 @@ __all__ = [
     "structural",
 ]
 
-LOOSE = 10.0
-"""Relative standard error (%) from which a combination is probed."""
+LOOSE = 2.0
+"""Relative standard error (%) from which a combination is probed. JModelica's
+``Simple2R1C_ic``, away from its optimum, gave its exact null direction (C against R1
+and R2) 7 %: the FMU solver's noise in the central differences. The profile, not this
+threshold, decides; a lower threshold only probes more (``2 * REFITS`` runs each)."""
 SPAN = 2.0
 """How many 95 % half-widths along the combination each probe goes."""
 FLAT = 0.25
