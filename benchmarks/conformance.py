@@ -148,6 +148,13 @@ def rc_data(fmu: Path, p: dict[str, float]) -> Made:
     return u.assign(T=temp), how
 
 
+def rc_own_data(fmu: Path, p: dict[str, float]) -> Made:
+    """Simple2R1C: modestpy's own ``result.csv`` (the FMU at ``parameters.csv``, inputs held)."""
+    u = pd.read_csv(fmu.parent / "inputs.csv")
+    temp = pd.read_csv(fmu.parent / "result.csv")["T"].to_numpy(float)
+    return u.assign(T=temp), "modestpy's result.csv (its FMU at R1 0.1, R2 0.25, C 2000)"
+
+
 def fmi3_data(fmu: Path, p: dict[str, float]) -> Made:
     """FMU3Model: output = 3 + increment * input(0) after init, + increment per step."""
     t = np.arange(0, 2 + 1e-9, 0.1)
@@ -213,6 +220,9 @@ CASES = [
     Case("Simple2R1C", MODESTPY, MP + "simple2R1C/Simple2R1C_linux64.fmu", RC, rc_data,
          ["Ti1", "Ti2"], ["T"], RC_HAND, RC_STUDY, 'hold = { Ti1 = "linear", Ti2 = "linear" }',
          RC_COMBOS, gfortran=True),
+    Case("Simple2R1C on result.csv", MODESTPY, MP + "simple2R1C/Simple2R1C_linux64.fmu",
+         RC, rc_own_data, ["Ti1", "Ti2"], ["T"], RC_HAND, RC_STUDY, "", RC_COMBOS,
+         gfortran=True),
     Case("Simple2R1C_ic", MODESTPY, MP + "simple2R1C_ic/Simple2R1C_ic_linux64.fmu",
          {**RC, "Tstart": 293.15}, rc_data, ["Ti1", "Ti2"], ["T"],
          RC_HAND + "Tstart = { levels = [270, 280, 290, 300, 310] }\n", RC_STUDY,

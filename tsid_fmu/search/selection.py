@@ -248,24 +248,28 @@ def decide(
         for i, c in enumerate(cands)
         if i != pick and i not in decided and i not in barred and _close(c, cands[pick])
     ]
-
-    def size(i: int) -> tuple[int, int]:  # free parameters, then the structure's own
-        return cands[i].k, len(cands[i].parameters)
-
-    # one decision: the simplest of the tied, and the reason says what made it so
-    group = [pick, *close]
-    pick = min(group, key=lambda i: (*size(i), cands[i].bic))
-    tied = [i for i in group if i != pick]
-    fewest = all(size(pick) < size(j) for j in tied)
-    tie = (
-        "the simpler is reported"
-        if fewest
-        else (
-            f"as simple ({cands[pick].k} free parameters each or fewer): the lowest BIC is reported"
-        )
-    )
+    pick, tied, tie = _simplest(cands, [pick, *close])
     _explain(cands, pick, why, tied, barred, degenerate, tie)
     return pick, tied
+
+
+def _simplest(cands: Sequence[Candidate], group: list[int]) -> tuple[int, list[int], str]:
+    """Choose among indistinguishable structures; return it, the others, and why.
+
+    One ranking decides and explains: fewer free parameters, then fewer parameters of
+    the structure (:attr:`Candidate.parameters`: a term switched off at the answer
+    still counts), then the lower BIC.
+    """
+
+    def size(i: int) -> tuple[int, int]:
+        return cands[i].k, len(cands[i].parameters)
+
+    pick = min(group, key=lambda i: (*size(i), cands[i].bic))
+    tied = [i for i in group if i != pick]
+    if all(size(pick) < size(j) for j in tied):
+        return pick, tied, "the simpler is reported"
+    simple = f"as simple ({cands[pick].k} free parameters each or fewer)"
+    return pick, tied, f"{simple}: the lowest BIC is reported"
 
 
 def _explain(
