@@ -305,7 +305,9 @@ def test_the_refinements_last_jacobian_names_the_pairs_in_the_parameters_units(m
     monkeypatch.setattr(
         refine._Problem,
         "stationarity",
-        lambda self, floor=0.0, probe=0.0: Stationarity(True, "projected Gauss-Newton", 0.0, 1.0, ""),
+        lambda self, floor=0.0, probe=0.0: Stationarity(
+            True, "projected Gauss-Newton", 0.0, 1.0, ""
+        ),
     )
     stage = refine.refine_stage("r", SPACE, START, ev.cost(**START), ev, Method(refine_max_nfev=20))
     assert "parallel" not in stage.extra
