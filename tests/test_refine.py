@@ -185,3 +185,34 @@ def test_where_no_fraction_is_lower_the_local_probes_decide():
     at_optimum, _, _ = _stage()
     problem, _ = _problem_at(dict(at_optimum.x), 1.0)
     assert problem.stationarity(probe=0.001).holds  # the model holds: no probe needed
+
+
+def test_a_trial_point_lower_by_no_more_than_the_gate_refutes_nothing():
+    """OpenModelica's MassSpringSubSystem2 (tsid init study) exited 1: its trials found
+    points lower by 2.9e-5, 1.4e-8 of a cost of 2014, under the gate (1e-4 of it) that a
+    predicted decrease must pass. The same gate now applies to what a trial finds."""
+    x = {"a": 2.0 * (1 + 5e-4), "k": 1.3, "c": 0.4}
+    problem, ev = _problem_at(x, -1.0)
+    r_x = ev.residuals(x)
+    real = ev.evaluate
+
+    def barely_lower(sets, progress=None):  # every trial point 2e-7 of the cost lower
+        out = real(sets, progress)
+        out.residuals = [r_x * (1 - 1e-7) for _ in sets]
+        out.costs[:, 0] = float(r_x @ r_x) * (1 - 1e-7) ** 2
+        return out
+
+    ev.evaluate = barely_lower
+    gate = problem.stationarity()
+    assert gate.holds and "lower the cost by no more than" in gate.detail
+    assert problem.best[0] < ev.cost(**x)  # the lower point is kept as the answer
+    problem, ev = _problem_at(x, -1.0)
+    ev.evaluate = lambda sets, progress=None: real_lower(real, sets, r_x, 1e-3)
+    assert not problem.stationarity().holds  # 2e-3 of the cost lower: that refutes it
+
+
+def real_lower(real, sets, r_x, share):
+    out = real(sets)
+    out.residuals = [r_x * (1 - share) for _ in sets]
+    out.costs[:, 0] = float(r_x @ r_x) * (1 - share) ** 2
+    return out

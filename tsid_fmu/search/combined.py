@@ -283,11 +283,11 @@ def _gate(
             fun(z + f * step)
     except StopIteration:
         return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
-    if best[0] < cost:
+    if cost - best[0] > GATE_RTOL * cost:  # lower by no more than the gate: the answer
         detail += f"; {LOWER_TRIED} {cost - best[0]:.3g}"
         return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
     reached = trial_reaches_gate(jac, r, step, GATE_RTOL * cost, fractions)
-    detail += "; " + trial_detail(fractions, reached)
+    detail += "; " + trial_detail(fractions, reached, cost - best[0])
     test = "projected Gauss-Newton, step tried" if reached else "projected Gauss-Newton"
     return Stationarity(reached, test, gap, cost, detail)
 

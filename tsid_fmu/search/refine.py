@@ -172,12 +172,12 @@ class _Problem:
             self._residuals([self.space.to_x(self.space.clip(s + f * step)) for f in fractions])
         except _Budget:
             return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
-        if self.best[0] < cost:
-            found = cost - self.best[0]
-            detail += f"; {LOWER_TRIED} {found:.3g}"
+        # a point lower by no more than the gate refutes nothing: it is the answer now
+        if cost - self.best[0] > GATE_RTOL * scale:
+            detail += f"; {LOWER_TRIED} {cost - self.best[0]:.3g}"
             return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
         reached = trial_reaches_gate(jac, r, step, GATE_RTOL * scale, fractions)
-        detail += "; " + trial_detail(fractions, reached)
+        detail += "; " + trial_detail(fractions, reached, cost - self.best[0])
         test = "projected Gauss-Newton, step tried" if reached else "projected Gauss-Newton"
         if not reached or probe <= 0:
             return Stationarity(reached, test, gap, cost, detail)
@@ -185,7 +185,7 @@ class _Problem:
             self._residuals(probe_points(self.space, x, probe))
         except _Budget:
             return Stationarity(False, test, gap, cost, detail + "; no runs left for probes")
-        if self.best[0] < cost:
+        if cost - self.best[0] > GATE_RTOL * scale:
             detail += f"; {LOWER_PROBED} {cost - self.best[0]:.3g} ({probe:g} of a first range)"
             return Stationarity(False, test, gap, cost, detail)
         detail += f"; no probe {probe:g} of a first range either side is lower"

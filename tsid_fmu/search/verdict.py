@@ -94,12 +94,18 @@ def trial_reaches_gate(
     return float(r @ r) - float(predicted @ predicted) <= gate
 
 
-def trial_detail(fractions: list[float], reached: bool) -> str:
-    """Say, after a failed trial, which fractions raised the cost and what that shows."""
-    if len(fractions) <= 2:
-        tried = "the step and its half raise the cost"
-    else:
-        tried = f"the step and its fractions down to 1/{round(1 / fractions[-1])} raise the cost"
+def trial_detail(fractions: list[float], reached: bool, lower: float = 0.0) -> str:
+    """Say, after a failed trial, which fractions raised the cost and what that shows.
+
+    ``lower``: how much the lowest of them lowered the cost, no more than the gate.
+    """
+    which = (
+        "the step and its half"
+        if len(fractions) <= 2
+        else f"the step and its fractions down to 1/{round(1 / fractions[-1])}"
+    )
+    what = f"lower the cost by no more than {lower:.3g}" if lower > 0 else "raise the cost"
+    tried = f"{which} {what}"
     if reached:
         return (
             f"tried, {tried}, where the model predicts no more than the gate: no lower point there"
