@@ -76,19 +76,20 @@ def unshown_warnings(
     """Return the warnings of an answer not shown to be an optimum.
 
     ``messages`` holds each stage's ``(name, message, status)``: every stage that
-    stopped short (status 1) is quoted. Where the study's own status is 1 and some
-    interval is finite, one more says that the intervals were computed there: they
-    describe the cost around a point that is not its minimum, and may miss the truth
-    (modestpy's ``Simple2R1C``, stopped at a limit 2.2 % off along R1 C, gave R1 C an
-    interval of 203 .. 205 around a true 200).
+    stopped short (status 1) is quoted. Where the study's own status is 1, one more
+    says that the intervals (of parameters, and of named combinations) were computed
+    there: they describe the cost around a point that is not its minimum, and may miss
+    the truth (modestpy's ``Simple2R1C``, stopped at a limit 1.1 % off along R1 C, gave
+    R1 C an interval of 200.96 .. 203.22 around a true 200).
     """
     out = [f"{name}: {message}" for name, message, stage in messages if stage == 1]
     finite = [n for n, iv in intervals.items() if iv and None not in iv]
-    if status == 1 and finite:
+    if status == 1:
+        which = f"of {', '.join(finite)} and " if finite else ""
         out.append(
             "the answer is not shown to be an optimum (exit status 1), and the 95 % "
-            f"intervals of {', '.join(finite)} were computed there: they may not hold the "
-            "truth; continue the study (--resume with higher limits) or read the warnings "
-            "above before using them"
+            f"intervals {which}of any combination named were computed there: they may "
+            "not hold the truth; continue the study (--resume with higher limits) or read "
+            "the warnings above before using them"
         )
     return out
