@@ -92,12 +92,15 @@ def weight_norms(study: Study) -> tuple[float, float]:
 
 
 def _weights_and_scale(
-    study: Study, experiment: Experiment, measured: np.ndarray
+    study: Study, experiment: Experiment, measured: np.ndarray, norm: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Each output's cost weight and residual scale, from the noise seen in the data."""
+    """Each output's cost weight and residual scale, from the noise seen in the data.
+
+    ``norm`` is the study's largest output weight (:func:`weight_norms`).
+    """
     names = list(experiment.outputs)
     user = np.array([(experiment.weights or {}).get(n, 1.0) for n in names], dtype=float)
-    user = user / weight_norms(study)[0]
+    user = user / norm
     sigma = data_noise(measured)
     sigma = np.array([experiment.noise.get(n, s) for n, s in zip(names, sigma, strict=True)])
     rms = np.sqrt(np.mean(measured**2, axis=0))
@@ -162,7 +165,8 @@ def prepare_experiment(
     check_settable(study.fmu, sorted({v for v in copies.values() if not delay_input(v)}), where)
     copies = {k: v for k, v in copies.items() if k in varied}
     # the noise, the weights and the residual scales come from the scored samples only
-    weights, scale = _weights_and_scale(study, experiment, select(windows, measured))
+    output_norm, window_norm = weight_norms(study)
+    weights, scale = _weights_and_scale(study, experiment, select(windows, measured), output_norm)
     return PreparedExperiment(
         name=experiment.name,
         time=_frozen(data.time),
@@ -177,7 +181,7 @@ def prepare_experiment(
         start_values={**experiment.start_values, **initial_values(study.fmu, experiment, data)},
         hold=dict(experiment.hold),
         windows=windows,
-        window_weights=tuple(w / weight_norms(study)[1] for w in experiment.window_weights or ()),
+        window_weights=tuple(w / window_norm for w in experiment.window_weights or ()),
         copies=copies,
     )
 

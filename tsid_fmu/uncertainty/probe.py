@@ -22,6 +22,7 @@ combination is well determined.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 
@@ -29,6 +30,7 @@ import numpy as np
 
 from tsid_fmu.errors import TsidError
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.search.space import Space
 from tsid_fmu.uncertainty.intervals import Uncertainty, quantile
 
@@ -103,10 +105,6 @@ def structural(
     experiment (a structural symmetry). None where it cannot be tried: no spec, no
     inputs, or a simulation failed. Three simulations per point and experiment.
     """
-    import dataclasses
-
-    from tsid_fmu.evaluate.serial import SerialEvaluator
-
     spec = getattr(evaluator, "spec", None)
     if spec is None or not points or any(e.inputs is None for e in spec.experiments):
         return None
