@@ -268,6 +268,7 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
             "time": tsid_time,
             "status": int(res.status),
             "fun": float(res.fun),
+            "coverage": coverage(res, gp.problem.truth),
         },
         "LS-c": run_least_squares(scorer, np.zeros(len(scorer.names))),
         "LS-t": run_least_squares(scorer, scorer.to_s(truth)),
@@ -291,6 +292,26 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
         "methods": rows,
         "notes": gp.notes,
         "time": time.perf_counter() - t0,
+    }
+
+
+def coverage(res, truth: dict[str, float]) -> dict:
+    """Which true values lie inside tsid's 95 % intervals, and whether the result flags
+    its intervals (its verdict on the fit: ``mismatch`` or ``coloured``)."""
+    inside = {}
+    for name, value in truth.items():
+        if name not in res.params:
+            continue
+        low, high = res.intervals.get(name, [None, None])
+        inside[name] = (low is None or low <= value) and (high is None or value <= high)
+    u = res.uncertainty
+    verdict = u.discrepancy.verdict if u is not None else "none"
+    # exit status 1 says the answer is not shown to be an optimum, and warns that its
+    # intervals may not hold: that flags them too
+    return {
+        "inside": inside,
+        "verdict": verdict,
+        "flagged": verdict != "consistent" or int(res.status) != 0,
     }
 
 

@@ -100,6 +100,51 @@ def _group_line(name: str, rows: Sequence[dict], methods: Sequence[str]) -> tupl
     )
 
 
+def _mismatch(row: dict) -> bool:
+    """Whether the draw put a model mismatch into the data (its notes say which)."""
+    note = str(row.get("notes", {}).get("mismatch", "none"))
+    return not note.startswith("none")
+
+
+def coverage_lines(rows: Sequence[dict]) -> list[str]:
+    """Share of true values inside tsid's 95 % intervals, per family, split three ways:
+    no mismatch drawn; mismatch drawn and the intervals flagged; mismatch drawn and not
+    flagged (a miss there is silent). Also the share of all parameters that miss silently."""
+
+    def cell(rs: Sequence[dict]) -> str:
+        hits = [v for r in rs for v in r["methods"]["tsid"]["coverage"]["inside"].values()]
+        return f"{sum(hits)}/{len(hits)}" if hits else "-"
+
+    done = [r for r in rows if "error" not in r and "coverage" in r["methods"]["tsid"]]
+    if not done:
+        return []
+    flagged = lambda r: r["methods"]["tsid"]["coverage"]["flagged"]  # noqa: E731
+    groups = {
+        "no mismatch": [r for r in done if not _mismatch(r)],
+        "mismatch, flagged": [r for r in done if _mismatch(r) and flagged(r)],
+        "mismatch, silent": [r for r in done if _mismatch(r) and not flagged(r)],
+    }
+    lines = ["", "Coverage: true values inside tsid's 95 % intervals (per parameter)"]
+    lines.append(f"{'family':<14} " + "  ".join(f"{k:>18}" for k in groups))
+    for family in [*dict.fromkeys(r["family"] for r in done), "all"]:
+        cells = [cell([r for r in g if family in ("all", r["family"])]) for g in groups.values()]
+        lines.append(f"{family:<14} " + "  ".join(f"{c:>18}" for c in cells))
+    every = [v for r in done for v in r["methods"]["tsid"]["coverage"]["inside"].values()]
+    silent = [
+        v
+        for r in groups["mismatch, silent"]
+        for v in r["methods"]["tsid"]["coverage"]["inside"].values()
+        if not v
+    ]
+    false_alarm = [flagged(r) for r in groups["no mismatch"]]
+    lines.append(
+        f"silent misses (outside the interval, not flagged): {len(silent)} of {len(every)} "
+        f"parameters ({100 * len(silent) / max(len(every), 1):.1f} %); flagged without a "
+        f"mismatch drawn: {_rate(false_alarm)}"
+    )
+    return lines
+
+
 def summary(rows: Sequence[dict], wall: float) -> tuple[list[str], bool]:
     """The summary lines and whether tsid meets the ``--check`` bar."""
     done = [r for r in rows if "error" not in r]
@@ -122,6 +167,7 @@ def summary(rows: Sequence[dict], wall: float) -> tuple[list[str], bool]:
         r for r in done if r["methods"]["tsid"]["status"] == 0 and not r["methods"]["tsid"]["ok"]
     ]
     tsid_ok = [r["methods"]["tsid"]["ok"] for r in done]
+    lines += coverage_lines(done)
     lines += [
         f"tsid succeeded where LS-c failed: {_rate(rescued)}",
         f"tsid false convergence (exit 0, not a success): {len(false_conv)} of {len(done)}",

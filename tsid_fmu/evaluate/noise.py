@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-__all__ = ["ACTIVE", "KEEP", "MAX_ORDER", "column_noise", "quantum", "white_noise"]
+__all__ = ["ACTIVE", "KEEP", "MAX_ORDER", "column_noise", "quantum", "trimmed_rms", "white_noise"]
 
 MAX_ORDER = 6
 """Highest order of differences tried."""
@@ -85,12 +85,16 @@ def white_noise(y: np.ndarray) -> float:
     d = np.asarray(y, dtype=float)
     for k in range(1, min(MAX_ORDER, d.size - 1) + 1):
         d = np.diff(d)
-        a = np.abs(d)
-        m = max(1, math.ceil(KEEP * a.size))
-        small = np.partition(a, m - 1)[:m] if m < a.size else a
-        rms = float(np.sqrt(np.mean(small * small)))
-        best = min(best, rms / _TRIM_RMS / math.sqrt(math.comb(2 * k, k)))
+        best = min(best, trimmed_rms(d) / math.sqrt(math.comb(2 * k, k)))
     return best
+
+
+def trimmed_rms(d: np.ndarray) -> float:
+    """Return the RMS of the :data:`KEEP` smallest of ``|d|``, scaled to a Gaussian's sd."""
+    a = np.abs(np.asarray(d, dtype=float))
+    m = max(1, math.ceil(KEEP * a.size))
+    small = np.partition(a, m - 1)[:m] if m < a.size else a
+    return float(np.sqrt(np.mean(small * small))) / _TRIM_RMS
 
 
 def quantum(y: np.ndarray) -> float:

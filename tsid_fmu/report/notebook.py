@@ -77,6 +77,17 @@ def sampled_note(sampled: Any) -> str:
     )
 
 
+MARKS = {"mismatch": " (does not hold: model mismatch)", "coloured": " (may not hold)"}
+"""What an interval cell says after its numbers when the verdict on the fit is against it
+(:mod:`tsid_fmu.uncertainty.discrepancy`)."""
+
+
+def interval_mark(u: Any) -> str:
+    """Return the mark of every interval of an analysis ``u`` (empty when they hold)."""
+    verdict = getattr(getattr(u, "discrepancy", None), "verdict", "consistent")
+    return MARKS.get(verdict, "")
+
+
 def parameter_columns(result: Any) -> list[str]:
     """Columns of the parameter table: :data:`PARAMETER_COLUMNS`, and a sampled interval's."""
     if getattr(result, "sampled", None) is None:
@@ -99,16 +110,18 @@ def parameter_rows(result: Any) -> list[list[Any]]:
     names = [n for n in names if n not in {f["name"] for f in factors}]  # rows of their own
     units = study_units(result.study)  # the study's, else the FMU's declared ones
     first = {p.name: f"{fmt(min(p.levels))} .. {fmt(max(p.levels))}" for p in params}
+    mark = interval_mark(result.uncertainty)
     for name in names:
         value = result.params.get(name, math.nan)
         low, high = result.intervals.get(name, [None, None])
         se = _std_error(result.uncertainty, name)
+        shown = _interval(low, value, high)
         rows.append(
             [
                 name,
                 value,
                 units.get(name, ""),
-                _interval(low, value, high),
+                shown + (mark if shown != "not determined" else ""),
                 se,
                 first.get(name, ""),
                 result.weak.get(name, ""),

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.fdstep import noise_of, solver_noise, steps_for
 from tsid_fmu.search.iteration import ProgressCallback
 from tsid_fmu.search.parallel import named_pairs
 from tsid_fmu.search.space import Space
@@ -47,7 +48,8 @@ from tsid_fmu.study.schema import Method
 __all__ = ["FD_STEP", "refine_stage"]
 
 FD_STEP = 1e-5
-"""Forward-difference step in search coordinates (1e-5 of a first range's width).
+"""Forward-difference step in search coordinates (1e-5 of a first range's width), where
+the FMU's own noise allows it (:mod:`tsid_fmu.search.fdstep` widens it where not).
 
 Small enough for a sharply curved valley (a swinging pendulum's cost over seconds of
 data: 1e-3 gave secants whose steps kept failing), large against the integrators' error
@@ -84,6 +86,7 @@ class _Problem:
         self.linearised: tuple[np.ndarray, float] | None = None
         self.calls = 0
         self.size = 0
+        self.steps = np.full(space.dim, FD_STEP)  # forward-difference steps (:mod:`.fdstep`)
 
     def _residuals(self, sets: list[dict[str, float]]) -> list[np.ndarray]:
         if self.evaluator.nfev - self.start >= self.limit:
@@ -129,12 +132,40 @@ class _Problem:
         r0 = self.last[1]
         self._check_step(s, r0)
         self.linearised = (s.copy(), 0.5 * float(np.dot(r0, r0)))
-        steps = np.where(s + FD_STEP <= self.space.s_upper, FD_STEP, -FD_STEP)
-        trial = list(s + np.diag(steps))  # row j: s with coordinate j stepped
-        cols = self._residuals([self.space.to_x(t) for t in trial])
-        jac = np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
+        jac = self._columns(s, r0, np.arange(s.size))
+        try:
+            noise = noise_of(self.evaluator, lambda: self._noise(s, r0))
+        except _Budget:  # no runs left to measure it: this Jacobian as it is
+            noise = 0.0
+        wider = steps_for(self.steps, jac, noise)
+        redo = np.flatnonzero(wider > 1.5 * self.steps)  # columns the FMU's noise spoils
+        if redo.size:
+            self.steps = np.where(wider > 1.5 * self.steps, wider, self.steps)
+            jac[:, redo] = self._columns(s, r0, redo)
         self.jacobian = (s.copy(), r0, jac)
         return jac
+
+    def _columns(self, s: np.ndarray, r0: np.ndarray, which: np.ndarray) -> np.ndarray:
+        """Forward differences of the columns ``which``, each with its step."""
+        h = self.steps[which]
+        h = np.where(s[which] + h <= self.space.s_upper[which], h, -h)
+        trial = []
+        for j, hj in zip(which, h, strict=True):
+            t = s.copy()
+            t[j] += hj
+            trial.append(self.space.to_x(t))
+        cols = self._residuals(trial)
+        return np.column_stack([(c - r0) / hj for c, hj in zip(cols, h, strict=True)])
+
+    def _noise(self, s: np.ndarray, r0: np.ndarray) -> float:
+        """Return the FMU's noise under parameter changes, by ECnoise (:mod:`.fdstep`)."""
+        return solver_noise(
+            lambda pts: self._residuals([self.space.to_x(self.space.clip(t)) for t in pts]),
+            s,
+            r0,
+            FD_STEP,
+            self.space.s_upper,
+        )
 
     def stationarity(self, floor: float = 0.0, probe: float = 0.0) -> Stationarity:
         """Test the answer with the last Jacobian (see :mod:`tsid_fmu.search.verdict`).

@@ -11,10 +11,12 @@ import numpy as np
 
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.evaluate.cost import Cost
+from tsid_fmu.evaluate.noise import quantum
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.prepare import data_noise
+from tsid_fmu.uncertainty.discrepancy import judge
 from tsid_fmu.uncertainty.intervals import Uncertainty, quantile, scale_groups, uncertainty
 from tsid_fmu.uncertainty.probe import probe_combinations
 from tsid_fmu.uncertainty.profile import ProfileProblem, profile_intervals
@@ -121,14 +123,38 @@ def assess(
         )
     if out.uncertainty is not None:
         out.uncertainty.scale_groups = scale_groups(out.uncertainty, space)
-    if out.uncertainty is not None and out.uncertainty.coloured:
+    if out.uncertainty is not None:
         u = out.uncertainty
-        out.warnings.append(
-            f"residuals are coloured ({', '.join(u.coloured)}): standard errors that assume "
-            f"white noise would be optimistic by ~x{u.inflation:.3g}; the intervals reported "
-            "use a HAC covariance that allows for it"
-        )
+        rounded = _rounded(spec, noise)
+        coloured = [c for c in u.coloured if c not in rounded]
+        misfit = [w.split(":")[0] for w in warnings if "model or solver mismatch" in w]
+        u.discrepancy = judge(u.constancy, coloured, misfit, u.inflation)
+        if not u.discrepancy.holds:
+            out.warnings.append(u.discrepancy.warning())
+        elif u.coloured:
+            out.warnings.append(
+                f"residuals are coloured ({', '.join(u.coloured)}) by the sensors' rounding: "
+                f"standard errors that assume white noise would be optimistic by "
+                f"~x{u.inflation:.3g}; the intervals use a HAC covariance that allows for it"
+            )
     out.nfev = evaluator.nfev - start
+    return out
+
+
+def _rounded(spec: EvaluationSpec, noise: Mapping) -> set[str]:
+    """``experiment / output`` of the outputs whose noise is a sensor's rounding.
+
+    A quantised sensor (an encoder) on a slow signal leaves residuals coloured by its
+    rounding, a known, deterministic cause (:func:`~tsid_fmu.evaluate.noise.quantum`):
+    noise no larger than twice the grid's ``q / sqrt(12)`` cannot be told from it.
+    """
+    out = set()
+    for e in spec.experiments:
+        measured = e.scored(e.measured)
+        for k, name in enumerate(e.output_names):
+            q = quantum(np.asarray(measured[:, k], dtype=float))
+            if q > 0 and noise[e.name][name] <= 2 * q / math.sqrt(12.0):
+                out.add(f"{e.name} / {name}")
     return out
 
 

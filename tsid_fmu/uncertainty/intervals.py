@@ -31,6 +31,7 @@ import numpy as np
 from scipy import stats
 
 from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty.discrepancy import Discrepancy, constancy
 from tsid_fmu.uncertainty.longrun import long_run_covariance
 from tsid_fmu.uncertainty.residuals import ljung_box
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
@@ -98,6 +99,12 @@ class Uncertainty:
     dof : dict
         Degrees of freedom of each parameter's variance (Satterthwaite); its interval
         is +/- :func:`quantile` ``(dof)`` standard errors.
+    constancy : dict
+        The score test that every half of every experiment calls for the same
+        parameters (:func:`tsid_fmu.uncertainty.discrepancy.constancy`).
+    discrepancy : Discrepancy
+        Whether the intervals hold: the verdict on the model's fit to the data
+        (:mod:`tsid_fmu.uncertainty.discrepancy`).
     resolution : dict
         Parameters whose standard error lies below what the profile likelihood resolves
         (:data:`tsid_fmu.uncertainty.profile.RESOLUTION`): the bound, in percent of the
@@ -123,6 +130,8 @@ class Uncertainty:
     )
     resolution: dict[str, float] = field(default_factory=dict)
     dof: dict[str, float] = field(default_factory=dict)
+    constancy: dict[str, Any] = field(default_factory=dict)
+    discrepancy: Discrepancy = field(default_factory=Discrepancy)
 
     @property
     def sigma(self) -> dict[str, list[float]]:
@@ -158,8 +167,11 @@ class Uncertainty:
             "method",
             "resolution",
             "dof",
+            "constancy",
         )
-        return json_safe({k: getattr(self, k) for k in keys})
+        out = json_safe({k: getattr(self, k) for k in keys})
+        out["discrepancy"] = self.discrepancy.to_dict()
+        return out
 
 
 def quantile(dof: float) -> float:
@@ -291,6 +303,9 @@ def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Un
         out.correlation[n] = {m: float(corr[i, k]) for k, m in enumerate(space.names)}
     out.combinations = _combinations(space, values, vectors, cov)
     out.cov = cov  # type: ignore[attr-defined]
+    values, vectors = np.linalg.eigh(fisher)
+    inv = np.where(values > 1e-14 * max(float(values.max()), 1e-300), 1.0 / values, 0.0)
+    out.constancy = constancy(series, (vectors * inv) @ vectors.T)
     return out
 
 

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.fdstep import known_noise, steps_for
 from tsid_fmu.search.space import Space
 
 __all__ = ["CHI2_95", "RESOLUTION", "ProfileProblem", "profile_intervals"]
@@ -165,9 +166,12 @@ class _Secant:
         if r0 is None:
             return False
         cols = []
+        # where the FMU's own solver is noisy, steps that beat its noise (one rule with
+        # the refinement's Jacobian, :mod:`tsid_fmu.search.fdstep`)
+        wide = steps_for(np.full(s0.size, CHECK_STEP), self.jac, known_noise(problem.evaluator))
         for k in range(s0.size):
             s = s0.copy()
-            h = CHECK_STEP if s[k] + CHECK_STEP <= problem.space.s_upper[k] else -CHECK_STEP
+            h = wide[k] if s[k] + wide[k] <= problem.space.s_upper[k] else -wide[k]
             s[k] += h
             cost, r = problem.cost(s)
             if r is None or not math.isfinite(cost):
