@@ -48,7 +48,7 @@ from tsid_fmu.uncertainty.fidelity import (
     start_point,
     study_noise,
 )
-from tsid_fmu.uncertainty.sampled import Sampled, sampled_intervals
+from tsid_fmu.uncertainty.sampled import for_study
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian
 
 __all__ = ["identify"]
@@ -287,7 +287,7 @@ def _finish(
         jac = residual_jacobian(found.sensitivities, spec, space, x)
         result.jac = jac[:, [found.sensitivities.names.index(n) for n in result.names]]
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
-    result.sampled = _sampled(study, ev, (spec, space, x), found.sensitivities, callback)
+    result.sampled = for_study(study.method, ev, (spec, space, x), found, callback)
     result.extra["on_bound"] = on_bounds(x, study.bounds(), study.first_levels())
     stopped = [(s.name, s.message, s.status) for s in stages]
     result.warnings = [
@@ -311,31 +311,6 @@ def _finish(
     if isinstance(store, Trail):
         _report(result, store, evaluators, plots, found.simulated, callback)
     return result
-
-
-def _sampled(
-    study: Study,
-    ev: Evaluator,
-    where: tuple[Any, Space, dict[str, float]],
-    sens: Sensitivities | None,
-    callback: ProgressCallback | None,
-) -> Sampled | None:
-    """Compute the sampled intervals the study asks for (``[method] uncertainty``)."""
-    method = study.method
-    if method.uncertainty == "analytic" or sens is None:
-        return None
-    spec, space, x = where
-    return sampled_intervals(
-        ev,
-        spec,
-        space,
-        x,
-        sens,
-        kind=method.uncertainty,
-        replicates=method.uncertainty_replicates,
-        seed=method.seed,
-        progress=callback,
-    )
 
 
 def _with_structure(result: IdentificationResult, structure: StructureResult | None) -> None:

@@ -69,11 +69,15 @@ def sampled_note(sampled: Any) -> str:
         else f"{exp}: AR order " + ", ".join(f"{o} {p}" for o, p in how["ar_order"].items())
         for exp, how in sampled.noise.items()
     )
+    reasons = sorted(set(getattr(sampled, "withheld", {}).values()))
+    withheld = (
+        f" Withheld for {', '.join(sampled.withheld)}: {'; '.join(reasons)}." if reasons else ""
+    )
     return (
         f"{kind.capitalize()} {100 * sampled.level:g} % intervals, beside the primary ones "
         f"(a check that does not linearise the model): {sampled.method}. {sampled.replicates} "
         f"replicates ({sampled.failed} failed, {sampled.unfinished} stopped at the step "
-        f"limit), {sampled.nfev} simulations; {noise}."
+        f"limit), {sampled.nfev} simulations; {noise}.{withheld}"
     )
 
 
@@ -137,7 +141,8 @@ def parameter_rows(result: Any) -> list[list[Any]]:
         for row in rows:
             low, high = sampled.intervals.get(row[0]) or [None, None]
             value = row[1] if isinstance(row[1], float | int) else math.nan
-            row.insert(4, _interval(low, value, high) if row[0] in sampled.intervals else "")
+            shown = _interval(low, value, high) if row[0] in sampled.intervals else ""
+            row.insert(4, "withheld" if row[0] in sampled.withheld else shown)
     return rows
 
 

@@ -45,10 +45,24 @@ from tsid_fmu.uncertainty.refits import MAX_STEPS, Replicate, SharedModel, refit
 from tsid_fmu.uncertainty.resample import ar_draw, block_bootstrap, block_length, percentile
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian
 
-__all__ = ["DEFAULT_REPLICATES", "SAMPLED", "Sampled", "sampled_intervals"]
+__all__ = [
+    "COLLAPSED",
+    "DEFAULT_REPLICATES",
+    "MIN_CONVERGED",
+    "SAMPLED",
+    "Sampled",
+    "for_study",
+    "sampled_intervals",
+]
 
 SAMPLED = ("bootstrap", "monte_carlo")
 """The sampled kinds of ``[method] uncertainty``."""
+
+MIN_CONVERGED = 0.8
+"""Share of the re-fits that must converge for the sampled intervals to be given."""
+
+COLLAPSED = 1e-9
+"""Relative width below which a sampled interval has collapsed onto one value."""
 
 DEFAULT_REPLICATES = 100
 """Replicates (re-fits) when the study does not give ``uncertainty_replicates``."""
@@ -86,6 +100,10 @@ class Sampled:
         Confidence level.
     method : str
         How the intervals were computed, in words.
+    withheld : dict
+        Parameters whose sampled interval is not given, with the reason
+        (:meth:`withhold`): too few re-fits converged, or the re-fits collapsed onto one
+        value where the primary interval is open.
     """
 
     kind: str
@@ -99,6 +117,40 @@ class Sampled:
     nfev: int = 0
     level: float = LEVEL
     method: str = ""
+    withheld: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def converged(self) -> int:
+        """Re-fits that converged (neither failed nor stopped at the step limit)."""
+        return self.replicates - self.failed - self.unfinished
+
+    def withhold(self, primary: Mapping[str, list[float | None]]) -> None:
+        """Withhold the intervals a reader must not take (``withheld``, with the reason).
+
+        All of them when fewer than :data:`MIN_CONVERGED` of the re-fits converged: a
+        re-fit stopped at its step limit sits between the answer and its own optimum, and
+        such intervals are too narrow (19 of 20 stopped gave 2.44 .. 2.58 against a primary
+        0.79 .. 6.8). A parameter's, where its re-fits collapse onto one value (relative
+        spread below :data:`COLLAPSED`) while its primary interval is open: a bound or a
+        direction the data do not see holds every re-fit still, which says nothing of
+        its precision.
+        """
+        if self.converged < MIN_CONVERGED * self.replicates:
+            why = (
+                f"only {self.converged} of {self.replicates} re-fits converged "
+                f"({self.failed} failed, {self.unfinished} stopped at the step limit)"
+            )
+            self.withheld = dict.fromkeys(self.intervals, why)
+            return
+        for name, (low, high) in self.intervals.items():
+            opened = primary.get(name, [None, None])
+            if None not in opened or low is None or high is None:
+                continue
+            if abs(high - low) <= COLLAPSED * max(abs(low), abs(high), 1e-300):
+                self.withheld[name] = (
+                    "the re-fits collapsed onto one value where the data do not determine "
+                    "the parameter (its primary interval is open)"
+                )
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-serialisable copy (non-finite numbers as ``None``)."""
@@ -301,4 +353,36 @@ def _summary(
         out.intervals[name] = percentile(values, out.level)
         finite = [v for v in values if math.isfinite(v)]
         out.std_error[name] = float(np.std(finite, ddof=1)) if len(finite) > 1 else math.nan
+    return out
+
+
+def for_study(
+    method: Any,
+    ev: Evaluator,
+    where: tuple[EvaluationSpec, Space, dict[str, float]],
+    found: Any,
+    progress: Notify | None = None,
+) -> Sampled | None:
+    """Return the sampled intervals a study's ``method`` asks for, at ``found``'s answer.
+
+    None for ``uncertainty = "analytic"`` or where the answer has no sensitivities; the
+    intervals a reader must not take beside ``found``'s primary ones are withheld
+    (:meth:`Sampled.withhold`).
+    """
+    sens = found.sensitivities
+    if method.uncertainty == "analytic" or sens is None:
+        return None
+    spec, space, x = where
+    out = sampled_intervals(
+        ev,
+        spec,
+        space,
+        x,
+        sens,
+        kind=method.uncertainty,
+        replicates=method.uncertainty_replicates,
+        seed=method.seed,
+        progress=progress,
+    )
+    out.withhold(found.uncertainty.intervals if found.uncertainty else {})
     return out
