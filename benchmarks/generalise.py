@@ -298,12 +298,16 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
 def coverage(res, truth: dict[str, float]) -> dict:
     """Which true values lie inside tsid's 95 % intervals, and whether the result flags
     its intervals (its verdict on the fit: ``mismatch`` or ``coloured``)."""
-    inside = {}
+    inside, reach = {}, {}
     for name, value in truth.items():
         if name not in res.params:
             continue
         low, high = res.intervals.get(name, [None, None])
         inside[name] = (low is None or low <= value) and (high is None or value <= high)
+        # the error as a share of the interval's half-width on its side (1: on the end)
+        end = high if value >= res.params[name] else low
+        if end is not None and end != res.params[name]:
+            reach[name] = abs(value - res.params[name]) / abs(end - res.params[name])
     u = res.uncertainty
     verdict = u.discrepancy.verdict if u is not None else "none"
     # exit status 1 says the answer is not shown to be an optimum, and warns that its

@@ -137,6 +137,14 @@ def coverage_lines(rows: Sequence[dict]) -> list[str]:
         if not v
     ]
     false_alarm = [flagged(r) for r in groups["no mismatch"]]
+    reach = [
+        v for r in groups["no mismatch"] for v in r["methods"]["tsid"]["coverage"]["reach"].values()
+    ]
+    if reach:  # calibrated 95 % intervals: |t| / 1.96 has a median of 0.34
+        lines.append(
+            f"no mismatch: median error / interval half-width {statistics.median(reach):.2f} "
+            "(0.34 for calibrated 95 % intervals: lower is conservative)"
+        )
     lines.append(
         f"silent misses (outside the interval, not flagged): {len(silent)} of {len(every)} "
         f"parameters ({100 * len(silent) / max(len(every), 1):.1f} %); flagged without a "
