@@ -7,7 +7,7 @@ Run from the repository root after ``mutmut run`` (``.ci/mutation`` does both)::
 
 It reads mutmut's own result files (``mutants/**/*.py.meta``) and, for each survivor,
 the line that mutmut changed (``mutmut.mutation.diff_apply.get_diff_for_mutant``), so
-that docs/mutation-survivors.md can name each one as ``file:line`` and the change.
+that docs/dev/mutation-survivors.md can name each one as ``file:line`` and the change.
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ found, worst parameter error against the truth, and (tsid) how far the Taguchi s
 alone got. Run::
 
     python benchmarks/accuracy.py                 # every problem
-    python benchmarks/accuracy.py --de-budget 1000 --markdown   # and the README's table
+    python benchmarks/accuracy.py --de-budget 1000 --markdown   # and its table (docs/benchmarks)
     python benchmarks/accuracy.py siso_encoder dc_motor --workers 1
     python benchmarks/accuracy.py --tsid-only     # tsid's rows only (a search change)
 """
@@ -215,7 +215,7 @@ def run_tsid(study: Study, truth, workers: int | None):
     return rows, res
 
 
-#: The README's label of each problem (``--markdown``).
+#: The label of each problem in docs/benchmarks/accuracy.md (``--markdown``).
 LABELS = {
     "siso_encoder": "SISO, load cells + encoder, Table I",
     "siso_loadcells": "SISO, load cells only",
@@ -234,7 +234,7 @@ def _error(e: float) -> str:
 
 
 def markdown_rows(name: str, rows: list[dict], best: float) -> list[str]:
-    """The README's table rows of one problem (``--markdown``)."""
+    """The table rows of one problem in docs/benchmarks/accuracy.md (``--markdown``)."""
     by = {r["method"]: r for r in rows}
 
     def cells(*methods: str) -> str:
@@ -349,7 +349,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--de-budget", type=int, default=1500)
     parser.add_argument(
-        "--markdown", action="store_true", help="end with the README's table of these problems"
+        "--markdown",
+        action="store_true",
+        help="end with the table of these problems (docs/benchmarks/accuracy.md)",
     )
     parser.add_argument(
         "--tsid-only", action="store_true", help="tsid's rows only, with their costs (no peers)"

@@ -8,7 +8,7 @@ and runs what a user runs: ``tsid info``, ``tsid init`` then ``tsid identify`` o
 study init wrote, unedited, and a hand-written study. A parameter whose 95 % interval is
 finite on both sides is "determined"; it passes when it lies within 1 % of the truth and
 the truth lies inside its interval. It is a measurement, not a test: it exits 0 whatever
-the rows say. ``docs/conformance.md`` holds the table of the last run.
+the rows say. ``docs/benchmarks/conformance.md`` holds the table of the last run.
 
 Run (downloads into ``benchmarks/.cache``, git-ignored; a few minutes on two cores)::
 

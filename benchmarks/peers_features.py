@@ -1,4 +1,5 @@
-"""Run the peers' calibration features on our FMU, so the README's table says only what ran.
+"""Run the peers' calibration features on our FMU, so the table of
+docs/benchmarks/peer-features.md says only what ran.
 
 Issue 29 asks for a table comparing tsid with modestpy, AixCaliBuHA and estim8 "only
 with what you ran". Each probe below is a short script, run by the peer's own Python

@@ -1,8 +1,8 @@
-"""The README's accuracy table: its fast rows reproduce (issue 27).
+"""The accuracy table of docs/benchmarks/accuracy.md: its fast rows reproduce (issue 27).
 
 ``python benchmarks/accuracy.py local_minima --de-budget 1000 --markdown`` (the lightly
 damped resonance: every method on it runs in about 40 s on 2 shared cores) prints the
-README's rows of that problem; this test runs it and compares them with the README's,
+page's rows of that problem; this test runs it and compares them with the page's,
 so it fails when either drifts. The other four problems take 3-8 minutes each (the
 differential evolution's 1000 simulations of the DC motor's pythonfmu FMU alone take
 minutes) and are left to the benchmark.
@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+PAGE = REPO / "docs" / "benchmarks" / "accuracy.md"
 LABEL = "| lightly damped resonance (local minima) |"
 
 
@@ -39,7 +40,7 @@ def _numbers(cell: str) -> list[float]:
 @pytest.mark.slow
 def test_the_resonance_rows_of_the_accuracy_table_reproduce():
     command = [sys.executable, "benchmarks/accuracy.py", "local_minima", "--de-budget", "1000"]
-    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    readme = PAGE.read_text(encoding="utf-8")
     assert "python benchmarks/accuracy.py --de-budget 1000" in readme
     out = subprocess.run(
         [*command, "--markdown"], cwd=REPO, capture_output=True, text=True, timeout=600

@@ -191,7 +191,7 @@ def test_the_hac_variance_is_unbiased_and_its_dof_match_its_scatter(coloured):
     assert np.all(np.abs(np.median(dofs, axis=0) / scatter - 1) < 0.3), (dofs, scatter)
 
 
-# -- a known case of every field (killed mutants of docs/mutation-survivors.md) ----------
+# -- a known case of every field (killed mutants of docs/dev/mutation-survivors.md) ----------
 # Alternating residuals make the HAC estimate smaller than the Cramer-Rao bound, so the
 # floor gives the standard errors exactly: the inverse of F = J^T J on the seen block.
 

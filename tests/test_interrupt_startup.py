@@ -2,7 +2,8 @@
 
 Issue 25: Ctrl-C 0.15-0.25 s after start, while ``tsid`` imports its package (numpy,
 pandas, scipy, matplotlib), died with a KeyboardInterrupt traceback from importlib and
-by the signal (-2), although the README says Ctrl-C is never raised inside an import.
+by the signal (-2), although docs/explanation/architecture.md says Ctrl-C is never raised
+inside an import.
 SIGTERM (``kill``, a batch system's time limit) ended the process with 143 and no
 message, without the cleanup Ctrl-C gets (the FMU's extraction folder was left).
 """

@@ -7,7 +7,7 @@ below the Cramer-Rao bound; the degrees of freedom are Satterthwaite's, within 1
 ``n - p``; the profile re-fit is a chord Gauss-Newton iteration of at most
 ``CHORD_STEPS + 1`` simulations that stops when a step gains less than 1 % of the
 threshold, its Jacobian corrected by each step's secant and re-linearised to check a
-bracket's outer end. They kill the open mutants of docs/mutation-survivors.md in those files.
+bracket's outer end. They kill the open mutants of docs/dev/mutation-survivors.md in those files.
 """
 
 from __future__ import annotations
@@ -274,7 +274,7 @@ def test_a_failed_simulation_in_the_profile_has_no_residuals():
     assert r is None and cost == pytest.approx(problem.cost0, rel=1e-12)
 
 
-# -- thresholds met exactly (equivalent verdicts of docs/mutation-survivors.md re-checked:
+# -- thresholds met exactly (equivalent verdicts of docs/dev/mutation-survivors.md re-checked:
 # each boundary can be built exactly, so each strict or non-strict rule is pinned)
 
 

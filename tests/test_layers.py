@@ -1,4 +1,4 @@
-"""The layers of docs/architecture.md point one way (issue 26): the result sits below
+"""The layers of docs/explanation/architecture.md point one way (issue 26): the result sits below
 the reports, which read it; the result reaches its notebook view and figures through
 what the reports register, never by importing them."""
 

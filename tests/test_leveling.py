@@ -173,7 +173,7 @@ def test_minor_contributors_keep_their_levels_when_selective():
 
 
 # -- every case's reason and the iteration's message, word for word ----------------------
-# (killed mutants of docs/mutation-survivors.md: the reason is what a person checks the
+# (killed mutants of docs/dev/mutation-survivors.md: the reason is what a person checks the
 # written levels against, so its level numbers, direction and case must be right)
 
 SELECTIVE = LevelingOptions(selective=True)

@@ -158,7 +158,7 @@ def test_each_parameter_profile_carries_its_own_inflation():
         assert 0.5 * (high - low) / wald == pytest.approx(1.06, abs=0.07), name
 
 
-# -- the AR pieces against closed forms (killed mutants of docs/mutation-survivors.md) ---
+# -- the AR pieces against closed forms (killed mutants of docs/dev/mutation-survivors.md) ---
 
 
 def _ar_gamma(phi: list[float], innovation: float, lags: int) -> np.ndarray:
@@ -268,7 +268,7 @@ def test_the_variance_of_several_series_is_their_sum():
     assert np.all(parts[0] > 0) and np.all(parts[1] > 0)
 
 
-# -- more closed forms (killed mutants of docs/mutation-survivors.md) ---------------------
+# -- more closed forms (killed mutants of docs/dev/mutation-survivors.md) ---------------------
 
 
 def test_autocovariances_of_small_or_negatively_correlated_processes():

@@ -230,7 +230,7 @@ def test_a_flat_small_rotated_factor_beside_a_mover_is_done_and_no_finite_sn_is_
 
 
 # -- kept rotated directions, names, log limits, zero widths, no centre (killed mutants of
-# docs/mutation-survivors.md)
+# docs/dev/mutation-survivors.md)
 
 
 def test_kept_directions_are_rescaled_to_the_new_centre_and_stay_unit_vectors():

@@ -1,11 +1,16 @@
-"""README's "Using it" and "Reports" snippets are taken from files and commands that run.
+"""The snippets of the README and the docs are taken from files and commands that run.
 
-* every command of the bash block parses with ``tsid``'s own parser (placeholders
-  ``STUDY.toml`` and ``DIR`` stand for the SISO example and a temporary folder), and
-  those that name only shipped files run, in a temporary folder;
-* the Python block runs as written (slow: one SISO study);
-* every line of the TOML block is a line of ``examples/lsea_siso/study.toml``, in order
-  (that study is run by ``tests/test_examples.py``).
+* every command of the bash block of ``docs/reference/cli.md`` parses with ``tsid``'s own
+  parser (placeholders ``STUDY.toml`` and ``DIR`` stand for the SISO example and a
+  temporary folder), and those that name only shipped files run, in a temporary folder;
+  the README's own ``tsid`` commands parse too;
+* the Python block of ``docs/reference/python.md`` runs as written (slow: one SISO
+  study), and the README's Python block is made of its lines, in order;
+* every line of the TOML block of ``docs/tutorial/first-identification.md`` is a line of
+  ``examples/lsea_siso/study.toml``, in order (that study is run by
+  ``tests/test_examples.py``);
+* every path the README and the docs name in backticks is in the repository, and every
+  relative link of theirs leads to a file that exists.
 """
 
 from __future__ import annotations
@@ -21,27 +26,32 @@ from tsid_fmu.cli import main, make_parser
 
 REPO = Path(__file__).resolve().parents[1]
 README = (REPO / "README.md").read_text(encoding="utf-8")
+DOCS = REPO / "docs"
+CLI_PAGE = DOCS / "reference" / "cli.md"
+PYTHON_PAGE = DOCS / "reference" / "python.md"
+TUTORIAL = DOCS / "tutorial" / "first-identification.md"
 
 
-def _section(title: str) -> str:
-    start = README.index(f"## {title}\n")
-    end = README.find("\n## ", start + 1)
-    return README[start : end if end > 0 else None]
+def _text(page: Path) -> str:
+    return page.read_text(encoding="utf-8")
 
 
-def _blocks(lang: str) -> list[str]:
-    text = _section("Using it") + _section("Reports")
+def _blocks(lang: str, text: str) -> list[str]:
     return re.findall(rf"```{lang}\n(.*?)```", text, flags=re.S)
 
 
-def _commands() -> list[list[str]]:
-    (block,) = _blocks("bash")
+def _command_lines(block: str) -> list[list[str]]:
     out = []
     for line in block.splitlines():
         command = line.split("  #")[0].strip()
         if command:
             out.append(shlex.split(command))
     return out
+
+
+def _commands() -> list[list[str]]:
+    (block,) = _blocks("bash", _text(CLI_PAGE))
+    return _command_lines(block)
 
 
 @pytest.fixture
@@ -68,6 +78,39 @@ def test_every_command_parses():
         parser.parse_args(_fill(argv[1:]))
 
 
+def test_the_readmes_tsid_commands_parse():
+    parser = make_parser()
+    commands = [
+        argv
+        for block in _blocks("bash", README)
+        for argv in _command_lines(block)
+        if argv[0] == "tsid"
+    ]
+    assert len(commands) >= 3
+    for argv in commands:
+        parser.parse_args(_fill(argv[1:]))
+
+
+def test_every_tsid_command_of_the_docs_parses():
+    parser = make_parser()
+    commands = [
+        (page, argv)
+        for page in sorted(DOCS.rglob("*.md"))
+        for block in _blocks("bash", _text(page))
+        for argv in _command_lines(
+            "\n".join(x for x in block.splitlines() if x.startswith("tsid "))
+        )
+    ]
+    assert len(commands) >= 20
+    for page, argv in commands:
+        if argv[1:] == ["--version"]:
+            continue
+        try:
+            parser.parse_args(_fill(argv[1:]))
+        except SystemExit as error:  # argparse's way of refusing
+            raise AssertionError((page.relative_to(REPO), argv)) from error
+
+
 def test_commands_on_shipped_files_run(workdir, capsys):
     ran = 0
     for argv in _commands():
@@ -88,35 +131,65 @@ def test_commands_on_shipped_files_run(workdir, capsys):
 
 
 def test_toml_snippet_is_taken_from_the_siso_study():
-    (block,) = _blocks("toml")
+    (block,) = _blocks("toml", _text(TUTORIAL))
     source = (REPO / "examples" / "lsea_siso" / "study.toml").read_text().splitlines()
     position = 0
     for line in block.splitlines():
         if not line.strip():
             continue
-        assert line in source[position:], f"README line not in the SISO study: {line!r}"
+        assert line in source[position:], f"tutorial line not in the SISO study: {line!r}"
         position = source.index(line, position) + 1
 
 
 @pytest.mark.slow
 def test_python_snippet_runs(workdir):
-    (block,) = _blocks("python")
+    (block,) = _blocks("python", _text(PYTHON_PAGE))
     namespace: dict = {}
-    exec(compile(block, "README.md", "exec"), namespace)
+    exec(compile(block, str(PYTHON_PAGE.relative_to(REPO)), "exec"), namespace)
     res = namespace["res"]
     assert res.success and (workdir / "results" / "siso" / "report.html").is_file()
     assert len(namespace["figures"]) == 4
     assert os.path.basename(str(res.study.fmu)) == "LSEA_SISO.fmu"
 
 
+def test_the_readmes_python_block_is_made_of_the_python_pages_lines():
+    (short,) = _blocks("python", README)
+    (full,) = _blocks("python", _text(PYTHON_PAGE))
+    source = full.splitlines()
+    position = 0
+    for line in short.splitlines():
+        if not line.strip():
+            continue
+        assert line in source[position:], f"README line not in {PYTHON_PAGE.name}: {line!r}"
+        position = source.index(line, position) + 1
+
+
+def _pages() -> list[Path]:
+    return [REPO / "README.md", *sorted(DOCS.rglob("*.md"))]
+
+
 def test_every_path_the_readme_names_is_in_the_repository():
     # issue 26: it cited ../shared/seeds/, which a user of the package does not have
     text = (REPO / "README.md").read_text(encoding="utf-8")
     assert not re.findall(r"`\.\./[^`]*`|\]\(\.\./", text)
-    for path in re.findall(
-        r"`((?:examples|fmus|models|benchmarks|docs|tests|tsid_fmu)/[^`\s]*)`", text
-    ):
-        clean = path.split("::")[0].rstrip(".,:;)")
-        if "*" in clean or "{" in clean or "NN" in clean:
-            continue
-        assert (REPO / clean).exists(), path
+    for page in _pages():
+        text = _text(page)
+        for path in re.findall(
+            r"`((?:examples|fmus|models|benchmarks|docs|tests|tsid_fmu)/[^`\s]*)`", text
+        ):
+            clean = path.split("::")[0].rstrip(".,:;)")
+            if any(mark in clean for mark in ("*", "{", "NN", "<")):
+                continue  # a pattern or a placeholder
+            if clean.startswith("benchmarks/.cache/"):
+                continue  # what a benchmark writes (git ignores it)
+            assert (REPO / clean).exists(), (page.relative_to(REPO), path)
+
+
+def test_every_relative_link_of_the_readme_and_the_docs_leads_to_a_file():
+    for page in _pages():
+        for target in re.findall(r"\]\(([^)\s]+)\)", _text(page)):
+            if re.match(r"[a-z]+:", target) or target.startswith("#"):
+                continue
+            path = (page.parent / target.split("#")[0]).resolve()
+            assert path.exists(), (page.relative_to(REPO), target)
+            assert REPO in path.parents or path == REPO, (page.relative_to(REPO), target)

@@ -281,7 +281,7 @@ def test_a_stage_that_converges_on_its_last_allowed_iteration_converges():
 
 
 # -- the hand-over, the hand-back and a continued stage (search/taguchi.py) ---------------
-# Killed mutants of docs/mutation-survivors.md: each boundary is met exactly (costs are
+# Killed mutants of docs/dev/mutation-survivors.md: each boundary is met exactly (costs are
 # binary fractions), and each message is pinned whole (it is what the trail and the
 # report show as the reason the stage ended).
 

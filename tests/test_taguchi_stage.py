@@ -3,7 +3,7 @@
 A stage re-runs from the next-best run when two iterations did not lower the cost (at
 most ``max_reruns`` times, counted over a continued stage too), hands over to the
 refinement once, scores its start points first and reads a continued stage back from
-its records. These tests kill the mutants docs/mutation-survivors.md listed as open in
+its records. These tests kill the mutants docs/dev/mutation-survivors.md listed as open in
 ``taguchi_stage``, ``_decide``, ``_start_cost``, ``_resume_point``,
 ``_evaluate_starts``, ``_next_best`` and ``_decide_rerun``.
 """

@@ -95,7 +95,7 @@ def test_an_iteration_with_a_failed_run_round_trips_through_strict_json():
 
 
 # -- what a stage reports, and a stage continued after a pause (killed mutants of
-# docs/mutation-survivors.md: the progress events, the recorder, the start points and
+# docs/dev/mutation-survivors.md: the progress events, the recorder, the start points and
 # the resume were reached by no fast test)
 
 

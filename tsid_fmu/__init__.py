@@ -1,6 +1,6 @@
 """tsid-fmu: Taguchi-method identification of FMU parameters from measured data.
 
-The flat public API, over the layers of the data flow (see ``docs/architecture.md``):
+The flat public API, over the layers of the data flow (see ``docs/explanation/architecture.md``):
 
 - :func:`simulate`: one FMU simulation against a DataFrame of inputs;
 - :func:`identify`: a whole study, returning an :class:`IdentificationResult`;

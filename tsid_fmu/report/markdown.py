@@ -194,7 +194,8 @@ def _fidelity(result: IdentificationResult) -> list[str]:
         "## Solver fidelity",
         "",
         f"The study's solver against a reference solution; a difference above "
-        f"{record['threshold']:g} x an output's noise matters (see docs/troubleshooting.md).",
+        f"{record['threshold']:g} x an output's noise matters "
+        "(see docs/how-to/troubleshooting.md).",
         "",
         f"- Interface: {record['requested']!r} requested, "
         f"**{names.get(record['interface'], record['interface'])}** used",

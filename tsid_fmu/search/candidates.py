@@ -17,7 +17,7 @@ shares. So:
   study of its own too; where the choice is a poor fit, the richest structure without
   one (:func:`next_own_study`); the comparison is made again.
 
-Measured on the SISO friction laws (``benchmarks/structure.py``, ``docs/structure-
+Measured on the SISO friction laws (``benchmarks/structure.py``, ``docs/dev/structure-
 diagnosis.md``): law 3 refined from law 1's answer (whose spring damping absorbs the
 viscous friction law 1 lacks) stopped at 5 to 7 times its optimum's cost; law 3's own
 study from the richest-first order crawled at 3e11 on law-1 data, where law 1's own

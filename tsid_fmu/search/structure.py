@@ -61,7 +61,7 @@ its optimum. Far from the fit a discrete factor's levels' means measure how each
 structure tolerates the Real parameters' wrong levels, not which structure fits
 (measured on the SISO friction laws: the law was fixed at 1e7 to 2e8 times the optimum's
 cost, the wrong one on two of three data sets, after 8 to 10 iterations of 27 runs;
-``docs/structure-diagnosis.md``). Every candidate is refined to its own optimum after
+``docs/dev/structure-diagnosis.md``). Every candidate is refined to its own optimum after
 them (:mod:`tsid_fmu.search.structures`), so iterations beyond the first few only cost
 simulations."""
 
