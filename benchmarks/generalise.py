@@ -312,11 +312,8 @@ def coverage(res, truth: dict[str, float]) -> dict:
     verdict = u.discrepancy.verdict if u is not None else "none"
     # exit status 1 says the answer is not shown to be an optimum, and warns that its
     # intervals may not hold: that flags them too
-    return {
-        "inside": inside,
-        "verdict": verdict,
-        "flagged": verdict != "consistent" or int(res.status) != 0,
-    }
+    flagged = verdict != "consistent" or int(res.status) != 0
+    return {"inside": inside, "reach": reach, "verdict": verdict, "flagged": flagged}
 
 
 def run_problem(family: str, index: int, seeds: str, de: bool) -> list[dict]:
