@@ -69,6 +69,7 @@ def test_find_models():
     ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("version", [2, 3])
 @pytest.mark.parametrize(
     "name", ["LSEA_SISO", "LSEA_MISO", "LSEA_SISO_Friction", "LSEA_MISO_OneMass"]
@@ -97,6 +98,7 @@ def _square(t: np.ndarray) -> dict:
     return {"input": input_signal(t, F_m=F)}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("version", [2, 3])
 def test_friction_switch_is_an_integer_parameter_and_law_2_is_lsea_siso(rebuilt, version):
     """``parameter Integer friction``: an FMI Integer (Int32) parameter that switches the law.
@@ -136,6 +138,7 @@ def test_friction_switch_is_an_integer_parameter_and_law_2_is_lsea_siso(rebuilt,
         assert np.max(np.abs(off - run(friction=law))) > 1.0  # B_s = 2.5 acts when on
 
 
+@pytest.mark.slow
 def test_build_is_byte_reproducible_and_selects_versions(rebuilt, tmp_path):
     args = ["--models-dir", str(MODELS), "--out", str(tmp_path), "--fmi-version", "3"]
     assert main([*args, "LSEA_SISO"]) == 0
@@ -144,6 +147,7 @@ def test_build_is_byte_reproducible_and_selects_versions(rebuilt, tmp_path):
     assert again.read_bytes() == (rebuilt / "fmi3" / "LSEA_SISO.fmu").read_bytes()
 
 
+@pytest.mark.slow
 def test_model_description_from_declarations(rebuilt):
     md = read_model_description(str(rebuilt / "LSEA_SISO.fmu"))
     v = {x.name: x for x in md.modelVariables}
@@ -164,6 +168,7 @@ def test_model_description_from_declarations(rebuilt):
     assert deps == ["a_o", "v", "v_o", "x", "x_o"]
 
 
+@pytest.mark.slow
 def test_fmi3_model_description(rebuilt):
     import zipfile
 

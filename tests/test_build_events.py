@@ -133,6 +133,7 @@ def test_if_expression_becomes_event_indicator_and_me_locates_switches(tmp_path,
     assert np.max(np.abs(cs["y"] - exact)) < 1e-6
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("version", [2, 3])
 @pytest.mark.parametrize("inside", ["abs(x - 0.55) <= w", "(x - 0.55)^2 <= w^2"])
 def test_cs_locates_a_switch_that_flips_back_within_one_internal_step(tmp_path, version, inside):

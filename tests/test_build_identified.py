@@ -39,6 +39,7 @@ def _starts(path: Path) -> dict[str, float]:
     return {v.name: float(v.start) for v in md.modelVariables if v.causality == "parameter"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("fmu", "values", "inputs"),
     [

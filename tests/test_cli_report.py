@@ -88,6 +88,7 @@ def _identify_one_iteration(study: Path, tmp_path: Path) -> dict:
     return json.loads((out / "result.json").read_text())
 
 
+@pytest.mark.slow
 def test_init_siso_round_trip(tmp_path, capsys):
     study = tmp_path / "s" / "study.toml"
     assert main(["init", str(REPO / "fmus" / "LSEA_SISO.fmu"),
@@ -106,6 +107,7 @@ def test_init_siso_round_trip(tmp_path, capsys):
     assert set(res["x"]) == {"F_cm", "F_vm", "M_m", "K_s", "B_s"}  # V_z: a numerical setting
 
 
+@pytest.mark.slow
 def test_init_miso_needs_the_derived_channels_and_then_runs(tmp_path, capsys):
     study = tmp_path / "study.toml"
     fmu, data = REPO / "fmus" / "LSEA_MISO.fmu", MISO / "force_only.csv"
@@ -140,6 +142,7 @@ def test_init_pythonfmu_round_trip_matches_columns_case_insensitively(tmp_path):
     assert set(res["x"]) == {"tau"}
 
 
+@pytest.mark.slow
 def test_identify_headline_agrees_with_the_exit_status(tmp_path, capsys):
     study = tmp_path / "study.toml"
     main(["init", str(REPO / "fmus" / "LSEA_SISO.fmu"), str(SISO / "measured.csv"),

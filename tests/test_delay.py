@@ -69,6 +69,7 @@ def delayed_data(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_a_sub_sample_input_delay_is_identified(lag, delayed_data):
     study = Study(
         fmu=lag,

@@ -35,6 +35,7 @@ def make_study(lag, **kw):
     )
 
 
+@pytest.mark.slow
 def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
     out = tmp_path / "out"
     res = identify(make_study(lag), out, plots=True)
@@ -67,6 +68,7 @@ def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
     assert "(noise, estimated from the data: " in (out / "report.md").read_text()
 
 
+@pytest.mark.slow
 def test_failed_rows_are_reported_and_do_not_stop_the_study(lag, tmp_path):
     # tau = 0 makes the FMU return fmi2Error for every row that uses it
     res = identify(make_study(lag, tau_levels=[0.0, 0.4, 1.0]), tmp_path / "o", plots=False)
@@ -80,6 +82,7 @@ def test_failed_rows_are_reported_and_do_not_stop_the_study(lag, tmp_path):
     assert "## Failed runs (3," in report and "| 1 |" in report
 
 
+@pytest.mark.slow
 def test_pause_edit_resume_matches_uninterrupted(lag, tmp_path):
     full = identify(make_study(lag), tmp_path / "full", plots=False)
     out = tmp_path / "paused"
@@ -98,6 +101,7 @@ def test_pause_edit_resume_matches_uninterrupted(lag, tmp_path):
     assert drawn.nfev == full.nfev
 
 
+@pytest.mark.slow
 def test_a_person_can_edit_the_next_levels(lag, tmp_path):
     out = tmp_path / "edit"
     identify(make_study(lag), out, pause_after=1, plots=False)

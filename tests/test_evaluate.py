@@ -193,6 +193,7 @@ def _assert_same(got, expected):
             np.testing.assert_array_equal(a.outputs, b.outputs)
 
 
+@pytest.mark.slow
 def test_results_and_counters_do_not_depend_on_the_number_of_workers(spec, serial_batches):
     expected, _, expected_nfev = serial_batches
     assert [e.nfev for e in expected] == [9 * 4, 4 + 1, 4]
@@ -236,6 +237,7 @@ def test_a_worker_killed_between_batches_fails_no_set(spec, serial_batches):
     np.testing.assert_array_equal(got.costs, serial_batches[0][0].costs[2:])
 
 
+@pytest.mark.slow
 def test_dask_gives_the_same_results_and_counters(spec, serial_batches):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(
@@ -263,6 +265,7 @@ def test_time_limit_rule():
             TimeLimit(bad)
 
 
+@pytest.mark.slow
 def test_worker_processes_stop_a_hanging_fmu_by_default(lag_crash_fmus, monkeypatch):
     crash_spec = make_spec(
         lag_crash_fmus["crash"],

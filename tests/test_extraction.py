@@ -127,6 +127,7 @@ report.write_text(
 """
 
 
+@pytest.mark.slow
 def test_folders_go_at_exit_and_a_forked_child_leaves_the_parents(lag, tmp_path):
     """The creating process removes its folders at exit; a forked child only its own."""
     tmp = tmp_path / "tmp"

@@ -108,6 +108,7 @@ def test_failing_step_names_call_step_and_time(fmus, grid, kind, backend, monkey
         )
 
 
+@pytest.mark.slow
 def test_fallback_without_numba_gives_identical_output(fmus, grid, tmp_path):
     """Numba absent (import blocked): the Python loop runs, with the same result."""
     t, u = grid

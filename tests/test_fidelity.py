@@ -57,6 +57,7 @@ def vdp_study(vdp, fmu="both", **kw):
     )
 
 
+@pytest.mark.slow
 def test_cs_study_warns_of_solver_error_and_names_the_fix(vdp, tmp_path):
     events = []
     res = identify(
@@ -98,6 +99,7 @@ def test_cs_study_warns_of_solver_error_and_names_the_fix(vdp, tmp_path):
     assert "**These intervals assume that the model explains the data" in report
 
 
+@pytest.mark.slow
 def test_auto_switches_to_model_exchange_and_finds_mu(vdp, tmp_path):
     out = tmp_path / "out"
     res = identify(vdp_study(vdp), out, plots=False)  # interface "auto" by default

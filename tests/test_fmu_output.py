@@ -37,6 +37,7 @@ def study(tmp_path_factory) -> Path:
     return d / "study.toml"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", [["--workers", "1"], ["--workers", "1", "--timeout", "0"]])
 def test_json_on_stdout_parses_whatever_the_fmu_prints(study, tmp_path, where):
     cmd = [sys.executable, "-m", "tsid_fmu", "identify", str(study), "--out",

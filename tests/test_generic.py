@@ -10,6 +10,9 @@ from tsid_fmu.build import build_fmu
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.study import Experiment, Parameter, Study
 
+# both tests identify a study end to end
+pytestmark = pytest.mark.slow
+
 SECOND_ORDER = """
 model SecondOrder "Plain second-order system, written only in a test"
   parameter Real zeta = 0.5 "Damping ratio";

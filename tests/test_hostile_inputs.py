@@ -160,6 +160,7 @@ def test_a_real_header_is_still_listed(tmp_path):
 # ------------------------------------------------ 3. devices, pipes, endless lines
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("device", ["/dev/zero", "/dev/urandom", "fifo"])
 def test_a_device_or_pipe_as_data_is_refused_at_once(lag, tmp_path, device):
     import os
@@ -260,6 +261,7 @@ def test_a_byte_order_mark_is_not_part_of_the_header(lag, tmp_path, capsys):
 # ------------------------------------------------ 10. the machine's fault, not the FMU's
 
 
+@pytest.mark.slow
 def test_a_file_size_limit_while_extracting_is_an_environment_error(lag, tmp_path):
     import os
     import resource
@@ -345,6 +347,7 @@ def test_levels_about_extreme_logs_give_no_numpy_warnings():
     assert len(levels) == 3 and all(np.isfinite(levels))
 
 
+@pytest.mark.slow
 def test_files_tsid_did_not_write_in_the_trail_are_warned_about(lag, tmp_path, capsys):
     (tmp_path / "study.toml").write_text(study_text(lag, iterations=3))
     out = tmp_path / "out"
@@ -379,6 +382,7 @@ def test_a_huge_integer_cell_in_the_data_is_located_not_a_crash(lag, tmp_path, c
         load_data(tmp_path / "d.csv")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("device", ["/dev/zero", "fifo"])
 def test_a_device_or_pipe_as_study_file_is_refused_at_once(tmp_path, device):
     import os

@@ -171,6 +171,7 @@ def test_counts_below_1_are_refused_by_the_command_line(tmp_path, capsys, option
     assert re.search(rf"{option[-2]}: .*must be at least 1", capsys.readouterr().err)
 
 
+@pytest.mark.slow
 def test_continue_from_a_run_the_iteration_does_not_have_is_bad_input(tmp_path, capsys):
     out = tmp_path / "o"
     args = ["identify", str(SISO), "--out", str(out), "--workers", "1", "-q", "--no-plots"]

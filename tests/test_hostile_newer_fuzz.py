@@ -114,6 +114,7 @@ def test_the_template_itself_loads(folder):
     assert isinstance(study, Study) and len(study.choices) == 4
 
 
+@pytest.mark.slow
 @settings(
     max_examples=300,
     deadline=None,

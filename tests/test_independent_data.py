@@ -82,6 +82,7 @@ def test_siso_data_show_stick_slip():
     assert np.abs(v_m).max() > 100 * SISO_GEN.V_Z
 
 
+@pytest.mark.slow
 def test_siso_independent_solution_agrees_with_the_fmu():
     problem = siso.siso(encoder=True)
     data = problem.experiments[0].data
@@ -126,6 +127,7 @@ def test_siso_cs_at_default_step_matches_independent_solution(fmu):
     assert rms_f < 0.05, rms_f  # measured: 3e-7
 
 
+@pytest.mark.slow
 def test_miso_generator_is_deterministic_and_logs_position_only(miso_frames):
     assert list(miso_frames) == ["force_only", "motion_only", "combined"]
     again = MISO_GEN.make_data(7)
@@ -152,6 +154,7 @@ def test_miso_stage_starts_from_rest_and_is_smooth():
     np.testing.assert_allclose(np.gradient(v_o, dt)[1:-1], a_o[1:-1], atol=1e-3)
 
 
+@pytest.mark.slow
 def test_miso_force_only_agrees_with_the_fmu(miso_frames):
     t = MISO_GEN.sample_times()
     f_m, stage = MISO_GEN.experiment_inputs("force_only", t)
@@ -170,6 +173,7 @@ def test_miso_force_only_agrees_with_the_fmu(miso_frames):
     assert rms < 0.2
 
 
+@pytest.mark.slow
 def test_problem_structures():
     p = siso.siso(encoder=False)
     assert "x_m" not in p.experiments[0].data.columns and p.noise.keys() == {"F_o"}
@@ -232,6 +236,7 @@ def test_dc_motor_fmu_is_the_model_and_misses_the_rig(tmp_path, monkeypatch):
         assert miss > DC_AT_TRUTH[name], (name, miss)
 
 
+@pytest.mark.slow
 def test_dc_motor_rig_data_stay_above_the_noise_after_the_best_fit():
     t = base.sample_times(dc_motor.DURATION)
     found, left = dc_motor.best_fit(t, dc_motor.voltage(t))
@@ -260,6 +265,7 @@ def test_resonance_fmu_is_the_model_and_misses_the_rig(tmp_path, monkeypatch):
     assert miss > RESONANCE_AT_TRUTH, miss
 
 
+@pytest.mark.slow
 def test_resonance_rig_data_stay_above_the_noise_after_the_best_fit():
     t = base.sample_times()
     found, left = local_minima.best_fit(t, local_minima.input_signal(t))

@@ -44,6 +44,7 @@ def study(fmu, data, **experiment) -> Study:
     )
 
 
+@pytest.mark.slow
 def test_a_state_set_from_the_first_sample_gives_the_truth(lag_fmu, tmp_path):
     data = record(tmp_path / "d.csv")
     first = float(pd.read_csv(data)["y"].iloc[0])

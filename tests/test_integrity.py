@@ -229,6 +229,7 @@ TAMPER = [
 ]  # fmt: skip
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "damage", "message"), TAMPER, ids=[t[0] for t in TAMPER])
 def test_a_damaged_or_changed_trail_file_is_named_on_resume(
     folder, tmp_path, capsys, name, damage, message
@@ -264,6 +265,7 @@ def test_an_edited_stage_record_is_named(folder, done):
             path.parent.rmdir()
 
 
+@pytest.mark.slow
 def test_a_person_may_still_edit_next_levels(folder, tmp_path, capsys):
     out = tmp_path / "out"
     assert identify(folder / "a.toml", out, "--pause-after", "1") == 3
@@ -329,6 +331,7 @@ def _single_error(proc: subprocess.CompletedProcess) -> str:
     return proc.stderr
 
 
+@pytest.mark.slow
 def test_each_exit_status_from_a_real_cli_run(folder, tmp_path):
     env = _env(tmp_path / "tmp")
     a = folder / "a.toml"
@@ -410,6 +413,7 @@ def _read_only(out: Path) -> Iterator[str]:
     pytest.skip("as root no folder could be made unwritable; tried " + "; ".join(tried))
 
 
+@pytest.mark.slow
 def test_a_read_only_folder_is_exit_4(folder, tmp_path):
     out = tmp_path / "ro"
     out.mkdir()
@@ -418,6 +422,7 @@ def test_a_read_only_folder_is_exit_4(folder, tmp_path):
     assert proc.returncode == 4 and str(out) in _single_error(proc)
 
 
+@pytest.mark.slow
 def test_two_processes_on_one_folder_and_an_interrupt(folder, tmp_path):
     out, env = tmp_path / "out", _env(tmp_path / "tmp")
     cmd = [sys.executable, "-m", "tsid_fmu", "identify", str(folder / "slow.toml"),

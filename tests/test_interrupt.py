@@ -29,6 +29,9 @@ TIMEOUT = 120.0
 
 STUDY = LAG_TOML
 
+# every test runs a whole study on the CLI and interrupts it
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> Path:

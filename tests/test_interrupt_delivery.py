@@ -97,6 +97,7 @@ sys.exit(1)
 """
 
 
+@pytest.mark.slow
 def test_an_interrupt_inside_exec_text_leaves_the_exit_status_alone(tmp_path):
     # run with -m, as ``python -m tsid_fmu``: there CPython turns the mark into -2
     (tmp_path / "tsid_test_exec.py").write_text(textwrap.dedent(SCRIPT))

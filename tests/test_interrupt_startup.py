@@ -31,6 +31,9 @@ if __name__ == '__main__':
     sys.exit(main())
 """  # what pip writes as the ``tsid`` console script
 
+# every test starts ``tsid`` in a fresh interpreter and interrupts it
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> Path:

@@ -122,6 +122,7 @@ def test_a_check_past_the_time_limit_says_so_and_the_result_is_written(crashy, t
     assert answer in res.warnings and saved["x"] == res.params
 
 
+@pytest.mark.slow
 def test_a_crashed_row_is_retried_once_in_a_fresh_worker(crashy):
     """A worker killed in the middle of a set (a crash not due to the parameters): the set
     runs again in a fresh worker, succeeds, and the first attempt is noted."""

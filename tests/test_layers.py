@@ -8,6 +8,7 @@ import ast
 import subprocess
 import sys
 
+import pytest
 from test_structure import MODULES, _imports
 
 import tsid_fmu
@@ -41,6 +42,7 @@ def test_the_reports_register_the_views_of_a_result():
     }
 
 
+@pytest.mark.slow
 def test_importing_the_result_alone_registers_the_views():
     code = (
         "from tsid_fmu.result import IdentificationResult as R\n"

@@ -178,6 +178,7 @@ def test_missing_dask_is_a_clear_error(lag_spec, monkeypatch):
         make_evaluator(lag_spec, scheduler="tcp://127.0.0.1:1")
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_the_same_costs(lag_spec, serial, tmp_path):
     distributed = pytest.importorskip("distributed")
     expected, clean = serial
@@ -194,6 +195,7 @@ def test_dask_local_cluster_gives_the_same_costs(lag_spec, serial, tmp_path):
     np.testing.assert_array_equal(sim[0].outputs, clean[0].outputs)
 
 
+@pytest.mark.slow
 def test_script_without_main_guard_can_run_workers(lag_crash_fmus, tmp_path):
     """Workers do not re-run the user's script (no ``if __name__ == "__main__"`` needed)."""
     import subprocess
@@ -220,6 +222,7 @@ def test_script_without_main_guard_can_run_workers(lag_crash_fmus, tmp_path):
     assert proc.stdout.count("COST") == 1
 
 
+@pytest.mark.slow
 def test_dask_isolates_crashes_and_hangs(crash_spec):
     distributed = pytest.importorskip("distributed")
     sets = [{"gain": 1.0}, {"gain": 25.0}, {"gain": 35.0}, {"gain": 2.0}]

@@ -93,6 +93,7 @@ def joint_optimum(s: Study, start: dict[str, float]) -> float:
     return float(np.sum(fit.fun**2))
 
 
+@pytest.mark.slow
 def test_each_experiment_gets_its_own_initial_position(lag_fmu, records, tmp_path):
     s = study(lag_fmu, records, per_experiment())
     assert s.parameter_names == ["tau", "x0[a]", "x0[b]"]
@@ -119,6 +120,7 @@ def test_each_experiment_gets_its_own_initial_position(lag_fmu, records, tmp_pat
     assert set(saved["x"]) >= {"x0[a]", "x0[b]"}
 
 
+@pytest.mark.slow
 def test_one_shared_initial_position_cannot_fit_both(lag_fmu, records):
     own = identify(study(lag_fmu, records, per_experiment()), plots=False, workers=1)
     shared = identify(

@@ -92,6 +92,7 @@ notice.close()
 """
 
 
+@pytest.mark.slow
 def test_a_first_numba_compile_is_announced_and_a_cached_load_is_not(tmp_path):
     pytest.importorskip("numba")
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(REPO)}

@@ -209,6 +209,7 @@ def _cs_interpolated(path: Path, times: np.ndarray, u: np.ndarray) -> np.ndarray
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("version", [2, 3])
 def test_miso_me_and_cs_match_reference(version):
     path = fmu_path("LSEA_MISO", version)

@@ -128,6 +128,7 @@ def test_example_report_html_renders_offline_with_the_taguchi_tables(example, br
     _no_sideways_scroll(report, browser)
 
 
+@pytest.mark.slow
 def test_report_html_fits_a_phone_and_a_desktop_window(browser, tmp_path):
     study = lag_study(tmp_path, name="a-study-name-long-enough-to-need-wrapping-on-a-phone",
                       max_iterations=2, replicates=1)  # fmt: skip

@@ -107,6 +107,7 @@ def test_numbers_are_rounded_alike():
     assert nice_ticks(-85.45, -85.41, 4)[0] >= -85.45
 
 
+@pytest.mark.slow
 def test_report_html_lists_failed_runs_and_diagnostics(tmp_path):
     d = tmp_path
     fmu = build_c_fmu(d)
@@ -131,6 +132,7 @@ def test_report_html_lists_failed_runs_and_diagnostics(tmp_path):
     assert "Response table for S/N ratios" in html and "ANOVA of S/N" in html
 
 
+@pytest.mark.slow
 def test_a_paused_study_is_drawn_for_review_and_resume_reuses_the_figures(result, tmp_path):
     study = result.study
     out = tmp_path / "paused"

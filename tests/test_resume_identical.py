@@ -28,6 +28,9 @@ from tsid_fmu.trail.levels import read_next_levels
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = LAG_TOML
 
+# every test pauses, resumes or reruns a whole study
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> Path:

@@ -339,6 +339,7 @@ def _only_own_errors(call, *args, **kwargs) -> None:
         pass
 
 
+@pytest.mark.slow
 @_FUZZ
 @given(doc=mutated_studies())
 def test_fuzz_study_documents(fuzz_dir, doc):
@@ -389,6 +390,7 @@ def numeric_tables(draw) -> str:
     return "\n".join(rows) + "\n"
 
 
+@pytest.mark.slow
 @_FUZZ
 @given(table=numeric_tables())
 def test_fuzz_numeric_tables(fuzz_dir, table):

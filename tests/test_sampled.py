@@ -116,6 +116,7 @@ def _line_fit(seed: int) -> tuple[LineEvaluator, Space, dict[str, float], np.nda
     return LineEvaluator(y), space, {"a": coef[0], "b": coef[1]}, half
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["bootstrap", "monte_carlo"])
 def test_percentile_intervals_of_a_linear_model_are_the_textbook_ones(kind):
     ratios, centres = [], []

@@ -81,6 +81,7 @@ def test_5000_simulations_in_one_session_stay_flat(lag):
     assert last / first < 3.0, f"time per simulation grew from {first:.2e} s to {last:.2e} s"
 
 
+@pytest.mark.slow
 def test_many_sessions_opened_and_closed_leave_nothing_behind(lag, tmp_path, monkeypatch):
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     t = np.linspace(0.0, 0.1, 11)

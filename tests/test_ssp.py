@@ -87,6 +87,7 @@ def _identified(result) -> dict[str, float]:
     return {**result.params, **result.study.start_values}
 
 
+@pytest.mark.slow
 def test_siso_model_ssp_simulates_like_tsid(tmp_path):
     study = load_study(EXAMPLES / "lsea_siso" / "study.toml")
     data = pd.read_csv(EXAMPLES / "lsea_siso" / "measured.csv").iloc[:1001]
@@ -115,6 +116,7 @@ def test_siso_model_ssp_simulates_like_tsid(tmp_path):
     assert np.max(np.abs(default["F_o"].to_numpy()[:-1] - ours)) > 1e-3 * scale
 
 
+@pytest.mark.slow
 def test_miso_model_ssp_simulates_like_tsid(tmp_path):
     study = load_study(EXAMPLES / "lsea_miso" / "study.toml")
     raw = pd.read_csv(EXAMPLES / "lsea_miso" / "combined.csv").iloc[:801]

@@ -38,6 +38,7 @@ def _bench():
     return bench
 
 
+@pytest.mark.slow
 def test_the_start_point_names_the_study_fmu_among_the_files():
     """The solver check at the start simulates one set: it must name a variant.
 

@@ -65,6 +65,7 @@ def test_the_committed_page_is_the_generated_one():
     )
 
 
+@pytest.mark.slow
 def test_the_command_prints_the_page_and_finds_every_key_documented():
     proc = subprocess.run(
         [sys.executable, "-m", "tsid_fmu.study.reference"],

@@ -154,6 +154,7 @@ def studies(draw, folder: Path):
     )
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.data())
 def test_a_study_reads_back_equal_from_its_toml(data):

@@ -11,10 +11,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from spec_helpers import lag_frame
 
 import tsid_fmu
 from tsid_fmu import Experiment, Method, Parameter, Study
+
+# both tests run a whole study on worker processes
+pytestmark = pytest.mark.slow
 
 
 def test_a_study_gives_the_same_answer_and_count_for_any_worker_count(lag_crash_fmus):

@@ -91,6 +91,7 @@ def whole(folder) -> dict:
     return _result(folder, "whole")
 
 
+@pytest.mark.slow
 def test_the_hand_study_with_dotted_names_finds_the_truth(folder, whole):
     for name, value in TRUTH.items():
         assert abs(whole["x"][name] / value - 1) < 0.01, (name, whole["x"])

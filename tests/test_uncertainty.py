@@ -68,6 +68,7 @@ def test_a_model_that_misses_a_term_is_reported_with_coloured_residuals(lag_fmu,
     assert "optimistic by ~x" in warning and res.uncertainty.inflation > 1.5
 
 
+@pytest.mark.slow
 def test_intervals_are_calibrated_on_five_noise_seeds_with_coloured_noise(lag_fmu, tmp_path):
     """Seeds 0-4 of AR(1) noise (rho 0.9): the 95 % intervals hold the truth for at
     least 90 % of the parameters (on seeds 0-19 this model gave 38 of 40)."""

@@ -82,6 +82,7 @@ def test_the_norms_are_the_largest_output_and_window_weights(lag):
     assert weight_norms(_study(lag, 1e-6)) == (1e-6, 1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [1e-6, 1e6])
 def test_a_study_gives_the_same_answer_and_exit_with_every_weight_scaled(lag, k):
     one = identify(_study(lag, 1.0), progress=False, plots=False)

@@ -54,6 +54,7 @@ def study(fmu, data, **windows) -> Study:
     )
 
 
+@pytest.mark.slow
 def test_a_transient_windowed_out_gives_the_truth_and_left_in_a_flagged_bias(lag_fmu, tmp_path):
     data = record(tmp_path / "d.csv")
     windowed = identify(study(lag_fmu, data, windows=[[2.0, 8.0]]), plots=False, workers=1)
