@@ -304,7 +304,8 @@ def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Un
     out.combinations = _combinations(space, values, vectors, cov)
     out.cov = cov  # type: ignore[attr-defined]
     values, vectors = np.linalg.eigh(fisher)
-    inv = np.where(values > 1e-14 * max(float(values.max()), 1e-300), 1.0 / values, 0.0)
+    keep = values > 1e-14 * max(float(values.max()), 1e-300)
+    inv = np.divide(1.0, values, out=np.zeros_like(values), where=keep)
     out.constancy = constancy(series, (vectors * inv) @ vectors.T)
     return out
 
