@@ -216,3 +216,16 @@ def real_lower(real, sets, r_x, share):
     out.residuals = [r_x * (1 - share) for _ in sets]
     out.costs[:, 0] = float(r_x @ r_x) * (1 - share) ** 2
     return out
+
+
+def test_a_stop_on_xtol_reads_as_a_sentence_not_a_tuple(monkeypatch):
+    # the xtol stop carries its kind as a second argument: the message once printed
+    # "('the last step was shorter than xtol=1e-08', 'xtol')"
+    def shorter(self, s, r):
+        if self.linearised is not None:
+            raise refine._Converged("the last step was shorter than xtol=1e-08", "xtol")
+
+    monkeypatch.setattr(refine._Problem, "_check_step", shorter)
+    result, _, _ = _stage()
+    assert "least squares: the last step was shorter than xtol=1e-08; stopped" in result.message
+    assert result.extra["stop"] == "xtol" and "('" not in result.message

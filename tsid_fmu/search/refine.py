@@ -282,7 +282,7 @@ def _solve(
         return 0, f"least squares: {out.message}"
     except _Converged as stop:
         extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
-        return 0, f"least squares: {stop}; stopped before another Jacobian"
+        return 0, f"least squares: {stop.args[0]}; stopped before another Jacobian"
     except _Budget:
         return 1, f"simulation limit ({limit}) of the refinement reached"
     except (ValueError, np.linalg.LinAlgError) as exc:  # the best set so far is kept
