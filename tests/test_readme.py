@@ -133,12 +133,7 @@ def test_commands_on_shipped_files_run(workdir, capsys):
 def test_toml_snippet_is_taken_from_the_siso_study():
     (block,) = _blocks("toml", _text(TUTORIAL))
     source = (REPO / "examples" / "lsea_siso" / "study.toml").read_text().splitlines()
-    position = 0
-    for line in block.splitlines():
-        if not line.strip():
-            continue
-        assert line in source[position:], f"tutorial line not in the SISO study: {line!r}"
-        position = source.index(line, position) + 1
+    _lines_in_order(block, source, "tutorial line not in the SISO study")
 
 
 @pytest.mark.slow
@@ -155,12 +150,16 @@ def test_python_snippet_runs(workdir):
 def test_the_readmes_python_block_is_made_of_the_python_pages_lines():
     (short,) = _blocks("python", README)
     (full,) = _blocks("python", _text(PYTHON_PAGE))
-    source = full.splitlines()
+    _lines_in_order(short, full.splitlines(), f"README line not in {PYTHON_PAGE.name}")
+
+
+def _lines_in_order(block: str, source: list[str], what: str) -> None:
+    """Assert that every non-blank line of ``block`` is a line of ``source``, in order."""
     position = 0
-    for line in short.splitlines():
+    for line in block.splitlines():
         if not line.strip():
             continue
-        assert line in source[position:], f"README line not in {PYTHON_PAGE.name}: {line!r}"
+        assert line in source[position:], f"{what}: {line!r}"
         position = source.index(line, position) + 1
 
 
