@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import os
 import sys
@@ -209,7 +210,10 @@ def run_least_squares(scorer: Scorer, start: np.ndarray) -> dict:
     s0 = np.clip(start, np.maximum(lo, -1e6) + 1e-9, np.minimum(hi, 1e6) - 1e-9)
     n0 = scorer.nfev
     out = least_squares(scorer.residuals, s0, bounds=(lo, hi), method="trf", x_scale="jac")
-    return {"cost": scorer.cost(out.x), "nfev": scorer.nfev - n0}
+    # rounds of parallel simulation: each step's run, and each Jacobian's p columns at once
+    p = len(start)
+    rounds = {str(w): int(out.nfev) + int(out.njev or 0) * -(-p // w) for w in (1, 4, 16)}
+    return {"cost": scorer.cost(out.x), "nfev": scorer.nfev - n0, "rounds": rounds}
 
 
 def run_cma(scorer: Scorer, seed: int) -> dict:
@@ -269,6 +273,8 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
             "status": int(res.status),
             "fun": float(res.fun),
             "coverage": coverage(res, gp.problem.truth),
+            "where": where(res),
+            "rounds": res.extra.get("rounds"),
         },
         "LS-c": run_least_squares(scorer, np.zeros(len(scorer.names))),
         "LS-t": run_least_squares(scorer, scorer.to_s(truth)),
@@ -295,6 +301,26 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
     }
 
 
+def where(res) -> dict[str, int]:
+    """tsid's simulations by what spent them: the arrays, the first refinement, the
+    horizons, the restarts, and the rest (combinations, checks, structure, the noise)."""
+    out = {"arrays": 0, "refine": 0, "horizons": 0, "restarts": 0, "other": 0}
+    for s in res.stages:
+        if s.kind in ("taguchi", "contribution", "stable"):
+            key = "arrays"
+        elif s.kind == "horizon" or s.name.startswith("refinement after the horizons"):
+            key = "horizons"
+        elif s.name.startswith("restart"):
+            key = "restarts"
+        elif s.kind == "refinement":
+            key = "refine"
+        else:
+            key = "other"
+        out[key] += int(s.nfev)
+    out["other"] += int(res.nfev) - sum(out.values())
+    return out
+
+
 def coverage(res, truth: dict[str, float]) -> dict:
     """Which true values lie inside tsid's 95 % intervals, and whether the result flags
     its intervals (its verdict on the fit: ``mismatch`` or ``coloured``)."""
@@ -313,7 +339,27 @@ def coverage(res, truth: dict[str, float]) -> dict:
     # exit status 1 says the answer is not shown to be an optimum, and warns that its
     # intervals may not hold: that flags them too
     flagged = verdict != "consistent" or int(res.status) != 0
-    return {"inside": inside, "reach": reach, "verdict": verdict, "flagged": flagged}
+    # for a look at calibration (``--json``): the error in standard errors, how much the
+    # HAC standard error exceeds the Cramer-Rao one, and the degrees of freedom
+    detail = {}
+    if u is not None:
+        for name in inside:
+            se = u.std_error.get(name)
+            crb = u.cramer_rao.get(name)
+            rel = u.relative.get(name)
+            detail[name] = {
+                "z": (truth[name] - res.params[name]) / se if se else None,
+                "hac_over_crb": rel / crb if rel and crb else None,
+                "dof": u.dof.get(name),
+                "profile": u.profile.get(name),
+            }
+    return {
+        "inside": inside,
+        "reach": reach,
+        "verdict": verdict,
+        "flagged": flagged,
+        "detail": detail,
+    }
 
 
 def run_problem(family: str, index: int, seeds: str, de: bool) -> list[dict]:
@@ -387,6 +433,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     parser.add_argument("--de", action="store_true", help="also run differential_evolution")
+    parser.add_argument("--json", default=None, help="also write every row to this JSON file")
     parser.add_argument(
         "--check",
         action="store_true",
@@ -399,6 +446,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = run_all(todo, seeds, args.workers, args.de)
     wall = time.perf_counter() - t0
     text, verdict = render(rows, wall, markdown=args.markdown, seeds=seeds, workers=args.workers)
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1, default=str))
     print(text)
     return 1 if args.check and not verdict else 0
 

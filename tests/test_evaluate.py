@@ -316,3 +316,14 @@ def test_evaluate_is_a_lower_layer_without_import_cycles():
 
     for node in graph:
         visit(node, ())
+
+
+def test_rounds_count_each_batch_of_new_sets_once_per_round_of_workers(spec):
+    """A batch of b new sets takes ceil(b / w) rounds on w workers; the memo's take none."""
+    sets = [{"tau": 0.01 * (k + 1), "x0": 0.1} for k in range(5)]
+    with SerialEvaluator(spec) as ev:
+        ev.evaluate(sets)  # 5 new sets: one batch
+        ev.evaluate(sets[:2])  # all in the memo: no round
+        ev.evaluate([{"tau": 0.07, "x0": 0.1}])  # one new set
+        assert ev.batches == [5, 1]
+        assert [ev.rounds(w) for w in (1, 4, 16)] == [6, 2 + 1, 1 + 1]

@@ -133,6 +133,19 @@ class StudyEvaluators:
         own = sum(int(ev.nfev) for ev in self.pool.values())
         return own + sum(child.nfev for child in self.children)
 
+    def rounds(self, workers: int) -> int | None:
+        """Return the rounds of parallel simulation so far on ``workers`` workers.
+
+        See :meth:`~tsid_fmu.evaluate.memo.MemoEvaluator.rounds`; None for an evaluator
+        given to the study that does not count them.
+        """
+        pool = [self.given] if self.given is not None else list(self.pool.values())
+        if not all(hasattr(ev, "rounds") for ev in pool):
+            return None
+        own = sum(int(ev.rounds(workers)) for ev in pool)
+        children = [child.rounds(workers) for child in self.children]
+        return None if None in children else own + sum(c or 0 for c in children)
+
     def close(self) -> None:
         """Close every evaluator made (and those of the candidate structures)."""
         for child in self.children:

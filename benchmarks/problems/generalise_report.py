@@ -153,6 +153,40 @@ def coverage_lines(rows: Sequence[dict]) -> list[str]:
     return lines
 
 
+def rounds_lines(rows: Sequence[dict]) -> list[str]:
+    """Median rounds of parallel simulation (the wall time in simulations) at 1, 4 and
+    16 workers, tsid against ``least_squares`` from the centre."""
+    done = [
+        r for r in rows if r["methods"]["tsid"].get("rounds") and "rounds" in r["methods"]["LS-c"]
+    ]
+    if not done:
+        return []
+    lines = ["", "Rounds of parallel simulation (median over runs; the wall time in simulations)"]
+    for w in ("1", "4", "16"):
+        tsid = _median([r["methods"]["tsid"]["rounds"][w] for r in done])
+        ls = _median([r["methods"]["LS-c"]["rounds"][w] for r in done])
+        ratio = tsid / ls if ls else float("inf")
+        lines.append(f"  {w:>2} workers: tsid {tsid:g} / LS-c {ls:g} = {ratio:.2f}")
+    return lines
+
+
+def where_lines(rows: Sequence[dict]) -> list[str]:
+    """Where tsid's simulations go: the median and the total of each part, and the
+    share of runs that spend any on it."""
+    done = [r for r in rows if "where" in r["methods"]["tsid"]]
+    if not done:
+        return []
+    parts = list(done[0]["methods"]["tsid"]["where"])
+    lines = ["", "Where tsid's simulations go (median over runs / total / runs spending any)"]
+    for part in parts:
+        spent = [r["methods"]["tsid"]["where"].get(part, 0) for r in done]
+        lines.append(
+            f"  {part:<10} {_median(spent):>7g} {sum(spent):>8d} "
+            f"{sum(v > 0 for v in spent):>4d}/{len(spent)}"
+        )
+    return lines
+
+
 def summary(rows: Sequence[dict], wall: float) -> tuple[list[str], bool]:
     """The summary lines and whether tsid meets the ``--check`` bar."""
     done = [r for r in rows if "error" not in r]
@@ -175,6 +209,8 @@ def summary(rows: Sequence[dict], wall: float) -> tuple[list[str], bool]:
         r for r in done if r["methods"]["tsid"]["status"] == 0 and not r["methods"]["tsid"]["ok"]
     ]
     tsid_ok = [r["methods"]["tsid"]["ok"] for r in done]
+    lines += where_lines(done)
+    lines += rounds_lines(done)
     lines += coverage_lines(done)
     lines += [
         f"tsid succeeded where LS-c failed: {_rate(rescued)}",

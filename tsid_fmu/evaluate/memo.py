@@ -91,6 +91,7 @@ class MemoEvaluator:
         self._residuals = _LRU(max(1, residual_cache))
         self._outputs = _LRU(max(0, output_cache))
         self._known: set[Key] = set()
+        self.batches: list[int] = []  # parameter sets run per batch (:meth:`rounds`)
 
     @property
     def nfev(self) -> int:
@@ -236,8 +237,17 @@ class MemoEvaluator:
             on_result(index, result)
 
         if jobs:
+            self.batches.append(len(jobs))
             self._run_jobs([job for _, job in jobs], recorded)
             self._batch_done()
+
+    def rounds(self, workers: int) -> int:
+        """Return the rounds of parallel simulation the batches so far take on ``workers``.
+
+        A batch of ``b`` parameter sets takes ``ceil(b / workers)`` rounds: the wall time
+        of a study whose simulations all take about as long, in units of one.
+        """
+        return sum(-(-b // max(workers, 1)) for b in self.batches)
 
     @staticmethod
     def _report(progress: Progress | None, done: int, total: int, n: int) -> int:
