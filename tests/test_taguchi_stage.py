@@ -4,7 +4,7 @@ A stage re-runs from the next-best run when two iterations did not lower the cos
 most ``max_reruns`` times, counted over a continued stage too), hands over to the
 refinement once, scores its start points first and reads a continued stage back from
 its records. These tests kill the mutants docs/dev/mutation-survivors.md listed as open in
-``taguchi_stage``, ``_decide``, ``_start_cost``, ``_resume_point``,
+``taguchi_stage``, ``_decide``, ``_resume_point``,
 ``_evaluate_starts``, ``_next_best`` and ``_decide_rerun``.
 """
 
@@ -27,6 +27,7 @@ from tsid_fmu.search import taguchi
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.taguchi import (
+    HANDOVER,
     RERUN_AFTER,
     TaguchiRun,
     _decide,
@@ -34,7 +35,6 @@ from tsid_fmu.search.taguchi import (
     _evaluate_starts,
     _next_best,
     _resume_point,
-    _start_cost,
     taguchi_stage,
 )
 from tsid_fmu.study.schema import Method
@@ -193,7 +193,7 @@ def _rec(index, cost, converged=False, deltas=(0.0,), extra=None):
 
 
 def _decide_run(**kw):
-    args = {"floor": None, "hand_back_below": None, "handover": False, **kw}
+    args = {"hand_back_below": None, "handover": False, **kw}
     return SimpleNamespace(method=Method(), space=None, **args)
 
 
@@ -203,32 +203,23 @@ def test_a_converged_iteration_keeps_its_own_message_when_it_would_also_stall():
     assert recs[-1].decision.message == "own message 3"
 
 
-def test_the_first_iteration_hands_over_against_the_start_points():
-    starts = [{"cost": 2.0}, {"cost": None}, {"cost": 1.0}]
-    recs = [_rec(1, 0.75, deltas=(1.0,), extra={"starts": starts})]
+def test_the_first_iteration_hands_over():
+    recs = [_rec(1, 0.75, deltas=(1.0,), extra={"starts": [{"cost": 0.5}]})]
     frame, pending, ended = _decide(recs, _decide_run(), 0, True, None)
-    assert ended == (
-        "handed over to the refinement: iteration 1 lowered the best cost by 25 % (less than 50 %)"
-    )
+    assert ended == HANDOVER.format(index=1)
+    assert ended.startswith("handed over to the refinement after iteration 1")
     assert recs[0].extra["handover"] == ended and pending is None and frame == "frame after 1"
 
 
-def test_a_stage_that_may_hand_over_does_not_hand_back():
+def test_a_stage_that_may_hand_over_hands_over_rather_than_back():
     """A fall below stall_rtol under the refinement's answer would hand back; a stage
-    that may still hand over (here kept from it by a low noise floor) does not."""
+    that has not handed over yet hands over instead."""
     recs = [_rec(1, 0.5 + 2.0**-20, deltas=(1.0,)), _rec(2, 0.5, deltas=(1.0,))]
-    run = _decide_run(floor=1e-6, hand_back_below=1.0)
-    assert _decide(recs, run, 0, True, None) == ("frame after 2", None, None)
+    run = _decide_run(hand_back_below=1.0)
+    assert _decide(recs, run, 0, True, None)[2] == HANDOVER.format(index=2)
     assert "handback" not in recs[-1].extra
     ended = _decide(recs, run, 0, False, None)[2]
     assert ended.startswith("handed back to the refinement") and recs[-1].extra["handback"]
-
-
-def test_the_start_cost_is_the_best_scored_start_point():
-    assert _start_cost([]) == math.inf
-    assert _start_cost([_rec(1, 5.0)]) == math.inf  # no start points scored
-    starts = [{"cost": 3.0}, {"cost": None}, {"cost": 2.5}]  # None: a failed one
-    assert _start_cost([_rec(1, 5.0, extra={"starts": starts}), _rec(2, 4.0)]) == 2.5
 
 
 def test_a_continued_stage_starts_from_the_last_records_best():

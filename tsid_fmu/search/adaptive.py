@@ -3,10 +3,8 @@
 With ``refine = "auto"`` (the default) and the ``sse`` cost a study is not a fixed
 sequence of stages:
 
-1. the Taguchi stage scores its start points and runs arrays while they make large
-   gains; once an iteration lowers the best cost by less than half, within 100 times the
-   noise floor, it hands over (:data:`~tsid_fmu.search.taguchi.HANDOVER_GAIN`,
-   :data:`~tsid_fmu.search.taguchi.HANDOVER_FIT`);
+1. the Taguchi stage scores its start points and runs one array over the first ranges,
+   then hands over (:func:`tsid_fmu.search.taguchi._handover`);
 2. the least-squares refinement polishes the best set;
 3. if the refined answer is not shown to be stationary, or is a poor fit
    (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the noise floor), or the

@@ -62,7 +62,7 @@ def local_search(
     """
     study = ctx.study
     exps = study.identify_names()
-    stages.append(refinement(ctx, answer_stage(stages).x, exps))
+    stages.append(refinement(ctx, _handed_over(stages), exps))
     if not adaptive:
         return _in_combinations(ctx, stages, exps)
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
@@ -90,6 +90,21 @@ def local_search(
             "horizons_agree": agreed,
         }
     return stages
+
+
+def _handed_over(stages: list[StageResult]) -> dict[str, float]:
+    """Return where the first refinement starts: the best set when the arrays handed over.
+
+    On ``--resume`` the Taguchi stage reads back with the iterations it ran after the
+    hand-over too (the refinement's answer was not settled); the first refinement still
+    starts where it did, so that it is read back rather than run again from elsewhere.
+    """
+    first = stages[0]
+    if first.kind == "taguchi":
+        handed = [r for r in first.records if "handover" in r.extra]
+        if handed and handed[0] is not first.records[-1]:
+            return {**first.x, **handed[0].best_x}
+    return answer_stage(stages).x
 
 
 def _in_combinations(ctx: Context, stages: list[StageResult], exps: list[str]) -> list[StageResult]:

@@ -31,7 +31,6 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.start import start_points
 from tsid_fmu.search.taguchi import TaguchiRun, frame_from_run, taguchi_stage
-from tsid_fmu.search.verdict import noise_floor
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Parameter, Phase
 
@@ -102,8 +101,6 @@ def _taguchi(
         hand_back_below=hand_back_below,
     )
     evaluator = ctx.evaluators.get(names, list(exps), fixed)
-    if handover:
-        run.floor = noise_floor(evaluator, method.weighting == "noise")
     if prior and hasattr(evaluator, "mark_known"):
         # what the interrupted run simulated is not counted again (it was in memory)
         evaluator.mark_known(_simulated_sets(prior))

@@ -23,24 +23,22 @@ from tsid_fmu.evaluate.timelimit import timed_out
 from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.iteration import Best, ProgressCallback, run_iteration
 from tsid_fmu.search.nextlevels import next_frame
-from tsid_fmu.search.record import IterationRecord, json_float, unjson_float
+from tsid_fmu.search.record import IterationRecord, json_float
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.schema import Method
 
-__all__ = ["HANDOVER_GAIN", "RERUN_AFTER", "Recorder", "TaguchiRun", "taguchi_stage"]
+__all__ = ["HANDOVER", "RERUN_AFTER", "Recorder", "TaguchiRun", "taguchi_stage"]
 
 RERUN_AFTER = 2
 """Iterations without a lower cost after which the next-best run is re-conducted."""
 
-HANDOVER_GAIN = 0.5
-"""With a hand-over (``refine = "auto"``), an iteration whose best cost is above this
-fraction of the best before it ends the stage: the arrays have stopped making large
-gains, and a local method finishes faster from there."""
-
-HANDOVER_FIT = 100.0
-"""... but only once the best cost is within this factor of the noise floor: farther out
-a local method from the best run too often ends in another basin."""
+HANDOVER = (
+    "handed over to the refinement after iteration {index}: its array spans the first "
+    "ranges, and a least-squares refinement from its best set finishes faster than more "
+    "arrays (they go on where the refinement's answer is not settled)"
+)
+"""Why a stage with a hand-over (``refine = "auto"``) ends after its first iteration."""
 
 
 def _hand_back(records: list[IterationRecord], run: TaguchiRun) -> str | None:
@@ -91,7 +89,6 @@ class TaguchiRun:
     experiments: list[str] = field(default_factory=list)
     starts: list[tuple[dict[str, float], str]] = field(default_factory=list)
     handover: bool = False
-    floor: float | None = None
     hand_back_below: float | None = None
 
 
@@ -184,20 +181,25 @@ def _stalled(records: list[IterationRecord], method: Method) -> str | None:
     )
 
 
-def _handover(records: list[IterationRecord], run: TaguchiRun, before: float) -> str | None:
-    """Whether the last iteration ends the stage for the refinement (see HANDOVER_GAIN)."""
-    if len(records) >= 2:
-        before = records[-2].best_cost
-    now = records[-1].best_cost
-    if not (math.isfinite(before) and math.isfinite(now)) or now <= HANDOVER_GAIN * before:
+def _handover(records: list[IterationRecord]) -> str | None:
+    """Whether the last iteration ends the stage for the refinement: the first one does.
+
+    The first array spans the first ranges, and its best set (a run, its predicted
+    optimum or a start point) lies in the best basin the arrays have seen. A
+    least-squares refinement from there, with its stationarity and fit tests, is the
+    cheapest way to find out whether that basin holds the optimum: where its answer is
+    not settled, this stage goes on from its records (:mod:`tsid_fmu.search.local`),
+    so further arrays are paid for only where a local method failed. Measured on the
+    generalisation benchmark's development seeds (72 runs): handing over after the
+    first iteration kept every success (72/72) at a median of 84 simulations, where
+    waiting until an iteration lowered the best cost by less than half within 100 times
+    the noise floor took 162.5 (and a hand-over once the arrays' linear residual model
+    explained 90 % of their costs, 154.5). An iteration whose runs all failed hands
+    nothing over.
+    """
+    if not math.isfinite(records[-1].best_cost):
         return None
-    if run.floor is not None and now > HANDOVER_FIT * run.floor:
-        return None
-    fell = 100.0 * (1.0 - now / before) if before > 0 else 0.0
-    return (
-        f"handed over to the refinement: iteration {records[-1].index} lowered the best "
-        f"cost by {fell:.3g} % (less than {100 * (1 - HANDOVER_GAIN):g} %)"
-    )
+    return HANDOVER.format(index=records[-1].index)
 
 
 def _evaluate_starts(
@@ -285,10 +287,10 @@ def taguchi_stage(
     """Run (or continue) a Taguchi stage; see the module docstring.
 
     A new stage first scores ``run.starts`` (the FMU's start values, the centre of the
-    levels): its answer is never worse than doing nothing. With ``run.handover``, an
-    iteration that lowers the best cost by less than :data:`HANDOVER_GAIN` ends the
-    stage for the refinement; once a stage has handed over, continuing it (with or
-    without ``handover``) runs on without a second hand-over.
+    levels): its answer is never worse than doing nothing. With ``run.handover``, the
+    first iteration ends the stage for the refinement (:func:`_handover`); once a stage
+    has handed over, continuing it (with or without ``handover``) runs on without a
+    second hand-over.
     """
     records, frame, pending, best = _resume_point(run)
     nfev = records[-1].nfev_total if records else run.nfev_before
@@ -347,7 +349,7 @@ def _decide(
         rec.decision.converged, rec.decision.message = True, stalled
     if rec.decision.converged:
         return rec.next_frame, None, rec.decision.message
-    handed = _handover(records, run, _start_cost(records)) if handover else None
+    handed = _handover(records) if handover else None
     if handed:
         rec.extra["handover"] = handed
         return rec.next_frame, None, handed
@@ -361,13 +363,6 @@ def _decide(
     frame, note, origin = alt
     rec.extra["next"] = {"frame": frame.to_dict(), "note": note, "from": origin}
     return frame, (note, origin), None
-
-
-def _start_cost(records: list[IterationRecord]) -> float:
-    """Return the best cost of the start points scored before the first iteration."""
-    starts = records[0].extra.get("starts") if records else None
-    costs = [unjson_float(s["cost"]) for s in starts or []]
-    return min(costs, default=math.inf)
 
 
 def _result(

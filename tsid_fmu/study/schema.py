@@ -346,9 +346,10 @@ class Method:
     refine : {"auto", "least_squares", "none"}
         What follows the Taguchi stage. ``"auto"`` (default): with the ``sse`` cost, the
         adaptive pipeline of :mod:`tsid_fmu.search.adaptive` (the Taguchi stage hands
-        over to a trust-region least-squares refinement when its arrays stop making
-        large gains; a poor fit sends the search back to the arrays and then to
-        restarts from the next-best runs); with another cost, as ``"none"``.
+        over to a trust-region least-squares refinement after its first array; an
+        answer that is not shown to be an optimum, or a poor fit, sends the search
+        back to the arrays and then to restarts from the next-best runs); with
+        another cost, as ``"none"``.
         ``"least_squares"``: the Taguchi stage runs to its own end, then the refinement
         (``"sse"`` only). ``"none"``: the Taguchi stage alone, then the local probe test
         of its answer. In every case the study converges (exit status 0) only where a
