@@ -229,3 +229,29 @@ def test_a_stop_on_xtol_reads_as_a_sentence_not_a_tuple(monkeypatch):
     result, _, _ = _stage()
     assert "least squares: the last step was shorter than xtol=1e-08; stopped" in result.message
     assert result.extra["stop"] == "xtol" and "('" not in result.message
+
+
+def test_a_refinement_out_of_runs_says_so_and_the_search_goes_on_from_it():
+    """A refinement stopped by its budget did not end by its own tests: its stage says
+    ``stop = "limit"``, and the adaptive search treats it as not settled (on the SISO
+    encoder's rough cost such a point passed the stationarity test at 1.014 x the
+    optimum)."""
+    from tsid_fmu.search.local import _collapsed
+
+    space = Space(
+        {"a": [1.0, 1.5, 3.0], "k": [0.5, 1.0, 2.0], "c": [0.0, 0.5, 1.0]},
+        {n: (0.0, math.inf) for n in TRUTH},
+        LevelingOptions(),
+    )
+    start = {"a": 1.0, "k": 2.0, "c": 1.0}
+    ev = ResidualEvaluator()
+    short = refine_stage(
+        "refinement", space, start, ev.cost(**start), ev, Method(cost="sse"), budget=6
+    )
+    assert short.status == 1 and short.message.startswith("simulation limit (6)")
+    assert short.extra["stop"] == "limit"
+    assert _collapsed(short) == (
+        "the refinement ran out of simulations before its own tests ended it"
+    )
+    done, _, _ = _stage()
+    assert done.extra["stop"] != "limit" and _collapsed(done) is None

@@ -190,7 +190,8 @@ def settle(
     """
     stage = polish(name, study, start, ev, progress)
     gate = stage.extra.get("stationarity") or {}
-    if stage.status != 1 or not stage.extra.get("stop") or gate.get("holds", True):
+    stopped = stage.extra.get("stop")  # by its tolerances; not "limit": out of runs
+    if stage.status != 1 or stopped in (None, "", "limit") or gate.get("holds", True):
         return stage
     x = {n: float(stage.x[n]) for n in study.parameter_names}
     again = polish(name, study, x, ev, progress)

@@ -325,6 +325,7 @@ def _solve(
         extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
         return 0, f"least squares: {stop.args[0]}; stopped before another Jacobian"
     except _Budget:
+        extra["stop"] = "limit"
         return 1, f"simulation limit ({limit}) of the refinement reached"
     except (ValueError, np.linalg.LinAlgError) as exc:  # the best set so far is kept
         return 1, f"least squares could not go on ({exc})"
