@@ -223,9 +223,6 @@ def test_a_poor_fit_after_the_refinement_sends_the_search_back_until_the_global_
     answer = adaptive.answer_stage(stages)
     first = next(s for s in stages if s.kind == "refinement")
     assert first.cost > 100 * answer.cost  # the first refinement sat in a local minimum
-    # ... and, started after the first array, it had a third of the usual budget
-    assert first.nfev == local.FIRST_BUDGET * (2 + 1) == 30
-    assert first.message.startswith("simulation limit (30) of the refinement reached")
     assert answer.x["w"] == pytest.approx(3.0, rel=1e-3)
     assert answer.cost < verdict.POOR_FIT * W.size
     assert adaptive.verdict(stages)[0] == 0

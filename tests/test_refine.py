@@ -245,9 +245,8 @@ def test_a_refinement_out_of_runs_says_so_and_the_search_goes_on_from_it():
     )
     start = {"a": 1.0, "k": 2.0, "c": 1.0}
     ev = ResidualEvaluator()
-    short = refine_stage(
-        "refinement", space, start, ev.cost(**start), ev, Method(cost="sse"), budget=6
-    )
+    limited = Method(cost="sse", refine_max_nfev=6)
+    short = refine_stage("refinement", space, start, ev.cost(**start), ev, limited)
     assert short.status == 1 and short.message.startswith("simulation limit (6)")
     assert short.extra["stop"] == "limit"
     assert _collapsed(short) == (

@@ -86,12 +86,8 @@ def polish(
     start: Mapping[str, float],
     evaluator: Evaluator,
     progress: ProgressCallback | None,
-    budget: int | None = None,
 ) -> StageResult:
-    """Run the refinement from ``start`` (its cost and residuals come from the memo).
-
-    ``budget`` bounds its simulations where the study's ``refine_max_nfev`` does not.
-    """
+    """Run the refinement from ``start`` (its cost and residuals come from the memo)."""
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
     floor = noise_floor(evaluator, study.method.weighting == "noise")
     scored = evaluator.evaluate([dict(start)])
@@ -105,7 +101,6 @@ def polish(
         progress=progress,
         start_residuals=scored.residuals[0] if scored.residuals else None,
         floor=floor,
-        budget=budget,
     )
 
 
@@ -115,7 +110,6 @@ def refinement(
     exps: list[str],
     key: str = "refinement",
     name: str = "refinement",
-    budget: int | None = None,
 ) -> StageResult:
     """Refine from ``start`` (a finished refinement from the same start is read back)."""
     study = ctx.study
@@ -124,7 +118,7 @@ def refinement(
     if done is not None and done.extra.get("start") == start:
         return done
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
-    result = polish(name, study, start, evaluator, ctx.progress, budget)
+    result = polish(name, study, start, evaluator, ctx.progress)
     result.experiments = list(exps)
     result.extra["start"] = start
     ctx.store.write_stage(key, result)

@@ -368,7 +368,6 @@ def refine_stage(
     progress: ProgressCallback | None = None,
     start_residuals: np.ndarray | None = None,
     floor: float = 0.0,
-    budget: int | None = None,
 ) -> StageResult:
     """Polish ``start`` by trust-region least squares on the same cost (``sse``).
 
@@ -398,17 +397,12 @@ def refine_stage(
         stationarity test measures the predicted decrease against it where the cost is
         below it (an overestimated noise), so that it does not ask for decimals the data
         do not carry.
-    budget : int, optional
-        The simulations allowed where ``method.refine_max_nfev`` is not set (default
-        ``30 (p + 1)`` per experiment).
 
     Returns
     -------
     StageResult
     """
-    limit = (
-        method.refine_max_nfev or budget or 30 * (space.dim + 1) * len(evaluator.spec.experiments)
-    )
+    limit = method.refine_max_nfev or 30 * (space.dim + 1) * len(evaluator.spec.experiments)
     problem, s0 = _problem_at(space, start, start_cost, evaluator, limit, fixed, start_residuals)
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
