@@ -44,6 +44,7 @@ cost = "sse"
 weighting = "noise"
 replicates = 1
 tolerance = 1e-8
+refine = "least_squares"   # the arrays to their own end: many iterations to pause in
 [parameters]
 "mass.m" = { levels = [0.5, 1, 2, 4, 8], min = 0.01 }
 "damper.d" = { levels = [1, 5, 10, 20, 40], min = 0.01 }
