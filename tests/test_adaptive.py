@@ -146,6 +146,19 @@ def test_a_taguchi_stage_with_a_hand_over_ends_after_its_first_iteration():
     assert len(off.records) > len(on.records)
 
 
+def test_a_pause_asked_for_at_the_hand_over_comes_before_the_refinement():
+    """--pause-after 1 pauses a stage that hands over after its first iteration (it
+    used to run on into the refinement); read back, it is the handed-over stage."""
+    levels = {"a": [1.0, 2.5, 4.0], "k": [0.5, 1.5, 2.5]}
+    paused = taguchi_stage(_stage_run(levels, handover=True, pause_after=1), _decay_evaluator())
+    assert paused.status == 2 and paused.message.startswith("paused after iteration 1")
+    assert len(paused.records) == 1 and "handover" in paused.records[0].extra
+    ev = _decay_evaluator()
+    again = taguchi_stage(_stage_run(levels, handover=True, prior=paused.records), ev)
+    assert ev.nfev == 0 and again.status == 0
+    assert again.message == taguchi.HANDOVER.format(index=1)
+
+
 def test_a_handed_over_stage_reads_back_as_finished_and_continues_without_a_second_handover():
     levels = {"a": [1.0, 2.5, 4.0], "k": [0.5, 1.5, 2.5]}
     first = taguchi_stage(_stage_run(levels, handover=True), _decay_evaluator())

@@ -228,6 +228,11 @@ def _evaluate_starts(
     return best, kept
 
 
+def _paused(run: TaguchiRun, ran: int) -> bool:
+    """Whether ``run.pause_after`` iterations have run in this call."""
+    return run.pause_after is not None and ran >= run.pause_after
+
+
 def _limits(run: TaguchiRun, index: int, nfev: int, ran: int) -> tuple[int, str] | None:
     """Whether the stage must stop before iteration ``index`` (status, message)."""
     limit = run.max_iterations or run.method.max_iterations
@@ -236,7 +241,7 @@ def _limits(run: TaguchiRun, index: int, nfev: int, ran: int) -> tuple[int, str]
     budget = run.method.max_simulations
     if budget is not None and nfev - run.nfev_before >= budget:
         return 1, f"simulation limit ({budget}) reached before the levels converged"
-    if run.pause_after is not None and ran >= run.pause_after:
+    if _paused(run, ran):
         return 2, f"paused after iteration {index - 1}: review the proposed levels and resume"
     return None
 
@@ -326,6 +331,10 @@ def taguchi_stage(
             recorder.iteration(rec)
         if progress:
             progress("iteration done", {"record": rec})
+        if ended is not None and "handover" in rec.extra and _paused(run, ran):
+            # a pause asked for here comes before the refinement; --resume goes on to it
+            note = f"paused after iteration {index}, handed over: resume to refine"
+            return _result(run, records, best, nfev, 2, note)
         if ended is not None:
             return _result(run, records, best, nfev, 0, ended)
     status, message = stop
