@@ -104,7 +104,7 @@ def test_init_siso_round_trip(tmp_path, capsys):
     assert "# fixedStepSize" in text and 'array = "L25"' in text
     assert 'cost = "sse"' in text and 'weighting = "noise"' in text and "replicates = 1" in text
     res = _identify_one_iteration(study, tmp_path)
-    assert set(res["x"]) == {"F_cm", "F_vm", "M_m", "K_s", "B_s"}  # V_z: a numerical setting
+    assert set(res["params"]) == {"F_cm", "F_vm", "M_m", "K_s", "B_s"}  # V_z: a numerical setting
 
 
 @pytest.mark.slow
@@ -120,7 +120,7 @@ def test_init_miso_needs_the_derived_channels_and_then_runs(tmp_path, capsys):
     text = study.read_text()
     assert 'inputs = { F_m = "F_m", x_o = "x_o", v_o = "v_o", a_o = "a_o" }' in text
     res = _identify_one_iteration(study, tmp_path)
-    assert set(res["x"]) == {"m1", "m2", "K_s", "C_d", "C_1", "C_2"}
+    assert set(res["params"]) == {"m1", "m2", "K_s", "C_d", "C_1", "C_2"}
 
 
 @pytest.mark.skipif(not pythonfmu_available(), reason="pythonfmu cannot build here")
@@ -139,7 +139,7 @@ def test_init_pythonfmu_round_trip_matches_columns_case_insensitively(tmp_path):
     assert 'time = "Time"' in text and 'inputs = { u = "U" }' in text
     assert 'outputs = { y = "Y" }' in text and "tau = { levels = [0.3162," in text
     res = _identify_one_iteration(study, tmp_path)
-    assert set(res["x"]) == {"tau"}
+    assert set(res["params"]) == {"tau"}
 
 
 @pytest.mark.slow

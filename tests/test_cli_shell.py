@@ -99,8 +99,8 @@ def test_identify_json_prints_the_summary_that_the_schema_describes(tmp_path, ca
     summary = json.loads(capsys.readouterr().out)  # nothing but the JSON on stdout
     jsonschema.validate(summary, _schema())
     saved = json.loads((out / "result.json").read_text())
-    assert summary["exit_status"] == rc == {0: 0, 1: 1, 2: 3}[saved["status"]]
-    assert {k: v["value"] for k, v in summary["parameters"].items()} == saved["x"]
+    assert summary["exit_status"] == rc == saved["status"]
+    assert {k: v["value"] for k, v in summary["parameters"].items()} == saved["params"]
     assert summary["parameters"]["tau"]["unit"] == "s"
     assert summary["parameters"]["tau"]["interval"] == saved["intervals"]["tau"]
     for key in ("fun", "nfev", "nit", "status", "success", "message"):

@@ -210,7 +210,7 @@ def test_a_result_without_its_checksum_is_not_said_to_be_old_only(tmp_path):
     path = tmp_path / "o" / "result.json"
     data = json.loads(path.read_text())
     del data["digest"]
-    data["x"]["tau"] = 9.0
+    data["params"]["tau"] = 9.0
     path.write_text(json.dumps(data))
     res = load(tmp_path / "o")
     note = next(w for w in res.warnings if "no checksum" in w)

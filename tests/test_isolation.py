@@ -95,7 +95,7 @@ def test_a_segfaulting_fmu_on_one_core_gives_failed_rows_and_a_result(crashy, tm
     status, err, _ = _tsid(study, one_core=True)
     assert status in (0, 1), err
     result = json.loads((tmp_path / "out" / "result.json").read_text())
-    assert result["x"]["gain"] < 0.7  # the answer lies where the FMU runs
+    assert result["params"]["gain"] < 0.7  # the answer lies where the FMU runs
     check = result["extra"]["fidelity"]["start"]["message"]
     assert "not checked" in check and "signal 11 SIGSEGV" in check  # the check crashed alone
     assert "signal 11 SIGSEGV" in (tmp_path / "out" / "report.md").read_text()
@@ -119,7 +119,7 @@ def test_a_check_past_the_time_limit_says_so_and_the_result_is_written(crashy, t
     answer = saved["extra"]["fidelity"]["answer"]["message"]
     assert answer.startswith("solver fidelity (answer): not checked")
     assert "time limit of 1.2 s per simulation exceeded" in answer
-    assert answer in res.warnings and saved["x"] == res.params
+    assert answer in res.warnings and saved["params"] == res.params
 
 
 @pytest.mark.slow

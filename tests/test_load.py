@@ -65,7 +65,7 @@ def test_load_refuses_a_changed_or_missing_file(run, tmp_path):
     shutil.copytree(out, copy)
     data = json.loads((copy / "result.json").read_text())
     assert isinstance(data["digest"], str)
-    data["x"]["tau"] *= 2
+    data["params"]["tau"] *= 2
     (copy / "result.json").write_text(json.dumps(data))
     with pytest.raises(StudyError, match=r"result.json: the result was changed or damaged"):
         load(copy)
@@ -113,15 +113,16 @@ def test_load_without_the_study_files_still_reads_the_numbers(run, tmp_path):
 def test_x_is_an_array_in_the_order_of_names_and_params_the_dict(run):
     res, _ = run
     assert res.names == res.study.parameter_names == ["tau", "x0"]
-    assert type(res.params) is dict and list(res.params) == res.names
+    assert isinstance(res.params, dict) and list(res.params) == res.names
     assert isinstance(res.x, np.ndarray) and res.x.shape == (2,) and res.x.dtype == float
     assert res.x.tolist() == [res.params["tau"], res.params["x0"]]
     with pytest.raises(ValueError, match="read-only"):
         res.x[0] = -1.0  # SciPy's array, but not a way to change the result
     assert "names: ['tau', 'x0']" in repr(res) and "x: array(" in repr(res)
-    # result.json keeps its format: the values by name
+    # result.json holds what the attributes hold: names, x in their order, params by name
     data = json.loads((res.out_dir / "result.json").read_text())
-    assert data["x"] == res.params
+    assert data["params"] == res.params
+    assert data["names"] == res.names and data["x"] == list(res.x)
 
 
 def test_cov_is_the_covariance_of_the_reported_standard_errors(run):

@@ -117,7 +117,7 @@ def test_each_experiment_gets_its_own_initial_position(lag_fmu, records, tmp_pat
     assert not again.warnings or all("changed" not in w for w in again.warnings)
     assert set(again.parameters_frame().index) == set(s.parameter_names)
     saved = json.loads((tmp_path / "out" / "result.json").read_text())
-    assert set(saved["x"]) >= {"x0[a]", "x0[b]"}
+    assert set(saved["params"]) >= {"x0[a]", "x0[b]"}
 
 
 @pytest.mark.slow

@@ -95,7 +95,7 @@ def whole(folder) -> dict:
 @pytest.mark.slow
 def test_the_hand_study_with_dotted_names_finds_the_truth(folder, whole):
     for name, value in TRUTH.items():
-        assert abs(whole["x"][name] / value - 1) < 0.01, (name, whole["x"])
+        assert abs(whole["params"][name] / value - 1) < 0.01, (name, whole["params"])
         low, high = whole["intervals"][name]
         assert low <= value <= high, (name, low, high)
     # rotated factors with dotted names were written, and they read back as written

@@ -161,6 +161,6 @@ def test_three_identical_studies_at_once_exit_cleanly_with_identical_results(pyl
     results = [
         _values(json.loads((tmp_path / f"out{k}" / "result.json").read_text())) for k in range(3)
     ]
-    assert results[0]["x"]["tau"] == pytest.approx(0.37, rel=0.1)
+    assert results[0]["params"]["tau"] == pytest.approx(0.37, rel=0.1)
     # bit-identical: JSON keeps every float's 17 significant digits
     assert results[1] == results[0] and results[2] == results[0]

@@ -31,6 +31,7 @@ from tsid_fmu.errors import (
 from tsid_fmu.fmu import simulate
 from tsid_fmu.identify import identify
 from tsid_fmu.load import load
+from tsid_fmu.params import Param, Parameters
 from tsid_fmu.result import IdentificationResult
 from tsid_fmu.screening import ScreeningResult, screen
 from tsid_fmu.study import (
@@ -57,7 +58,9 @@ __all__ = [
     "IdentificationResult",
     "Method",
     "ModelChoice",
+    "Param",
     "Parameter",
+    "Parameters",
     "Phase",
     "ResourceError",
     "ScreeningResult",

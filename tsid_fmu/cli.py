@@ -77,14 +77,14 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         timeout=args.timeout,
         scheduler=args.scheduler,
     )
-    code = {0: 0, 1: 1, 2: 3}[result.status]
+    code = result.status  # the exit status (tsid_fmu.result.STATUS)
     if args.json:
         import json
 
         summary = {**result.summary(), "exit_status": code}
         print(json.dumps(summary, indent=1, allow_nan=False))
     else:
-        _print_result(result, out, code)
+        _print_result(result, out)
     return code
 
 
@@ -98,36 +98,9 @@ def _show_progress(quiet: bool, stream: Any) -> bool:
     return not quiet and callable(isatty) and bool(isatty())
 
 
-def _print_result(result: Any, out: Path, code: int) -> None:
-    """Print the answer rounded to 5 significant figures, under a headline with the exit code."""
-    from tsid_fmu.report.notebook import parameter_columns, parameter_rows, sampled_note
-    from tsid_fmu.report.style import cost_name, fmt
-    from tsid_fmu.result import STATUS
-
-    rows = [[fmt(v) if not isinstance(v, str) else v for v in r] for r in parameter_rows(result)]
-    columns = parameter_columns(result)
-    widths = [max(len(str(x)) for x in col) for col in zip(columns, *rows, strict=True)]
-    for r in [columns, *rows]:
-        print("  ".join(str(x).ljust(w) for x, w in zip(r, widths, strict=True)).rstrip())
-    if result.sampled is not None:
-        print(sampled_note(result.sampled))
-    print()
-    for st in result.stages:
-        print(f"stage {st.name} ({st.kind}): cost {fmt(st.cost)}, {st.nfev} simulations")
-    structure = result.extra.get("structure")
-    if structure:
-        print(f"structure: {structure['chosen']}: {structure['why']}")
-    print()
-    print(f"{STATUS[result.status]} (exit status {code}): {result.message}")
-    cost = cost_name(result.study)
-    print(f"cost ({cost}) {fmt(result.fun)} on the measured inputs; {result.nfev} simulations")
-    for warning in result.warnings:
-        print(f"warning: {warning}")
-    for name, reason in result.weak.items():
-        print(f"weakly determined: {name}: {reason}")
-    for name, v in result.validation.items():
-        if "cost" in v:
-            print(f"validation {name}: cost ({cost}) {fmt(v['cost'])}")
+def _print_result(result: Any, out: Path) -> None:
+    """Print the text report (:meth:`IdentificationResult.fit_report`), then its files."""
+    print(result.fit_report())
     print(f"report: {out}/report.html (text: {out}/report.md)")
 
 
@@ -144,7 +117,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     interface = None  # the interface the identification chose (solver fidelity check)
     if args.result:
         saved = saved_result(Path(args.result))
-        values.update(saved["x"])
+        values.update(saved["params"])
         interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
     chosen = {c.name: c for c in study.choices}  # a choice as its label (model=Drag)
     for name, text in parse_assignments(args.set, "--set").items():

@@ -149,9 +149,10 @@ def saved_result(path: Path) -> dict[str, Any]:
         )
     try:
         saved = json.loads(file.read_text(encoding="utf-8"))
-        if not isinstance(saved.get("x"), dict):
+        values = saved.get("params", saved.get("x"))  # "x" by name: tsid-fmu 0.2
+        if not isinstance(values, dict):
             raise TypeError("no parameters")
-        saved["x"] = {str(k): float(v) for k, v in saved["x"].items()}
+        saved["params"] = {str(k): float(v) for k, v in values.items()}
     except (OSError, UnicodeDecodeError, ValueError, TypeError, AttributeError) as exc:
         raise StudyError(
             f"{file}: cannot read identified parameters ({type(exc).__name__})"

@@ -16,6 +16,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluators import StudyEvaluators
@@ -26,7 +28,7 @@ from tsid_fmu.report.html import write_html
 from tsid_fmu.report.markdown import markdown_report
 from tsid_fmu.report.render import draw_study
 from tsid_fmu.report.ssp import write_model_ssp
-from tsid_fmu.result import IdentificationResult
+from tsid_fmu.result import PAUSED, IdentificationResult
 from tsid_fmu.search.adaptive import answer_stage, verdict
 from tsid_fmu.search.context import Context
 from tsid_fmu.search.iteration import ProgressCallback
@@ -96,10 +98,14 @@ def _annotate(folder: Path, record: IterationRecord, space: Space) -> None:
 
 
 def _status(stages: list[StageResult]) -> tuple[int, str]:
-    """Return the study's verdict: the answer's stationarity test where one was made."""
+    """Return the study's status (its exit status) and message.
+
+    The verdict is the answer's stationarity test where one was made; a stage paused
+    for review (its status 2) pauses the study (:data:`PAUSED`, exit status 3).
+    """
     last = stages[-1]
     if last.status == 2:
-        return 2, last.message
+        return PAUSED, last.message
     said = "; ".join(f"{s.name}: {s.message}" for s in stages if s.kind != "contribution")
     tested = verdict(stages)
     if tested is not None:
@@ -208,7 +214,7 @@ def _report(
     if study is None:  # pragma: no cover - _finish always attaches the study
         return
     t0 = time.perf_counter()
-    if result.status != 2:
+    if result.status != PAUSED:
         write_result_files(result, store.out)
         write_model_ssp(result, store.out)
         store.write_text("report.md", markdown_report(result))
@@ -271,9 +277,9 @@ def _finish(
         for n in study.parameter_names
     }
     start, callback = fidelity
-    if status == 2 or evaluators.given is not None:
+    if status == PAUSED or evaluators.given is not None:
         _with_structure(result, structure)
-        if isinstance(store, Trail) and status == 2 and evaluators.given is None:
+        if isinstance(store, Trail) and status == PAUSED and evaluators.given is None:
             _report(result, store, evaluators, plots, None, callback)  # for the review
         return _record(result, start, None)
     exps = study.identify_names()
@@ -317,14 +323,23 @@ def _finish(
 
 
 def _with_structure(result: IdentificationResult, structure: StructureResult | None) -> None:
-    """Put the chosen structure into the result: its values, the structures table."""
-    if structure is None:
-        return
-    result.params.update(structure.values)
-    result.structures = structure.table()
-    result.extra["structure"] = structure.summary()
-    if structure.tied:
-        result.warnings.insert(0, f"structure: {structure.summary()['why']}")
+    """Put the chosen structure into the result, then describe each parameter.
+
+    The structure's values follow the Real parameters in ``params``, with a ``nan``
+    column each in ``jac`` (a discrete choice has no derivative), so that ``x``,
+    ``cov`` and ``jac`` keep one order; then :meth:`describe_parameters`.
+    """
+    if structure is not None:
+        result.params.update(structure.values)
+        result.structures = structure.table()
+        result.extra["structure"] = structure.summary()
+        if structure.tied:
+            result.warnings.insert(0, f"structure: {structure.summary()['why']}")
+        if result.jac is not None and result.jac.shape[1] < len(result.params):
+            missing = len(result.params) - result.jac.shape[1]
+            pad = np.full((result.jac.shape[0], missing), np.nan)
+            result.jac = np.hstack([result.jac, pad])
+    result.describe_parameters()
 
 
 def _stages(

@@ -236,7 +236,7 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
     attached, more = _study(out, study, data.get("study_folder"))
     try:
         result = IdentificationResult(
-            params=_numbers(data["x"]),
+            params=_params(data),
             fun=_number(data["fun"]),
             nfev=int(data["nfev"]),
             success=bool(data["success"]),
@@ -263,8 +263,16 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
         raise StudyError(f"{out / 'result.json'}: damaged result ({exc!r})") from None
     if data.get("comparison") is not None:
         result.extra["comparison"] = data["comparison"]
+    result.describe_parameters()
     result.contribution = {
         n: [float(r.anova.contribution[n]) for r in result.iterations if n in r.names]
         for n in result.params
     }
     return result
+
+
+def _params(data: dict[str, Any]) -> dict[str, float]:
+    """Return the values by name: ``params``, else the ``x`` by name of tsid-fmu 0.2."""
+    if "params" in data:
+        return _numbers(data["params"])
+    return _numbers(data["x"])

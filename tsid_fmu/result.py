@@ -1,15 +1,16 @@
 """The outcome of an identification, in the style of :class:`scipy.optimize.OptimizeResult`.
 
 The schema is the same for every kind of study (one Taguchi stage, phases, with or
-without refinement): ``x`` (an array in the order of ``names``; ``params`` the same
-values by name), ``fun`` (always the study's cost on the measured inputs of
-its identification experiments), ``nfev``, ``success``, ``status``, ``message``, the
-``stages`` in order, and the ``intervals``.
+without refinement): ``x`` (an array in the order of ``names``, the order of ``cov``
+and ``jac`` too; ``params`` the same values by name, each with lmfit's ``stderr``,
+``min``, ``max`` and tsid's ``interval`` and ``unit``), ``fun`` (always the study's
+cost on the measured inputs of its identification experiments), ``nfev``,
+``success``, ``status`` (the exit status), ``message``, the ``stages`` in order, and
+the ``intervals``.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,11 +18,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+import tsid_fmu.result_views as result_views
 from tsid_fmu.errors import TsidError
+from tsid_fmu.params import Parameters, describe
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
-from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import strict
 from tsid_fmu.uncertainty.intervals import Uncertainty
 from tsid_fmu.uncertainty.sampled import Sampled
@@ -29,10 +31,13 @@ from tsid_fmu.uncertainty.sampled import Sampled
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["RUNS_NOTE", "STATUS", "IdentificationResult", "register_views"]
+__all__ = ["PAUSED", "RUNS_NOTE", "STATUS", "IdentificationResult", "register_views"]
 
-STATUS = {0: "converged", 1: "stopped at a limit", 2: "paused for review"}
-"""Meaning of :attr:`IdentificationResult.status`."""
+PAUSED = 3
+""":attr:`IdentificationResult.status` of a study paused for review (``--pause-after``)."""
+
+STATUS = {0: "converged", 1: "stopped at a limit", 3: "paused for review"}
+"""Meaning of :attr:`IdentificationResult.status`: the exit status of ``tsid identify``."""
 
 RUNS_NOTE = (
     "one row per run of an orthogonal array (a parameter set), simulated on every "
@@ -74,6 +79,8 @@ class IdentificationResult:
 
     As in :class:`scipy.optimize.OptimizeResult`, :attr:`x` is an array; :attr:`params`
     (lmfit's name) holds the same values by name, and is what the constructor takes.
+    :attr:`status` is the exit status ``tsid identify`` ends with, and
+    :meth:`fit_report` is the text report, as lmfit's.
 
     Attributes
     ----------
@@ -81,8 +88,10 @@ class IdentificationResult:
         Identified values in the order of ``names`` (read-only; from ``params``).
     names : list of str
         The parameters, in the study's order.
-    params : dict
-        Identified value of each parameter, by name, in the study's order.
+    params : Parameters
+        Identified value of each parameter, by name, in the study's order: each a
+        :class:`~tsid_fmu.params.Param`, a float with lmfit's ``value``, ``stderr``,
+        ``min``, ``max`` and ``vary``, and ``interval``, ``unit`` and ``weak``.
     fun : float
         The study's cost of ``x`` on the measured inputs of the identification
         experiments (the one objective every stage minimised).
@@ -92,9 +101,11 @@ class IdentificationResult:
     success : bool
         True if the last stage converged.
     status : int
-        0 converged, 1 stopped at a limit with a valid result, 2 paused for review.
+        The exit status of ``tsid identify`` (:data:`STATUS`): 0 converged, 1 stopped
+        at a limit with a valid result, 3 paused for review.
     message : str
-        Why the study stopped.
+        Why the study stopped: every stage's message and the verdict, in one line
+        (:attr:`messages` has them as a list).
     nit : int
         Taguchi iterations (orthogonal arrays) run, over all stages.
     stages : list of StageResult
@@ -139,14 +150,15 @@ class IdentificationResult:
         The study identified.
     out_dir : Path or None
         Where the trail and report were written.
-    cov : numpy.ndarray or None
+    cov : numpy.ndarray
         Covariance of the parameters the intervals use, ``(n, n)`` in the order of
         ``names`` (derived from ``uncertainty``; see the property).
     jac : numpy.ndarray or None
         Jacobian of the residuals at :attr:`x` with respect to the parameters, in
         parameter units, shape ``(n_residuals, len(names))``: the one the intervals were
         computed from (:func:`tsid_fmu.uncertainty.sensitivity.residual_jacobian`).
-        ``None`` where no intervals were computed. The results folder keeps it in
+        A discrete choice's column is ``nan``. ``None`` where no intervals were
+        computed. The results folder keeps it in
         ``jacobian.npy`` (its SHA-256 in ``result.json``), so that
         :func:`tsid_fmu.load` gives the same array back.
     """
@@ -175,6 +187,22 @@ class IdentificationResult:
     structures: list[dict[str, Any]] = field(default_factory=list)
     jac: np.ndarray | None = field(default=None, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.params, Parameters):
+            self.params = Parameters(self.params)
+
+    def describe_parameters(self) -> None:
+        """Fill in each :attr:`params` entry's ``stderr``, ``interval``, ``unit`` and bounds.
+
+        ``identify`` and ``load`` call it once the intervals are known.
+        """
+        self.params = describe(self)
+
+    @property
+    def messages(self) -> list[str]:
+        """Each stage's message, ``"<stage>: <message>"``, in order."""
+        return [f"{s.name}: {s.message}" for s in self.stages]
+
     @property
     def names(self) -> list[str]:
         """The parameters, in the order of :attr:`x` (the study's order)."""
@@ -191,7 +219,7 @@ class IdentificationResult:
         return out
 
     @property
-    def cov(self) -> np.ndarray | None:
+    def cov(self) -> np.ndarray:
         """Covariance of the parameters, shape ``(n, n)`` in the order of :attr:`names`.
 
         In parameter units (squared), the covariance the intervals were computed from
@@ -199,13 +227,18 @@ class IdentificationResult:
         standard error reported (``uncertainty.std_error``), which the profile likelihood
         may have widened: ``sqrt(diag(cov))`` is the reported standard errors. A
         parameter the data do not determine has an infinite variance and ``nan``
-        covariances. ``None`` where no intervals were computed.
+        covariances. A discrete choice (structure identification) has a row and column
+        of ``nan``: it has no variance. Where no intervals were computed (a paused
+        study, ``refine = "none"`` with a cost other than ``sse``) every entry is
+        ``nan``, as SciPy's ``curve_fit`` fills ``pcov`` with ``inf`` where it cannot
+        estimate it. Always ``(len(x), len(x))``.
         """
-        u = self.uncertainty
+        u, size = self.uncertainty, len(self.params)
         chosen = (self.extra.get("structure") or {}).get("values") or {}
         names = [n for n in self.names if n not in chosen]  # discrete choices: no variance
+        out = np.full((size, size), np.nan)
         if u is None or any(n not in u.std_error for n in names):
-            return None
+            return out
         se = np.array([float(u.std_error[n]) for n in names])
         corr = np.array(
             [[float(u.correlation.get(a, {}).get(b, 0.0)) for b in names] for a in names]
@@ -215,7 +248,9 @@ class IdentificationResult:
             cov = corr * np.outer(se, se)
         cov[~np.outer(finite, finite)] = np.nan
         np.fill_diagonal(cov, se**2)
-        return cov
+        at = [self.names.index(n) for n in names]
+        out[np.ix_(at, at)] = cov
+        return out
 
     @property
     def iterations(self) -> list[IterationRecord]:
@@ -262,6 +297,15 @@ class IdentificationResult:
         width = max(map(len, keys))
         return "\n".join(f"{k.rjust(width)}: {getattr(self, k)!r}" for k in keys)
 
+    def fit_report(self) -> str:
+        """Return the text report, as lmfit's ``fit_report``: what ``tsid identify`` prints.
+
+        The parameters with their units, 95 % intervals, standard errors and flags, the
+        stages, the structure chosen, the verdict with the exit status, the cost, the
+        warnings and the validation experiments.
+        """
+        return _view("fit_report")(self)
+
     def _repr_html_(self) -> str:
         """Return the notebook view: headline, parameters with intervals, stages."""
         return _view("result_html")(self)
@@ -292,10 +336,17 @@ class IdentificationResult:
         return _view("plot_parameters")(self)
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the result as strict-JSON data (the content of ``result.json``)."""
+        """Return the result as strict-JSON data (the content of ``result.json``).
+
+        Its keys are the attributes': ``names`` and ``x`` (a list in that order), and
+        ``params`` (the same values by name), ``fun``, ``nfev``, ``success``,
+        ``status``, ``message``, ``nit``, the ``stages``, the ``intervals`` and the rest.
+        """
         return strict(
             {
-                "x": dict(self.params),
+                "names": self.names,
+                "x": [float(v) for v in self.params.values()],
+                "params": {k: float(v) for k, v in self.params.items()},
                 "fun": self.fun,
                 "nfev": self.nfev,
                 "success": self.success,
@@ -340,56 +391,7 @@ class IdentificationResult:
         (name, kind, cost, simulations, iterations, status, message), the ``warnings``
         and ``out_dir``. Non-finite numbers are ``null``.
         """
-        units = study_units(self.study)  # the study's, else the FMU's declared ones
-        params = {
-            name: {
-                "value": value,
-                "interval": list(self.intervals.get(name) or [None, None]),
-                "unit": units.get(name, ""),
-                "weak": self.weak.get(name),
-                **({"sampled_interval": self.sampled.intervals[name]} if self._has(name) else {}),
-            }
-            for name, value in self.params.items()
-        }
-        stages = [
-            {
-                "name": s.name,
-                "kind": s.kind,
-                "cost": s.cost,
-                "nfev": s.nfev,
-                "nit": len(s.records),
-                "status": s.status,
-                "message": s.message,
-            }
-            for s in self.stages
-        ]
-        return strict(
-            {
-                "format": 1,
-                "parameters": params,
-                "fun": self.fun,
-                "nfev": self.nfev,
-                "nit": self.nit,
-                "status": self.status,
-                "success": self.success,
-                "message": self.message,
-                "stages": stages,
-                "warnings": list(self.warnings),
-                "out_dir": None if self.out_dir is None else str(self.out_dir),
-                **self._structure_summary(),
-            }
-        )
-
-    def _has(self, name: str) -> bool:
-        return self.sampled is not None and name in self.sampled.intervals
-
-    def _structure_summary(self) -> dict[str, Any]:
-        """Return the ``structure`` entry of :meth:`summary` (structure identification only)."""
-        found = self.extra.get("structure")
-        if not found:
-            return {}
-        keys = ("chosen", "choices", "why", "indistinguishable")
-        return {"structure": {**{k: found.get(k) for k in keys}, "table": self.structures}}
+        return result_views.summary(self)
 
     def to_pandas(self) -> pd.DataFrame:
         """Return every run of every Taguchi iteration as one DataFrame.
@@ -420,56 +422,11 @@ class IdentificationResult:
         analysis or check); ``simulations`` (their sum, the stage's ``nfev``). The
         column ``simulations`` adds up to :attr:`nfev`.
         """
-        import pandas as pd
-
-        rows = []
-        for s in self.stages:
-            arrays = sum(int(r.nfev) for r in s.records)
-            rows.append(
-                {
-                    "stage": s.name,
-                    "kind": s.kind,
-                    "array runs": sum(len(r.sets) for r in s.records),
-                    "confirmation runs": len(s.records),
-                    "array simulations": arrays,
-                    "other simulations": int(s.nfev) - arrays,
-                    "simulations": int(s.nfev),
-                }
-            )
-        return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
+        return result_views.simulations_frame(self)
 
     def stages_frame(self) -> pd.DataFrame:
         """Return one row per stage: kind, cost, simulations, what it contributed."""
-        import pandas as pd
-
-        rows, before = [], math.inf
-        for s in self.stages:
-            partial = s.kind == "horizon"  # its cost is over part of the data
-            gain = (before - s.cost) / before if math.isfinite(before) and before else math.nan
-            gain = math.nan if partial else gain
-            rows.append(
-                {
-                    "stage": s.name,
-                    "kind": s.kind,
-                    "cost": s.cost,
-                    "simulations": s.nfev,
-                    "cost fall [%]": 100 * gain,
-                    "message": s.message,
-                }
-            )
-            before = s.cost if s.kind not in ("contribution", "horizon") else before
-        return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
-
-    def _sampled_columns(self, name: str) -> dict[str, float]:
-        """Return the sampled interval of ``name`` as the columns of :meth:`parameters_frame`."""
-        if self.sampled is None:
-            return {}
-        low, high = self.sampled.intervals.get(name) or [None, None]
-        kind = self.sampled.kind.replace("_", " ")
-        return {
-            f"{kind} low": math.nan if low is None else low,
-            f"{kind} high": math.nan if high is None else high,
-        }
+        return result_views.stages_frame(self)
 
     def parameters_frame(self) -> pd.DataFrame:
         """Return the identified parameters with units, intervals, ranges and flags.
@@ -477,24 +434,4 @@ class IdentificationResult:
         With sampled intervals (:attr:`sampled`), their ends follow the standard error
         (columns ``bootstrap low``/``high`` or ``monte carlo low``/``high``).
         """
-        import pandas as pd
-
-        rows, units = [], study_units(self.study)  # the study's, else the FMU's units
-        params = self.study.identified_parameters() if self.study else []
-        for p in (p for p in params if p.name in self.params):  # those of the structure
-            low, high = self.intervals.get(p.name, [None, None])
-            se = self.uncertainty.relative.get(p.name, math.nan) if self.uncertainty else math.nan
-            rows.append(
-                {
-                    "parameter": p.name,
-                    "value": self.params[p.name],
-                    "unit": units.get(p.name, ""),
-                    "95% low": math.nan if low is None else low,
-                    "95% high": math.nan if high is None else high,
-                    "std error [%]": se,
-                    **self._sampled_columns(p.name),
-                    "first levels": f"{min(p.levels):.6g} .. {max(p.levels):.6g}",
-                    "weakly determined": self.weak.get(p.name, ""),
-                }
-            )
-        return pd.DataFrame(rows).set_index("parameter") if rows else pd.DataFrame()
+        return result_views.parameters_frame(self)

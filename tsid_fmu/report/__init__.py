@@ -13,6 +13,7 @@ from tsid_fmu.report.markdown import markdown_report, markdown_table
 from tsid_fmu.report.notebook import parameter_rows  # registers the result's views
 from tsid_fmu.report.plots import convergence_plot, fit_plot, main_effects_plot
 from tsid_fmu.report.render import Figures, draw_study
+from tsid_fmu.report.text import fit_report
 
 __all__ = [
     "ConsoleProgress",
@@ -20,6 +21,7 @@ __all__ = [
     "convergence_plot",
     "draw_study",
     "fit_plot",
+    "fit_report",
     "html_report",
     "main_effects_plot",
     "markdown_report",

@@ -22,7 +22,7 @@ from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
 from tsid_fmu.report.scored import experiment_notes
 from tsid_fmu.report.style import cost_name, fmt, input_contribution
-from tsid_fmu.result import STATUS, IdentificationResult
+from tsid_fmu.result import PAUSED, STATUS, IdentificationResult
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import atomic_write
 from tsid_fmu.uncertainty.assess import NOISE_SOURCES
@@ -72,7 +72,7 @@ def verdict_tone(result: IdentificationResult) -> str:
     one stopped at a limit (exit status 1) without warnings; ``"bad"`` (red) for exit
     status 1 with warnings; ``"paused"`` (blue) for a study paused for review.
     """
-    if result.status == 2:
+    if result.status == PAUSED:
         return "paused"
     findings = bool(result.warnings) or bool(result.weak)
     if result.status == 0:
@@ -81,7 +81,7 @@ def verdict_tone(result: IdentificationResult) -> str:
 
 
 def _headline(result: IdentificationResult, cost: str) -> str:
-    exit_status = {0: 0, 1: 1, 2: 3}.get(result.status, result.status)
+    exit_status = result.status
     tone = verdict_tone(result)
     said = [f"{len(result.warnings)} warning(s)"] if result.warnings else []
     said += [f"{len(result.weak)} weakly determined parameter(s)"] if result.weak else []

@@ -14,7 +14,7 @@ from typing import Any
 from tsid_fmu.errors import StudyError
 from tsid_fmu.report.html_tables import esc, table
 from tsid_fmu.report.style import fmt, fmt_levels
-from tsid_fmu.result import register_views
+from tsid_fmu.result import STATUS, register_views
 from tsid_fmu.study.units import study_units
 
 __all__ = [
@@ -148,9 +148,7 @@ def parameter_rows(result: Any) -> list[list[Any]]:
 
 def result_html(result: Any) -> str:
     """Return the notebook view of a result: headline, parameters, stages."""
-    status = {0: "converged", 1: "stopped at a limit", 2: "paused for review"}.get(
-        result.status, str(result.status)
-    )
+    status = STATUS.get(result.status, str(result.status))
     parts = [
         f"<div><p><b>{esc(status)}</b>: {esc(result.message)}</p>",
         f"<p>cost {esc(fmt(result.fun))} on the measured inputs; {result.nit} Taguchi "

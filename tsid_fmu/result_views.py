@@ -1,0 +1,177 @@
+"""Views of an :class:`~tsid_fmu.result.IdentificationResult`: its summary and tables.
+
+The result's methods ``summary``, ``simulations_frame``, ``stages_frame`` and
+``parameters_frame`` call these with the result; they read it and write nothing (and
+do not import :mod:`tsid_fmu.result`, which imports them).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+from tsid_fmu.study.units import study_units
+from tsid_fmu.trail.files import strict
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = ["parameters_frame", "simulations_frame", "stages_frame", "summary"]
+
+
+def summary(result: Any) -> dict[str, Any]:
+    """Return the answer in brief, as strict JSON data (``tsid identify --json``).
+
+    It follows ``tsid_fmu/schemas/result-summary.schema.json``: ``parameters`` (per
+    name its ``value``, 95 % ``interval`` and ``unit``, why it is ``weak``, and its
+    ``sampled_interval`` where the study asks for one),
+    ``fun``, ``nfev``, ``nit``, ``status``, ``success``, ``message``, the ``stages``
+    (name, kind, cost, simulations, iterations, status, message), the ``warnings``
+    and ``out_dir``. Non-finite numbers are ``null``.
+    """
+    units = study_units(result.study)  # the study's, else the FMU's declared ones
+    params = {
+        name: {
+            "value": value,
+            "interval": list(result.intervals.get(name) or [None, None]),
+            "unit": units.get(name, ""),
+            "weak": result.weak.get(name),
+            **({"sampled_interval": result.sampled.intervals[name]} if _has(result, name) else {}),
+        }
+        for name, value in result.params.items()
+    }
+    stages = [
+        {
+            "name": s.name,
+            "kind": s.kind,
+            "cost": s.cost,
+            "nfev": s.nfev,
+            "nit": len(s.records),
+            "status": s.status,
+            "message": s.message,
+        }
+        for s in result.stages
+    ]
+    return strict(
+        {
+            "format": 1,
+            "parameters": params,
+            "fun": result.fun,
+            "nfev": result.nfev,
+            "nit": result.nit,
+            "status": result.status,
+            "success": result.success,
+            "message": result.message,
+            "stages": stages,
+            "warnings": list(result.warnings),
+            "out_dir": None if result.out_dir is None else str(result.out_dir),
+            **_structure_summary(result),
+        }
+    )
+
+
+def _has(result: Any, name: str) -> bool:
+    return result.sampled is not None and name in result.sampled.intervals
+
+
+def _structure_summary(result: Any) -> dict[str, Any]:
+    """Return the ``structure`` entry of :meth:`summary` (structure identification only)."""
+    found = result.extra.get("structure")
+    if not found:
+        return {}
+    keys = ("chosen", "choices", "why", "indistinguishable")
+    return {"structure": {**{k: found.get(k) for k in keys}, "table": result.structures}}
+
+
+def simulations_frame(result: Any) -> pd.DataFrame:
+    """Return where the :attr:`nfev` simulations went, one row per stage.
+
+    Columns: ``kind``; ``array runs`` (the stage's rows of :meth:`to_pandas`);
+    ``confirmation runs`` (one parameter set per iteration, at the predicted
+    optimum); ``array simulations`` (what the array runs and confirmation runs
+    simulated, every experiment and replicate); ``other simulations`` (start points
+    and re-runs of a Taguchi stage, or the whole of a refinement, contribution
+    analysis or check); ``simulations`` (their sum, the stage's ``nfev``). The
+    column ``simulations`` adds up to :attr:`nfev`.
+    """
+    import pandas as pd
+
+    rows = []
+    for s in result.stages:
+        arrays = sum(int(r.nfev) for r in s.records)
+        rows.append(
+            {
+                "stage": s.name,
+                "kind": s.kind,
+                "array runs": sum(len(r.sets) for r in s.records),
+                "confirmation runs": len(s.records),
+                "array simulations": arrays,
+                "other simulations": int(s.nfev) - arrays,
+                "simulations": int(s.nfev),
+            }
+        )
+    return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
+
+
+def stages_frame(result: Any) -> pd.DataFrame:
+    """Return one row per stage: kind, cost, simulations, what it contributed."""
+    import pandas as pd
+
+    rows, before = [], math.inf
+    for s in result.stages:
+        partial = s.kind == "horizon"  # its cost is over part of the data
+        gain = (before - s.cost) / before if math.isfinite(before) and before else math.nan
+        gain = math.nan if partial else gain
+        rows.append(
+            {
+                "stage": s.name,
+                "kind": s.kind,
+                "cost": s.cost,
+                "simulations": s.nfev,
+                "cost fall [%]": 100 * gain,
+                "message": s.message,
+            }
+        )
+        before = s.cost if s.kind not in ("contribution", "horizon") else before
+    return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
+
+
+def _sampled_columns(result: Any, name: str) -> dict[str, float]:
+    """Return the sampled interval of ``name`` as the columns of :meth:`parameters_frame`."""
+    if result.sampled is None:
+        return {}
+    low, high = result.sampled.intervals.get(name) or [None, None]
+    kind = result.sampled.kind.replace("_", " ")
+    return {
+        f"{kind} low": math.nan if low is None else low,
+        f"{kind} high": math.nan if high is None else high,
+    }
+
+
+def parameters_frame(result: Any) -> pd.DataFrame:
+    """Return the identified parameters with units, intervals, ranges and flags.
+
+    With sampled intervals (:attr:`sampled`), their ends follow the standard error
+    (columns ``bootstrap low``/``high`` or ``monte carlo low``/``high``).
+    """
+    import pandas as pd
+
+    rows, units = [], study_units(result.study)  # the study's, else the FMU's units
+    params = result.study.identified_parameters() if result.study else []
+    for p in (p for p in params if p.name in result.params):  # those of the structure
+        low, high = result.intervals.get(p.name, [None, None])
+        se = result.uncertainty.relative.get(p.name, math.nan) if result.uncertainty else math.nan
+        rows.append(
+            {
+                "parameter": p.name,
+                "value": result.params[p.name],
+                "unit": units.get(p.name, ""),
+                "95% low": math.nan if low is None else low,
+                "95% high": math.nan if high is None else high,
+                "std error [%]": se,
+                **_sampled_columns(result, p.name),
+                "first levels": f"{min(p.levels):.6g} .. {max(p.levels):.6g}",
+                "weakly determined": result.weak.get(p.name, ""),
+            }
+        )
+    return pd.DataFrame(rows).set_index("parameter") if rows else pd.DataFrame()
