@@ -3,6 +3,8 @@
 * no module of ``tsid_fmu`` over 500 lines (vendored C headers are not Python);
 * no function or method over 80 lines, counting every line of its definition, its
   signature and docstring included (issue 26 counted so: ``anova`` 119 lines);
+* the projected Gauss-Newton stationarity test is made in one place
+  (``tsid_fmu.search.verdict.gauss_newton_test``), which every refinement calls;
 * no import cycle between the package's modules, counting every ``import`` statement
   wherever it stands (inside functions and ``TYPE_CHECKING`` blocks too), and treating
   ``import tsid_fmu.x`` / ``from tsid_fmu.x import y`` as an edge to ``tsid_fmu.x``
@@ -131,3 +133,22 @@ def test_cycle_detector_sees_a_cycle_inside_a_function():
     a = ast.parse("def f():\n    from tsid_fmu.errors import TsidError\n")
     assert "tsid_fmu.errors" in _imports("tsid_fmu", a)
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == [["a", "b", "c"]]
+
+
+def test_the_projected_gauss_newton_test_is_made_in_one_place():
+    """Its trials (``trial_fractions``) and its verdicts (``GN_TRIED``) live in verdict.py."""
+    made = {
+        name
+        for name, path in MODULES.items()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Call)
+        and getattr(node.func, "id", getattr(node.func, "attr", None))
+        in ("trial_fractions", "trial_reaches_gate", "trial_detail")
+    }
+    assert made == {"tsid_fmu.search.verdict"}
+    said = {
+        name
+        for name, path in MODULES.items()
+        if '"projected Gauss-Newton, step tried"' in path.read_text(encoding="utf-8")
+    }
+    assert said == {"tsid_fmu.search.verdict"}

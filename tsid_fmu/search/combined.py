@@ -37,13 +37,9 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
-    LOWER_TRIED,
     Stationarity,
     decided_by_trial,
-    gauss_newton_step,
-    trial_detail,
-    trial_fractions,
-    trial_reaches_gate,
+    gauss_newton_test,
 )
 from tsid_fmu.study.definition import Study
 
@@ -270,26 +266,23 @@ def _gate(
     the ``best`` set).
     """
     cost = float(r @ r)
-    gap, step = gauss_newton_step(jac, r, z, *bounds)
-    detail = (
-        f"the projected Gauss-Newton step in the combinations predicts a decrease of "
-        f"{gap:.3g} ({gap / cost if cost > 0 else 0.0:.2g} of the cost)"
-    )
-    if gap <= GATE_RTOL * cost:
-        return Stationarity(True, "projected Gauss-Newton", gap, cost, detail)
-    fractions = trial_fractions(jac, r, step, GATE_RTOL * cost)
-    try:
-        for f in fractions:
-            fun(z + f * step)
-    except StopIteration:
-        return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
-    if cost - best[0] > GATE_RTOL * cost:  # lower by no more than the gate: the answer
-        detail += f"; {LOWER_TRIED} {cost - best[0]:.3g}"
-        return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
-    reached = trial_reaches_gate(jac, r, step, GATE_RTOL * cost, fractions)
-    detail += "; " + trial_detail(fractions, reached, cost - best[0])
-    test = "projected Gauss-Newton, step tried" if reached else "projected Gauss-Newton"
-    return Stationarity(reached, test, gap, cost, detail)
+
+    def say(gap: float) -> str:
+        return (
+            f"the projected Gauss-Newton step in the combinations predicts a decrease of "
+            f"{gap:.3g} ({gap / cost if cost > 0 else 0.0:.2g} of the cost)"
+        )
+
+    def simulate(points: list[np.ndarray]) -> bool:
+        try:
+            for point in points:
+                fun(point)
+        except StopIteration:
+            return False
+        return True
+
+    gate = GATE_RTOL * cost
+    return gauss_newton_test(jac, r, z, bounds, cost, gate, say, simulate, lambda: best[0])
 
 
 def refine_in_combinations(

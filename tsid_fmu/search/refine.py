@@ -33,15 +33,14 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
+    GN_TEST,
+    GN_TRIED,
     LOWER_PROBED,
-    LOWER_TRIED,
     Stationarity,
     decided_by_trial,
     gauss_newton_step,
+    gauss_newton_test,
     probe_points,
-    trial_detail,
-    trial_fractions,
-    trial_reaches_gate,
 )
 from tsid_fmu.study.schema import Method
 
@@ -224,38 +223,39 @@ class _Problem:
         """
         cost, x = self.best
         if self.jacobian is None or not math.isfinite(cost):
-            return Stationarity(False, "projected Gauss-Newton", math.inf, cost, "no Jacobian")
+            return Stationarity(False, GN_TEST, math.inf, cost, "no Jacobian")
         s_lin, r_lin, jac = self.jacobian
         s = self.space.to_s(x)
         r = self.best_r if self.best_r is not None else r_lin
         if not np.array_equal(s, s_lin) and self.best_r is None:
             s = s_lin
-        gap, step = gauss_newton_step(jac, r, s, self.space.s_lower, self.space.s_upper)
         scale, gate = max(cost, floor), self.gate(cost, floor)
-        share = gap / scale if scale > 0 else 0.0
-        detail = (
-            f"the projected Gauss-Newton step predicts a decrease of {gap:.3g} ({share:.2g} "
-            f"of the cost or the noise floor, whichever is larger; "
-            f"{'at most' if gap <= gate else 'more than'} {GATE_RTOL:g})"
+
+        def say(gap: float) -> str:
+            share = gap / scale if scale > 0 else 0.0
+            said = (
+                f"the projected Gauss-Newton step predicts a decrease of {gap:.3g} "
+                f"({share:.2g} of the cost or the noise floor, whichever is larger; "
+                f"{'at most' if gap <= gate else 'more than'} {GATE_RTOL:g})"
+            )
+            if gate > GATE_RTOL * scale:
+                said += f"; the FMU's own noise makes a change of the cost below {gate:.3g} moot"
+            return said
+
+        def simulate(points: list[np.ndarray]) -> bool:
+            try:
+                self._residuals([self.space.to_x(self.space.clip(t)) for t in points])
+            except _Budget:
+                return False
+            return True
+
+        bounds = (self.space.s_lower, self.space.s_upper)
+        found = gauss_newton_test(
+            jac, r, s, bounds, cost, gate, say, simulate, lambda: self.best[0]
         )
-        if gate > GATE_RTOL * scale:
-            detail += f"; the FMU's own noise makes a change of the cost below {gate:.3g} moot"
-        if gap <= gate:
-            return Stationarity(True, "projected Gauss-Newton", gap, cost, detail)
-        fractions = trial_fractions(jac, r, step, gate)
-        try:
-            self._residuals([self.space.to_x(self.space.clip(s + f * step)) for f in fractions])
-        except _Budget:
-            return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
-        # a point lower by no more than the gate refutes nothing: it is the answer now
-        if cost - self.best[0] > gate:
-            detail += f"; {LOWER_TRIED} {cost - self.best[0]:.3g}"
-            return Stationarity(False, "projected Gauss-Newton", gap, cost, detail)
-        reached = trial_reaches_gate(jac, r, step, gate, fractions)
-        detail += "; " + trial_detail(fractions, reached, cost - self.best[0])
-        test = "projected Gauss-Newton, step tried" if reached else "projected Gauss-Newton"
-        if not reached or probe <= 0:
-            return Stationarity(reached, test, gap, cost, detail)
+        if found.test != GN_TRIED or not found.holds or probe <= 0:
+            return found
+        test, gap, detail = found.test, found.gap, found.detail
         try:
             self._residuals(probe_points(self.space, x, probe))
         except _Budget:

@@ -24,7 +24,7 @@ stationary may blame the model for it.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,12 +36,15 @@ from tsid_fmu.search.space import Space
 
 __all__ = [
     "GATE_RTOL",
+    "GN_TEST",
+    "GN_TRIED",
     "LOWER_PROBED",
     "LOWER_TRIED",
     "POOR_FIT",
     "Stationarity",
     "gauss_newton_gap",
     "gauss_newton_step",
+    "gauss_newton_test",
     "noise_floor",
     "probe_points",
     "probe_test",
@@ -56,6 +59,12 @@ LOWER_TRIED = "tried, the step lowered the cost by"
 
 LOWER_PROBED = "but a local probe lowered the cost by"
 """How a failed stationarity test says that, its step failing, a local probe was lower."""
+
+GN_TEST = "projected Gauss-Newton"
+"""The name of the projected Gauss-Newton test (:func:`gauss_newton_test`)."""
+
+GN_TRIED = "projected Gauss-Newton, step tried"
+"""Its name where it held by simulating its step (the model does not hold that close)."""
 
 MAX_TRIALS = 12
 """Fractions of a Gauss-Newton step a stationarity test simulates at most (1, 1/2, ...,
@@ -123,7 +132,7 @@ def decided_by_trial(gate: Mapping[str, Any]) -> bool:
     close to the answer), or it failed with its step, simulated, lower: where the
     refinement in combinations (:mod:`~tsid_fmu.search.combined`) runs.
     """
-    if gate.get("test") == "projected Gauss-Newton, step tried":
+    if gate.get("test") == GN_TRIED:
         return True
     detail = str(gate.get("detail", ""))
     return not gate.get("holds", True) and (LOWER_TRIED in detail or LOWER_PROBED in detail)
@@ -314,3 +323,59 @@ def noise_floor(evaluator: Evaluator, weighted: bool) -> float:
             sigma = noise_level(e.scored(e.measured))
             total += n * float(np.sum((sigma / e.scale) ** 2))
     return total
+
+
+def gauss_newton_test(
+    jac: np.ndarray,
+    r: np.ndarray,
+    s: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    cost: float,
+    gate: float,
+    say: Callable[[float], str],
+    simulate: Callable[[list[np.ndarray]], bool],
+    lowest: Callable[[], float],
+) -> Stationarity:
+    """Run the projected Gauss-Newton test at an answer: the one place it is made.
+
+    Parameters
+    ----------
+    jac, r, s : numpy.ndarray
+        The last Jacobian, the answer's residuals and the answer, in the coordinates
+        the caller searched in.
+    bounds : tuple of numpy.ndarray
+        The lower and upper bounds of ``s``.
+    cost : float
+        The answer's cost.
+    gate : float
+        The largest predicted decrease of the cost that still shows an optimum.
+    say : callable
+        ``say(gap)``: the sentence that opens the test's ``detail``.
+    simulate : callable
+        ``simulate(points)`` scores the trial points (in the coordinates of ``s``), and
+        returns False where the runs ran out.
+    lowest : callable
+        ``lowest()``: the lowest cost known after the trials.
+
+    Returns
+    -------
+    Stationarity
+        It holds where the step predicts a decrease of at most ``gate``
+        (:data:`GN_TEST`), or where the step and its halves down to the gate
+        (:func:`trial_fractions`), simulated, lower the cost by no more than the gate
+        (:data:`GN_TRIED`). A trial lower by more than the gate, or a trial that found
+        no runs left, fails it.
+    """
+    gap, step = gauss_newton_step(jac, r, s, *bounds)
+    detail = say(gap)
+    if gap <= gate:
+        return Stationarity(True, GN_TEST, gap, cost, detail)
+    fractions = trial_fractions(jac, r, step, gate)
+    if not simulate([s + f * step for f in fractions]):
+        return Stationarity(False, GN_TEST, gap, cost, detail)
+    lower = cost - lowest()
+    if lower > gate:  # a point lower by no more than the gate refutes nothing
+        return Stationarity(False, GN_TEST, gap, cost, f"{detail}; {LOWER_TRIED} {lower:.3g}")
+    reached = trial_reaches_gate(jac, r, step, gate, fractions)
+    detail += "; " + trial_detail(fractions, reached, lower)
+    return Stationarity(reached, GN_TRIED if reached else GN_TEST, gap, cost, detail)
