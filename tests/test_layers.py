@@ -7,12 +7,15 @@ from __future__ import annotations
 import ast
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from test_structure import MODULES, _imports
 
 import tsid_fmu
 from tsid_fmu.result import _VIEWS
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def _reaches(start: str) -> set[str]:
@@ -51,3 +54,13 @@ def test_importing_the_result_alone_registers_the_views():
         "assert 'a' in r._repr_html_()\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_every_module_of_search_is_on_the_architecture_pages_map():
+    """docs/explanation/architecture.md names every module of ``search/`` with what it
+    decides; a module added without a line there fails here."""
+    page = (REPO / "docs" / "explanation" / "architecture.md").read_text(encoding="utf-8")
+    section = page.split("## The modules of `search/`", 1)[1]
+    listed = {line.split()[0] for line in section.splitlines() if line.startswith("  ")}
+    modules = {n.rsplit(".", 1)[1] + ".py" for n in MODULES if n.startswith("tsid_fmu.search.")}
+    assert modules - listed == set()
