@@ -61,10 +61,10 @@ def test_the_reports_and_the_command_line_show_them(run, capsys):
     for text in (md, page):
         assert "Bootstrap 95 % intervals, beside the primary ones" in text
     assert "bootstrap 95 % interval" in page
-    _print_result(res, out, 0)
+    _print_result(res, out)
     printed = capsys.readouterr().out
     assert "bootstrap 95 % interval" in printed and "replicates (0 failed" in printed
-    _print_result(plain, out, 0)
+    _print_result(plain, out)
     assert "bootstrap" not in capsys.readouterr().out
     # tsid identify --json: the summary carries it, as its schema says
     import jsonschema

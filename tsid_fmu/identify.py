@@ -103,9 +103,9 @@ def _status(stages: list[StageResult]) -> tuple[int, str]:
     The verdict is the answer's stationarity test where one was made; a stage paused
     for review (its status 2) pauses the study (:data:`PAUSED`, exit status 3).
     """
-    last = stages[-1]
-    if last.status == 2:
-        return PAUSED, last.message
+    paused = [s for s in stages if s.status == 2]  # the Taguchi stage resumed, or the last
+    if paused:
+        return PAUSED, paused[0].message
     said = "; ".join(f"{s.name}: {s.message}" for s in stages if s.kind != "contribution")
     tested = verdict(stages)
     if tested is not None:

@@ -71,13 +71,18 @@ class Control:
 
 @dataclass
 class Context:
-    """The study, its evaluators and trail, the progress callback, this call's control."""
+    """The study, its evaluators and trail, the progress callback, this call's control.
+
+    ``ran`` counts the Taguchi iterations this call has run so far, over every stage:
+    ``--pause-after`` counts them (a stage the arrays go back to counts on).
+    """
 
     study: Study
     evaluators: Evaluators
     store: StageStore
     progress: ProgressCallback | None
     control: Control
+    ran: int = 0
 
 
 def polish(

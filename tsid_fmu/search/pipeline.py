@@ -45,6 +45,16 @@ class _Recorder:
         self.store.write_iteration(self.key, record, self.space)
 
 
+def _pause_left(ctx: Context) -> int | None:
+    """Return the iterations a stage may run before ``--pause-after`` pauses it.
+
+    The pause counts the iterations of this call, over every stage: arrays that go on
+    after a refinement was not settled count from where they handed over.
+    """
+    pause = ctx.control.pause_after
+    return None if pause is None else max(pause - ctx.ran, 1)
+
+
 def _taguchi(
     ctx: Context,
     key: str,
@@ -90,7 +100,7 @@ def _taguchi(
         override_note=note,
         nfev_before=nfev_before,
         max_iterations=max_iterations,
-        pause_after=ctx.control.pause_after,
+        pause_after=_pause_left(ctx),
         experiments=list(exps),
         starts=start_points(
             space,
@@ -104,7 +114,9 @@ def _taguchi(
     if prior and hasattr(evaluator, "mark_known"):
         # what the interrupted run simulated is not counted again (it was in memory)
         evaluator.mark_known(_simulated_sets(prior))
+    before = len(prior)
     result = taguchi_stage(run, evaluator, _Recorder(ctx.store, key, space), ctx.progress)
+    ctx.ran += max(len(result.records) - before, 0)
     result.kind = kind
     if result.status != 2:
         ctx.store.write_stage(key, result)
