@@ -43,8 +43,8 @@ study = Study(
     fmu=fmu,
     parameters=[Parameter("tau", [0.05, 0.5, 2.0], min=0.0)],
     experiments=[Experiment(folder / "d.csv", inputs={{"u": "u"}}, outputs={{"y": "y"}})],
-    method=Method(max_iterations=2, cost="sse", weighting="noise") if users
-    else Method(max_iterations=2, refine="none", replicates=1),
+    method=Method(max_iterations=2, cost="sse", weighting="noise", replicates=2) if users
+    else Method(max_iterations=2, cost="iae", weighting="none", refine="none", replicates=1),
 )
 res = identify(study, workers=None if users else 1, timeout=None if users else 0, plots=False)
 print(json.dumps({{

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ import pandas as pd
 import pytest
 from fmu_factory import build_pythonfmu, pythonfmu_available
 
-from tsid_fmu import __version__
+from tsid_fmu import Method, Study, __version__
 from tsid_fmu.cli import main, make_parser
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.report.console import ConsoleProgress
@@ -103,6 +104,15 @@ def test_init_siso_round_trip(tmp_path, capsys):
     )
     assert "# fixedStepSize" in text and 'array = "L25"' in text
     assert 'cost = "sse"' in text and 'weighting = "noise"' in text and "replicates = 1" in text
+    # init writes the defaults of Method() and of a study file without them
+    written = tomllib.loads(text)["method"]
+    keys = ("cost", "weighting", "replicates")
+    assert {k: written[k] for k in keys} == {k: getattr(Method(), k) for k in keys}
+    bare = text.replace('cost = "sse"', "").replace('weighting = "noise"', "")
+    bare = bare.replace("replicates = 1", "")
+    (study.parent / "bare.toml").write_text(bare)
+    loaded = Study.from_toml(study.parent / "bare.toml").method
+    assert {k: getattr(loaded, k) for k in keys} == {k: written[k] for k in keys}
     res = _identify_one_iteration(study, tmp_path)
     assert set(res["params"]) == {"F_cm", "F_vm", "M_m", "K_s", "B_s"}  # V_z: a numerical setting
 

@@ -151,6 +151,8 @@ def synthetic_study(tmp_path, **kw):
         parameters=[Parameter("a", [0, 1, 2]), Parameter("b", [0, 1, 2])],
         experiments=[Experiment(data="unused.csv", outputs={"y": "y"})],
         replicates=1,
+        cost="iae",  # the Taguchi stage alone: the fake evaluator has no residuals
+        weighting="none",
         **kw,
     )
 
@@ -219,7 +221,9 @@ def test_noise_weighting_divides_each_output_by_its_noise(lag, tmp_path):
     from tsid_fmu.study import serial_evaluator as Evaluator
 
     x = {"tau": TAU, "x0": X0}
-    plain = dataclasses.replace(make_study(lag), cost="sse", replicates=1, input_noise=0.0)
+    plain = dataclasses.replace(
+        make_study(lag), cost="sse", weighting="none", replicates=1, input_noise=0.0
+    )
     weighted = dataclasses.replace(plain, weighting="noise")
     with Evaluator(plain) as a, Evaluator(weighted) as b:
         sigma = noise_level(a.prepared[0].measured)[0]

@@ -46,6 +46,7 @@ def study_text(fmu: Path, *, data: str | None = None, extra: str = "", levels: s
     return (
         f'[study]\nfmu = "{fmu.as_posix()}"\n[data]\nfile = "{data}"\ninputs = {{ u = "u" }}\n'
         f'outputs = {{ y = "y" }}\n{extra}[method]\nmax_iterations = {iterations}\n'
+        f'cost = "iae"\nweighting = "none"\nreplicates = 2\n'  # written for the SISO paper's
         f"[parameters]\ntau = {{ levels = [{levels}], min = 0 }}\n"
     )
 

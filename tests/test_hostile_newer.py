@@ -82,6 +82,8 @@ def _variant_study(folder: Path, params: str, study: str = "") -> Study:
 file = "d.csv"
 inputs = {{ u = "u" }}
 outputs = {{ y = "y" }}
+[method]
+weighting = "none"  # exact data: no noise to weight by
 [parameters]
 tau = {{ levels = [0.5, 1.0, 2.0], min = 0.01 }}
 variant = {{ fmus = ["LagA.fmu", "LagB.fmu"] }}
@@ -348,6 +350,7 @@ inputs = { F_m = "F_m" }
 outputs = { F_o = "F_o" }
 [method]
 array = "L18"
+weighting = "none"
 [parameters]
 K_s = { levels = [4000, 8000, 12000] }
 friction = { choices = [1, 2] }

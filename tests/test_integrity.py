@@ -55,6 +55,9 @@ outputs = {{ y = "y" }}
 seed = {seed}
 replicates = 1
 max_iterations = 10
+cost = "iae"  # the SISO paper's cost: these tests were written for it
+weighting = "none"
+
 [leveling]
 {leveling}
 [parameters]

@@ -41,7 +41,8 @@ def study(tmp_path_factory) -> Path:
     fmu = lag_case(d, 0.0002)  # 5,001 samples
     (d / "study.toml").write_text(
         f'[study]\nfmu = "{fmu.name}"\n[data]\nfile = "good.csv"\ninputs = {{ u = "u" }}\n'
-        'outputs = { y = "y" }\n[method]\nmax_iterations = 8\n[leveling]\ntolerance = 0.0001\n'
+        'outputs = { y = "y" }\n[method]\nmax_iterations = 8\nweighting = "none"\n'
+        "[leveling]\ntolerance = 0.0001\n"
         "[parameters]\ntau = { levels = [0.1, 0.3, 0.6], min = 0 }\n"
     )
     (d / "tsid").write_text(SCRIPT)

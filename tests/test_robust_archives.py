@@ -296,7 +296,8 @@ def test_cli_prints_one_line_for_a_hostile_fmu(lag, tmp_path, capsys):
     study = tmp_path / "s.toml"
     study.write_text(
         '[study]\nfmu = "evil.fmu"\n[data]\nfile = "d.csv"\ninputs = { u = "u" }\n'
-        'outputs = { y = "y" }\n[parameters]\ntau = { levels = [0.1, 0.2, 0.3] }\n'
+        'outputs = { y = "y" }\n[method]\nweighting = "none"\n'
+        "[parameters]\ntau = { levels = [0.1, 0.2, 0.3] }\n"
     )
     assert main(["identify", str(study), "--out", str(tmp_path / "o"), "-q", "--no-plots"]) == 2
     err = capsys.readouterr().err

@@ -154,7 +154,7 @@ def test_the_option_is_checked_with_clear_errors():
     with pytest.raises(StudyError, match="uncertainty must be 'analytic', 'bootstrap' or"):
         Method(cost="sse", uncertainty="bootstrapping")
     with pytest.raises(StudyError, match=r"minimises the sse cost; the study uses .iae."):
-        Method(uncertainty="monte_carlo")
+        Method(cost="iae", uncertainty="monte_carlo")
     with pytest.raises(StudyError, match="uncertainty_replicates must be an integer >= 20"):
         Method(cost="sse", uncertainty="bootstrap", uncertainty_replicates=5)
 

@@ -307,21 +307,24 @@ class Method:
         Orthogonal array (e.g. ``"L25"``) of the first levels, and of later iterations
         whose factors it fits; default (and otherwise) the smallest that fits.
     cost : str
-        The study's one objective (:data:`tsid_fmu.evaluate.cost.COSTS`): ``"iae"``
-        (default, the SISO paper's), ``"sse"`` (the MISO paper's; with
-        ``weighting = "noise"`` the Gaussian maximum-likelihood cost, which the intervals
-        and the refinement stage assume), ``"ise"``, ``"rmse"``, ``"nrmse"``. Every
-        stage minimises it and compares parameter sets by it on the measured inputs.
-    weighting : {"none", "noise"}
-        ``noise`` divides each output's cost by its noise level (squared for
+        The study's one objective (:data:`tsid_fmu.evaluate.cost.COSTS`): ``"sse"``
+        (default, the MISO paper's; with ``weighting = "noise"`` the Gaussian
+        maximum-likelihood cost, which the intervals and the refinement stage assume),
+        ``"iae"`` (the SISO paper's), ``"ise"``, ``"rmse"``, ``"nrmse"``. Every stage
+        minimises it and compares parameter sets by it on the measured inputs. The
+        defaults of ``cost``, ``weighting`` and ``replicates`` are those ``tsid init``
+        writes.
+    weighting : {"noise", "none"}
+        ``noise`` (default) divides each output's cost by its noise level (squared for
         ``sse``/``ise``), as a maximum-likelihood fit does: the experiment's ``noise``
         where given (a sensor's known resolution), else estimated from the data; an
-        output that shows no noise is refused (give its ``noise`` or ``weights``).
-        ``none`` (default) uses the output weights as given.
+        output that shows no noise (simulated data without noise) is refused: give its
+        ``noise`` or ``weights``, or set ``weighting = "none"``. ``none`` uses the output
+        weights as given.
     replicates : int
         Runs per array row: the measured inputs, plus ``replicates - 1`` copies with
-        white noise added to the inputs (the SISO paper's robustness step; its S/N is
-        over all of them). Default 2, as in the SISO paper.
+        white noise added to the inputs (the SISO paper's robustness step, with 2; its
+        S/N is over all of them). Default 1: the measured inputs only.
     input_noise : float
         Standard deviation of the replicates' input noise, relative to each input's
         standard deviation. Default 0.01.
@@ -393,9 +396,9 @@ class Method:
     """
 
     array: str | None = None
-    cost: str = "iae"
-    weighting: str = "none"
-    replicates: int = 2
+    cost: str = "sse"
+    weighting: str = "noise"
+    replicates: int = 1
     input_noise: float = 0.01
     seed: int = 0
     max_iterations: int = 20
