@@ -10,7 +10,6 @@ take it as the number it is) that also carries lmfit's attributes: ``value``,
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from typing import Any
 
 __all__ = ["Param", "Parameters", "describe"]
@@ -132,8 +131,3 @@ def describe(result: Any) -> Parameters:
             weak=result.weak.get(name),
         )
     return out
-
-
-def plain(values: Mapping[str, float]) -> dict[str, float]:
-    """Return ``values`` as plain floats (what a file or another process is given)."""
-    return {str(k): float(v) for k, v in values.items()}

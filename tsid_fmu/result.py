@@ -229,9 +229,9 @@ class IdentificationResult:
         parameter the data do not determine has an infinite variance and ``nan``
         covariances. A discrete choice (structure identification) has a row and column
         of ``nan``: it has no variance. Where no intervals were computed (a paused
-        study, ``refine = "none"`` with a cost other than ``sse``) every entry is
-        ``nan``, as SciPy's ``curve_fit`` fills ``pcov`` with ``inf`` where it cannot
-        estimate it. Always ``(len(x), len(x))``.
+        study, or an answer whose cost is not finite) every entry is ``nan``, as
+        SciPy's ``curve_fit`` fills ``pcov`` with ``inf`` where it cannot estimate it.
+        Always ``(len(x), len(x))``.
         """
         u, size = self.uncertainty, len(self.params)
         chosen = (self.extra.get("structure") or {}).get("values") or {}
