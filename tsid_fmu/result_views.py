@@ -20,15 +20,7 @@ __all__ = ["parameters_frame", "simulations_frame", "stages_frame", "summary"]
 
 
 def summary(result: Any) -> dict[str, Any]:
-    """Return the answer in brief, as strict JSON data (``tsid identify --json``).
-
-    It follows ``tsid_fmu/schemas/result-summary.schema.json``: ``parameters`` (per
-    name its ``value``, 95 % ``interval`` and ``unit``, why it is ``weak``, and its
-    ``sampled_interval`` where the study asks for one),
-    ``fun``, ``nfev``, ``nit``, ``status``, ``success``, ``message``, the ``stages``
-    (name, kind, cost, simulations, iterations, status, message), the ``warnings``
-    and ``out_dir``. Non-finite numbers are ``null``.
-    """
+    """Return :meth:`~tsid_fmu.result.IdentificationResult.summary`."""
     units = study_units(result.study)  # the study's, else the FMU's declared ones
     params = {
         name: {
@@ -84,16 +76,7 @@ def _structure_summary(result: Any) -> dict[str, Any]:
 
 
 def simulations_frame(result: Any) -> pd.DataFrame:
-    """Return where the :attr:`nfev` simulations went, one row per stage.
-
-    Columns: ``kind``; ``array runs`` (the stage's rows of :meth:`to_pandas`);
-    ``confirmation runs`` (one parameter set per iteration, at the predicted
-    optimum); ``array simulations`` (what the array runs and confirmation runs
-    simulated, every experiment and replicate); ``other simulations`` (start points
-    and re-runs of a Taguchi stage, or the whole of a refinement, contribution
-    analysis or check); ``simulations`` (their sum, the stage's ``nfev``). The
-    column ``simulations`` adds up to :attr:`nfev`.
-    """
+    """Return :meth:`~tsid_fmu.result.IdentificationResult.simulations_frame`."""
     import pandas as pd
 
     rows = []
@@ -149,11 +132,7 @@ def _sampled_columns(result: Any, name: str) -> dict[str, float]:
 
 
 def parameters_frame(result: Any) -> pd.DataFrame:
-    """Return the identified parameters with units, intervals, ranges and flags.
-
-    With sampled intervals (:attr:`sampled`), their ends follow the standard error
-    (columns ``bootstrap low``/``high`` or ``monte carlo low``/``high``).
-    """
+    """Return :meth:`~tsid_fmu.result.IdentificationResult.parameters_frame`."""
     import pandas as pd
 
     rows, units = [], study_units(result.study)  # the study's, else the FMU's units
