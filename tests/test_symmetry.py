@@ -195,3 +195,21 @@ def test_a_symmetry_that_holds_for_other_inputs_too_is_called_structural(tmp_pat
         assert structural(ev, x, [{"R": 2.0, "C": 0.15}, {"R": 0.5, "C": 0.6}], level) is True
         assert structural(ev, x, [{"R": 1.1, "C": 0.3}], level) is False  # tau moved 10 %
         assert structural(ev, x, [], level) is None
+
+
+def test_the_products_pair_the_parameter_that_moves_against_the_others_and_use_their_names():
+    """JModelica's Simple2R1C in the study's order (R1, R2, C), along a direction the
+    solver's noise tilted (C's weight 0.652 against 0.537 and 0.535): the products are
+    C R1 and C R2 (not R1 R2^-1 and R1 C), and their values are those of the products
+    their names show (the study had reported R1 C = 202.11 against a truth of 200)."""
+    levels = {"R1": [0.02, 0.6], "R2": [0.02, 0.6], "C": [500.0, 8000.0]}
+    space = Space(levels, {n: (0.0, math.inf) for n in levels}, LevelingOptions())
+    values = {"R1": 0.049701, "R2": 0.12428, "C": 4026.0}
+    v = np.array([0.537, 0.535, -0.652])
+    u = Uncertainty(values=dict(values))
+    u.cov = 1e-8 * np.eye(3)
+    u.dof = {n: 100.0 for n in levels}
+    fixed = fixed_across(space, u, v, ["R1", "R2", "C"])
+    assert [f["name"] for f in fixed] == ["C R1", "C R2"]
+    assert fixed[0]["value"] == pytest.approx(4026.0 * 0.049701, rel=1e-12)
+    assert fixed[1]["value"] == pytest.approx(4026.0 * 0.12428, rel=1e-12)

@@ -250,6 +250,17 @@ def _exponent(a: float) -> str:
     return f"^{a:.3g}"
 
 
+def _rounded(a: float) -> float:
+    """Return an exponent as :func:`_exponent` writes it: a near-integer as that integer.
+
+    The value and the interval of a combination named ``C R1`` are those of ``C R1``,
+    not of ``C R1^0.98`` (the direction the differences give is tilted off the exact
+    symmetry by the solver's noise).
+    """
+    k = round(a)
+    return float(k) if abs(a - k) < 0.02 * max(abs(a), 1.0) and k != 0 else a
+
+
 def fixed_across(
     space: Space, u: Uncertainty, v: np.ndarray, members: list[str]
 ) -> list[dict[str, object]]:
@@ -257,8 +268,9 @@ def fixed_across(
 
     For an exact symmetry of parameters in logarithmic coordinates (the capacity and the
     two resistances of a thermal model, scaled by ``k`` and ``1/k``) these are the
-    products the data fix: the first member paired with each other one, with exponents
-    that cancel ``v`` (``R1 C``, ``R2 C``). For parameters in linear coordinates, the
+    products the data fix: one member (the one that moves against the others, where one
+    does; else the first) paired with each other one, with exponents that cancel ``v``
+    (``C R1``, ``C R2``). For parameters in linear coordinates, the
     sums. Their standard errors come from the covariance with ``v``'s own variance
     projected out (along ``v`` it measured the solver's noise, not the data). Members
     of mixed coordinates are not combined.
@@ -274,9 +286,13 @@ def fixed_across(
     keep = np.eye(space.dim) - np.outer(unit, unit)
     cov_p = keep @ finite @ keep
     t = quantile(max(min(u.dof.values(), default=1.0), 1.0))
-    first, out = idx[0], []
-    for j in idx[1:]:
-        a = {first: 1.0, j: -float(change[first] / change[j])}
+    # the pivot is the member that moves against the others (C against R1 and R2), so
+    # that each pair is a product, R1 C and R2 C, not a ratio of two that move together
+    signs = [1 if change[j] > 0 else -1 for j in idx]
+    first = next((j for j, g in zip(idx, signs, strict=True) if signs.count(g) == 1), idx[0])
+    out = []
+    for j in [i for i in idx if i != first]:
+        a = {first: 1.0, j: _rounded(-float(change[first] / change[j]))}
         names = [space.names[i] for i in a]
         g = np.zeros(space.dim)
         for i, coef in a.items():
