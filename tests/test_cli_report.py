@@ -31,7 +31,7 @@ def test_version_and_help_for_every_option(capsys):
     assert stop.value.code == 0 and capsys.readouterr().out.strip() == f"tsid {__version__}"
     parser = make_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(sub.choices) == {"identify", "simulate", "info", "init", "build", "screen"}
+    assert set(sub.choices) == {"identify", "simulate", "info", "init", "build", "screen", "design"}
     for name, p in sub.choices.items():
         for action in p._actions:
             if not isinstance(action, argparse._HelpAction):

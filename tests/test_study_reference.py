@@ -34,6 +34,7 @@ LOADER_KEYS = {
     "[leveling]": set(loader._LEVELING_TYPES),
     "[[phases]]": loader._PHASE,
     "[contribution]": set(loader._CONTRIB_TYPES),
+    "[design]": set(loader._DESIGN_TYPES),
 }
 
 

@@ -7,6 +7,8 @@ The flat public API, over the layers of the data flow (see ``docs/explanation/ar
 - :func:`screen`: a sensitivity screening (Morris or Sobol, through SALib) over a
   study's first ranges, beside the MISO paper's eq. (7) from an L25
   (:class:`ScreeningResult`);
+- :func:`design`: the experiment that determines what a result left open, or why none
+  can (:class:`Design`, from the study's ``[design]`` table, :class:`DesignOptions`);
 - :func:`load`: the :class:`IdentificationResult` of a finished study's results folder;
 - :class:`Study` with :class:`Parameter`, :class:`Choice` (a discrete factor),
   :class:`ModelChoice` (a choice among FMU files), :class:`Experiment` and :class:`Method`,
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 # first of all: `tsid` on the command line holds Ctrl-C while the imports below run
 import tsid_fmu._startup  # noqa: F401  # isort: skip
+from tsid_fmu.design import Design, DesignOptions, design
 from tsid_fmu.errors import (
     ArrayError,
     BuildError,
@@ -53,6 +56,8 @@ __all__ = [
     "Choice",
     "ContributionOptions",
     "DataError",
+    "Design",
+    "DesignOptions",
     "Experiment",
     "FMUError",
     "IdentificationResult",
@@ -69,6 +74,7 @@ __all__ = [
     "StudyError",
     "TsidError",
     "__version__",
+    "design",
     "identify",
     "load",
     "screen",

@@ -1,4 +1,4 @@
-"""Command line: ``tsid identify | simulate | info | init | build | screen``.
+"""Command line: ``tsid identify | simulate | info | init | build | screen | design``.
 
 Every ending is one exit status (:data:`EXIT_STATUSES`) and, for an error, one line on
 stderr, never a traceback: errors of the package (:class:`~tsid_fmu.errors.TsidError`,
@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from tsid_fmu.cli_design import add_design_parser
 from tsid_fmu.cli_exits import (
     environment,
     error,
@@ -391,6 +392,7 @@ def make_parser() -> argparse.ArgumentParser:
     _identify_parser(sub)
     _other_parsers(sub)
     add_screen_parser(sub)  # cli_screen.py
+    add_design_parser(sub)  # cli_design.py
     return parser
 
 

@@ -362,6 +362,13 @@ def init_study(
         '# uncertainty = "bootstrap"   # or "monte_carlo": noise from their AR model',
         "# uncertainty_replicates = 100",
         "",
+        "# what to measure next: tsid design STUDY --result DIR proposes the input that",
+        "# determines what these data leave open, inside the limits the rig can apply",
+        "# [design]",
+        "# inputs = { INPUT = [-1.0, 1.0] }  # [min, max]; default: the range the data applied",
+        "# band = [0.1, 10.0]                # Hz; default 2 periods a record to 1/20 of the rate",
+        '# kinds = ["steps", "chirp", "multisine", "prbs"]',
+        "",
         "[parameters]",
         f"# {'five' if n == 5 else 'three'} log-spaced levels over one decade around the "
         "FMU's start value, within the",

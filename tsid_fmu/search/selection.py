@@ -139,6 +139,9 @@ class Candidate:
             "simulations": self.nfev,
             "chosen": self.chosen,
             "why": self.why,
+            # the structure's choices and its own optimum, for tsid design's discrimination
+            "values": dict(self.values),
+            "x": dict(self.x),
         }
 
 

@@ -23,10 +23,12 @@ from typing import Any
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.study.choice import Choice, ModelChoice
 from tsid_fmu.study.definition import Study
+from tsid_fmu.study.designopts import DesignOptions
 from tsid_fmu.study.schema import ContributionOptions, Experiment, Method, Parameter, Phase
 from tsid_fmu.study.toml import (
     _CONTRIB_TYPES,
     _DATA,
+    _DESIGN_TYPES,
     _LEVELING_TYPES,
     _METHOD_TYPES,
     _PARAM,
@@ -115,6 +117,14 @@ TABLES = (
         _CONTRIB_TYPES,
         (ContributionOptions,),
         kinds=_CONTRIB_TYPES,
+    ),
+    Table(
+        ("design",),
+        "[design]",
+        _DESIGN_TYPES,
+        (DesignOptions,),
+        kinds=_DESIGN_TYPES,
+        form="Read by `tsid design` only: the experiments it may propose.",
     ),
 )
 """The tables of a study file, in the page's order."""

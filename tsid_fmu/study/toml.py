@@ -20,10 +20,17 @@ from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import StudyError
 from tsid_fmu.study.checks import parse_toml
 from tsid_fmu.study.choice import Choice, ModelChoice
+from tsid_fmu.study.designopts import DesignOptions
 from tsid_fmu.study.schema import ContributionOptions, Experiment, Method, Parameter, Phase
 from tsid_fmu.study.toml_write import write_study_file
 
-__all__ = ["read_study_file", "study_from_document", "write_study_file"]
+__all__ = [
+    "design_options",
+    "read_design",
+    "read_study_file",
+    "study_from_document",
+    "write_study_file",
+]
 
 
 MAX_FILE_BYTES = 16 * 1024**2
@@ -38,6 +45,7 @@ _TOP = {
     "parameters",
     "phases",
     "contribution",
+    "design",
 }
 _STUDY = {"name", "fmu", "start_values", "interface", "step_size"}
 _DATA = {
@@ -104,6 +112,17 @@ _CONTRIB_TYPES: dict[str, type] = {
     "compare_ungrouped": bool,
     "refine_jointly": bool,
     "refine_span": float,
+}
+_DESIGN_TYPES: dict[str, type] = {
+    "inputs": dict,
+    "band": list,
+    "duration": float,
+    "sample_time": float,
+    "kinds": list,
+    "criterion": str,
+    "bands": int,
+    "seed": int,
+    "experiment": str,
 }
 _TYPE_NAMES = {
     float: "a number",
@@ -337,6 +356,23 @@ def _contribution(doc: Mapping[str, Any], where: _Where) -> ContributionOptions:
     return _build(where, "[contribution]", ContributionOptions, **args)
 
 
+def design_options(doc: Mapping[str, Any], source: str) -> DesignOptions:
+    """Return the ``[design]`` table of a parsed study file (defaults where it is absent)."""
+    where = _Where(source)
+    args = _typed(_table(doc, "design", where), _DESIGN_TYPES, where, "[design]")
+    return _build(where, "[design]", DesignOptions, **args)
+
+
+def read_design(path: str | Path) -> DesignOptions:
+    """Read the ``[design]`` table of a study file (:mod:`tsid_fmu.study.designopts`)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise StudyError(f"{path}: cannot read the study file ({type(exc).__name__})") from None
+    return design_options(parse_toml(text, str(path)), str(path))
+
+
 def study_from_document(doc: Mapping[str, Any], base: Path, source: str) -> dict[str, Any]:
     """Return the keyword arguments of a Study from a parsed TOML document.
 
@@ -358,6 +394,7 @@ def study_from_document(doc: Mapping[str, Any], base: Path, source: str) -> dict
     st = _table(doc, "study", where, required=not fmus)
     _check_keys(st, _STUDY, where, "[study]")
     parameters = _parameters(doc, base, where)
+    design_options(doc, source)  # checked with the rest; tsid design reads it
     fmu_name = _get(st, "fmu", str, where, "[study]")
     models = [c for c in parameters if isinstance(c, ModelChoice)]
     if fmu_name is None and not models:

@@ -1,0 +1,244 @@
+"""Close the loop of ``tsid design``: predicted against achieved intervals.
+
+``--case siso`` (the default): for the SISO example (``examples/lsea_siso``), identify
+the study as shipped (B_s open), run the design, make the proposed experiment's data
+with the example's independent simulator at the truth (``examples/lsea_siso/
+make_data.py``: the equations solved piecewise exactly, the rig's load cells and
+encoder, a new noise draw per seed), add it to the study as a second experiment,
+identify again (five levels from half to twice each parameter's first answer, as a
+user starting from it would), and compare, per parameter, the achieved 95 % interval
+with the predicted one (the ratio of their widths, each relative to its own answer; and
+whether the achieved one holds the truth).
+
+``--case miso``: the MISO example's force-only experiment alone (which fixes only the
+ratios of m1, K_s, C_d and C_1, not their scale), designed over the motor force and
+the stage position (``examples/lsea_miso/make_data.py``'s simulator, the stage
+following a cubic spline through the designed positions).
+
+A measurement, not a test: it exits 0 whatever the rows say.
+``docs/benchmarks/design.md`` holds the tables of the last run.
+
+Run (about 1 minute per seed on two cores)::
+
+    python benchmarks/design.py --seeds 10 [--workers 2] [--case miso]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import math
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "lsea_siso"
+
+
+def _make_data_module(example: str):
+    path = ROOT / "examples" / example / "make_data.py"
+    spec = importlib.util.spec_from_file_location(f"{example}_make_data", path)
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+def _rig_data(md, t: np.ndarray, f_m: np.ndarray, seed: int) -> pd.DataFrame:
+    """The proposed experiment as the rig would log it (make_data.py's sensors)."""
+    x_m, _, f_o = md.simulate(t, f_m, md.TRUTH)
+    rng = np.random.default_rng(seed)
+    sys.path.insert(0, str(EXAMPLE.parent))
+    from _datagen import load_cells, quantise
+
+    front, rear = load_cells(f_o, md.NOISE["F_of"], md.NOISE["F_or"], rng)
+    encoder = quantise(x_m, md.ENCODER_STEP)
+    return pd.DataFrame({"time": t, "F_m": f_m, "F_of": front, "F_or": rear, "x_m": encoder})
+
+
+def _width(iv) -> float:
+    if not iv or iv[0] is None or iv[1] is None:
+        return math.inf
+    return float(iv[1]) - float(iv[0])
+
+
+class _SplineStage:
+    """A stage that follows the designed position samples: a cubic spline through them."""
+
+    def __init__(self, t: np.ndarray, x: np.ndarray) -> None:
+        from scipy.interpolate import CubicSpline
+
+        self.x = CubicSpline(t, x)
+        self.v, self.a = self.x.derivative(1), self.x.derivative(2)
+
+    def __call__(self, t):
+        return self.x(t), self.v(t), self.a(t)
+
+    def position_velocity(self, t: float) -> tuple[float, float]:
+        return float(self.x(t)), float(self.v(t))
+
+
+MISO_STUDY = """\
+[study]
+name = "LSEA MISO, force only"
+fmu = "{fmu}"
+[[experiments]]
+name = "force only"
+file = "{data}"
+derived = {{ F_o = "F_of - F_or", v_o = "der(x_o)", a_o = "der(x_o, 2)" }}
+inputs = {{ F_m = "F_m", x_o = "x_o", v_o = "v_o", a_o = "a_o" }}
+hold = {{ x_o = "linear", v_o = "linear", a_o = "linear" }}
+outputs = {{ F_o = "F_o" }}
+[method]
+cost = "sse"
+weighting = "noise"
+replicates = 1
+max_iterations = 20
+refine = "least_squares"
+start = "centre"
+[parameters]
+m1 = {{ levels = [0.15, 0.4, 1.0], min = 0.01, unit = "kg" }}
+K_s = {{ levels = [3000, 6000, 12000], min = 10, unit = "N/m" }}
+C_d = {{ levels = [0.5, 2, 10], min = 0, unit = "N.s/m" }}
+C_1 = {{ levels = [8, 16, 32], min = 0, unit = "N.s/m" }}
+# the motor's force limit and the stage's stroke (the example's data: 150 N, 34 mm);
+# the highest frequency the stage follows (--miso-band)
+[design]
+inputs = {{ F_m = [-150.0, 150.0], x_o = [-0.036, 0.036] }}
+band = [0.2, {band}]
+"""
+
+
+def _case(name: str, work: Path, band: float = 10.0):
+    """Return the case's study file, its independent data maker and its truth."""
+    if name == "siso":
+        md = _make_data_module("lsea_siso")
+
+        def make(d, seed: int) -> pd.DataFrame:
+            return _rig_data(md, d.time, d.proposal.values[:, 0], seed)
+
+        return EXAMPLE / "study.toml", make, md.TRUTH
+    md = _make_data_module("lsea_miso")
+    study = work / "miso.toml"
+    study.write_text(
+        MISO_STUDY.format(
+            fmu=ROOT / "fmus" / "LSEA_MISO.fmu",
+            data=ROOT / "examples" / "lsea_miso" / "force_only.csv",
+            band=band,
+        )
+    )
+
+    def make_miso(d, seed: int) -> pd.DataFrame:
+        sys.path.insert(0, str(EXAMPLE.parent))
+        from _datagen import load_cells, quantise
+
+        f_m, x_o = (d.proposal.values[:, d.inputs.index(c)] for c in ("F_m", "x_o"))
+        f_o = md.simulate(d.time, f_m, _SplineStage(d.time, x_o), md.TRUTH)
+        front, rear = load_cells(
+            f_o, md.NOISE["F_of"], md.NOISE["F_or"], np.random.default_rng(seed)
+        )
+        return pd.DataFrame(
+            {
+                "time": d.time,
+                "F_m": f_m,
+                "x_o": quantise(x_o, md.ENCODER_STEP),
+                "F_of": front,
+                "F_or": rear,
+            }
+        )
+
+    return study, make_miso, md.TRUTH
+
+
+def main() -> int:
+    import tsid_fmu
+    from tsid_fmu.design import design
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--case", choices=["siso", "miso"], default="siso")
+    ap.add_argument("--miso-band", type=float, default=10.0, help="the stage's band (Hz)")
+    args = ap.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="tsid-design-"))
+    study_file, make, truth = _case(args.case, work, args.miso_band)
+    started = time.perf_counter()
+    base = tsid_fmu.identify(study_file, work / "base", plots=False, workers=args.workers)
+    d = design(base, workers=args.workers)
+    names = d.names
+    predicted = dict(zip(names, d.after or [None] * len(names), strict=True))
+    print(f"study as shipped: {base.nfev} simulations; design: {d.nfev} simulations")
+    print(f"proposal: {d.verdict}")
+    limits = ", ".join(
+        f"{n} in [{a:g}, {b:g}]" for n, (a, b) in zip(d.inputs, d.limits, strict=True)
+    )
+    print(f"inputs: {limits}\n")
+    if d.proposal is None:
+        return 0
+    study = tsid_fmu.Study.from_toml(study_file)
+    first = study.experiments[0]
+    # the second study starts where the first ended, as a user's would: five levels from
+    # half to twice each answer (inside its bounds); the arrays still search them
+    around = [
+        tsid_fmu.Parameter(p.name, [min(max(float(base.params[p.name]) * f, p.min), p.max)
+                                    for f in (0.5, 0.7, 1.0, 1.4, 2.0)],
+                           min=p.min, max=p.max, unit=p.unit)
+        for p in study.parameters
+    ]  # fmt: skip
+    ratios: dict[str, list[float]] = {n: [] for n in names}
+    holds: dict[str, int] = {n: 0 for n in names}
+    header = f"{'seed':>4} " + " ".join(f"{n + ' achieved/predicted':>24}" for n in names)
+    print(header)
+    for seed in range(args.seeds):
+        extra = tsid_fmu.Experiment(
+            make(d, 1000 + seed),
+            inputs=dict(first.inputs),
+            outputs=dict(first.outputs),
+            derived=dict(first.derived),
+            noise=dict(first.noise),
+            hold=dict(first.hold),
+            name="designed",
+        )
+        two = tsid_fmu.Study(study.fmu, around, [first, extra], method=study.method,
+                             start_values=study.start_values, name="with the design")  # fmt: skip
+        res = tsid_fmu.identify(two, work / f"seed{seed}", plots=False, workers=args.workers)
+        cells = []
+        for n in names:
+            got, want = res.intervals.get(n), predicted[n]
+            # widths relative to each answer (a log-scale interval scales with its value;
+            # the prediction is made at the first answer, the achieved at the second)
+            got_rel = _width(got) / float(res.params[n])
+            want_rel = _width(want) / float(base.params[n])
+            r = got_rel / want_rel if math.isfinite(want_rel) else math.nan
+            ratios[n].append(r)
+            inside = (
+                got is not None
+                and got[0] is not None
+                and got[1] is not None
+                and (got[0] <= truth[n] <= got[1])
+            )
+            holds[n] += bool(inside)
+            cells.append(f"{r:>21.2f} {'in ' if inside else 'OUT'}")
+        print(f"{seed:>4} " + " ".join(cells), flush=True)
+    print("\nper parameter over the seeds:")
+    print(f"{'parameter':<10} {'predicted interval':>24} {'median ratio':>13} {'range':>15} "
+          f"{'within +-30 %':>14} {'truth inside':>13}")  # fmt: skip
+    for n in names:
+        rs = [r for r in ratios[n] if math.isfinite(r)]
+        iv = predicted[n]
+        shown = "open" if not math.isfinite(_width(iv)) else f"{iv[0]:.5g} .. {iv[1]:.5g}"
+        within = sum(0.7 <= r <= 1.3 for r in rs)
+        print(f"{n:<10} {shown:>24} {statistics.median(rs) if rs else math.nan:>13.2f} "
+              f"{(min(rs) if rs else math.nan):>7.2f}..{(max(rs) if rs else math.nan):<7.2f} "
+              f"{within:>10}/{len(rs):<3} {holds[n]:>9}/{args.seeds}")  # fmt: skip
+    print(f"\n{time.perf_counter() - started:.0f} s; work folder {work}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,238 @@
+"""``tsid design``: the experiment that determines what a study left open, or why none can."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+from fmu_factory import build_pythonfmu, lag_study, pythonfmu_available
+
+from tsid_fmu import Experiment, Method, Parameter, Study, StudyError, identify
+from tsid_fmu.cli import main
+from tsid_fmu.design import DesignOptions, design, write_design
+from tsid_fmu.design.signals import candidates
+from tsid_fmu.study.toml import design_options
+
+
+def test_every_candidate_stays_inside_the_limits_and_the_kinds_differ():
+    t = np.arange(0, 5.0 + 1e-9, 0.01)
+    found = candidates(t, [(-2.0, 3.0), (0.0, 1.0)], (0.2, 5.0), ["steps", "chirp",
+                       "multisine", "prbs"], 2, 0)  # fmt: skip
+    assert {s.kind for s in found} == {"steps", "chirp", "multisine", "prbs"}
+    for s in found:
+        assert s.values.shape == (t.size, 2)
+        assert s.values[:, 0].min() >= -2.0 - 1e-12 and s.values[:, 0].max() <= 3.0 + 1e-12
+        assert s.values[:, 1].min() >= -1e-12 and s.values[:, 1].max() <= 1.0 + 1e-12
+    # a multisine per band with one input alone moving: the other held at its middle
+    alone = [s for s in found if s.name.endswith("input 2 alone")]
+    assert alone and np.all(alone[0].values[:, 0] == 0.5)
+
+
+@pytest.mark.parametrize(
+    ("table", "says"),
+    [
+        ({"criterion": "E"}, "[design] criterion"),
+        ({"band": [5.0, 1.0]}, "[design] band"),
+        ({"inputs": {"u": [1.0, 1.0]}}, "[design] inputs.u"),
+        ({"kinds": ["noise"]}, "[design] kinds"),
+        ({"bands": 0}, "[design] bands"),
+        ({"wobble": 1}, "wobble"),
+    ],
+)
+def test_a_wrong_design_table_is_refused_naming_the_key(table, says):
+    with pytest.raises(StudyError, match=rf"{__import__('re').escape(says)}"):
+        design_options({"design": table}, "study.toml")
+
+
+def _lag(tmp_path):
+    study = lag_study(tmp_path, method=Method(max_iterations=6))
+    return identify(study, tmp_path / "out", plots=False, workers=1, timeout=0)
+
+
+def test_a_design_proposes_an_input_inside_the_limits_and_predicts_narrower_intervals(tmp_path):
+    result = _lag(tmp_path)
+    d = design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=2))
+    assert d.proposal is not None and not d.structural
+    assert d.proposal.values.min() >= -1.0 and d.proposal.values.max() <= 1.0
+    # the study's information, every candidate's, then the study's analysis with the
+    # proposal (two experiments a parameter set)
+    assert d.nfev > (2 * 2 + 1) * (1 + len(d.candidates)) + 2 * (2 * 2 + 1)
+    for j, name in enumerate(d.names):
+        low, high = d.after[j]
+        study_low, study_high = result.intervals[name]
+        # the study plus the proposal: narrower than the study alone, around the answer
+        assert low < float(result.params[name]) < high
+        assert high - low < study_high - study_low
+    files = write_design(d, tmp_path / "design")
+    csv = pd.read_csv(tmp_path / "design" / "design_input.csv")
+    assert list(csv.columns) == ["time", "u"] and len(csv) == d.time.size
+    assert {p.name for p in files} >= {"design.png", "design.json", "design.md", "design.html"}
+    assert "predicted, with the proposal" in (tmp_path / "design" / "design.md").read_text()
+
+
+def test_the_criterion_ranks_the_candidates_and_the_proposal_is_the_best(tmp_path):
+    result = _lag(tmp_path)
+    for criterion in ("D", "A"):
+        d = design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=2,
+                                         criterion=criterion))  # fmt: skip
+        best = max(d.candidates, key=lambda c: c["score"])
+        assert d.proposal.name == best["name"]
+        assert len({round(c["score"], 9) for c in d.candidates}) > 1  # they differ
+
+
+def test_tsid_design_writes_its_files_and_prints_json(tmp_path, capsys):
+    result = _lag(tmp_path)
+    study = tmp_path / "study.toml"
+    result.study.to_toml(study)
+    with study.open("a") as fh:
+        fh.write('\n[design]\ninputs = { u = [-0.5, 0.5] }\nbands = 1\nkinds = ["chirp"]\n')
+    assert main(["design", str(study), "--result", str(tmp_path / "out"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["inputs"] == {"u": [-0.5, 0.5]}
+    assert out["proposal"].startswith("chirp")
+    assert [c["kind"] for c in out["candidates"]] == ["chirp"]
+    frame = pd.read_csv(tmp_path / "design" / "design_input.csv")
+    assert frame.u.min() >= -0.5 and frame.u.max() <= 0.5
+
+
+def test_tsid_design_on_a_missing_result_is_one_line_and_exit_2(tmp_path, capsys):
+    study = lag_study(tmp_path)
+    path = tmp_path / "study.toml"
+    study.to_toml(path)
+    assert main(["design", str(path), "--result", str(tmp_path / "nothing")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nothing" in err[0]
+
+
+@pytest.mark.skipif(not pythonfmu_available(), reason="needs pythonfmu and a shared libpython")
+def test_an_exact_symmetry_is_reported_as_structural_and_nothing_is_proposed(tmp_path):
+    """The lag with tau = R C: no input separates R and C. The design says so, names the
+    product the data fix, and proposes no experiment; it fails when the direction is not
+    followed by simulation (a finite-difference Fisher matrix sees the solver's noise)."""
+    fmu = build_pythonfmu(tmp_path, "RCLag", rc=True)
+    t = np.round(np.arange(0.0, 2.0 + 1e-9, 0.02), 10)
+    u = np.where(t < 0.7, 1.0, 0.2) + 0.3 * np.sin(5 * t)
+    pd.DataFrame({"time": t, "u": u, "y": 0.0 * t}).to_csv(tmp_path / "d.csv", index=False)
+    study = Study(
+        fmu=fmu,
+        # ranges over decades: log coordinates, in which the symmetry is straight
+        parameters=[
+            Parameter("R", [0.1, 1.0, 10.0], min=0.0),
+            Parameter("C", [0.03, 0.3, 3.0], min=0.0),
+        ],
+        experiments=[
+            Experiment(tmp_path / "d.csv", inputs={"u": "u"}, outputs={"y": "y"}, noise={"y": 0.01})
+        ],
+        cost="sse",
+        replicates=1,
+    )
+    result = SimpleNamespace(
+        study=study,
+        params={"R": 1.0, "C": 0.3},
+        intervals={"R": [None, None], "C": [None, None]},
+        uncertainty=None,
+        noise={},
+    )
+    d = design(result, DesignOptions(inputs={"u": [0.0, 1.0]}, bands=1, kinds=["chirp", "prbs"]))
+    assert d.proposal is None and d.after is None
+    (s,) = d.structural
+    assert sorted(s.members) == ["C", "R"]
+    (fixed,) = s.fixed
+    assert fixed["name"] in ("R C", "C R") and fixed["value"] == pytest.approx(0.3)
+    assert "no input of this kind separates" in d.verdict
+    assert d.to_dict()["parameters"][0]["predicted_after"] is None
+
+
+def test_tsid_init_writes_a_design_table_to_uncomment(tmp_path):
+    from fmu_factory import lag_data
+
+    from tsid_fmu.scaffold import init_study
+
+    fmu, data = lag_data(tmp_path, 0.37, 0.8)
+    frame = pd.read_csv(data).rename(columns={"y_meas": "y"})
+    frame.to_csv(data, index=False)
+    text = init_study(fmu, data, tmp_path / "study.toml")
+    assert "# [design]" in text
+    opened = text.replace("# [design]", "[design]").replace("# inputs = { INPUT", "inputs = { u")
+    opened = opened.replace("# band = [", "band = [")
+    (tmp_path / "study.toml").write_text(opened)
+    study = Study.from_toml(tmp_path / "study.toml")  # the whole file still reads
+    from tsid_fmu.study.toml import read_design
+
+    options = read_design(tmp_path / "study.toml")
+    assert study.fmu == fmu.resolve()
+    assert options.inputs == {"u": [-1.0, 1.0]} and options.band == [0.1, 10.0]
+
+
+def test_structures_the_data_cannot_tell_apart_get_the_input_that_separates_them(tmp_path):
+    """The lag's integer gain: a free decay from x0 (no input) gives the same output with
+    gain 1 from x0 and gain 2 from x0 / 2, so the study's structures tie; any input that
+    moves separates them (y tends to u against 2 u). The design proposes one, and says
+    how little the study's own input separates them."""
+    from fmu_factory import build_c_fmu, lag_response
+
+    from tsid_fmu import Choice
+
+    fmu = build_c_fmu(tmp_path)
+    t = np.arange(0, 3.0 + 1e-9, 0.01)
+    y = lag_response(t, np.zeros_like(t), 0.37, 0.8)
+    pd.DataFrame({"time": t, "u": 0.0 * t, "y": y}).to_csv(tmp_path / "d.csv", index=False)
+    study = Study(
+        fmu=fmu,
+        parameters=[
+            Parameter("tau", [0.1, 1.0], min=0.0),
+            Parameter("x0", [-1.0, 2.0]),
+            Choice("gain", [1, 2]),
+        ],
+        experiments=[
+            Experiment(tmp_path / "d.csv", inputs={"u": "u"}, outputs={"y": "y"}, noise={"y": 0.01})
+        ],
+        cost="sse",
+        replicates=1,
+    )
+    rows = [
+        {"structure": "gain=1", "values": {"gain": 1}, "x": {"tau": 0.37, "x0": 0.8}},
+        {"structure": "gain=2", "values": {"gain": 2}, "x": {"tau": 0.37, "x0": 0.4}},
+    ]
+    result = SimpleNamespace(
+        study=study,
+        params={"tau": 0.37, "x0": 0.8, "gain": 1.0},
+        intervals={"tau": [0.36, 0.38], "x0": [0.79, 0.81]},
+        uncertainty=None,
+        noise={},
+        structures=rows,
+        extra={"structure": {"chosen": "gain=1", "indistinguishable": ["gain=2"]}},
+    )
+    d = design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=1))
+    found = d.discrimination
+    assert found is not None and found["structures"] == ["gain=1", "gain=2"]
+    assert found["now"]["gain=1 / gain=2"] < 1e-6  # the free decay: the same output
+    best = found["chi2"]["gain=1 / gain=2"]
+    assert best > 1e4 and best == max(found["scores"])
+    assert d.separating.name == d.candidates[found["best"]]["name"]
+    write_design(d, tmp_path / "design")
+    frame = pd.read_csv(tmp_path / "design" / "design_structures_input.csv")
+    assert frame.u.abs().max() <= 1.0 and frame.u.abs().max() > 0.5
+    assert "Structures the study cannot tell apart" in d.markdown()
+    # a study whose structures were told apart gets no such proposal
+    result.extra = {"structure": {"chosen": "gain=1", "indistinguishable": []}}
+    assert design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=1)).separating is None
+
+
+def test_a_smooth_input_gets_sines_not_steps():
+    """A position whose derivatives feed the model must not jump: where a square wave is
+    asked for it gets a sine at that frequency (and the multisine over one frequency was
+    no sine at all: its Schroeder phases cancelled to rounding noise)."""
+    t = np.round(np.arange(0, 10.0 + 1e-9, 0.001), 9)
+    found = candidates(t, [(-1.0, 1.0), (-0.036, 0.036)], (0.2, 10.0), ["steps", "prbs"], 3, 0,
+                       smooth=[False, True])  # fmt: skip
+    for s in found:
+        position = s.values[:, 1]
+        step = np.abs(np.diff(position)).max()
+        # at most the slope of a sine at the band's top, sampled at 1 kHz
+        assert step <= 0.036 * 2 * np.pi * 10.0 * 0.001 * 1.01, s.name
+        assert np.ptp(position) > 0.036  # and it moves
+    assert {np.abs(np.diff(s.values[:, 0])).max() for s in found if s.kind == "steps"} == {2.0}

@@ -1,0 +1,56 @@
+"""``tsid design STUDY --result DIR``: the experiment to run next, or why none helps.
+
+Prints the verdict and the table of intervals (the study's, and predicted with the
+proposal); writes ``design_input.csv`` (the input to replay on the rig),
+``design.png``, ``design.json``, ``design.md`` and ``design.html`` to the output folder
+(default ``design/`` beside the result folder). ``--json`` prints ``design.json``'s
+content instead of the table. Errors are the package's own (exit 2, one line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from tsid_fmu.cli_values import timeout_seconds, worker_count
+
+__all__ = ["add_design_parser"]
+
+
+def _cmd_design(args: argparse.Namespace) -> int:
+    from tsid_fmu.design import design, write_design
+    from tsid_fmu.load import load
+
+    folder = Path(args.result)
+    result = load(folder, args.study)
+    found = design(result, workers=args.workers, timeout=args.timeout)
+    out = Path(args.out) if args.out else folder.parent / "design"
+    files = write_design(found, out)
+    if args.json:
+        print(json.dumps(found.to_dict(), indent=1, allow_nan=False))
+        return 0
+    print(found.markdown())
+    print("wrote " + ", ".join(str(p) for p in files))
+    return 0
+
+
+def add_design_parser(sub: Any) -> None:
+    """Add ``tsid design`` to the sub-commands."""
+    p = sub.add_parser(
+        "design",
+        help="propose the experiment that determines what a study left open",
+        description="From a finished identification, propose the input (inside the study "
+        "file's [design] limits: amplitudes, band, duration, signal kinds) that best "
+        "determines what the data left weak, with the intervals the study plus it would "
+        "give; or report that no input of that kind separates some parameters, naming "
+        "what the data do fix.",
+    )
+    p.add_argument("study", help="study file (TOML), with an optional [design] table")
+    p.add_argument("--result", required=True, metavar="DIR", help="the study's results folder")
+    p.add_argument("-o", "--out", help="output folder (default: design/ beside DIR)")
+    p.add_argument("--workers", type=worker_count, metavar="N", help="worker processes")
+    p.add_argument("--timeout", type=timeout_seconds, metavar="SECONDS", help="per simulation")
+    p.add_argument("--json", action="store_true", help="print design.json on stdout")
+    p.set_defaults(func=_cmd_design)

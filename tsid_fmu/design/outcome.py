@@ -1,0 +1,232 @@
+"""What :func:`tsid_fmu.design` found: the proposal, the predicted intervals, the reasons."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.design.signals import Signal
+from tsid_fmu.uncertainty.intervals import json_safe
+
+__all__ = ["CRITERIA_TEXT", "Design", "Structural"]
+
+CRITERIA_TEXT = {
+    "D": "D-optimal: the largest determinant of the Fisher matrix of every parameter (in "
+    "search coordinates, so units do not matter): the smallest joint confidence region, "
+    "which gains most where the study is weakest",
+    "A": "A-optimal on the weak combinations: the smallest sum of their variances",
+}
+"""How each criterion ranks the candidates, as the report says it."""
+
+
+@dataclass
+class Structural:
+    """A direction that no candidate input separates: the model's own symmetry.
+
+    Attributes
+    ----------
+    members : list of str
+        The parameters in it.
+    terms : dict
+        The direction, by search coordinate (``lg C``: weight).
+    fixed : list of dict
+        The combinations across it that the data fix (``{"name": "C R1", "value",
+        "interval"}``), predicted with the proposed experiment where there is one.
+    """
+
+    members: list[str]
+    terms: dict[str, float]
+    fixed: list[dict[str, Any]] = field(default_factory=list)
+
+    def advice(self) -> str:
+        """Say what would fix the rest: a known value or another measurement."""
+        names = ", ".join(self.members)
+        return (
+            f"no input of this kind separates {names}: fix one of them at a known value "
+            "(a datasheet, a separate test), or measure another output that depends on it "
+            "alone"
+        )
+
+
+def _fmt(v: float | None) -> str:
+    return "open" if v is None else f"{v:.5g}"
+
+
+def _span(iv: list | None) -> str:
+    if iv is None:
+        return "-"
+    low, high = iv
+    return "not determined" if low is None and high is None else f"{_fmt(low)} .. {_fmt(high)}"
+
+
+def width(iv: list | None) -> float:
+    """Return an interval's width; ``inf`` for an open one."""
+    if not iv or iv[0] is None or iv[1] is None:
+        return math.inf
+    return float(iv[1]) - float(iv[0])
+
+
+@dataclass
+class Design:
+    """An experiment design and its evidence (:func:`tsid_fmu.design`).
+
+    Attributes
+    ----------
+    names : list of str
+        The parameters.
+    values : dict
+        The answer the design is made at.
+    criterion : str
+        ``D`` or ``A`` (:data:`CRITERIA_TEXT`).
+    inputs : list of str
+        The FMU inputs designed, in the column order of ``proposal.values``.
+    limits : list of (float, float)
+        Each input's ``[min, max]``.
+    band : (float, float)
+        The frequencies allowed (Hz).
+    time : numpy.ndarray
+        Sample times of the proposed record (s).
+    candidates : list of dict
+        Every candidate's name, kind and criterion value.
+    proposal : Signal or None
+        The proposed input; ``None`` where no input of the family helps (structural).
+    predicted_outputs : numpy.ndarray or None
+        The template's outputs simulated at the answer with the proposal.
+    output_names : list of str
+        Those outputs.
+    template : str
+        The experiment whose outputs and sensors the proposal has.
+    study_intervals : dict
+        The study's own 95 % intervals.
+    after : list or None
+        Predicted 95 % intervals per parameter (in ``names`` order) of the study plus
+        the proposal (``None`` without one).
+    weak : list of dict
+        The directions the study leaves weak.
+    structural : list of Structural
+        The directions no candidate separates.
+    nfev : int
+        Simulations used (each candidate's record counts one).
+    separating : Signal or None
+        Where the study's structures ended indistinguishable: the input that separates
+        them best (:mod:`tsid_fmu.design.discriminate`).
+    discrimination : dict or None
+        Its evidence: ``structures``, ``chi2`` per pair with it, ``now`` on the study's
+        inputs, ``scores`` per candidate.
+    """
+
+    names: list[str]
+    values: dict[str, float]
+    criterion: str
+    inputs: list[str]
+    limits: list[tuple[float, float]]
+    band: tuple[float, float]
+    time: np.ndarray
+    candidates: list[dict[str, Any]]
+    proposal: Signal | None
+    predicted_outputs: np.ndarray | None
+    output_names: list[str]
+    template: str
+    study_intervals: dict[str, list]
+    after: list | None
+    weak: list[dict[str, float]]
+    structural: list[Structural]
+    nfev: int
+    separating: Signal | None = None
+    discrimination: dict[str, Any] | None = None
+
+    @property
+    def verdict(self) -> str:
+        """One line: what the design proposes, or why nothing."""
+        if self.proposal is None:
+            return "no experiment of this kind helps: " + "; ".join(
+                s.advice() for s in self.structural
+            )
+        what = "what the study left weak" if self.weak else "every parameter"
+        line = f"run {self.proposal.name}: it determines {what} best ({self.criterion}-optimal)"
+        if self.separating is not None:
+            line += f"; to tell the structures apart, run {self.separating.name}"
+        return line
+
+    def table(self) -> list[dict[str, Any]]:
+        """Per parameter: value, the study's interval, and predicted with the proposal."""
+        return [
+            {
+                "parameter": n,
+                "value": self.values[n],
+                "study": self.study_intervals.get(n),
+                "predicted_after": None if self.after is None else self.after[j],
+            }
+            for j, n in enumerate(self.names)
+        ]
+
+    def to_pandas(self) -> Any:
+        """:meth:`table` as a DataFrame indexed by parameter."""
+        import pandas as pd
+
+        return pd.DataFrame(self.table()).set_index("parameter")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return a JSON-serialisable copy (the proposal's samples are in the CSV, not here)."""
+        return json_safe(
+            {
+                "verdict": self.verdict,
+                "criterion": self.criterion,
+                "criterion_text": CRITERIA_TEXT[self.criterion],
+                "template": self.template,
+                "inputs": {n: list(lim) for n, lim in zip(self.inputs, self.limits, strict=True)},
+                "band_hz": list(self.band),
+                "duration": float(self.time[-1] - self.time[0]),
+                "sample_time": float(self.time[1] - self.time[0]),
+                "proposal": None if self.proposal is None else self.proposal.name,
+                "parameters": self.table(),
+                "weak": self.weak,
+                "structural": [{**vars(s), "advice": s.advice()} for s in self.structural],
+                "candidates": self.candidates,
+                "nfev": self.nfev,
+                "separating": None if self.separating is None else self.separating.name,
+                "discrimination": self.discrimination,
+            }
+        )
+
+    def markdown(self) -> str:
+        """Return the report section, in markdown."""
+        lines = ["## Experiment design", "", f"**{self.verdict}**", ""]
+        limits = ", ".join(
+            f"{n} in [{a:g}, {b:g}]" for n, (a, b) in zip(self.inputs, self.limits, strict=True)
+        )
+        lines += [
+            f"- Inputs: {limits}; band {self.band[0]:.3g}-{self.band[1]:.3g} Hz; "
+            f"{self.time[-1] - self.time[0]:g} s at {self.time[1] - self.time[0]:g} s, with "
+            f"experiment {self.template!r}'s outputs and sensors.",
+            f"- Criterion: {CRITERIA_TEXT[self.criterion]}.",
+            f"- {len(self.candidates)} candidates, {self.nfev} simulations.",
+            "",
+            "| parameter | value | study's 95 % interval | predicted, with the proposal |",
+            "| --- | --- | --- | --- |",
+        ]
+        for row in self.table():
+            lines.append(
+                f"| {row['parameter']} | {row['value']:.5g} | {_span(row['study'])} | "
+                f"{_span(row['predicted_after'])} |"
+            )
+        if self.discrimination is not None and self.separating is not None:
+            d = self.discrimination
+            lines += ["", f"Structures the study cannot tell apart: {', '.join(d['structures'])}. "
+                      f"Run {self.separating.name} to separate them "
+                      "(expected chi-square between their predictions, in the sensors' noise):",
+                      "", "| pair | on the study's inputs | with the proposal |",
+                      "| --- | --- | --- |"]  # fmt: skip
+            for pair, value in d["chi2"].items():
+                lines.append(f"| {pair} | {d['now'][pair]:.4g} | {value:.4g} |")
+        for s in self.structural:
+            fixed = "; ".join(
+                f"{f['name']} = {f['value']:.5g} ({_span(f['interval'])})" for f in s.fixed
+            )
+            lines += ["", f"Structural: {s.advice()}."]
+            if fixed:
+                lines.append(f"The data fix: {fixed}.")
+        return "\n".join(lines) + "\n"

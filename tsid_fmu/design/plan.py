@@ -1,0 +1,191 @@
+"""What a design works with: the study at its answer, the template, the candidate inputs.
+
+The designed signals are *data columns*, the ones a rig's controller sets (a motor
+force, a stage position), and a candidate experiment is built as the template
+experiment would be from a data file: its ``derived`` channels (a velocity
+``der(x_o)``), its input and output mappings, its hold, its initial states and its
+sensors' noise. So a column whose derivatives the model takes as inputs gets smooth
+signals only (a chirp or a multisine where a step or a PRBS is asked for: a position
+that jumps has no velocity), and the columns not designed are held at the template's
+first sample.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from tsid_fmu.data.expressions import names_used
+from tsid_fmu.design.signals import Signal, candidates
+from tsid_fmu.errors import StudyError
+from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
+from tsid_fmu.search.space import Space
+from tsid_fmu.study.definition import Study, fields_of
+from tsid_fmu.study.designopts import DesignOptions
+from tsid_fmu.study.prepare import load_experiment, prepare
+from tsid_fmu.study.schema import Experiment
+from tsid_fmu.study.toml import read_design
+
+__all__ = ["Plan", "candidate_spec", "make_plan"]
+
+
+@dataclass
+class Plan:
+    """The study at its answer, the template experiment and the candidate inputs."""
+
+    study: Study
+    options: DesignOptions
+    spec: EvaluationSpec
+    space: Space
+    x: dict[str, float]
+    template: PreparedExperiment
+    source: Experiment
+    held: dict[str, float]
+    time: np.ndarray
+    columns: list[str]
+    limits: list[tuple[float, float]]
+    band: tuple[float, float]
+    signals: list[Signal]
+    sigma: np.ndarray
+
+
+def _options(result: Any, options: DesignOptions | None) -> DesignOptions:
+    if options is not None:
+        return options
+    source = getattr(result.study, "source", None)
+    return read_design(source) if source is not None else DesignOptions()
+
+
+def _template(study: Study, spec: EvaluationSpec, name: str) -> tuple[PreparedExperiment, Any]:
+    names = [e.name for e in spec.experiments]
+    if name and name not in names:
+        raise StudyError(
+            f"[design] experiment {name!r} is not an identification experiment ({', '.join(names)})"
+        )
+    k = names.index(name) if name else 0
+    source = next(e for e in study.experiments if e.name == names[k])
+    return spec.experiments[k], source
+
+
+def _time(template: PreparedExperiment, opts: DesignOptions) -> np.ndarray:
+    t = np.asarray(template.time, dtype=float)
+    dt = opts.sample_time or float(np.median(np.diff(t)))
+    duration = opts.duration or float(t[-1] - t[0])
+    n = round(duration / dt)
+    if n < 10 or n > 10_000_000:
+        raise StudyError(f"[design] duration {duration} s at {dt} s gives {n} samples")
+    return np.round(t[0] + dt * np.arange(n + 1), 12)
+
+
+def _input_columns(source: Experiment, frame: pd.DataFrame) -> list[str]:
+    """Return the data columns the FMU's inputs come from, directly or through derived ones."""
+    out: list[str] = []
+    for channel in source.inputs.values():
+        used = names_used(source.derived[channel]) if channel in source.derived else {channel}
+        out += [c for c in sorted(used) if c in frame.columns and c not in out]
+    return out
+
+
+def _smooth(source: Experiment, column: str) -> bool:
+    """Whether the model takes a derivative of ``column`` as an input."""
+    feeds = set(source.inputs.values())
+    return any(
+        name in feeds and "der(" in expr and column in names_used(expr)
+        for name, expr in source.derived.items()
+    )
+
+
+def _limits(
+    source: Experiment, frame: pd.DataFrame, opts: DesignOptions
+) -> tuple[list[str], list[tuple[float, float]]]:
+    columns = _input_columns(source, frame)
+    if opts.inputs:
+        unknown = [n for n in opts.inputs if n not in columns]
+        if unknown:
+            raise StudyError(
+                f"[design] inputs: {', '.join(unknown)} is not a data column that feeds an "
+                f"input of experiment {source.name!r} ({', '.join(columns) or 'none'})"
+            )
+        names = list(opts.inputs)
+        return names, [(opts.inputs[n][0], opts.inputs[n][1]) for n in names]
+    varied = [c for c in columns if np.ptp(frame[c].to_numpy(float)) > 0]
+    if not varied:
+        raise StudyError(
+            f"experiment {source.name!r}: no data column drives an FMU input, or none varies: "
+            "there is nothing to design (give [design] inputs)"
+        )
+    return varied, [(float(frame[c].min()), float(frame[c].max())) for c in varied]
+
+
+def _sigma(result: Any, template: PreparedExperiment) -> np.ndarray:
+    known = (getattr(result, "noise", None) or {}).get(template.name, {})
+    return np.array(
+        [float(known.get(n, s)) for n, s in zip(template.output_names, template.scale, strict=True)]
+    )
+
+
+def make_plan(result: Any, options: DesignOptions | None) -> Plan:
+    """Check the study and build everything the design needs, before any simulation."""
+    study = getattr(result, "study", None)
+    if study is None:
+        raise StudyError("design: the result has no study attached (load it with its study)")
+    if study.variants is not None and study.variants.name not in study.start_values:
+        raise StudyError("design: a study that chooses among FMU files is not designed yet")
+    if study.copies:
+        raise StudyError("design: a study with per-experiment parameters is not designed yet")
+    opts = _options(result, options)
+    spec = prepare(study)
+    fixed = {n: float(result.params[n]) for n in study.choice_names}
+    spec = dataclasses.replace(spec, start_values={**spec.start_values, **fixed})
+    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
+    x = {n: float(result.params[n]) for n in space.names}
+    template, source = _template(study, spec, opts.experiment)
+    frame = load_experiment(source).frame
+    columns, limits = _limits(source, frame, opts)
+    t = _time(template, opts)
+    band = (
+        tuple(opts.band) if opts.band else (2.0 / float(t[-1] - t[0]), 1.0 / (20 * (t[1] - t[0])))
+    )
+    raw = [c for c in frame.columns if c not in source.derived and c != source.time_column]
+    held = {str(c): float(frame[c].iloc[0]) for c in raw}
+    smooth = [_smooth(source, c) for c in columns]
+    signals = candidates(t, limits, band, opts.kinds, opts.bands, opts.seed, smooth=smooth)
+    return Plan(study, opts, spec, space, x, template, source, held, t, columns, limits,
+                (float(band[0]), float(band[1])), signals, _sigma(result, template))  # fmt: skip
+
+
+def candidate_spec(plan: Plan, signals: list[np.ndarray]) -> EvaluationSpec:
+    """Return a spec with one experiment per candidate input (``signals[k]``, ``(n, m)``).
+
+    Each is the template experiment on a data frame whose designed columns hold the
+    signal and whose other columns hold the template's first sample; its sensors'
+    noise is stated (``plan.sigma``), so nothing is estimated from those columns.
+    """
+    src = plan.source
+    noise = dict(zip(src.outputs, plan.sigma.tolist(), strict=True))
+    experiments = []
+    for k, values in enumerate(signals):
+        data = {src.time_column: plan.time, **{c: np.full(plan.time.size, v)
+                                               for c, v in plan.held.items()}}  # fmt: skip
+        for i, c in enumerate(plan.columns):
+            data[c] = values[:, i]
+        experiments.append(
+            dataclasses.replace(
+                src,
+                data=pd.DataFrame(data),
+                name=f"design {k + 1}",
+                noise=noise,
+                windows=[],
+                warmup=0.0,
+                window_weights=None,
+                sample_time=None,
+                role="identify",
+            )
+        )
+    study = Study(**{**fields_of(plan.study), "experiments": experiments, "phases": []})
+    spec = prepare(study)
+    return dataclasses.replace(spec, start_values=plan.spec.start_values)

@@ -1,0 +1,283 @@
+"""The experiment that determines what a study left open, or the finding that none can.
+
+:func:`design` takes an identification's answer and its study, and
+
+1. builds the candidate inputs of ``[design]`` (:mod:`tsid_fmu.design.signals`);
+2. computes the study's Fisher information and each candidate's at the answer
+   (:mod:`tsid_fmu.design.fisher`): ``2p + 1`` simulations of the study, and ``2p + 1``
+   of every candidate;
+3. finds the directions the study leaves weak (an open interval, a combination not
+   determined) and asks whether any candidate could fix them. A direction that even
+   all the candidates together leave nearly flat is followed by simulation: a point
+   :data:`STEP` search units along it, re-fitted across it by Gauss-Newton steps,
+   simulated with every candidate input. Where every candidate's outputs there match
+   the answer's to :data:`~tsid_fmu.uncertainty.probe.FLAT` of the sensors' noise (the
+   RMS over the samples, as the study's own probe of a symmetry), the outputs are the
+   same for every input, up to the FMU solver's accuracy: the direction is
+   *structural*. No input of this family separates those parameters; the design names
+   the combinations across it that the data do fix, and what would fix the rest (a
+   known value, another measurement);
+4. ranks the candidates by the criterion (D or A, :class:`~tsid_fmu.study.designopts.
+   DesignOptions`) of the summed information in the directions that are not
+   structural, and predicts the 95 % intervals that the study plus the best candidate
+   would give by running the study's own analysis on them
+   (:mod:`tsid_fmu.design.predict`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.design.discriminate import discriminate
+from tsid_fmu.design.fisher import candidate_fisher, study_fisher
+from tsid_fmu.design.outcome import Design, Structural
+from tsid_fmu.design.plan import Plan, candidate_spec, make_plan
+from tsid_fmu.design.predict import predicted_intervals
+from tsid_fmu.evaluate.factory import make_evaluator
+from tsid_fmu.search.space import Space
+from tsid_fmu.study.designopts import DesignOptions
+from tsid_fmu.uncertainty.intervals import UNDETERMINED, Uncertainty
+from tsid_fmu.uncertainty.probe import FLAT, MEMBER, fixed_across
+
+__all__ = ["STEP", "design"]
+
+STEP = 0.25
+"""How far (search units: a quarter of a first range) a weak direction is followed to
+test whether any input could separate it."""
+REFITS = 3
+"""Simulations of every candidate at most per direction followed (the point, then
+Gauss-Newton re-fits across the direction)."""
+
+
+def _basis(vectors: list[np.ndarray], dim: int) -> np.ndarray:
+    """Orthonormal columns spanning ``vectors`` (``(dim, 0)`` for none)."""
+    if not vectors:
+        return np.zeros((dim, 0))
+    u, s, _ = np.linalg.svd(np.stack(vectors, axis=1), full_matrices=False)
+    return u[:, s > 0.5 * s.max()]
+
+
+def _weak(result: Any, space: Space, f0: np.ndarray) -> np.ndarray:
+    """Return the directions the study leaves weak (orthonormal columns, search coordinates).
+
+    The combinations the study found not determined; each parameter with an open
+    interval that none of those explains (its own axis); and the directions the
+    information ``f0`` itself leaves undetermined.
+    """
+    vectors = []
+    values, vecs = np.linalg.eigh(f0)
+    for lam, v in zip(values, vecs.T, strict=True):
+        if lam <= 0 or 1 / math.sqrt(lam) > UNDETERMINED:
+            vectors.append(v)
+    u = getattr(result, "uncertainty", None)
+    explained = set()
+    for c in getattr(u, "combinations", None) or []:
+        if c.get("determined") is False and "direction" in c:
+            v = np.asarray(c["direction"], dtype=float)
+            v = v / max(float(np.linalg.norm(v)), 1e-300)
+            vectors.append(v)
+            explained |= {j for j in range(space.dim) if abs(v[j]) >= MEMBER}
+    # an open interval that none of those explains: the direction its profile follows,
+    # the parameter moving and the others re-fitted (the valley of F_vm and B_s that
+    # only act through their sum on one output), not its own axis
+    # regularised, not pinv: along an exact symmetry f0 is zero to rounding, and pinv
+    # would drop the very direction the profile follows
+    inverse = np.linalg.inv(f0 + 1e-12 * max(float(np.trace(f0)), 1e-300) * np.eye(space.dim))
+    for j, name in enumerate(space.names):
+        if j not in explained and None in (result.intervals.get(name) or [None]):
+            v = inverse[:, j] if np.any(inverse[:, j]) else np.eye(space.dim)[j]
+            vectors.append(v / np.linalg.norm(v))
+    return _basis(vectors, space.dim)
+
+
+def _cov(info: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """``keep (keep^T info keep)^-1 keep^T``: the covariance within ``keep``'s span."""
+    if keep.shape[1] == 0:
+        return np.zeros_like(info)
+    m = keep.T @ info @ keep
+    values, vectors = np.linalg.eigh(m)
+    seen = values > 1e-14 * max(values.max(), 1e-300)
+    inv = np.where(seen, 1 / np.maximum(values, 1e-300), 0)
+    cov = keep @ (vectors * inv) @ vectors.T @ keep.T
+    unseen = keep @ vectors[:, ~seen]  # no information at all: infinite variance
+    return cov + np.diag(np.where((unseen**2).sum(axis=1) > 1e-6, np.inf, 0.0))
+
+
+def _score(info: np.ndarray, keep: np.ndarray, targets: np.ndarray, criterion: str) -> float:
+    """Score in ``keep``'s span: log det (D, larger is better) or -sum of variances (A)."""
+    if keep.shape[1] == 0:
+        return 0.0
+    if criterion == "D":
+        m = keep.T @ info @ keep
+        values = np.linalg.eigvalsh(m)
+        return float(np.sum(np.log(np.maximum(values, 1e-300))))
+    cov = _cov(info, keep)
+    return -float(np.trace(targets.T @ cov @ targets))
+
+
+class _Follow:
+    """Simulate the candidates along a direction and measure how far their outputs move."""
+
+    def __init__(self, evaluator: Any, space: Space, x: Mapping[str, float], base: list) -> None:
+        self.evaluator, self.space, self.x, self.base = evaluator, space, dict(x), base
+
+    def rise(self, point: dict[str, float]) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per candidate, how far its outputs at ``point`` lie from the answer's.
+
+        The largest over its outputs of the RMS over the samples of the difference, in
+        the sensors' noise; and every whitened difference, for the re-fit.
+        """
+        (run,) = self.evaluator.simulate([point])
+        if any(sim.outputs is None for sim in run):
+            return None
+        r = [
+            (sim.outputs - b) / e.scale[None, :]
+            for sim, b, e in zip(run, self.base, self.evaluator.spec.experiments, strict=True)
+        ]
+        rms = np.array([float(np.max(np.sqrt(np.mean(d**2, axis=0)))) for d in r])
+        return rms, np.concatenate([d.ravel() for d in r])
+
+    def flat(self, v: np.ndarray, jac: np.ndarray) -> bool:
+        """Whether no candidate tells the answer from :data:`STEP` along ``v`` (re-fitted).
+
+        Up to :data:`REFITS` Gauss-Newton steps across ``v`` with the candidates'
+        Jacobian at the answer: in linear coordinates a symmetry (``R C`` fixed) is
+        curved, and the point along its tangent lies off it.
+        """
+        s0 = self.space.to_s(self.x)
+        sign = 1.0 if np.all(s0 + STEP * v <= self.space.s_upper) else -1.0
+        s = self.space.clip(s0 + sign * STEP * v)
+        unit = v / max(float(np.linalg.norm(v)), 1e-300)
+        across = np.linalg.svd(np.eye(self.space.dim) - np.outer(unit, unit))[0][:, :-1]
+        step = np.linalg.pinv(jac @ across)
+        for _ in range(REFITS):
+            found = self.rise(self.space.to_x(s))
+            if found is None:
+                return False
+            if np.max(found[0]) <= FLAT:
+                return True
+            s = self.space.clip(s - across @ (step @ found[1]))
+        return False
+
+
+def _structural(space: Space, x: dict, v: np.ndarray, cov: np.ndarray) -> Structural:
+    members = [n for j, n in enumerate(space.names) if abs(v[j]) >= MEMBER]
+    u = Uncertainty(values=dict(x))
+    u.cov = cov  # type: ignore[attr-defined]
+    u.dof = {n: 1e6 for n in space.names}
+    return Structural(members, _terms(space, v), fixed_across(space, u, v, members))
+
+
+def _terms(space: Space, v: np.ndarray) -> dict[str, float]:
+    """Name a direction by its coordinates' weights (``lg C``: -0.58), small ones left out."""
+    u = space.u_direction(v)
+    return {space.label(j): round(float(c), 3) for j, c in enumerate(u) if abs(c) >= 0.05}
+
+
+def _explore(plan: Plan, result: Any, workers: Any, timeout: Any) -> dict[str, Any]:
+    """Simulate the study and the candidates: information, weak and structural directions."""
+    space, x = plan.space, plan.x
+    inflation = float(getattr(result.uncertainty, "inflation", 1.0) or 1.0)
+    with make_evaluator(plan.spec, workers=workers, timeout=timeout) as ev:
+        f0, residuals = study_fisher(ev, space, x, inflation)
+        nfev = ev.nfev
+    cspec = candidate_spec(plan, [s.values for s in plan.signals])
+    with make_evaluator(cspec, workers=workers, timeout=timeout) as ev:
+        fishers, outputs, jacs = candidate_fisher(ev, space, x, plan.sigma)
+        weak = _weak(result, space, f0)
+        # what the study says it does not determine, it does not: the differences'
+        # curvature along those directions is the solver's noise, not the data's
+        drop = np.eye(space.dim) - weak @ weak.T
+        f0 = drop @ f0 @ drop
+        follow = _Follow(ev, space, x, outputs)
+        jac = np.vstack(jacs)
+        found = []
+        vecs = np.linalg.eigh(f0 + sum(fishers))[1]
+        for k in range(weak.shape[1]):  # the pooled information's weakest directions
+            if not follow.flat(vecs[:, k], jac):
+                break
+            found.append(vecs[:, k])
+        nfev += ev.nfev
+    return {"f0": f0, "residuals": residuals, "fishers": fishers, "outputs": outputs,
+            "weak": weak, "found": found, "nfev": nfev}  # fmt: skip
+
+
+def design(
+    result: Any,
+    options: DesignOptions | None = None,
+    *,
+    workers: int | None = 1,
+    timeout: float | None = 0,
+) -> Design:
+    """Propose the experiment that best determines what ``result`` left weak.
+
+    Parameters
+    ----------
+    result : IdentificationResult
+        A finished identification with its study attached (:func:`tsid_fmu.load` of its
+        results folder, or :func:`tsid_fmu.identify`'s return).
+    options : DesignOptions, optional
+        The family of inputs; default the study file's ``[design]`` table (all defaults
+        where it has none).
+    workers, timeout
+        As :func:`tsid_fmu.identify` (default: in this process, no time limit).
+
+    Returns
+    -------
+    Design
+        The proposal (or none, with the reason), the predicted intervals, the
+        candidates' scores, the structural findings and the simulations used.
+    """
+    plan = make_plan(result, options)
+    space, x = plan.space, plan.x
+    e = _explore(plan, result, workers, timeout)
+    f0, weak, found, fishers, nfev = e["f0"], e["weak"], e["found"], e["fishers"], e["nfev"]
+    s_basis = _basis(found, space.dim)
+    keep = np.linalg.svd(np.eye(space.dim) - s_basis @ s_basis.T)[0][:, : space.dim - len(found)]
+    targets = weak - s_basis @ (s_basis.T @ weak)
+    targets = _basis([c for c in targets.T if np.linalg.norm(c) > 0.5], space.dim)
+    if targets.shape[1] == 0:
+        targets = keep
+    scores = [_score(f0 + f, keep, targets, plan.options.criterion) for f in fishers]
+    best = int(np.argmax(scores))
+    propose = not (found and weak.shape[1] <= len(found))
+    cov = _cov(f0 + fishers[best], keep) if propose else _cov(f0, keep)
+    after = None
+    if propose:
+        one = candidate_spec(plan, [plan.signals[best].values])
+        after, used = predicted_intervals(
+            plan.spec, one, e["outputs"][best], e["residuals"][plan.template.name], space, x,
+            plan.options.seed, workers=workers, timeout=timeout,
+        )  # fmt: skip
+        nfev += used
+    separate = discriminate(plan, result, workers, timeout)
+    if separate is not None:
+        nfev += separate["nfev"]
+    return Design(
+        names=list(space.names),
+        values=x,
+        criterion=plan.options.criterion,
+        inputs=plan.columns,
+        limits=plan.limits,
+        band=plan.band,
+        time=plan.time,
+        candidates=[
+            {"name": s.name, "kind": s.kind, "score": sc}
+            for s, sc in zip(plan.signals, scores, strict=True)
+        ],
+        proposal=plan.signals[best] if propose else None,
+        predicted_outputs=e["outputs"][best] if propose else None,
+        output_names=list(plan.template.output_names),
+        template=plan.template.name,
+        study_intervals={n: list(result.intervals.get(n) or [None, None]) for n in space.names},
+        after=None if after is None else [after[n] for n in space.names],
+        weak=[_terms(space, v) for v in weak.T],
+        structural=[_structural(space, x, v, cov) for v in found],
+        nfev=nfev,
+        separating=None if separate is None else plan.signals[separate["best"]],
+        discrimination=separate,
+    )
