@@ -73,6 +73,13 @@ def _unit_prbs(t: np.ndarray, f2: float, rng: np.random.Generator) -> np.ndarray
     return bits[slots]
 
 
+def _below(band: tuple[float, float], cap: float) -> tuple[float, float]:
+    """Return ``band`` moved down, its width in octaves kept, until its top is ``cap``."""
+    if band[1] <= cap:
+        return band
+    return (band[0] * cap / band[1], cap)
+
+
 def _sub_bands(f1: float, f2: float, n: int) -> list[tuple[float, float]]:
     edges = np.geomspace(f1, f2, n + 1)
     out = [(float(a), float(b)) for a, b in itertools.pairwise(edges)]
@@ -110,6 +117,7 @@ def candidates(
     seed: int,
     *,
     smooth: list[bool] | None = None,
+    caps: list[float] | None = None,
 ) -> list[Signal]:
     """Return the candidate inputs on the sample times ``t``.
 
@@ -131,8 +139,12 @@ def candidates(
         Per input: whether it must be smooth (a position whose derivatives the model
         takes): it then gets a sine at a square wave's frequency, and a multisine where
         a PRBS is asked for.
+    caps : list of float, optional
+        Per input: the highest frequency it may carry (default the band's top); a
+        sub-band above it is moved down to it.
     """
     smooth = smooth or [False] * len(limits)
+    caps = caps or [band[1]] * len(limits)
     rng = np.random.default_rng(seed)
     lo = np.array([a for a, _ in limits])
     hi = np.array([b for _, b in limits])
@@ -147,7 +159,11 @@ def candidates(
             trials = _sub_bands(band[0], band[1], bands)
         for sub in trials:
             units = np.stack(
-                [_unit(kind, t, sub, i, rng, smooth[i], band[1]) for i in range(n_in)], axis=1
+                [
+                    _unit(kind, t, _below(sub, caps[i]), i, rng, smooth[i], caps[i])
+                    for i in range(n_in)
+                ],
+                axis=1,
             )
             label = f"{sub[0]:.3g} Hz" if kind == "steps" else f"{sub[0]:.3g}-{sub[1]:.3g} Hz"
             out.append(Signal(f"{kind} {label}", kind, sub, mid + half * units))
