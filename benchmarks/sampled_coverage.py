@@ -12,7 +12,7 @@ error and not noise, and ``x_m`` is so precise that it decides the answer, so no
 interval made from the noise can hold the truth on 95 % of the seeds with it
 (``--encoder`` shows it). To keep the cost down, each seed's fit starts **from the
 truth** with the least-squares refinement only (the stage that ends every
-identification of these data, :func:`tsid_fmu.search.refine.refine_stage`), not with
+identification of these data, :func:`tsid_fmu.search.local.refine.refine_stage`), not with
 the Taguchi stage from Table I (about 400 simulations more per seed). At that answer the
 package computes, as :func:`tsid_fmu.identify.identify` does:
 
@@ -50,7 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.evaluate import make_evaluator
-from tsid_fmu.search.refine import refine_stage
+from tsid_fmu.search.local.refine import refine_stage
 from tsid_fmu.search.space import Space
 from tsid_fmu.study import prepare
 from tsid_fmu.uncertainty.assess import assess

@@ -53,7 +53,7 @@ import friction_laws as laws  # noqa: E402
 
 from tsid_fmu import Choice, Experiment, Method, Parameter, Study, identify  # noqa: E402
 from tsid_fmu.evaluate import make_evaluator  # noqa: E402
-from tsid_fmu.search.selection import information  # noqa: E402
+from tsid_fmu.search.structure.selection import information  # noqa: E402
 from tsid_fmu.study import prepare  # noqa: E402
 
 FMU = REPO / "fmus" / "LSEA_SISO_Friction.fmu"

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import structure as base
 
 from tsid_fmu import Choice, Experiment, Parameter, Study, identify
-from tsid_fmu.search.selection import information
+from tsid_fmu.search.structure.selection import information
 
 laws = base.laws
 #: Law 2's Real parameters with damping on; off, B_s has no effect.

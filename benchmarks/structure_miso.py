@@ -50,7 +50,7 @@ sys.modules[_spec.name] = rig
 _spec.loader.exec_module(rig)
 
 from tsid_fmu import Experiment, Method, ModelChoice, Parameter, Study, identify  # noqa: E402
-from tsid_fmu.search.selection import information  # noqa: E402
+from tsid_fmu.search.structure.selection import information  # noqa: E402
 
 FMUS = {
     1: HERE.parent / "fmus" / "LSEA_MISO_OneMass.fmu",

@@ -20,13 +20,16 @@ from spec_helpers import CurveEvaluator, floor_experiment
 
 from tsid_fmu import Experiment, Method, Parameter, Study
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search import adaptive, context, local, taguchi, verdict
-from tsid_fmu.search.frame import Frame
+from tsid_fmu.search import context, verdict
+from tsid_fmu.search.local import adaptive
+from tsid_fmu.search.local import flow as local
 from tsid_fmu.search.pipeline import run_stages
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.start import start_points
-from tsid_fmu.search.taguchi import TaguchiRun, taguchi_stage
+from tsid_fmu.search.taguchi import stage as taguchi
+from tsid_fmu.search.taguchi.frame import Frame
+from tsid_fmu.search.taguchi.stage import TaguchiRun, taguchi_stage
+from tsid_fmu.search.taguchi.start import start_points
 from tsid_fmu.trail.folder import NullStore
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]

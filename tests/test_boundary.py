@@ -1,4 +1,4 @@
-"""The score test at a nesting point (:mod:`tsid_fmu.search.boundary`).
+"""The score test at a nesting point (:mod:`tsid_fmu.search.structure.boundary`).
 
 The toy is the SISO plant's pair in miniature: the first output depends on ``v + b``
 only (the motion, through viscous friction plus spring damping), the second on ``b``
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from spec_helpers import CurveEvaluator
 
-from tsid_fmu.search.boundary import score_step, significant
+from tsid_fmu.search.structure.boundary import score_step, significant
 from tsid_fmu.search.verdict import gauss_newton_step
 
 T = np.linspace(0.0, 10.0, 400)
@@ -74,7 +74,7 @@ def test_significant_means_more_than_bics_charge_for_one_parameter(gap, expected
 def test_a_prediction_the_steps_own_cost_does_not_bear_out_moves_nothing():
     """The score test's forward differences carry a model's event noise; only a step
     whose own cost is lower by the threshold is refined from (two runs check it)."""
-    from tsid_fmu.search.boundary import tried
+    from tsid_fmu.search.structure.boundary import tried
 
     ev = CurveEvaluator(_model, MEASURED, SIGMA)
     r0 = ev.residuals(AT_NESTING)

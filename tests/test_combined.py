@@ -1,4 +1,4 @@
-"""The refinement in the combinations the data fix (:mod:`tsid_fmu.search.combined`).
+"""The refinement in the combinations the data fix (:mod:`tsid_fmu.search.local.combined`).
 
 The toy's first output depends on ``v + b`` only, through a phase with event-like steps
 (as the SISO plant's motion depends on viscous friction plus spring damping), its second
@@ -17,7 +17,7 @@ import scipy.optimize
 from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search.combined import (
+from tsid_fmu.search.local.combined import (
     combined_refinement,
     parallel_pairs,
     physical_jacobian,
@@ -162,7 +162,7 @@ def test_a_pairs_ratio_is_measured_again_with_steps_matched_to_it():
     """From a ratio off by 30 % (as relative steps, whose events differ, can give), two
     rounds of steps matched to the combination find the toy's, 1 (its outputs depend on
     ``v + b``; the second output's small ``b`` term shifts it by less than 1e-4)."""
-    from tsid_fmu.search.combined import matched_ratio
+    from tsid_fmu.search.local.combined import matched_ratio
 
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     r0 = ev.residuals(START)
@@ -212,8 +212,8 @@ def test_a_study_of_one_structure_is_refined_in_its_combinations_too(monkeypatch
     """Not only the structure route: a plain study whose refinement's test held by a trial
     in the valley (SISO law 3's own study, dev seed 122: 1.021 x the optimum, "converged")
     ends refined in the combination, read back from its trail when run again."""
-    from tsid_fmu.search import local
     from tsid_fmu.search.context import Context, Control
+    from tsid_fmu.search.local import flow as local
 
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     gate = {"holds": True, "test": "projected Gauss-Newton, step tried", "detail": ""}
@@ -279,7 +279,7 @@ def test_the_least_squares_in_combinations_runs_its_jacobians_as_batches_and_not
 def test_a_ratio_already_matched_is_measured_in_one_round():
     """From the toy's own ratio (1: its outputs depend on ``v + b``), the first round of
     matched steps moves it by less than 1e-4 of itself, and the second is not run."""
-    from tsid_fmu.search.combined import matched_ratio
+    from tsid_fmu.search.local.combined import matched_ratio
 
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     r0 = ev.residuals(START)
@@ -291,7 +291,7 @@ def test_the_refinements_last_jacobian_names_the_pairs_in_the_parameters_units(m
     """A refinement whose test held by a trial keeps the parallel pairs of its last
     Jacobian (in logarithmic search coordinates), their ratio per unit of the parameters
     (the toy's 1, not the ratio of the coordinates' scales)."""
-    from tsid_fmu.search import refine
+    from tsid_fmu.search.local import refine
     from tsid_fmu.search.verdict import Stationarity
     from tsid_fmu.study.schema import Method
 

@@ -1,4 +1,4 @@
-"""Finite-difference steps chosen from the FMU's own noise (``tsid_fmu.search.fdstep``)."""
+"""Finite-difference steps chosen from the FMU's own noise (``tsid_fmu.search.local.fdstep``)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import pytest
 from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search import refine
-from tsid_fmu.search.fdstep import MAX_STEP, solver_noise, steps_for
-from tsid_fmu.search.refine import refine_stage
+from tsid_fmu.search.local import refine
+from tsid_fmu.search.local.fdstep import MAX_STEP, solver_noise, steps_for
+from tsid_fmu.search.local.refine import refine_stage
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.schema import Method
 

@@ -2,7 +2,7 @@
 
 The lag FMU against data with an unmodelled ringing (``0.2 sin(7 t)``, twenty times the
 noise): every answer is a poor fit, so the search follows the data from their first
-part (:mod:`tsid_fmu.search.local`), reaches the same answer again, and skips the
+part (:mod:`tsid_fmu.search.local.flow`), reaches the same answer again, and skips the
 restarts; the warning says so.
 """
 

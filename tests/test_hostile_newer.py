@@ -299,7 +299,7 @@ def test_a_study_with_choices_refuses_to_pause(variants):
 def test_a_tie_between_equally_simple_structures_does_not_claim_the_simpler():
     import math
 
-    from tsid_fmu.search.selection import Candidate, decide
+    from tsid_fmu.search.structure.selection import Candidate, decide
 
     n = 100
     a = Candidate("A", {"s": 0.0}, {}, 1.0, 100.0, n, 2, ["x", "y"])

@@ -16,7 +16,7 @@ from scipy.optimize import least_squares
 
 import tsid_fmu
 from tsid_fmu.scaffold import init_study
-from tsid_fmu.search.start import fmu_start_values
+from tsid_fmu.search.taguchi.start import fmu_start_values
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -19,8 +19,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.taguchi.frame import Factor, Frame
 from tsid_fmu.study.tomltext import toml_key, toml_string
 from tsid_fmu.trail.levels import read_next_levels, write_next_levels
 

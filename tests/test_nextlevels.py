@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from tsid_fmu.doe.leveling import LevelingOptions, relevel
-from tsid_fmu.search import nextlevels
-from tsid_fmu.search.frame import Factor, Frame
-from tsid_fmu.search.nextlevels import GROWTH, MAX_HALF_WIDTH, next_frame
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.taguchi import nextlevels
+from tsid_fmu.search.taguchi.frame import Factor, Frame
+from tsid_fmu.search.taguchi.nextlevels import GROWTH, MAX_HALF_WIDTH, next_frame
 
 WIDE = (-math.inf, math.inf)
 CENTRE = ({"p": 101.0, "q": 99.0}, "run 3")

@@ -9,8 +9,8 @@ import pytest
 from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search import refine
-from tsid_fmu.search.refine import refine_stage
+from tsid_fmu.search.local import refine
+from tsid_fmu.search.local.refine import refine_stage
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
@@ -236,7 +236,7 @@ def test_a_refinement_out_of_runs_says_so_and_the_search_goes_on_from_it():
     ``stop = "limit"``, and the adaptive search treats it as not settled (on the SISO
     encoder's rough cost such a point passed the stationarity test at 1.014 x the
     optimum)."""
-    from tsid_fmu.search.local import _collapsed
+    from tsid_fmu.search.local.flow import _collapsed
 
     space = Space(
         {"a": [1.0, 1.5, 3.0], "k": [0.5, 1.0, 2.0], "c": [0.0, 0.5, 1.0]},

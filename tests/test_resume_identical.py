@@ -20,8 +20,8 @@ import pandas as pd
 import pytest
 from fmu_factory import LAG_TOML, build_c_fmu, lag_response
 
-from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.taguchi.frame import Frame
 from tsid_fmu.study import load_study
 from tsid_fmu.trail.levels import read_next_levels
 

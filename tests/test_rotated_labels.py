@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.taguchi.frame import Factor, Frame
 
 
 def test_anchored_rotated_factors_are_not_all_labelled_by_the_largest_parameter():

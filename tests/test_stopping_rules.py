@@ -20,10 +20,10 @@ import pytest
 from test_taguchi_valley import ValleyEvaluator
 
 from tsid_fmu.doe.leveling import LevelingOptions, relative_span, relevel
-from tsid_fmu.search.frame import Factor, Frame
-from tsid_fmu.search.nextlevels import _rotated_decisions
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.taguchi import (
+from tsid_fmu.search.taguchi.frame import Factor, Frame
+from tsid_fmu.search.taguchi.nextlevels import _rotated_decisions
+from tsid_fmu.search.taguchi.stage import (
     TaguchiRun,
     _decide_rerun,
     _finished,

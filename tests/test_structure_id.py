@@ -17,20 +17,20 @@ import pytest
 from scipy import stats
 from spec_helpers import CurveEvaluator, floor_experiment
 
-import tsid_fmu.search.structure as structure
+import tsid_fmu.search.structure.arrays as structure
 import tsid_fmu.study.definition as definition
 from tsid_fmu import Choice, Experiment, Method, Parameter, Study
 from tsid_fmu.doe.arrays import get_array
 from tsid_fmu.doe.leveling import LevelingDecision
 from tsid_fmu.search.context import Context, Control
-from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.nesting import at_nesting_point
-from tsid_fmu.search.optima import consistent, measure, update
 from tsid_fmu.search.record import IterationRecord
-from tsid_fmu.search.selection import Candidate, decide
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.structure import DiscreteFactor, discrete_table, settled
-from tsid_fmu.search.structures import _candidates, run_structure
+from tsid_fmu.search.structure.arrays import DiscreteFactor, discrete_table, settled
+from tsid_fmu.search.structure.compare import _candidates, run_structure
+from tsid_fmu.search.structure.nesting import at_nesting_point
+from tsid_fmu.search.structure.optima import consistent, measure, update
+from tsid_fmu.search.structure.selection import Candidate, decide
+from tsid_fmu.search.taguchi.frame import Frame
 from tsid_fmu.trail.folder import NullStore
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
@@ -485,7 +485,7 @@ def test_the_simplest_structure_gets_the_own_study_and_the_richer_its_answer_emb
 
 
 def test_an_embedding_reaches_a_nesting_value_on_a_bound_that_log_coordinates_cannot():
-    from tsid_fmu.search.nesting import embed
+    from tsid_fmu.search.structure.nesting import embed
 
     def model(a, b, c, on):  # any c > 0 switches a step on (as a friction term would)
         return _model(a, b, c + 0.05 * (c > 0), on)
@@ -503,8 +503,8 @@ def test_an_embedding_reaches_a_nesting_value_on_a_bound_that_log_coordinates_ca
 
 
 def test_a_chosen_answer_from_a_warm_start_gets_its_own_study_unless_shown_optimal():
-    from tsid_fmu.search.candidates import needs_own_study
     from tsid_fmu.search.stage import StageResult
+    from tsid_fmu.search.structure.candidates import needs_own_study
 
     def stage(holds):
         extra = {"stationarity": {"holds": holds, "test": "gauss-newton", "detail": ""}}
@@ -517,8 +517,8 @@ def test_a_chosen_answer_from_a_warm_start_gets_its_own_study_unless_shown_optim
 
 
 def test_a_poor_fit_gives_the_richest_candidate_without_one_a_study_of_its_own():
-    from tsid_fmu.search.candidates import next_own_study
     from tsid_fmu.search.stage import StageResult
+    from tsid_fmu.search.structure.candidates import next_own_study
 
     def stage(holds):
         extra = {"stationarity": {"holds": holds, "test": "gauss-newton", "detail": ""}}
@@ -576,7 +576,7 @@ def test_a_chosen_warm_start_stuck_in_a_poor_fit_is_identified_again_by_its_own_
 
 
 def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_fit():
-    from tsid_fmu.search.nesting import REPRODUCE, _fit_extra
+    from tsid_fmu.search.structure.nesting import REPRODUCE, _fit_extra
 
     measured = _data(a=2.0, b=1.3, c=0.0, on=0)
     study = _study()
@@ -600,7 +600,7 @@ def test_an_embedding_fit_that_scipy_cannot_go_on_with_is_not_reproduced(monkeyp
     reproduced" (the embedding's other routes follow), instead of raising."""
     import scipy.optimize
 
-    from tsid_fmu.search.nesting import REPRODUCE, _fit_extra
+    from tsid_fmu.search.structure.nesting import REPRODUCE, _fit_extra
 
     def failing(fun, x0, **kwargs):
         fun(x0)
@@ -624,7 +624,7 @@ def test_a_nesting_check_puts_extra_parameters_near_their_bounds_on_them_first()
     at the richer answer), it reproduces exactly. A fit first walks c towards it (and
     stops short, at the first point within the tolerance). At c = 0.05, not near its
     bound, c is fitted from there."""
-    from tsid_fmu.search.nesting import nesting
+    from tsid_fmu.search.structure.nesting import nesting
 
     measured = _data(a=2.0, b=1.3, c=0.0, on=0)
     study = _study()
@@ -641,7 +641,7 @@ def test_a_nesting_check_puts_extra_parameters_near_their_bounds_on_them_first()
 
 
 def test_a_nesting_found_earlier_is_reused_where_the_richer_answer_fits_far_better():
-    from tsid_fmu.search.nesting import known, nesting
+    from tsid_fmu.search.structure.nesting import known, nesting
 
     measured = _data(a=2.0, b=1.3, c=0.3, on=1)
     cands, studies, evs, _, _ = _nested_pair(
@@ -711,7 +711,7 @@ def test_a_candidate_shown_at_an_optimum_is_not_followed_from_a_richer_answer():
 
 
 def test_only_the_lowest_cost_earlier_answer_that_embeds_is_embedded():
-    from tsid_fmu.search.candidates import embedded_answers
+    from tsid_fmu.search.structure.candidates import embedded_answers
 
     measured = _data(a=2.0, b=1.3, c=0.3, on=1)
     study = _study()
@@ -725,7 +725,7 @@ def test_only_the_lowest_cost_earlier_answer_that_embeds_is_embedded():
 
 
 def test_where_the_best_earlier_answer_does_not_embed_no_other_is_tried(monkeypatch):
-    from tsid_fmu.search import candidates
+    from tsid_fmu.search.structure import candidates
 
     measured = _data(a=2.0, b=1.3, c=0.3, on=1)
     study = _study()
@@ -746,7 +746,7 @@ def test_where_the_best_earlier_answer_does_not_embed_no_other_is_tried(monkeypa
 def test_among_earlier_answers_as_good_as_the_best_the_simplest_is_embedded():
     import dataclasses
 
-    from tsid_fmu.search.candidates import embedded_answers
+    from tsid_fmu.search.structure.candidates import embedded_answers
 
     measured = _data(a=2.0, b=1.3, c=0.3, on=1)
     study = _study()
@@ -764,8 +764,8 @@ def test_among_earlier_answers_as_good_as_the_best_the_simplest_is_embedded():
 
 
 def test_a_warm_answer_shown_stationary_is_settled_for_the_nesting_checks(monkeypatch):
-    from tsid_fmu.search import structures
-    from tsid_fmu.search.candidates import stationary
+    from tsid_fmu.search.structure import compare as structures
+    from tsid_fmu.search.structure.candidates import stationary
 
     seen = []
     real = structures.consistent
@@ -810,7 +810,7 @@ def test_an_embedding_tries_a_simpler_parameter_of_the_same_unit_as_a_nesting_va
     unit, ``c = b`` is tried (a run at the start, one at the lower bound, one at ``b``)
     and reproduces exactly. Without a unit in common, ``c`` is fitted, and ends near
     ``b`` but not on it, in more runs."""
-    from tsid_fmu.search.nesting import embed
+    from tsid_fmu.search.structure.nesting import embed
 
     def model(a, b, c, on):
         return a * np.exp(-b * T) if not on else 0.5 * a * (np.exp(-b * T) + np.exp(-c * T))
@@ -840,8 +840,8 @@ def test_a_refinement_stopped_short_of_its_test_is_refined_once_more(
     """A refinement that stopped at its tolerances (``stop``) but whose stationarity test
     found a lower point (status 1) is refined again from its answer, once; one stopped
     by its simulation limit (no ``stop``), shown stationary, or without a test, is not."""
-    from tsid_fmu.search import optima
     from tsid_fmu.search.stage import StageResult
+    from tsid_fmu.search.structure import optima
 
     starts = []
 

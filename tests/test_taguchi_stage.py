@@ -23,10 +23,10 @@ from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import SimulationError
 from tsid_fmu.evaluate.protocol import Evaluation
 from tsid_fmu.evaluate.timelimit import EXCEEDED
-from tsid_fmu.search import taguchi
-from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.taguchi import (
+from tsid_fmu.search.taguchi import stage as taguchi
+from tsid_fmu.search.taguchi.frame import Frame
+from tsid_fmu.search.taguchi.stage import (
     HANDOVER,
     RERUN_AFTER,
     TaguchiRun,

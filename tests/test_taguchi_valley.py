@@ -14,9 +14,9 @@ from scipy.optimize import least_squares
 from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.taguchi import TaguchiRun, taguchi_stage
+from tsid_fmu.search.taguchi.frame import Frame
+from tsid_fmu.search.taguchi.stage import TaguchiRun, taguchi_stage
 from tsid_fmu.study.schema import Method
 
 T = np.linspace(0.0, 6.0, 400)

@@ -1,7 +1,7 @@
 """One evaluator per sub-problem of a study: its parameters, experiments and fixed values.
 
 :func:`tsid_fmu.identify.identify` makes one :class:`StudyEvaluators` per study (and
-structure identification one per candidate structure, :mod:`tsid_fmu.search.structures`);
+structure identification one per candidate structure, :mod:`tsid_fmu.search.structure.compare`);
 the stages ask it for the evaluator of each sub-problem, shared between them.
 """
 

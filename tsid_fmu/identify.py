@@ -29,14 +29,14 @@ from tsid_fmu.report.markdown import markdown_report
 from tsid_fmu.report.render import draw_study
 from tsid_fmu.report.ssp import write_model_ssp
 from tsid_fmu.result import PAUSED, IdentificationResult
-from tsid_fmu.search.adaptive import answer_stage, verdict
 from tsid_fmu.search.context import Context
-from tsid_fmu.search.iteration import ProgressCallback
+from tsid_fmu.search.local.adaptive import answer_stage, verdict
 from tsid_fmu.search.pipeline import Control, run_stages
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.structures import StructureResult, run_structure
+from tsid_fmu.search.structure.compare import StructureResult, run_structure
+from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.folder import NullStore, Trail

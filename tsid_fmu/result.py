@@ -374,7 +374,7 @@ class IdentificationResult:
 
         Columns: ``cost``, ``k`` (free Real parameters), ``AIC``, ``BIC``, ``LRT p`` and
         ``LRT against`` (nested structures), ``validation cost``, ``simulations``,
-        ``chosen`` and ``why``; the formulas are in :mod:`tsid_fmu.search.selection`.
+        ``chosen`` and ``why``; the formulas are in :mod:`tsid_fmu.search.structure.selection`.
         """
         import pandas as pd
 

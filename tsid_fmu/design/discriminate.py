@@ -1,7 +1,7 @@
 """The input that best separates structures the study could not tell apart.
 
 Where a structure study ends "indistinguishable" (the chosen structure and others within
-the noise, :mod:`tsid_fmu.search.selection`), each of those structures is simulated at
+the noise, :mod:`tsid_fmu.search.structure.selection`), each of those structures is simulated at
 its own optimum with every candidate input, and the candidate whose outputs differ most
 is proposed: the criterion is the expected chi-square between two structures'
 predictions, ``sum ((y_a - y_b) / sigma)**2`` over the samples and outputs (what the

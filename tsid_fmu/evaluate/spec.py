@@ -394,7 +394,7 @@ class EvaluationSpec:
         its weights and noise scales: the cost of a shortened spec is the same sum over
         fewer samples. The adaptive search scores such "horizons" to follow a minimum
         from short data, where an oscillating model's cost has few valleys, to the full
-        record (:mod:`tsid_fmu.search.adaptive`).
+        record (:mod:`tsid_fmu.search.local.adaptive`).
         """
         if not 0 < fraction <= 1:
             raise StudyError(f"fraction must be in (0, 1], got {fraction}")

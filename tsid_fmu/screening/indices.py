@@ -21,7 +21,7 @@ import numpy as np
 
 from tsid_fmu.doe.arrays import OrthogonalArray, select_array
 from tsid_fmu.errors import StudyError
-from tsid_fmu.search.contribution import parameter_contribution
+from tsid_fmu.search.phases.contribution import parameter_contribution
 
 __all__ = [
     "CONF_LEVEL",
@@ -186,7 +186,7 @@ def array_contribution(s: np.ndarray, names: Sequence[str], y: np.ndarray) -> di
 
     For each parameter, the costs are averaged per level (its response table); its
     "% of error variation" is ``(largest - smallest level mean) / mean cost x 100``
-    (:func:`tsid_fmu.search.contribution.parameter_contribution` on the level means,
+    (:func:`tsid_fmu.search.phases.contribution.parameter_contribution` on the level means,
     whose mean is that of all runs in a balanced array).
 
     Parameters

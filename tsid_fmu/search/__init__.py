@@ -1,14 +1,19 @@
-"""The search: stages of Taguchi iterations over factors, phases, and the refinement.
+"""The search: the stages that find the answer, one sub-package per part of the procedure.
 
-- :mod:`~tsid_fmu.search.space` and :mod:`~tsid_fmu.search.frame`: the coordinates and
-  the factors (parameters, or rotated combinations) of an iteration;
-- :mod:`~tsid_fmu.search.iteration`: one iteration (array runs, S/N, prediction,
-  confirmation, re-leveling) and :mod:`~tsid_fmu.search.record`, what it leaves;
-- :mod:`~tsid_fmu.search.taguchi`: the Taguchi stage, iterations until Case 3;
-- :mod:`~tsid_fmu.search.phases` and :mod:`~tsid_fmu.search.contribution`: the MISO
-  paper's contribution analyses and phases;
-- :mod:`~tsid_fmu.search.refine`: the optional least-squares refinement;
-- :mod:`~tsid_fmu.search.pipeline`: the stages of a study, in order.
+- :mod:`~tsid_fmu.search.taguchi`: the Taguchi stage (:mod:`~tsid_fmu.search.taguchi.stage`),
+  its iterations (:mod:`~tsid_fmu.search.taguchi.iteration`) over factors
+  (:mod:`~tsid_fmu.search.taguchi.frame`) and re-leveling
+  (:mod:`~tsid_fmu.search.taguchi.nextlevels`);
+- :mod:`~tsid_fmu.search.phases`: the MISO paper's contribution analyses and phases;
+- :mod:`~tsid_fmu.search.local`: the local search after the arrays (refinement,
+  horizons, restarts; :mod:`~tsid_fmu.search.local.flow`);
+- :mod:`~tsid_fmu.search.structure`: structure identification (mixed arrays,
+  candidates, nesting, selection);
+- :mod:`~tsid_fmu.search.verdict`: the stationarity tests that earn exit status 0;
+- :mod:`~tsid_fmu.search.pipeline`: the stages of a study, in order; shared:
+  :mod:`~tsid_fmu.search.space` (coordinates), :mod:`~tsid_fmu.search.record` (what an
+  iteration leaves), :mod:`~tsid_fmu.search.stage` (a stage's result),
+  :mod:`~tsid_fmu.search.context` (what the stages share).
 """
 
 from tsid_fmu.search.pipeline import Control, run_stages

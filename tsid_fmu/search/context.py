@@ -1,7 +1,7 @@
 """What every stage of a study shares: the study, its evaluators, its trail, its progress.
 
 :class:`Context` is handed from stage to stage (:mod:`tsid_fmu.search.pipeline`,
-:mod:`tsid_fmu.search.local`); :func:`refinement` runs the least-squares refinement as a
+:mod:`tsid_fmu.search.local.flow`); :func:`refinement` runs the least-squares refinement as a
 stage of the trail, read back when it has already run from the same start.
 """
 
@@ -15,13 +15,13 @@ import numpy as np
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.iteration import ProgressCallback
-from tsid_fmu.search.phases import Evaluators
+from tsid_fmu.search.local.refine import refine_stage
+from tsid_fmu.search.phases.stage import Evaluators
 from tsid_fmu.search.record import IterationRecord
-from tsid_fmu.search.refine import refine_stage
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.taguchi.frame import Frame
+from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.search.verdict import noise_floor
 from tsid_fmu.study.definition import Study
 

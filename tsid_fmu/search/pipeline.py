@@ -4,7 +4,7 @@ A single-group study runs one ``taguchi`` stage over all parameters. A phased st
 (explicit ``[[phases]]``, or ``[contribution] enabled``) runs the ``contribution``
 analyses, one ``phase`` stage per parameter group, and a joint phase over all
 parameters on all identification experiments. Then, by ``[method] refine``: the
-adaptive local search of :mod:`tsid_fmu.search.adaptive` (``"auto"`` with the ``sse``
+adaptive local search of :mod:`tsid_fmu.search.local.adaptive` (``"auto"`` with the ``sse``
 cost: refinement, back to the arrays, horizons, restarts), the ``refinement`` alone
 (``"least_squares"``), or the ``check`` stage's local probes (otherwise). Every stage
 gets its own evaluator spec (its parameters, its experiments, the others held at their
@@ -20,17 +20,17 @@ from collections.abc import Mapping
 import numpy as np
 
 from tsid_fmu.errors import StudyError
-from tsid_fmu.search.adaptive import answer_stage
 from tsid_fmu.search.context import Context, Control, StageStore, polish
-from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.iteration import ProgressCallback
-from tsid_fmu.search.local import check, local_search
-from tsid_fmu.search.phases import Evaluators, centre_values, joint_levels, plan_phases
+from tsid_fmu.search.local.adaptive import answer_stage
+from tsid_fmu.search.local.flow import check, local_search
+from tsid_fmu.search.phases.stage import Evaluators, centre_values, joint_levels, plan_phases
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.start import start_points
-from tsid_fmu.search.taguchi import TaguchiRun, frame_from_run, taguchi_stage
+from tsid_fmu.search.taguchi.frame import Frame
+from tsid_fmu.search.taguchi.iteration import ProgressCallback
+from tsid_fmu.search.taguchi.stage import TaguchiRun, frame_from_run, taguchi_stage
+from tsid_fmu.search.taguchi.start import start_points
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Parameter, Phase
 
@@ -71,7 +71,7 @@ def _taguchi(
 ) -> StageResult:
     """Run (or continue) one Taguchi-kind stage of ``params`` on ``exps``.
 
-    It scores its start points first (:mod:`tsid_fmu.search.start`): the values the
+    It scores its start points first (:mod:`tsid_fmu.search.taguchi.start`): the values the
     earlier stages left where there are some, else the FMU's start values; and the
     centre of the first levels.
     """

@@ -13,7 +13,7 @@ from tsid_fmu.doe.anova import AnovaTable, anova
 from tsid_fmu.doe.leveling import LevelingDecision
 from tsid_fmu.doe.response import ResponseTable, response_table
 from tsid_fmu.doe.sn import sn_smaller_the_better
-from tsid_fmu.search.frame import Frame
+from tsid_fmu.search.taguchi.frame import Frame
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -7,7 +7,7 @@ itself otherwise), minus the middle of its first levels' range, divided by that
 range's width. So every parameter's first levels span one unit of ``s``, and a step in
 ``s`` means the same fraction of the user's rough range for every parameter, however
 different their units and magnitudes (the MISO paper's "quite different
-value-ranges"). Rotated factors (:mod:`tsid_fmu.search.frame`) are directions in ``s``.
+value-ranges"). Rotated factors (:mod:`tsid_fmu.search.taguchi.frame`) are directions in ``s``.
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ a phase of a phased (MISO) study, itself a Taguchi procedure on a parameter grou
 MISO paper's one-at-a-time contribution runs; the local probe test of an answer that no
 refinement tested (:mod:`tsid_fmu.search.verdict`); in structure identification, the mixed
 arrays of Real and discrete factors, one stage per candidate structure not chosen, and
-the comparison of the structures (:mod:`tsid_fmu.search.structures`)."""
+the comparison of the structures (:mod:`tsid_fmu.search.structure.compare`)."""
 
 
 @dataclass

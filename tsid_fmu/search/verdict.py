@@ -130,7 +130,7 @@ def decided_by_trial(gate: Mapping[str, Any]) -> bool:
 
     It held by a trial alone ("step tried": the first-order model does not hold this
     close to the answer), or it failed with its step, simulated, lower: where the
-    refinement in combinations (:mod:`~tsid_fmu.search.combined`) runs.
+    refinement in combinations (:mod:`~tsid_fmu.search.local.combined`) runs.
     """
     if gate.get("test") == GN_TRIED:
         return True

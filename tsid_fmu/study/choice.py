@@ -9,7 +9,7 @@ A :class:`Choice` is written in a study's ``[parameters]`` table as::
 
 Its choices are the levels of its column in the orthogonal arrays (never re-leveled
 numerically: a choice stays one of the candidates until the structure procedure of
-:mod:`tsid_fmu.search.structure` fixes it). :func:`resolve_choices` checks each against
+:mod:`tsid_fmu.search.structure.arrays` fixes it). :func:`resolve_choices` checks each against
 the FMU's model description and turns the choices into the numbers the FMU is set to
 (Booleans 0/1, Enumeration items their declared integer values).
 

@@ -103,7 +103,7 @@ class Study:
     choices : list of Choice
         Discrete factors (FMU Integer, Boolean or Enumeration variables) whose value is
         chosen from the data with the Real parameters (structure identification,
-        :mod:`tsid_fmu.search.structure`). A :class:`Choice` given among ``parameters``
+        :mod:`tsid_fmu.search.structure.arrays`). A :class:`Choice` given among ``parameters``
         is moved here.
     variants : ModelChoice, optional
         The choice among FMU files, kept where the structure is fixed (``choices``

@@ -48,7 +48,7 @@ class ContributionOptions:
         Run the input and parameter contribution analyses and identify in phases.
     group_ratio : float
         Gap between the contributions of consecutive parameters that starts a new group
-        (see :func:`tsid_fmu.search.contribution.group_parameters`). Default 1.75.
+        (see :func:`tsid_fmu.search.phases.contribution.group_parameters`). Default 1.75.
     min_percent : float
         A parameter contributing less than this (% of error variation) to an
         experiment is left for the next experiment's phases. Default 1.

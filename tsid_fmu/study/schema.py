@@ -348,7 +348,7 @@ class Method:
         cost (MISO paper). Default 2.
     refine : {"auto", "least_squares", "none"}
         What follows the Taguchi stage. ``"auto"`` (default): with the ``sse`` cost, the
-        adaptive pipeline of :mod:`tsid_fmu.search.adaptive` (the Taguchi stage hands
+        adaptive pipeline of :mod:`tsid_fmu.search.local.adaptive` (the Taguchi stage hands
         over to a trust-region least-squares refinement after its first array; an
         answer that is not shown to be an optimum, or a poor fit, sends the search
         back to the arrays and then to restarts from the next-best runs); with
@@ -362,7 +362,7 @@ class Method:
         number of identification experiments (about thirty Jacobians).
     start : {"fmu", "centre"}
         The start point the Taguchi stage scores before its first array, beside the
-        centre of the first levels (:mod:`tsid_fmu.search.start`): ``"fmu"`` (default)
+        centre of the first levels (:mod:`tsid_fmu.search.taguchi.start`): ``"fmu"`` (default)
         the FMU's start values of the parameters; ``"centre"`` the centre alone (an FMU
         whose start values are placeholders, or a benchmark whose FMU holds the truth).
     interface : {"auto", "cs", "me"}, optional

@@ -40,10 +40,10 @@ from pathlib import Path
 
 from tsid_fmu.errors import StudyError
 from tsid_fmu.fmu import native
-from tsid_fmu.search.frame import Frame
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.taguchi.frame import Frame
 from tsid_fmu.study.definition import Study
 from tsid_fmu.trail.files import atomic_write, write_json
 from tsid_fmu.trail.integrity import file_hashes, seal, unexpected_files

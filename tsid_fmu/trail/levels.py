@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.errors import StudyError
-from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.taguchi.frame import Factor, Frame
 from tsid_fmu.study.checks import parse_toml
 from tsid_fmu.study.tomltext import toml_key, toml_string
 

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.fdstep import known_noise, steps_for
+from tsid_fmu.search.local.fdstep import known_noise, steps_for
 from tsid_fmu.search.space import Space
 
 __all__ = ["CHI2_95", "RESOLUTION", "ProfileProblem", "profile_intervals"]
@@ -167,7 +167,7 @@ class _Secant:
             return False
         cols = []
         # where the FMU's own solver is noisy, steps that beat its noise (one rule with
-        # the refinement's Jacobian, :mod:`tsid_fmu.search.fdstep`)
+        # the refinement's Jacobian, :mod:`tsid_fmu.search.local.fdstep`)
         wide = steps_for(np.full(s0.size, CHECK_STEP), self.jac, known_noise(problem.evaluator))
         for k in range(s0.size):
             s = s0.copy()

@@ -26,11 +26,11 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.fdstep import known_noise, noise_of, solver_noise, steps_for
-from tsid_fmu.search.iteration import ProgressCallback
-from tsid_fmu.search.parallel import named_pairs
+from tsid_fmu.search.local.columns import named_pairs
+from tsid_fmu.search.local.fdstep import known_noise, noise_of, solver_noise, steps_for
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
     GN_TEST,
@@ -48,7 +48,7 @@ __all__ = ["FD_STEP", "refine_stage"]
 
 FD_STEP = 1e-5
 """Forward-difference step in search coordinates (1e-5 of a first range's width), where
-the FMU's own noise allows it (:mod:`tsid_fmu.search.fdstep` widens it where not).
+the FMU's own noise allows it (:mod:`tsid_fmu.search.local.fdstep` widens it where not).
 
 Small enough for a sharply curved valley (a swinging pendulum's cost over seconds of
 data: 1e-3 gave secants whose steps kept failing), large against the integrators' error
@@ -345,7 +345,7 @@ def _again_wider(
     generalisation benchmark's evaluation seeds for no success: so the first pass keeps
     them, and this second one, from its best point, runs only where the widened
     Jacobian there predicts a decrease (:meth:`_Problem.doubtful`); it can only lower
-    the cost (:mod:`tsid_fmu.search.fdstep`).
+    the cost (:mod:`tsid_fmu.search.local.fdstep`).
     """
     problem.linearised, problem.last = None, None
     s = space.to_s(problem.best[1])

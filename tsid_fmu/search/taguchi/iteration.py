@@ -10,7 +10,7 @@
 4. The lowest cost seen so far (over the runs, the confirmation and earlier iterations)
    is the stage's answer: never worse than any run evaluated.
 5. The next levels are centred on the prediction or on the best run (``selection``) and
-   re-levelled by the papers' cases (:mod:`tsid_fmu.search.nextlevels`); with
+   re-levelled by the papers' cases (:mod:`tsid_fmu.search.taguchi.nextlevels`); with
    ``rotate``, the next factors are the principal axes of the surface the runs show.
 """
 
@@ -27,11 +27,11 @@ from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.doe.rules import main_effect_optimum
 from tsid_fmu.errors import ArrayError, StudyError
 from tsid_fmu.evaluate.protocol import Evaluation, Evaluator
-from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.nextlevels import next_frame
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.surface import principal_axes
+from tsid_fmu.search.taguchi.frame import Frame
+from tsid_fmu.search.taguchi.nextlevels import next_frame
+from tsid_fmu.search.taguchi.surface import principal_axes
 from tsid_fmu.study.schema import Method
 
 __all__ = ["Best", "ProgressCallback", "predict", "run_iteration"]

@@ -22,7 +22,7 @@ import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.search.contribution import (
+from tsid_fmu.search.phases.contribution import (
     group_parameters,
     input_contribution,
     oat_values,

@@ -6,7 +6,7 @@ Jacobian columns are parallel. The angle between two columns does not depend on 
 columns' scales, so a Jacobian in any coordinates that are a function of one parameter
 each (the search's logarithmic ones, or the parameters' own) finds the same pairs; the
 ratio of the pair's effects is read in the parameters' own units.
-:mod:`~tsid_fmu.search.combined` refines in those combinations.
+:mod:`~tsid_fmu.search.local.combined` refines in those combinations.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ this. Measured on the SISO plant at law 3's answers (dev seeds 101 to 103), with
 forward-difference steps: viscous friction and spring damping 1.7e-4 to 1.0e-3 (event
 noise: their different steps shift different events; with steps matched to their sum,
 4e-9 to 6e-8), every other pair 0.03 or more. A pair taken wrongly costs the runs of
-:func:`~tsid_fmu.search.combined.combined_refinement`, whose answer is kept only where it
+:func:`~tsid_fmu.search.local.combined.combined_refinement`, whose answer is kept only where it
 is lower."""
 
 

@@ -4,7 +4,7 @@ For parameters (axis-aligned factors) the decision is exactly the papers'
 :func:`tsid_fmu.doe.leveling.relevel`, in parameter units. For rotated factors the same
 rules (:func:`tsid_fmu.doe.rules.decide_factor`) act on each factor's offsets. Either way
 each factor gets a case, a centre and a half-width. When the next frame is rotated, its
-factors are the principal axes of the cost surface (:mod:`tsid_fmu.search.surface`),
+factors are the principal axes of the cost surface (:mod:`tsid_fmu.search.taguchi.surface`),
 and their half-widths are the extent, along each new axis, of the box of half-widths
 just decided (the ellipsoid ``sum_k h_k^2 d_k d_k^T``), at most the first levels' range.
 """
@@ -18,8 +18,8 @@ import numpy as np
 from tsid_fmu.doe.leveling import LevelingDecision, relevel
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.doe.rules import FactorState, decide_factor
-from tsid_fmu.search.frame import Factor, Frame
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.taguchi.frame import Factor, Frame
 
 __all__ = ["MAX_HALF_WIDTH", "next_frame"]
 

@@ -120,7 +120,7 @@ class Candidate:
         ``active`` holds those that change the outputs at the answer; a parameter that
         ended at the value that switches its term off (a coefficient of 0 reached in
         logarithmic coordinates, 2e-16) changes nothing there, yet the structure has it.
-        Nesting is judged on these (:mod:`~tsid_fmu.search.nesting`).
+        Nesting is judged on these (:mod:`~tsid_fmu.search.structure.nesting`).
         """
         free = list(self.extra.get("free", ()))
         return free + [n for n in self.active if n not in free]

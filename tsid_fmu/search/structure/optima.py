@@ -10,9 +10,9 @@ fit of the simpler one it nests. So:
   Real parameters that change its outputs (``k``) and its validation cost.
 - **Warm starts** (:func:`warm_start`): a candidate after the first is refined from the
   best of its start points: the answers of the candidates refined before it that it
-  nests, embedded in it (:func:`~tsid_fmu.search.nesting.embed`), those answers as they
+  nests, embedded in it (:func:`~tsid_fmu.search.structure.nesting.embed`), those answers as they
   are, the best point the arrays saw in it, and the centre of the first levels.
-- **Nesting** (:mod:`tsid_fmu.search.nesting`): structure ``s`` is nested in ``r`` where
+- **Nesting** (:mod:`tsid_fmu.search.structure.nesting`): structure ``s`` is nested in ``r`` where
   ``r``'s free parameters include ``s``'s and ``r``'s extra parameters reproduce ``s``'s
   fit; the fit that reproduces it is ``s``'s answer **embedded** in ``r``.
 - **Consistent optima** (:func:`consistent`): for each nested pair, a richer candidate
@@ -21,7 +21,7 @@ fit of the simpler one it nests. So:
   candidate above the best richer one that nests it is refined again from that richer
   answer followed to the nesting point (:func:`follow`: the projection onto it). A
   restart replaces a candidate's answer only where it is lower.
-- **At the nesting point** (:func:`~tsid_fmu.search.nesting.at_nesting_point`): a richer
+- **At the nesting point** (:func:`~tsid_fmu.search.structure.nesting.at_nesting_point`): a richer
   answer whose extra parameters sit where they make it the simpler structure is that
   structure; the decision does not credit its extra parameters with a lower cost found
   there.
@@ -37,11 +37,11 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.search.context import polish
-from tsid_fmu.search.nesting import nesting, slack
-from tsid_fmu.search.refine import refine_stage
-from tsid_fmu.search.selection import Candidate
+from tsid_fmu.search.local.refine import refine_stage
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.structure.nesting import nesting, slack
+from tsid_fmu.search.structure.selection import Candidate
 from tsid_fmu.study.definition import Study
 
 __all__ = [
@@ -71,7 +71,7 @@ WARM_NFEV = 10
 """Simulations per (Real parameter + 1) of a refinement from warm starts and of a restart
 (the study's own limit where lower). A candidate chosen from a warm start that stopped
 short of an optimum gets a study of its own
-(:func:`~tsid_fmu.search.candidates.needs_own_study`); measured on the SISO friction
+(:func:`~tsid_fmu.search.structure.candidates.needs_own_study`); measured on the SISO friction
 laws, warm refinements and restarts that ran to the default limit (30 per parameter +
 1) spent 200 to 750 simulations per structure, most of them on structures the
 comparison then rejected by 1e5 in BIC."""

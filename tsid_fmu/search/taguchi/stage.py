@@ -1,6 +1,6 @@
 """The Taguchi stage: iterations until the levels converge (Case 3) or a limit is reached.
 
-Each iteration is :func:`tsid_fmu.search.iteration.run_iteration`. Between iterations
+Each iteration is :func:`tsid_fmu.search.taguchi.iteration.run_iteration`. Between iterations
 the stage applies the MISO paper's lesson: when continuing from the best choice has not
 lowered the cost for ``RERUN_AFTER`` iterations, the search is re-conducted from the
 next-best run of the iteration that made that choice (the paper continued from its run
@@ -20,12 +20,12 @@ import numpy as np
 from tsid_fmu.errors import SimulationError, StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.timelimit import timed_out
-from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.iteration import Best, ProgressCallback, run_iteration
-from tsid_fmu.search.nextlevels import next_frame
 from tsid_fmu.search.record import IterationRecord, json_float
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.taguchi.frame import Frame
+from tsid_fmu.search.taguchi.iteration import Best, ProgressCallback, run_iteration
+from tsid_fmu.search.taguchi.nextlevels import next_frame
 from tsid_fmu.study.schema import Method
 
 __all__ = ["HANDOVER", "RERUN_AFTER", "Recorder", "TaguchiRun", "taguchi_stage"]
@@ -188,7 +188,7 @@ def _handover(records: list[IterationRecord]) -> str | None:
     optimum or a start point) lies in the best basin the arrays have seen. A
     least-squares refinement from there, with its stationarity and fit tests, is the
     cheapest way to find out whether that basin holds the optimum: where its answer is
-    not settled, this stage goes on from its records (:mod:`tsid_fmu.search.local`),
+    not settled, this stage goes on from its records (:mod:`tsid_fmu.search.local.flow`),
     so further arrays are paid for only where a local method failed. Measured on the
     generalisation benchmark's development seeds (72 runs): handing over after the
     first iteration kept every success (72/72) at a median of 84 simulations, where

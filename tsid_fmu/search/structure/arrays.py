@@ -16,7 +16,7 @@ numerically: their levels stay their choices until they are fixed.
 
 The stage ends when every discrete factor is fixed, when the Real parameters' levels
 converge (Case 3) or stall, or at the study's limits. What follows (each candidate
-structure refined to its own optimum and compared) is :mod:`tsid_fmu.search.structures`.
+structure refined to its own optimum and compared) is :mod:`tsid_fmu.search.structure.compare`.
 """
 
 from __future__ import annotations
@@ -32,12 +32,12 @@ from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.doe.leveling import FactorDecision, LevelingDecision
 from tsid_fmu.errors import ArrayError, StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.iteration import Best, ProgressCallback, predict
-from tsid_fmu.search.nextlevels import next_frame
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.taguchi.frame import Frame
+from tsid_fmu.search.taguchi.iteration import Best, ProgressCallback, predict
+from tsid_fmu.search.taguchi.nextlevels import next_frame
 from tsid_fmu.study.schema import Method
 
 __all__ = [
@@ -62,7 +62,7 @@ structure tolerates the Real parameters' wrong levels, not which structure fits
 (measured on the SISO friction laws: the law was fixed at 1e7 to 2e8 times the optimum's
 cost, the wrong one on two of three data sets, after 8 to 10 iterations of 27 runs;
 ``docs/dev/structure-diagnosis.md``). Every candidate is refined to its own optimum after
-them (:mod:`tsid_fmu.search.structures`), so iterations beyond the first few only cost
+them (:mod:`tsid_fmu.search.structure.compare`), so iterations beyond the first few only cost
 simulations."""
 
 

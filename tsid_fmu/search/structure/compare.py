@@ -1,14 +1,14 @@
 """Structure identification: the structure stage, then every candidate refined and compared.
 
-1. The structure stage (:mod:`tsid_fmu.search.structure`) runs mixed arrays of the
+1. The structure stage (:mod:`tsid_fmu.search.structure.arrays`) runs mixed arrays of the
    Real parameters and the discrete factors until every discrete factor is fixed, or
-   for at most :data:`~tsid_fmu.search.structure.MAX_ITERATIONS` iterations.
+   for at most :data:`~tsid_fmu.search.structure.arrays.MAX_ITERATIONS` iterations.
 2. The candidate structures: every combination of the levels still open (at most
    :data:`MAX_CANDIDATES`, the best-scoring first), and for each fixed factor its
    runner-up level, so that the choice is always compared with an alternative (all
    combinations where they are at most :data:`MAX_ALL`).
 3. Each candidate's free parameters are probed at the best point the arrays saw in it
-   (:mod:`tsid_fmu.search.candidates`). The simplest (fewest free parameters) is
+   (:mod:`tsid_fmu.search.structure.candidates`). The simplest (fewest free parameters) is
    identified as a study of its own over those parameters, from the first levels (the
    Taguchi stage, then the refinement, as the study's method says); every other one by
    a short refinement from the best of its warm starts: the earlier answers it nests,
@@ -20,14 +20,14 @@
    nested, whether the richer one reproduces the simpler one's fit with its extra
    parameters (then it nests it, and the likelihood-ratio test applies); candidates
    not at their optimum by that nesting are restarted
-   (:func:`~tsid_fmu.search.optima.consistent`).
-5. :func:`tsid_fmu.search.selection.decide` chooses. A choice whose answer came from a
+   (:func:`~tsid_fmu.search.structure.optima.consistent`).
+5. :func:`tsid_fmu.search.structure.selection.decide` chooses. A choice whose answer came from a
    warm start and is not shown to be an optimum gets a study of its own, or, where the
    choice is a poor fit, the richest candidate without one
-   (:func:`~tsid_fmu.search.candidates.next_own_study`); the comparison is made again.
+   (:func:`~tsid_fmu.search.structure.candidates.next_own_study`); the comparison is made again.
 6. The chosen answer, where its stationarity test held by a trial alone (a cost made
    rough by events) and two of its parameters act through their combination, is
-   refined in that combination (:mod:`tsid_fmu.search.combined`), and kept where lower.
+   refined in that combination (:mod:`tsid_fmu.search.local.combined`), and kept where lower.
 """
 
 from __future__ import annotations
@@ -40,8 +40,15 @@ from typing import Any
 
 import numpy as np
 
-from tsid_fmu.search.boundary import score_step, significant, tried
-from tsid_fmu.search.candidates import (
+from tsid_fmu.search.context import Context
+from tsid_fmu.search.local.combined import refine_in_combinations
+from tsid_fmu.search.phases.stage import Evaluators
+from tsid_fmu.search.record import IterationRecord
+from tsid_fmu.search.space import Space
+from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.structure.arrays import DiscreteFactor, StructureRun, structure_stage
+from tsid_fmu.search.structure.boundary import score_step, significant, tried
+from tsid_fmu.search.structure.candidates import (
     best_point,
     embedded_answers,
     identify_candidate,
@@ -55,16 +62,9 @@ from tsid_fmu.search.candidates import (
     stationary,
     warm_starts,
 )
-from tsid_fmu.search.combined import refine_in_combinations
-from tsid_fmu.search.context import Context
-from tsid_fmu.search.nesting import at_nesting_point, known
-from tsid_fmu.search.optima import consistent, settle, update
-from tsid_fmu.search.phases import Evaluators
-from tsid_fmu.search.record import IterationRecord
-from tsid_fmu.search.selection import Candidate, decide
-from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.structure import DiscreteFactor, StructureRun, structure_stage
+from tsid_fmu.search.structure.nesting import at_nesting_point, known
+from tsid_fmu.search.structure.optima import consistent, settle, update
+from tsid_fmu.search.structure.selection import Candidate, decide
 from tsid_fmu.search.verdict import noise_floor
 from tsid_fmu.study.definition import Study
 
@@ -291,7 +291,7 @@ def _leave(
 ) -> bool:
     """Test each richer answer at a nesting point for a lower point off it; refine there.
 
-    The score test of :mod:`~tsid_fmu.search.boundary`, once per pair: where moving off
+    The score test of :mod:`~tsid_fmu.search.structure.boundary`, once per pair: where moving off
     the nesting point predicts a decrease beyond BIC's charge for one parameter, and
     the step (or its half) gives one, the richer candidate is restarted from there (kept
     where lower). Returns whether one moved.

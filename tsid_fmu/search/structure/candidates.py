@@ -1,6 +1,6 @@
 """The candidate structures' own studies: which structure gets one, and over what.
 
-Structure identification (:mod:`tsid_fmu.search.structures`) refines every candidate
+Structure identification (:mod:`tsid_fmu.search.structure.compare`) refines every candidate
 structure to its own optimum. A study of its own (the Taguchi stage from the first
 levels, then the refinement) reaches an optimum from far away, but costs what one
 identification costs; a refinement from a warm start (another structure's answer) costs
@@ -34,16 +34,16 @@ from typing import Any
 
 import numpy as np
 
-from tsid_fmu.search.adaptive import answer_stage, verdict
 from tsid_fmu.search.context import Context
-from tsid_fmu.search.frame import Frame
-from tsid_fmu.search.nesting import embed, slack
-from tsid_fmu.search.optima import measure, short, update, warm_start
-from tsid_fmu.search.phases import Evaluators
+from tsid_fmu.search.local.adaptive import answer_stage, verdict
+from tsid_fmu.search.phases.stage import Evaluators
 from tsid_fmu.search.record import IterationRecord
-from tsid_fmu.search.selection import Candidate
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.structure.nesting import embed, slack
+from tsid_fmu.search.structure.optima import measure, short, update, warm_start
+from tsid_fmu.search.structure.selection import Candidate
+from tsid_fmu.search.taguchi.frame import Frame
 from tsid_fmu.search.verdict import POOR_FIT
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Parameter
@@ -305,12 +305,12 @@ def embedded_answers(
 
     One earlier candidate whose free parameters are a subset of ``active`` is tried: the
     lowest-cost one (among those as good as the lowest, to within what an embedding may
-    differ, :func:`~tsid_fmu.search.nesting.slack`, the simplest: measured on the SISO
+    differ, :func:`~tsid_fmu.search.structure.nesting.slack`, the simplest: measured on the SISO
     friction laws, law 2's answer at law 1's fit did not embed in law 3 after 78 runs,
     law 1's did after 18). Where this structure's extra parameters reproduce its answer
-    (:func:`~tsid_fmu.search.nesting.embed`, from ``best`` or the centre of the first
+    (:func:`~tsid_fmu.search.structure.nesting.embed`, from ``best`` or the centre of the first
     levels) it is returned as ``[(index, point, label)]``, else nothing. Only the
-    lowest-cost start is refined from (:func:`~tsid_fmu.search.optima.warm_start`), and an
+    lowest-cost start is refined from (:func:`~tsid_fmu.search.structure.optima.warm_start`), and an
     embedding costs up to 20 runs per extra parameter: measured on the SISO friction
     laws, a second one cost 16 to 78 runs and was never the start; where the first did
     not embed, the next did not either (law-1 data, dev seed 107: law 1's answer in law 3
@@ -367,7 +367,7 @@ def probe(
     """Return a structure's study, evaluators, arrays' best point, free parameters there, runs.
 
     The free parameters (those that change the outputs) are counted at the best point
-    the arrays saw in the structure (:func:`~tsid_fmu.search.optima.measure`, one run
+    the arrays saw in the structure (:func:`~tsid_fmu.search.structure.optima.measure`, one run
     per Real parameter); a structure the arrays never scored counts none.
     """
     best = best_point(points, values)[1]

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from tsid_fmu.search.combined import _residuals
+from tsid_fmu.search.local.combined import _residuals
 
 __all__ = ["RELATIVE_STEP", "SPAN_STEP", "score_step", "significant", "tried"]
 

@@ -4,7 +4,7 @@ With ``refine = "auto"`` (the default) and the ``sse`` cost a study is not a fix
 sequence of stages:
 
 1. the Taguchi stage scores its start points and runs one array over the first ranges,
-   then hands over (:func:`tsid_fmu.search.taguchi._handover`);
+   then hands over (:func:`tsid_fmu.search.taguchi.stage._handover`);
 2. the least-squares refinement polishes the best set;
 3. if the refined answer is not shown to be stationary, or is a poor fit
    (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the noise floor), or the
@@ -25,7 +25,7 @@ sequence of stages:
    paper's re-run from the next-best run);
 6. where the answer's test held by a trial alone, or its simulated step was lower, and
    two parameters act through one combination, the refinement in that combination
-   (:mod:`tsid_fmu.search.combined`), kept where lower;
+   (:mod:`tsid_fmu.search.local.combined`), kept where lower;
 7. the answer is the lowest-cost set of every stage, and the study has converged only
    where a stationarity test holds there (:mod:`tsid_fmu.search.verdict`). A poor fit
    that no restart improved is a warning, not a verdict: the optima of a model that

@@ -1,7 +1,7 @@
 """Nesting: whether a richer structure reproduces a simpler one's fit, and where.
 
 Structure ``s`` is nested in ``r`` where ``r``'s parameters include ``s``'s
-(:attr:`~tsid_fmu.search.selection.Candidate.parameters`) and
+(:attr:`~tsid_fmu.search.structure.selection.Candidate.parameters`) and
 ``r``'s extra parameters reproduce ``s``'s fit; the fit that reproduces it is ``s``'s
 answer **embedded** in ``r`` (:func:`embed` before ``r`` is refined, to start from;
 :func:`nesting` at the answers). The extra parameters are first tried at values that
@@ -10,7 +10,7 @@ coordinates reach only at minus infinity; and, before a refinement, a simpler
 parameter's value in the same unit), then fitted by least squares, stopped at the first
 point that reproduces the fit. A richer answer whose extra parameters sit where they
 make it the simpler structure is that structure (:func:`at_nesting_point`).
-:mod:`tsid_fmu.search.optima` uses these to keep every candidate at its optimum.
+:mod:`tsid_fmu.search.structure.optima` uses these to keep every candidate at its optimum.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from tsid_fmu.search.selection import Candidate
 from tsid_fmu.search.space import Space
+from tsid_fmu.search.structure.selection import Candidate
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.units import study_units
 

@@ -14,8 +14,8 @@ squares with their sum as one coordinate ended at 0.99908 x in 93 runs, while re
 with forward-difference steps from 1e-8 to 1e-2 and in the Jacobian's eigen-coordinates
 all stopped at 1.0078 to 1.017 x.
 
-:func:`~tsid_fmu.search.parallel.parallel_pairs` finds such pairs in a Jacobian (the
-refinement's last one, kept in its stage: :mod:`~tsid_fmu.search.parallel`);
+:func:`~tsid_fmu.search.local.columns.parallel_pairs` finds such pairs in a Jacobian (the
+refinement's last one, kept in its stage: :mod:`~tsid_fmu.search.local.columns`);
 :func:`matched_ratio` measures each pair's ratio again; :func:`combined_refinement` refines
 with each pair ``(i, j)`` re-parametrised as ``c = p_i + a p_j`` (``a`` from
 the columns) and ``p_j``, the valley then along an axis. Bounds of ``p_i`` become a
@@ -30,11 +30,11 @@ from typing import Any
 
 import numpy as np
 
-from tsid_fmu.search.adaptive import answer_stage
-from tsid_fmu.search.optima import settle, short
-from tsid_fmu.search.parallel import PARALLEL, parallel_pairs
+from tsid_fmu.search.local.adaptive import answer_stage
+from tsid_fmu.search.local.columns import PARALLEL, parallel_pairs
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.structure.optima import settle, short
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
     Stationarity,
@@ -298,7 +298,7 @@ def refine_in_combinations(
     each pair's ratio measured again, :func:`matched_ratio`): then
     :func:`combined_refinement` (at most 5 runs per parameter + 1). A lower end whose
     stationarity test holds there is the answer; otherwise a refinement in the usual
-    coordinates from it gives the verdict (:func:`~tsid_fmu.search.optima.settle`).
+    coordinates from it gives the verdict (:func:`~tsid_fmu.search.structure.optima.settle`).
     The Jacobian is the refinement's last (its ``extra["parallel"]``, no run), or ``p``
     runs at the answer where a stage has none (one read back from an older trail).
     Returns that stage, or None, and the simulations spent here (the stage's ``nfev``

@@ -6,7 +6,7 @@ values (the user's first levels, or levels made by :func:`tsid_fmu.doe.leveling.
 or **a rotated factor**: a direction in the search coordinates of
 :mod:`tsid_fmu.search.space` along which several parameters move together, with level
 offsets along it. Rotated factors are the principal axes of the cost surface as the
-array runs show it (:mod:`tsid_fmu.search.surface`): where parameters act only in
+array runs show it (:mod:`tsid_fmu.search.taguchi.surface`): where parameters act only in
 combination (a mass and a stiffness through the natural frequency), one factor moves
 the combination and another its complement, so the main effects of an orthogonal array
 are no longer confounded by that interaction.

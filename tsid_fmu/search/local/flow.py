@@ -1,6 +1,6 @@
 """The local search after the arrays: refinement, back to the arrays, horizons, restarts.
 
-The order of the steps and why each is taken are in :mod:`tsid_fmu.search.adaptive`;
+The order of the steps and why each is taken are in :mod:`tsid_fmu.search.local.adaptive`;
 with ``refine = "none"`` (or a cost other than ``sse``) :func:`check` runs the local
 probe test at the arrays' answer instead.
 """
@@ -11,9 +11,9 @@ import math
 from collections.abc import Callable, Mapping
 
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.adaptive import AGREE, HORIZONS, answer_stage, restart_start
-from tsid_fmu.search.combined import refine_in_combinations
 from tsid_fmu.search.context import Context, note, polish, refinement
+from tsid_fmu.search.local.adaptive import AGREE, HORIZONS, answer_stage, restart_start
+from tsid_fmu.search.local.combined import refine_in_combinations
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
@@ -65,7 +65,7 @@ def local_search(
 ) -> list[StageResult]:
     """Refine the best set; with ``adaptive``, go on where it is not settled.
 
-    See :mod:`tsid_fmu.search.adaptive` for the order of the steps; ``resume`` continues
+    See :mod:`tsid_fmu.search.local.adaptive` for the order of the steps; ``resume`` continues
     the handed-over Taguchi stage (``stages[0]``) from its records to its own end.
     """
     study = ctx.study
@@ -118,7 +118,7 @@ def _handed_over(stages: list[StageResult]) -> dict[str, float]:
 def _in_combinations(ctx: Context, stages: list[StageResult], exps: list[str]) -> list[StageResult]:
     """Refine the answer in the combinations the data fix, where that lowers it.
 
-    :func:`~tsid_fmu.search.combined.refine_in_combinations`: only where the answer's
+    :func:`~tsid_fmu.search.local.combined.refine_in_combinations`: only where the answer's
     test held by a trial alone or found a lower point, and two parameters act through
     their combination. Measured on the SISO plant's law 3 (its study alone, dev seed
     122): the refinement's test held by a trial at 17470, 1.021 x the optimum, in the

@@ -1,0 +1,1 @@
+"""The local search after the arrays: refinement, horizons, restarts, probes."""

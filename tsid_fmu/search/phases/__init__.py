@@ -1,0 +1,1 @@
+"""The MISO paper's contribution analyses and the phases they plan."""

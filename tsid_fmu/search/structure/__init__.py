@@ -1,0 +1,1 @@
+"""Structure identification: mixed arrays, candidate structures, nesting, selection."""

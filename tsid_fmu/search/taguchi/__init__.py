@@ -1,0 +1,1 @@
+"""The Taguchi stage: orthogonal-array iterations over factors until Case 3."""
