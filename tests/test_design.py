@@ -257,3 +257,31 @@ def test_a_differentiated_column_is_designed_only_where_der_is_accurate():
         spectrum = np.abs(np.fft.rfft(s.values[:, 1] - s.values[:, 1].mean()))
         freqs = np.fft.rfftfreq(t.size, 0.001)
         assert freqs[np.argmax(spectrum)] <= cap * 1.05, s.name
+
+
+def test_offsets_that_act_through_one_sum_are_named_as_that_sum():
+    """Three position offsets of which the output sees only a + b + c / 2 (OpenModelica's
+    Mass_Damper: the housing's offset, the spring's length and half the mass's): two
+    directions no input separates, and one combination across them, named as a sum
+    whatever the rotation of the two directions."""
+    import sys
+
+    from tsid_fmu.doe.options import LevelingOptions
+    from tsid_fmu.search.space import Space
+
+    across = sys.modules["tsid_fmu.design.across"]
+    levels = {n: [0.0, 2.0] for n in ("a", "b", "c")}
+    space = Space(levels, {n: (-10.0, 10.0) for n in levels}, LevelingOptions(scale="linear"))
+    fixed = np.array([1.0, 1.0, 0.5]) * space.width  # the functional, in search coordinates
+    null = np.linalg.svd(np.eye(3) - np.outer(fixed, fixed) / (fixed @ fixed))[0][:, :2]
+    rotation = np.array([[0.6, -0.8], [0.8, 0.6]])
+    x = {"a": 0.3, "b": 0.4, "c": 0.6}
+    cov = 1e-6 * np.outer(fixed, fixed) / (fixed @ fixed)
+    for basis in (null, null @ rotation):
+        members, found = across.combinations_across(space, x, basis, cov)
+        assert members == ["a", "b", "c"]
+        (combo,) = found
+        assert combo["name"] == "a + b + 0.5 c"
+        assert combo["value"] == pytest.approx(0.3 + 0.4 + 0.3)
+        low, high = combo["interval"]
+        assert low < combo["value"] < high

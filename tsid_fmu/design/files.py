@@ -107,18 +107,13 @@ def write_design(d: Design, out: str | Path) -> list[Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     files = []
-    if d.proposal is not None:
-        frame = pd.DataFrame(d.proposal.values, columns=d.inputs)
-        frame.insert(0, "time", d.time)
-        csv = out / "design_input.csv"
-        frame.to_csv(csv, index=False)
-        files.append(csv)
-    if d.separating is not None:
-        frame = pd.DataFrame(d.separating.values, columns=d.inputs)
-        frame.insert(0, "time", d.time)
-        csv = out / "design_structures_input.csv"
-        frame.to_csv(csv, index=False)
-        files.append(csv)
+    for signal, name in ((d.proposal, "design_input.csv"),
+                         (d.separating, "design_structures_input.csv")):  # fmt: skip
+        if signal is not None:
+            frame = pd.DataFrame(signal.values, columns=d.inputs)
+            frame.insert(0, "time", d.time)
+            frame.to_csv(out / name, index=False)
+            files.append(out / name)
     js = out / "design.json"
     js.write_text(json.dumps(d.to_dict(), indent=1, allow_nan=False), encoding="utf-8")
     md = out / "design.md"

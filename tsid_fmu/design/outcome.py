@@ -30,24 +30,31 @@ class Structural:
     ----------
     members : list of str
         The parameters in it.
-    terms : dict
-        The direction, by search coordinate (``lg C``: weight).
+    terms : list of dict
+        Its directions, each by search coordinate (``lg C``: weight).
     fixed : list of dict
         The combinations across it that the data fix (``{"name": "C R1", "value",
         "interval"}``), predicted with the proposed experiment where there is one.
     """
 
     members: list[str]
-    terms: dict[str, float]
+    terms: list[dict[str, float]]
     fixed: list[dict[str, Any]] = field(default_factory=list)
 
     def advice(self) -> str:
-        """Say what would fix the rest: a known value or another measurement."""
+        """Say what would fix the rest: known values or another measurement."""
         names = ", ".join(self.members)
+        k = len(self.terms)
+        which = (
+            "one of them at a known value"
+            if k == 1
+            else "them at known values"
+            if k >= len(self.members)
+            else f"{k} of them at known values"
+        )
         return (
-            f"no input of this kind separates {names}: fix one of them at a known value "
-            "(a datasheet, a separate test), or measure another output that depends on it "
-            "alone"
+            f"no input of this kind separates {names}: fix {which} (a datasheet, a "
+            "separate test), or measure another output that depends on them otherwise"
         )
 
 

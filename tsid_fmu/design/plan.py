@@ -174,7 +174,13 @@ def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     opts = _options(result, options)
     spec = prepare(study)
     fixed = {n: float(result.params[n]) for n in study.choice_names}
-    spec = dataclasses.replace(spec, start_values={**spec.start_values, **fixed})
+    # the interface the identification chose (its solver-fidelity check), as tsid
+    # simulate --result does: OpenModelica's Mass_Damper simulated by its Co-Simulation
+    # (a fixed explicit Euler step) gave residuals 330 times the noise at the answer
+    chosen = ((getattr(result, "extra", None) or {}).get("fidelity") or {}).get("interface")
+    spec = dataclasses.replace(
+        spec, start_values={**spec.start_values, **fixed}, interface=chosen or spec.interface
+    )
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
     x = {n: float(result.params[n]) for n in space.names}
     template, source = _template(study, spec, opts.experiment)
@@ -227,4 +233,6 @@ def candidate_spec(plan: Plan, signals: list[np.ndarray]) -> EvaluationSpec:
         )
     study = Study(**{**fields_of(plan.study), "experiments": experiments, "phases": []})
     spec = prepare(study)
-    return dataclasses.replace(spec, start_values=plan.spec.start_values)
+    return dataclasses.replace(
+        spec, start_values=plan.spec.start_values, interface=plan.spec.interface
+    )

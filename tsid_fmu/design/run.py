@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.design.across import combinations_across
 from tsid_fmu.design.discriminate import discriminate
 from tsid_fmu.design.fisher import candidate_fisher, study_fisher
 from tsid_fmu.design.outcome import Design, Structural
@@ -40,8 +41,8 @@ from tsid_fmu.design.predict import predicted_intervals
 from tsid_fmu.evaluate.factory import make_evaluator
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.designopts import DesignOptions
-from tsid_fmu.uncertainty.intervals import UNDETERMINED, Uncertainty
-from tsid_fmu.uncertainty.probe import FLAT, MEMBER, fixed_across
+from tsid_fmu.uncertainty.intervals import UNDETERMINED
+from tsid_fmu.uncertainty.probe import FLAT, MEMBER
 
 __all__ = ["STEP", "design"]
 
@@ -164,12 +165,13 @@ class _Follow:
         return False
 
 
-def _structural(space: Space, x: dict, v: np.ndarray, cov: np.ndarray) -> Structural:
-    members = [n for j, n in enumerate(space.names) if abs(v[j]) >= MEMBER]
-    u = Uncertainty(values=dict(x))
-    u.cov = cov  # type: ignore[attr-defined]
-    u.dof = {n: 1e6 for n in space.names}
-    return Structural(members, _terms(space, v), fixed_across(space, u, v, members))
+def _structural(space: Space, x: dict, found: list[np.ndarray], cov: np.ndarray) -> list:
+    """Return the structural finding: one subspace, its members, what the data fix."""
+    if not found:
+        return []
+    basis = _basis(found, space.dim)
+    members, fixed = combinations_across(space, x, basis, cov)
+    return [Structural(members, [_terms(space, v) for v in basis.T], fixed)]
 
 
 def _terms(space: Space, v: np.ndarray) -> dict[str, float]:
@@ -276,7 +278,7 @@ def design(
         study_intervals={n: list(result.intervals.get(n) or [None, None]) for n in space.names},
         after=None if after is None else [after[n] for n in space.names],
         weak=[_terms(space, v) for v in weak.T],
-        structural=[_structural(space, x, v, cov) for v in found],
+        structural=_structural(space, x, found, cov),
         nfev=nfev,
         separating=None if separate is None else plan.signals[separate["best"]],
         discrimination=separate,

@@ -1,0 +1,134 @@
+"""Name what the data fix across a subspace no input separates.
+
+One structural direction (the capacity against the two resistances of a thermal model)
+leaves products the data fix: :func:`tsid_fmu.uncertainty.probe.fixed_across` names
+them pairwise (``C R1``, ``C R2``). Several directions at once (three position offsets
+of which the output sees only a sum) leave fewer combinations than members, and no
+pairing names them: each combination across the subspace is written out with one pivot
+member per combination (reduced row-echelon form, so the list does not depend on the
+directions' arbitrary rotation), in the form in which its coefficients are simplest: a
+product of powers (``x1 x2^-1``) or a weighted sum (``x1 + 0.5 x2``), whichever lies
+closer to whole and half coefficients. Its value and 95 % interval come from the
+covariance within the determined directions.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty.intervals import Z95, Uncertainty
+from tsid_fmu.uncertainty.probe import MEMBER, fixed_across
+
+__all__ = ["combinations_across"]
+
+
+def _rref(a: np.ndarray) -> np.ndarray:
+    """Return the reduced row-echelon form of ``a`` (rows: combinations), partial pivoting."""
+    a = a.astype(float).copy()
+    row = 0
+    for col in range(a.shape[1]):
+        if row == a.shape[0]:
+            break
+        pivot = row + int(np.argmax(np.abs(a[row:, col])))
+        if abs(a[pivot, col]) < 1e-9:
+            continue
+        a[[row, pivot]] = a[[pivot, row]]
+        a[row] /= a[row, col]
+        for other in range(a.shape[0]):
+            if other != row:
+                a[other] -= a[other, col] * a[row]
+        row += 1
+    return a[:row]
+
+
+def _roughness(coefficients: np.ndarray) -> float:
+    """How far coefficients lie from whole and half numbers (0: all of them on one)."""
+    return float(np.sum(np.abs(2 * coefficients - np.round(2 * coefficients))))
+
+
+def _simple(a: float) -> float:
+    """Return ``a`` rounded to a whole or half number where it lies within 2 %."""
+    k = round(2 * a) / 2
+    return k if k != 0 and abs(a - k) < 0.02 * max(abs(a), 1.0) else a
+
+
+def _named(space: Space, idx: list[int], g: np.ndarray, x: dict) -> tuple[str, Any, np.ndarray]:
+    """Return the name, the value function and its coefficients of combination ``g``."""
+    names = [space.names[j] for j in idx]
+    values = np.array([x[n] for n in names], dtype=float)
+    log = all(space.log[j] for j in idx)
+    forms = []
+    if log and np.all(values > 0):  # g on lg x: a product; locally a sum with g / x
+        forms.append(("product", g / g[np.argmax(np.abs(g))]))
+        linear = g / values
+        forms.append(("sum", linear / linear[np.argmax(np.abs(linear))]))
+    elif not any(space.log[j] for j in idx):
+        forms.append(("sum", g / g[np.argmax(np.abs(g))]))
+    if not forms:
+        return "", None, g
+    kind, coef = min(forms, key=lambda f: _roughness(f[1]))
+    coef = np.array([_simple(float(c)) for c in coef])
+    if kind == "product":
+        name = " ".join(
+            f"{n}" + ("" if c == 1 else f"^{c:g}") for n, c in zip(names, coef, strict=True) if c
+        )
+        return name, (lambda v: float(np.prod(v**coef))), coef
+    name = " ".join(
+        f"{'+' if c > 0 else '-'} {'' if abs(c) == 1 else f'{abs(c):g} '}{n}"
+        for n, c in zip(names, coef, strict=True)
+        if c
+    ).lstrip("+ ")
+    return name, (lambda v: float(np.dot(coef, v))), coef
+
+
+def _interval(space: Space, idx: list[int], value: Any, x: dict, cov: np.ndarray) -> list:
+    """Return a 95 % interval of ``value`` from ``cov`` (search coordinates), by gradient."""
+    s0 = space.to_s(x)
+    base = np.array([x[space.names[j]] for j in idx], dtype=float)
+    centre = value(base)
+    grad = np.zeros(space.dim)
+    for j in idx:
+        s = s0.copy()
+        s[j] += 1e-6
+        moved = space.to_x(s)
+        grad[j] = (value(np.array([moved[space.names[i]] for i in idx])) - centre) / 1e-6
+    finite = np.where(np.isfinite(cov), cov, 0.0)
+    half = Z95 * math.sqrt(max(float(grad @ finite @ grad), 0.0))
+    return [centre - half, centre + half]
+
+
+def combinations_across(
+    space: Space, x: dict, basis: np.ndarray, cov: np.ndarray
+) -> tuple[list[str], list[dict[str, Any]]]:
+    """Return the members of a structural subspace and the combinations the data fix.
+
+    ``basis`` holds the subspace's orthonormal directions as columns (search
+    coordinates); ``cov`` is the covariance of the determined directions.
+    """
+    weight = np.sqrt((basis**2).sum(axis=1))
+    idx = [j for j in range(space.dim) if weight[j] >= MEMBER]
+    members = [space.names[j] for j in idx]
+    if basis.shape[1] == 1:  # one direction: the pairwise products, as the study names them
+        u = Uncertainty(values=dict(x))
+        u.cov = cov  # type: ignore[attr-defined]
+        u.dof = {n: 1e6 for n in space.names}
+        return members, fixed_across(space, u, basis[:, 0], members)
+    inside = np.eye(space.dim)[:, idx]
+    across = inside - basis @ (basis.T @ inside)
+    u, s, _ = np.linalg.svd(across, full_matrices=False)
+    keep = u[:, s > 0.5]  # a member's axis is a unit vector: what lies across has norm ~1
+    rows = _rref((keep.T)[:, idx]) if keep.size else np.zeros((0, len(idx)))
+    out = []
+    for r in rows:
+        g = r / space.width[idx]  # coefficients on the working values (lg x or x)
+        name, value, _ = _named(space, idx, g, x)
+        if not name:
+            continue
+        base = np.array([x[space.names[j]] for j in idx], dtype=float)
+        out.append({"name": name, "value": value(base),
+                    "interval": _interval(space, idx, value, x, cov)})  # fmt: skip
+    return members, out
