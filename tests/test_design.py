@@ -54,8 +54,13 @@ def _lag(tmp_path):
 
 def test_a_design_proposes_an_input_inside_the_limits_and_predicts_narrower_intervals(tmp_path):
     result = _lag(tmp_path)
-    d = design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=2))
+    said: list[str] = []
+    d = design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=2), progress=said.append)
     assert d.proposal is not None and not d.structural
+    # a line before each batch of simulations: a slow FMU's user sees where it is
+    assert [line.split()[0] for line in said] == ["the", str(len(d.candidates)), "proposal"]
+    assert "candidate inputs" in said[1] and "analysis" in said[2]
+    assert d._repr_markdown_() == d.markdown()
     assert d.proposal.values.min() >= -1.0 and d.proposal.values.max() <= 1.0
     # the study's information, every candidate's, then the study's analysis with the
     # proposal (two experiments a parameter set)

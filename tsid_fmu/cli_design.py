@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +26,10 @@ def _cmd_design(args: argparse.Namespace) -> int:
 
     folder = Path(args.result)
     result = load(folder, args.study)
-    found = design(result, workers=args.workers, timeout=args.timeout)
+    shown = not args.quiet and sys.stderr.isatty()
+    found = design(result, workers=args.workers, timeout=args.timeout,
+                   progress=(lambda line: print(f"design: {line}", file=sys.stderr,
+                                                flush=True)) if shown else None)  # fmt: skip
     out = Path(args.out) if args.out else folder.parent / "design"
     files = write_design(found, out)
     if args.json:
@@ -53,4 +57,5 @@ def add_design_parser(sub: Any) -> None:
     p.add_argument("--workers", type=worker_count, metavar="N", help="worker processes")
     p.add_argument("--timeout", type=timeout_seconds, metavar="SECONDS", help="per simulation")
     p.add_argument("--json", action="store_true", help="print design.json on stdout")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=_cmd_design)

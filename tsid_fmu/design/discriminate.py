@@ -22,10 +22,10 @@ from tsid_fmu.design.plan import Plan, candidate_spec
 from tsid_fmu.evaluate.factory import make_evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 
-__all__ = ["discriminate"]
+__all__ = ["discriminate", "tied"]
 
 
-def _tied(result: Any) -> list[dict[str, Any]]:
+def tied(result: Any) -> list[dict[str, Any]]:
     """Return the rows of the chosen structure and those indistinguishable from it."""
     info = (getattr(result, "extra", None) or {}).get("structure") or {}
     names = [info.get("chosen"), *info.get("indistinguishable", [])]
@@ -60,7 +60,7 @@ def discriminate(plan: Plan, result: Any, workers: Any, timeout: Any) -> dict[st
     inputs), ``scores`` (per candidate, the least-separated pair's chi-square) and
     ``nfev``.
     """
-    rows = _tied(result)
+    rows = tied(result)
     if not rows:
         return None
     cspec = candidate_spec(plan, [s.values for s in plan.signals])

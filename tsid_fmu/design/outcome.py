@@ -199,6 +199,10 @@ class Design:
             }
         )
 
+    def _repr_markdown_(self) -> str:
+        """Show the report section in a notebook."""
+        return self.markdown()
+
     def markdown(self) -> str:
         """Return the report section, in markdown."""
         lines = ["## Experiment design", "", f"**{self.verdict}**", ""]

@@ -27,13 +27,13 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
 from tsid_fmu.design.across import combinations_across
-from tsid_fmu.design.discriminate import discriminate
+from tsid_fmu.design.discriminate import discriminate, tied
 from tsid_fmu.design.fisher import candidate_fisher, study_fisher
 from tsid_fmu.design.outcome import Design, Structural
 from tsid_fmu.design.plan import Plan, candidate_spec, make_plan
@@ -180,14 +180,17 @@ def _terms(space: Space, v: np.ndarray) -> dict[str, float]:
     return {space.label(j): round(float(c), 3) for j, c in enumerate(u) if abs(c) >= 0.05}
 
 
-def _explore(plan: Plan, result: Any, workers: Any, timeout: Any) -> dict[str, Any]:
+def _explore(plan: Plan, result: Any, workers: Any, timeout: Any, say: Any) -> dict[str, Any]:
     """Simulate the study and the candidates: information, weak and structural directions."""
     space, x = plan.space, plan.x
     inflation = float(getattr(result.uncertainty, "inflation", 1.0) or 1.0)
+    n = 2 * space.dim + 1
+    say(f"the study's information at the answer: {n} simulations of each experiment")
     with make_evaluator(plan.spec, workers=workers, timeout=timeout) as ev:
         f0, residuals = study_fisher(ev, space, x, inflation)
         nfev = ev.nfev
     cspec = candidate_spec(plan, [s.values for s in plan.signals])
+    say(f"{len(plan.signals)} candidate inputs: {n * len(plan.signals)} simulations")
     with make_evaluator(cspec, workers=workers, timeout=timeout) as ev:
         fishers, outputs, jacs = candidate_fisher(ev, space, x, plan.sigma)
         weak = _weak(result, space, f0)
@@ -214,6 +217,7 @@ def design(
     *,
     workers: int | None = 1,
     timeout: float | None = 0,
+    progress: Callable[[str], None] | None = None,
 ) -> Design:
     """Propose the experiment that best determines what ``result`` left weak.
 
@@ -227,6 +231,9 @@ def design(
         where it has none).
     workers, timeout
         As :func:`tsid_fmu.identify` (default: in this process, no time limit).
+    progress : callable, optional
+        Called with a line before each batch of simulations (``tsid design`` prints
+        them on a terminal).
 
     Returns
     -------
@@ -236,7 +243,8 @@ def design(
     """
     plan = make_plan(result, options)
     space, x = plan.space, plan.x
-    e = _explore(plan, result, workers, timeout)
+    say = progress or (lambda line: None)
+    e = _explore(plan, result, workers, timeout, say)
     f0, weak, found, fishers, nfev = e["f0"], e["weak"], e["found"], e["fishers"], e["nfev"]
     s_basis = _basis(found, space.dim)
     keep = np.linalg.svd(np.eye(space.dim) - s_basis @ s_basis.T)[0][:, : space.dim - len(found)]
@@ -251,11 +259,14 @@ def design(
     after = None
     if propose:
         one = candidate_spec(plan, [plan.signals[best].values])
+        say(f"proposal {plan.signals[best].name}: the study's analysis with it, to predict")
         after, used = predicted_intervals(
             plan.spec, one, e["outputs"][best], e["residuals"][plan.template.name], space, x,
             plan.options.seed, workers=workers, timeout=timeout,
         )  # fmt: skip
         nfev += used
+    if tied(result):
+        say("the tied structures with every candidate input")
     separate = discriminate(plan, result, workers, timeout)
     if separate is not None:
         nfev += separate["nfev"]
