@@ -290,3 +290,20 @@ def test_offsets_that_act_through_one_sum_are_named_as_that_sum():
         assert combo["value"] == pytest.approx(0.3 + 0.4 + 0.3)
         low, high = combo["interval"]
         assert low < combo["value"] < high
+
+
+def test_a_study_whose_outputs_never_moved_leaves_every_axis_weak():
+    """A nut held below its break-away force: the outputs do not depend on any
+    parameter, the study's information is zero, and every open parameter is weak along
+    its own axis (a regularised inverse of zero had overflowed to nan)."""
+    import sys
+
+    from tsid_fmu.doe.options import LevelingOptions
+    from tsid_fmu.search.space import Space
+
+    run = sys.modules["tsid_fmu.design.run"]
+    space = Space({"a": [1.0, 10.0], "b": [1.0, 10.0]}, {"a": (0, 100), "b": (0, 100)},
+                  LevelingOptions())  # fmt: skip
+    result = SimpleNamespace(intervals={"a": [None, None], "b": [None, None]}, uncertainty=None)
+    weak = run._weak(result, space, np.zeros((2, 2)))
+    assert np.all(np.isfinite(weak)) and weak.shape == (2, 2)

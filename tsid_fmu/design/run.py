@@ -87,7 +87,10 @@ def _weak(result: Any, space: Space, f0: np.ndarray) -> np.ndarray:
     # only act through their sum on one output), not its own axis
     # regularised, not pinv: along an exact symmetry f0 is zero to rounding, and pinv
     # would drop the very direction the profile follows
-    inverse = np.linalg.inv(f0 + 1e-12 * max(float(np.trace(f0)), 1e-300) * np.eye(space.dim))
+    trace = float(np.trace(f0))
+    inverse = (
+        np.linalg.inv(f0 + 1e-12 * trace * np.eye(space.dim)) if trace > 0 else np.eye(space.dim)
+    )
     for j, name in enumerate(space.names):
         if j not in explained and None in (result.intervals.get(name) or [None]):
             v = inverse[:, j] if np.any(inverse[:, j]) else np.eye(space.dim)[j]
@@ -184,6 +187,9 @@ def _explore(plan: Plan, result: Any, workers: Any, timeout: Any, say: Any) -> d
     """Simulate the study and the candidates: information, weak and structural directions."""
     space, x = plan.space, plan.x
     inflation = float(getattr(result.uncertainty, "inflation", 1.0) or 1.0)
+    # a study whose outputs did not move (a nut stuck below its break-away force) has
+    # no inflation to speak of: nan, which would spoil every matrix below
+    inflation = inflation if math.isfinite(inflation) and inflation > 0 else 1.0
     n = 2 * space.dim + 1
     say(f"the study's information at the answer: {n} simulations of each experiment")
     with make_evaluator(plan.spec, workers=workers, timeout=timeout) as ev:
