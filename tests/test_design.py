@@ -307,3 +307,13 @@ def test_a_study_whose_outputs_never_moved_leaves_every_axis_weak():
     result = SimpleNamespace(intervals={"a": [None, None], "b": [None, None]}, uncertainty=None)
     weak = run._weak(result, space, np.zeros((2, 2)))
     assert np.all(np.isfinite(weak)) and weak.shape == (2, 2)
+
+
+def test_the_readme_and_the_cli_reference_show_tsid_design():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "README.md").read_text(encoding="utf-8")
+    assert "tsid design study.toml --result results/plant" in readme
+    assert "docs/how-to/experiment-design.md" in readme
+    assert "tsid design STUDY.toml --result DIR" in (root / "docs/reference/cli.md").read_text()
