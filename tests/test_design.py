@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -317,3 +318,15 @@ def test_the_readme_and_the_cli_reference_show_tsid_design():
     assert "tsid design study.toml --result results/plant" in readme
     assert "docs/how-to/experiment-design.md" in readme
     assert "tsid design STUDY.toml --result DIR" in (root / "docs/reference/cli.md").read_text()
+
+
+def test_a_candidate_that_leaves_a_target_unseen_scores_worst_not_nan():
+    """np.argmax takes a nan for the largest: an A score must never be nan."""
+    import sys
+
+    run = sys.modules["tsid_fmu.design.run"]
+    keep, targets = np.eye(2), np.eye(2)[:, :1]
+    blind = run._score(np.diag([0.0, 4.0]), keep, targets, "A")
+    seeing = run._score(np.diag([1.0, 4.0]), keep, targets, "A")
+    assert math.isfinite(blind) and seeing > blind
+    assert int(np.argmax([blind, seeing])) == 1

@@ -65,9 +65,11 @@ def _basis(vectors: list[np.ndarray], dim: int) -> np.ndarray:
 def _weak(result: Any, space: Space, f0: np.ndarray) -> np.ndarray:
     """Return the directions the study leaves weak (orthonormal columns, search coordinates).
 
-    The combinations the study found not determined; each parameter with an open
-    interval that none of those explains (its own axis); and the directions the
-    information ``f0`` itself leaves undetermined.
+    The combinations the study found not determined; for each parameter with an open
+    interval that none of those explains, the direction its profile follows (the
+    parameter moving, the others re-fitted: the valley of F_vm and B_s, which act on
+    one output through their sum only); and the directions the information ``f0``
+    itself leaves undetermined.
     """
     vectors = []
     values, vecs = np.linalg.eigh(f0)
@@ -82,11 +84,8 @@ def _weak(result: Any, space: Space, f0: np.ndarray) -> np.ndarray:
             v = v / max(float(np.linalg.norm(v)), 1e-300)
             vectors.append(v)
             explained |= {j for j in range(space.dim) if abs(v[j]) >= MEMBER}
-    # an open interval that none of those explains: the direction its profile follows,
-    # the parameter moving and the others re-fitted (the valley of F_vm and B_s that
-    # only act through their sum on one output), not its own axis
-    # regularised, not pinv: along an exact symmetry f0 is zero to rounding, and pinv
-    # would drop the very direction the profile follows
+    # the profile's direction from a regularised inverse, not pinv: along an exact
+    # symmetry f0 is zero to rounding, and pinv would drop the very direction wanted
     trace = float(np.trace(f0))
     inverse = (
         np.linalg.inv(f0 + 1e-12 * trace * np.eye(space.dim)) if trace > 0 else np.eye(space.dim)
@@ -120,6 +119,7 @@ def _score(info: np.ndarray, keep: np.ndarray, targets: np.ndarray, criterion: s
         values = np.linalg.eigvalsh(m)
         return float(np.sum(np.log(np.maximum(values, 1e-300))))
     cov = _cov(info, keep)
+    cov = np.where(np.isfinite(cov), cov, 1e300)  # a target left unseen: the worst score
     return -float(np.trace(targets.T @ cov @ targets))
 
 
