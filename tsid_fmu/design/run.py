@@ -217,6 +217,16 @@ def _explore(plan: Plan, result: Any, workers: Any, timeout: Any, say: Any) -> d
             "weak": weak, "found": found, "nfev": nfev}  # fmt: skip
 
 
+def _predict(plan: Plan, e: dict, best: int, workers: Any, timeout: Any, say: Any) -> tuple:
+    """Run the study's analysis with the proposal: its intervals, and the simulations."""
+    one = candidate_spec(plan, [plan.signals[best].values])
+    say(f"proposal {plan.signals[best].name}: the study's analysis with it, to predict")
+    return predicted_intervals(
+        plan.spec, one, e["outputs"][best], e["residuals"][plan.template.name], plan.space,
+        plan.x, plan.options.seed, workers=workers, timeout=timeout,
+    )  # fmt: skip
+
+
 def design(
     result: Any,
     options: DesignOptions | None = None,
@@ -262,15 +272,8 @@ def design(
     best = int(np.argmax(scores))
     propose = not (found and weak.shape[1] <= len(found))
     cov = _cov(f0 + fishers[best], keep) if propose else _cov(f0, keep)
-    after = None
-    if propose:
-        one = candidate_spec(plan, [plan.signals[best].values])
-        say(f"proposal {plan.signals[best].name}: the study's analysis with it, to predict")
-        after, used = predicted_intervals(
-            plan.spec, one, e["outputs"][best], e["residuals"][plan.template.name], space, x,
-            plan.options.seed, workers=workers, timeout=timeout,
-        )  # fmt: skip
-        nfev += used
+    after, used = _predict(plan, e, best, workers, timeout, say) if propose else (None, 0)
+    nfev += used
     if tied(result):
         say("the tied structures with every candidate input")
     separate = discriminate(plan, result, workers, timeout)
