@@ -330,3 +330,21 @@ def test_a_candidate_that_leaves_a_target_unseen_scores_worst_not_nan():
     seeing = run._score(np.diag([1.0, 4.0]), keep, targets, "A")
     assert math.isfinite(blind) and seeing > blind
     assert int(np.argmax([blind, seeing])) == 1
+
+
+def test_the_design_simulates_through_the_interface_the_identification_chose(tmp_path):
+    """The design re-simulates at the answer: through the interface identify's solver
+    fidelity check chose (Mass_Damper's Co-Simulation, a fixed Euler step, had left
+    residuals 330 times the noise where Model Exchange had been chosen)."""
+    import sys
+
+    from tsid_fmu.uncertainty.fidelity import chosen_interface
+
+    make_plan = sys.modules["tsid_fmu.design.plan"].make_plan
+    result = _lag(tmp_path)
+    options = DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=2)
+    for chosen in ("me", "cs"):
+        result.extra["fidelity"] = {"interface": chosen}
+        assert chosen_interface(result.extra) == chosen
+        assert make_plan(result, options).spec.interface == chosen
+    assert chosen_interface({}) is None and chosen_interface(None) is None

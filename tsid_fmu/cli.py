@@ -112,6 +112,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from tsid_fmu.report.plots import fit_plot
     from tsid_fmu.study import Study, prepare
     from tsid_fmu.study.units import study_units
+    from tsid_fmu.uncertainty.fidelity import chosen_interface
 
     study = Study.from_toml(args.study)
     values: dict[str, float] = {}
@@ -119,7 +120,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if args.result:
         saved = saved_result(Path(args.result))
         values.update(saved["params"])
-        interface = (saved.get("extra") or {}).get("fidelity", {}).get("interface")
+        interface = chosen_interface(saved.get("extra"))
     chosen = {c.name: c for c in study.choices}  # a choice as its label (model=Drag)
     for name, text in parse_assignments(args.set, "--set").items():
         if name in chosen:

@@ -30,6 +30,7 @@ from tsid_fmu.study.designopts import DesignOptions
 from tsid_fmu.study.prepare import load_experiment, prepare
 from tsid_fmu.study.schema import Experiment
 from tsid_fmu.study.toml import read_design
+from tsid_fmu.uncertainty.fidelity import chosen_interface
 
 __all__ = ["Plan", "candidate_spec", "make_plan"]
 
@@ -174,10 +175,7 @@ def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     opts = _options(result, options)
     spec = prepare(study)
     fixed = {n: float(result.params[n]) for n in study.choice_names}
-    # the interface the identification chose (its solver-fidelity check), as tsid
-    # simulate --result does: OpenModelica's Mass_Damper simulated by its Co-Simulation
-    # (a fixed explicit Euler step) gave residuals 330 times the noise at the answer
-    chosen = ((getattr(result, "extra", None) or {}).get("fidelity") or {}).get("interface")
+    chosen = chosen_interface(getattr(result, "extra", None))  # as tsid simulate --result
     spec = dataclasses.replace(
         spec, start_values={**spec.start_values, **fixed}, interface=chosen or spec.interface
     )

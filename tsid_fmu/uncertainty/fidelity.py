@@ -63,6 +63,7 @@ __all__ = [
     "Fidelity",
     "check_fidelity",
     "choose_interface",
+    "chosen_interface",
     "fidelity_record",
     "fidelity_warnings",
     "start_point",
@@ -451,6 +452,17 @@ def fidelity_record(start: Fidelity, answer: Fidelity | None) -> dict[str, Any]:
         "start": start.to_dict(),
         "answer": answer.to_dict() if answer is not None else None,
     }
+
+
+def chosen_interface(extra: Mapping[str, Any] | None) -> str | None:
+    """Return the interface a result's fidelity check chose, or ``None`` where none ran.
+
+    ``extra`` is ``result.extra`` (or a saved result's ``"extra"``). Whatever simulates
+    at the answer again (``tsid simulate --result``, ``tsid design``) uses it: OpenModelica's
+    ``Mass_Damper`` simulated by its Co-Simulation (a fixed explicit Euler step) left
+    residuals 330 times the noise where the identification had chosen Model Exchange.
+    """
+    return ((extra or {}).get("fidelity") or {}).get("interface")
 
 
 def fidelity_warnings(start: Fidelity, answer: Fidelity | None) -> list[str]:
