@@ -122,6 +122,23 @@ class Space:
             return max(abs(float(value)), smallest) * math.log(10.0) * float(self.width[j])
         return float(self.width[j])
 
+    def floored(self, x: Mapping[str, float]) -> list[str]:
+        """Return the log parameters that ``x`` puts on their floor (0, or near it).
+
+        The floor is where :meth:`coordinate` puts 0: three decades below the smallest
+        first level. There a step in the coordinate hardly moves the value, so the cost is
+        flat in it whatever the data say: a refinement started there stays, and its
+        stationarity test holds (:meth:`anchored` coordinates have no such floor).
+        """
+        out = []
+        for j, n in enumerate(self.names):
+            if not self.log[j]:
+                continue
+            floor = 10.0 ** min(float(self.origin[j] - 0.5 * self.width[j] - 3.0), 300.0)
+            if float(x[n]) <= floor * (1.0 + 1e-9):
+                out.append(n)
+        return out
+
     def anchored(self, x: Mapping[str, float]) -> Space:
         """Linear coordinates about ``x`` with this space's local scale there.
 
