@@ -42,6 +42,7 @@ __all__ = [
     "LOWER_TRIED",
     "POOR_FIT",
     "Stationarity",
+    "bounded_trials",
     "gauss_newton_gap",
     "gauss_newton_step",
     "gauss_newton_test",
@@ -93,6 +94,24 @@ def trial_fractions(jac: np.ndarray, r: np.ndarray, step: np.ndarray, gate: floa
             break
         f /= 2.0
     return out
+
+
+def bounded_trials(
+    jac: np.ndarray, r: np.ndarray, s: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+    gate: float,
+) -> list[np.ndarray]:  # fmt: skip
+    """Return the points to simulate along the Gauss-Newton step within the bounds.
+
+    The step is the bounded linear least-squares solution, every parameter together
+    (SciPy's ``lsq_linear``): at a bound, one parameter's own gradient may point out of
+    it while a step with the others compensating lowers the cost (viscous friction up,
+    spring damping down), which the projected step (:func:`gauss_newton_step`) drops.
+    Its fractions are those of :func:`trial_fractions`.
+    """
+    from scipy.optimize import lsq_linear
+
+    step = lsq_linear(jac, -r, bounds=(lower - s, upper - s)).x
+    return [np.clip(s + f * step, lower, upper) for f in trial_fractions(jac, r, step, gate)]
 
 
 def trial_reaches_gate(

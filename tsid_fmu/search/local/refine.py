@@ -37,11 +37,11 @@ from tsid_fmu.search.verdict import (
     GN_TRIED,
     LOWER_PROBED,
     Stationarity,
+    bounded_trials,
     decided_by_trial,
     gauss_newton_step,
     gauss_newton_test,
     probe_points,
-    trial_fractions,
 )
 from tsid_fmu.study.schema import Method
 
@@ -338,15 +338,13 @@ def _again_wider(
     """Run the least squares again from the best point, with steps that beat the noise.
 
     A forward difference of :data:`FD_STEP` that the FMU's own solver noise spoils can
-    stop the trust region short of the optimum and pass the stationarity test with it
-    (JModelica's ``Simple2R1C``: exit 0 at a cost 13 % above the truth's). Widening those
-    steps from the start changed the answers of models whose roughness is events (dry
-    friction's stick and slip, where the short steps' Jacobian serves better), and a
-    second pass wherever the noise spoiled a column cost 14 % more simulations over the
-    generalisation benchmark's evaluation seeds for no success: so the first pass keeps
-    them, and this second one, from its best point, runs only where the widened
-    Jacobian there predicts a decrease (:meth:`_Problem.doubtful`); it can only lower
-    the cost (:mod:`tsid_fmu.search.local.fdstep`).
+    stop the trust region short and pass the stationarity test (JModelica's
+    ``Simple2R1C``: exit 0 at 13 % above the truth's cost). Wider steps from the start
+    changed the answers of models with events (dry friction, where short steps serve
+    better), and a second pass wherever a column was spoiled cost 14 % more simulations
+    on the generalisation evaluation seeds for no success: so this pass runs only where
+    the widened Jacobian at the best point predicts a decrease
+    (:meth:`_Problem.doubtful`); it can only lower the cost (:mod:`.fdstep`).
     """
     problem.linearised, problem.last = None, None
     s = space.to_s(problem.best[1])
@@ -370,38 +368,51 @@ def _off_the_floor(
 ) -> tuple[dict[str, float], float, np.ndarray | None]:
     """Leave a log parameter's floor by one Gauss-Newton step in linear coordinates.
 
-    A start that puts a log parameter on its floor (a nesting value of 0, embedded:
-    :meth:`~tsid_fmu.search.space.Space.floored`) is flat in that coordinate, so the
-    trust region stays there, or crawls along a valley that the logarithm bends (viscous
-    friction and spring damping act through their sum). In :meth:`anchored
-    <tsid_fmu.search.space.Space.anchored>` coordinates the Gauss-Newton step within the
-    bounds, every parameter together (SciPy's ``lsq_linear``: on the bound, the floored
-    parameter's own gradient may point out while the others compensating lower the
-    cost), is simulated with its halves down to the gate (the stationarity test's
-    trial), and the refinement goes on from the lowest point in the study's own
-    coordinates. Measured on the friction-law plant (law 2 refined from law 1's answer
-    on a chirp): least squares in logarithmic coordinates stopped at 36 times the
-    optimum's cost, and in anchored ones spent its 80 runs crawling; this step, then
-    the usual refinement, reached the optimum. Returns the new start, its cost and
-    residuals.
+    On its floor (:meth:`~tsid_fmu.search.space.Space.floored`: a nesting value of 0,
+    embedded) the cost is flat in the coordinate, and a valley along a sum (viscous
+    friction and spring damping) is bent by the logarithm. In :meth:`anchored
+    <tsid_fmu.search.space.Space.anchored>` coordinates the step within the bounds, all
+    parameters together, is simulated with its halves down to the gate; the lowest point
+    is the new start. Measured on the friction-law plant (law 2 from law 1's answer on a
+    chirp): least squares in logarithmic coordinates stopped at 36 times the optimum's.
     """
-    from scipy.optimize import lsq_linear
-
     line = space.anchored(start)
     problem, s0 = _problem_at(line, start, start_cost, evaluator, limit, fixed, start_residuals)
     try:
         jac = problem.jac(s0)
         r = problem.last[1] if problem.last is not None else start_residuals
         if r is not None and np.isfinite(jac).all():
-            step = lsq_linear(jac, -r, bounds=(line.s_lower - s0, line.s_upper - s0)).x
-            fractions = trial_fractions(jac, r, step, problem.gate(start_cost, floor))
-            problem._residuals([line.to_x(line.clip(s0 + f * step)) for f in fractions])
+            gate = problem.gate(start_cost, floor)
+            points = bounded_trials(jac, r, s0, line.s_lower, line.s_upper, gate)
+            problem._residuals([line.to_x(t) for t in points])
     except (_Budget, _Converged):
         pass
     cost, x = problem.best
     if cost >= start_cost:
         return dict(start), start_cost, start_residuals
     return {**dict(start), **x}, cost, problem.best_r
+
+
+def _started(
+    space: Space,
+    start: Mapping[str, float],
+    start_cost: float,
+    evaluator: Evaluator,
+    limit: int,
+    fixed: Mapping[str, float] | None,
+    start_residuals: np.ndarray | None,
+    floor: float,
+    extra: dict[str, Any],
+) -> tuple[_Problem, np.ndarray]:
+    """Return the refinement's problem and start point, off any log parameter's floor."""
+    n0, floored = evaluator.nfev, space.floored(start)
+    if floored:
+        start, start_cost, start_residuals = _off_the_floor(
+            space, start, start_cost, evaluator, limit, fixed, start_residuals, floor
+        )
+        extra["off_the_floor"] = {"parameters": floored, "cost": float(start_cost)}
+    left = max(limit - (evaluator.nfev - n0), 1)
+    return _problem_at(space, start, start_cost, evaluator, left, fixed, start_residuals)
 
 
 def refine_stage(
@@ -457,20 +468,13 @@ def refine_stage(
         "method": "scipy.optimize.least_squares(method='trf')",
         "start_cost": float(start_cost),
     }
-    floored = space.floored(start)
-    if floored:
-        start, start_cost, start_residuals = _off_the_floor(
-            space, start, start_cost, evaluator, limit, fixed, start_residuals, floor
-        )
-        extra["off_the_floor"] = {"parameters": floored, "cost": float(start_cost)}
-    left = max(limit - (evaluator.nfev - n0), 1)
-    problem, s0 = _problem_at(space, start, start_cost, evaluator, left, fixed, start_residuals)
+    problem, s0 = _started(space, start, start_cost, evaluator, limit, fixed, start_residuals,
+                           floor, extra)  # fmt: skip
     status, message = _solve(problem, s0, space, limit, extra)
     if status == 0 and problem.spoiled and problem.doubtful(floor):
         status, message = _again_wider(problem, space, limit, extra, message)
     gate = problem.stationarity(floor, method.leveling.tolerance)
-    cost, x = problem.best
-    nfev = evaluator.nfev - n0
+    (cost, x), nfev = problem.best, evaluator.nfev - n0
     extra["stationarity"] = gate.to_dict()
     if problem.jacobian is not None and decided_by_trial(extra["stationarity"]):
         # what the refinement in combinations reads: no runs spent again on a Jacobian
