@@ -5,10 +5,11 @@ the study as shipped (B_s open), run the design, make the proposed experiment's 
 with the example's independent simulator at the truth (``examples/lsea_siso/
 make_data.py``: the equations solved piecewise exactly, the rig's load cells and
 encoder, a new noise draw per seed), add it to the study as a second experiment,
-identify again (five levels from half to twice each parameter's first answer, as a
-user starting from it would), and compare, per parameter, the achieved 95 % interval
-with the predicted one (the ratio of their widths, each relative to its own answer; and
-whether the achieved one holds the truth).
+identify again (``--levels study``, the default: with the study's own first levels, as
+a user adding the experiment to the study file would; ``--levels around``: five levels
+from half to twice each parameter's first answer), and compare, per parameter, the
+achieved 95 % interval with the predicted one (the ratio of their widths, each relative
+to its own answer; and whether the achieved one holds the truth).
 
 ``--case miso``: the MISO example's force-only experiment alone (which fixes only the
 ratios of m1, K_s, C_d and C_1, not their scale), designed over the motor force and
@@ -164,6 +165,9 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--case", choices=["siso", "miso"], default="siso")
     ap.add_argument("--miso-band", type=float, default=10.0, help="the stage's band (Hz)")
+    ap.add_argument("--levels", choices=["study", "around"], default="study",
+                    help="the second study's first levels: the study's own, or around the "
+                         "first answer (half to twice)")  # fmt: skip
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="tsid-design-"))
     study_file, make, truth = _case(args.case, work, args.miso_band)
@@ -182,9 +186,11 @@ def main() -> int:
         return 0
     study = tsid_fmu.Study.from_toml(study_file)
     first = study.experiments[0]
-    # the second study starts where the first ended, as a user's would: five levels from
-    # half to twice each answer (inside its bounds); the arrays still search them
-    around = [
+    # "study": the experiment added to the study file as it is (its first levels, so the
+    # profile's resolution, a fraction of a first range, is the prediction's); "around":
+    # five levels from half to twice each answer (inside its bounds), as a user starting
+    # from the first answer might write
+    around = study.parameters if args.levels == "study" else [
         tsid_fmu.Parameter(p.name, [min(max(float(base.params[p.name]) * f, p.min), p.max)
                                     for f in (0.5, 0.7, 1.0, 1.4, 2.0)],
                            min=p.min, max=p.max, unit=p.unit)
