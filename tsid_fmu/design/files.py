@@ -8,7 +8,6 @@ interval now and predicted with the proposal, relative to its value.
 
 from __future__ import annotations
 
-import html
 import json
 import math
 from pathlib import Path
@@ -69,29 +68,22 @@ def plot_design(d: Design, path: Path) -> Path:
     return path
 
 
-def _html(d: Design) -> str:
-    body = []
-    for line in d.markdown().splitlines():
-        if line.startswith("## "):
-            body.append(f"<h2>{html.escape(line[3:])}</h2>")
-        elif line.startswith("| ---"):
-            continue
-        elif line.startswith("|"):
-            cells = [html.escape(c.strip()) for c in line.strip("|").split("|")]
-            body.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
-        elif line:
-            body.append(f"<p>{html.escape(line.lstrip('- ').replace('**', ''))}</p>")
-    text, rows = (
-        [b for b in body if not b.startswith("<tr>")],
-        [b for b in body if b.startswith("<tr>")],
-    )
-    table = "<table>" + "".join(rows) + "</table>"
+def _html(d: Design, png: bytes) -> str:
+    """Return ``design.html``: the report section, with ``report.html``'s tables and style."""
+    from tsid_fmu.report.html_tables import CSS, esc, image, table
+
+    part = d.section()
+    body = ["<h1>Experiment design</h1>", f"<p><strong>{esc(d.verdict)}</strong></p>",
+            "<ul>" + "".join(f"<li>{esc(f)}</li>" for f in part["facts"]) + "</ul>",
+            table(*part["intervals"])]  # fmt: skip
+    if part["separate"] is not None:
+        said, columns, rows = part["separate"]
+        body += [f"<p>{esc(said)}</p>", table(columns, rows)]
+    body += [f"<p>{esc(sentence)}</p>" for sentence in part["structural"]]
+    body.append(image(png, "the proposed input, the outputs it gives, and the intervals"))
     return (
-        "<!doctype html><meta charset='utf-8'><title>tsid design</title>"
-        + "".join(text[:5])
-        + table
-        + "".join(text[5:])
-        + "<img src='design.png' alt='proposed input and intervals'>"
+        "<!doctype html><html><head><meta charset='utf-8'><title>tsid design</title>"
+        f"<style>{CSS}</style></head><body>{''.join(body)}</body></html>"
     )
 
 
@@ -118,6 +110,7 @@ def write_design(d: Design, out: str | Path) -> list[Path]:
     js.write_text(json.dumps(d.to_dict(), indent=1, allow_nan=False), encoding="utf-8")
     md = out / "design.md"
     md.write_text(d.markdown(), encoding="utf-8")
+    png = plot_design(d, out / "design.png")
     page = out / "design.html"
-    page.write_text(_html(d), encoding="utf-8")
-    return [*files, plot_design(d, out / "design.png"), js, md, page]
+    page.write_text(_html(d, png.read_bytes()), encoding="utf-8")
+    return [*files, png, js, md, page]

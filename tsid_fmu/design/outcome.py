@@ -203,41 +203,59 @@ class Design:
         """Show the report section in a notebook."""
         return self.markdown()
 
-    def markdown(self) -> str:
-        """Return the report section, in markdown."""
-        lines = ["## Experiment design", "", f"**{self.verdict}**", ""]
+    def section(self) -> dict[str, Any]:
+        """Return the report section's content, for :meth:`markdown` and the HTML page.
+
+        ``facts`` (sentences), ``intervals`` (columns and rows), ``separate`` (a
+        sentence, columns and rows; ``None`` where no structures tied) and ``structural``
+        (sentences).
+        """
         limits = ", ".join(
             f"{n} in [{a:g}, {b:g}]" for n, (a, b) in zip(self.inputs, self.limits, strict=True)
         )
-        lines += [
-            f"- Inputs: {limits}; band {self.band[0]:.3g}-{self.band[1]:.3g} Hz; "
-            f"{self.time[-1] - self.time[0]:g} s at {self.time[1] - self.time[0]:g} s, with "
-            f"experiment {self.template!r}'s outputs and sensors.",
-            f"- Criterion: {CRITERIA_TEXT[self.criterion]}.",
-            f"- {len(self.candidates)} candidates, {self.nfev} simulations.",
-            "",
-            "| parameter | value | study's 95 % interval | predicted, with the proposal |",
-            "| --- | --- | --- | --- |",
+        facts = [
+            f"Inputs: {limits}; band {self.band[0]:.3g}-{self.band[1]:.3g} Hz; "
+            f"{self.time[-1] - self.time[0]:g} s at {self.time[1] - self.time[0]:g} s, with the "
+            f"outputs and sensors of experiment {self.template!r}.",
+            f"Criterion: {CRITERIA_TEXT[self.criterion]}.",
+            f"{len(self.candidates)} candidates, {self.nfev} simulations.",
         ]
-        for row in self.table():
-            lines.append(
-                f"| {row['parameter']} | {row['value']:.5g} | {_span(row['study'])} | "
-                f"{_span(row['predicted_after'])} |"
-            )
+        rows = [[r["parameter"], f"{r['value']:.5g}", _span(r["study"]),
+                 _span(r["predicted_after"])] for r in self.table()]  # fmt: skip
+        separate = None
         if self.discrimination is not None and self.separating is not None:
             d = self.discrimination
-            lines += ["", f"Structures the study cannot tell apart: {', '.join(d['structures'])}. "
-                      f"Run {self.separating.name} to separate them "
-                      "(expected chi-square between their predictions, in the sensors' noise):",
-                      "", "| pair | on the study's inputs | with the proposal |",
-                      "| --- | --- | --- |"]  # fmt: skip
-            for pair, value in d["chi2"].items():
-                lines.append(f"| {pair} | {d['now'][pair]:.4g} | {value:.4g} |")
+            said = (f"Structures the study cannot tell apart: {', '.join(d['structures'])}. "
+                    f"Run {self.separating.name} to separate them (expected chi-square "
+                    "between their predictions, in the sensors' noise):")  # fmt: skip
+            pairs = [[p, f"{d['now'][p]:.4g}", f"{v:.4g}"] for p, v in d["chi2"].items()]
+            separate = (said, ["pair", "on the study's inputs", "with the proposal"], pairs)
+        structural = []
         for s in self.structural:
+            structural.append(f"Structural: {s.advice()}.")
             fixed = "; ".join(
                 f"{f['name']} = {f['value']:.5g} ({_span(f['interval'])})" for f in s.fixed
             )
-            lines += ["", f"Structural: {s.advice()}."]
             if fixed:
-                lines.append(f"The data fix: {fixed}.")
+                structural.append(f"The data fix: {fixed}.")
+        columns = ["parameter", "value", "study's 95 % interval", "predicted, with the proposal"]
+        return {"facts": facts, "intervals": (columns, rows), "separate": separate,
+                "structural": structural}  # fmt: skip
+
+    def markdown(self) -> str:
+        """Return the report section, in markdown."""
+        part = self.section()
+
+        def grid(columns: list[str], rows: list[list[str]]) -> list[str]:
+            return ["| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns),
+                    *("| " + " | ".join(r) + " |" for r in rows)]  # fmt: skip
+
+        lines = ["## Experiment design", "", f"**{self.verdict}**", ""]
+        lines += [f"- {fact}" for fact in part["facts"]] + [""]
+        lines += grid(*part["intervals"])
+        if part["separate"] is not None:
+            said, columns, rows = part["separate"]
+            lines += ["", said, "", *grid(columns, rows)]
+        for sentence in part["structural"]:
+            lines += ["", sentence] if sentence.startswith("Structural") else [sentence]
         return "\n".join(lines) + "\n"
