@@ -10,7 +10,7 @@ import pytest
 from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
-from tsid_fmu.search.local import refine
+from tsid_fmu.search.local import problem
 from tsid_fmu.search.local.fdstep import MAX_STEP, solver_noise, steps_for
 from tsid_fmu.search.local.refine import refine_stage
 from tsid_fmu.search.space import Space
@@ -100,6 +100,6 @@ def test_the_refinement_finds_the_optimum_of_an_fmu_whose_solver_adds_noise(monk
     assert cost <= best_cost * 1.001
     # without the rule, forward differences of 1e-5 see the noise, not the slope: the
     # refinement stops far off (measured: cost 298 against 68, exit status 1)
-    monkeypatch.setattr(refine, "steps_for", lambda steps, jac, noise: steps)
+    monkeypatch.setattr(problem, "steps_for", lambda steps, jac, noise: steps)
     x, cost, status = _refine()
     assert status != 0 and cost > 2 * best_cost

@@ -256,32 +256,37 @@ def test_a_refinement_out_of_runs_says_so_and_the_search_goes_on_from_it():
     assert done.extra["stop"] != "limit" and _collapsed(done) is None
 
 
-def test_a_log_parameter_started_on_its_bound_of_0_moves_off_it_where_the_data_call_for_it():
-    """A nesting value of 0 embedded (a richer structure's extra damping) in logarithmic
-    coordinates: three decades below the first levels, where the valley along a sum
-    (viscous friction and spring damping) is bent into an exponential the trust region
-    crawls along. The refinement works in linear coordinates about the start there (the
-    friction-law plant's law 2 from law 1's answer stayed at 36 times the cost of its
-    optimum, and the structure study chose law 3)."""
+def test_an_answer_on_a_log_parameters_floor_is_tested_in_linear_coordinates():
+    """A nesting value of 0 (a richer structure's extra damping) sits three decades below
+    the first levels in logarithmic coordinates, where the cost is flat in the coordinate
+    and an FMU's own noise swamps its Jacobian column: least squares stays and its test
+    holds (here exit 0 at twice the optimum's cost; on the friction-law plant law 2 from
+    law 1's answer at 36 times). The test is made again in linear coordinates there: a
+    lower point fails it, and a refinement from that point reaches the optimum."""
 
     def model(a: float, d: float) -> np.ndarray:
-        return (a + d) * np.exp(-T) + 1e-3 * d * T  # d is seen alone, weakly
+        # a valley along a + d (viscous friction and spring damping), d seen alone, and
+        # a solver's noise: 1e-4 of the sensor's, at random with the parameters
+        return (a + d) * np.exp(-T) + 1e-2 * d * T + 1e-6 * np.sin(1e9 * (a + 3 * d) + 7 * T)
 
     ev = CurveEvaluator(model, model(2.0, 0.5) + NOISE, 0.01)
     space = Space({"a": [1.0, 2.0, 4.0], "d": [0.1, 1.0, 10.0]},
                   {"a": (0.0, math.inf), "d": (0.0, math.inf)}, LevelingOptions())  # fmt: skip
     assert list(space.log) == [False, True]
-    start = {"a": 2.5, "d": 0.0}  # the simpler structure's answer: a alone carries a + d
-    assert space.floored(start) == ["d"] and space.floored({"a": 2.5, "d": 1e-3}) == []
-    first = ev.evaluate([start])
-    result = refine_stage("refinement", space, start, float(first.costs[0, 0]), ev,
-                          Method(cost="sse", refine="least_squares", refine_max_nfev=200),
-                          start_residuals=first.residuals[0])  # fmt: skip
-    # the model is linear in a and d: the optimum in closed form
-    basis = np.column_stack([np.exp(-T), np.exp(-T) + 1e-3 * T]) / 0.01
-    coef = np.linalg.lstsq(basis, ev.measured / 0.01, rcond=None)[0]
-    best = ev.cost(a=coef[0], d=coef[1])
-    assert result.extra["off_the_floor"]["parameters"] == ["d"]
-    assert result.status == 0, result.message
-    assert result.cost <= best * (1 + 1e-9)
-    assert result.nfev < 50  # in logarithmic coordinates: 200, its limit, 2e-3 above
+    assert space.floored({"a": 2.5, "d": 0.0}) == ["d"]
+    assert space.floored({"a": 2.5, "d": 1e-3}) == []
+    method = Method(cost="sse", refine="least_squares", refine_max_nfev=200)
+
+    def refined(start):
+        first = ev.evaluate([start])
+        return refine_stage("refinement", space, start, float(first.costs[0, 0]), ev, method,
+                            start_residuals=first.residuals[0])  # fmt: skip
+
+    stuck = refined({"a": 2.5, "d": 0.0})  # the simpler structure's answer: a carries a + d
+    assert stuck.extra["off_the_floor"]["parameters"] == ["d"]
+    assert stuck.status == 1 and "on the floor" in stuck.message, stuck.message
+    assert not space.floored(stuck.x)
+    again = refined(stuck.x)
+    basis = np.column_stack([np.exp(-T), np.exp(-T) + 1e-2 * T]) / 0.01
+    a, d = np.linalg.lstsq(basis, ev.measured / 0.01, rcond=None)[0]
+    assert again.status == 0 and again.cost <= 1.0001 * ev.cost(a=a, d=d)
