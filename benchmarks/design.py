@@ -5,9 +5,9 @@ the study as shipped (B_s open), run the design, make the proposed experiment's 
 with the example's independent simulator at the truth (``examples/lsea_siso/
 make_data.py``: the equations solved piecewise exactly, the rig's load cells and
 encoder, a new noise draw per seed), add it to the study as a second experiment,
-identify again (``--levels study``, the default: with the study's own first levels, as
-a user adding the experiment to the study file would; ``--levels around``: five levels
-from half to twice each parameter's first answer), and compare, per parameter, the
+identify again (``--levels around``, the default: five levels from half to twice each
+parameter's first answer; ``--levels study``: with the study's own first levels, as a
+user adding the experiment to the study file unchanged would), and compare, per parameter, the
 achieved 95 % interval with the predicted one (the ratio of their widths, each relative
 to its own answer; and whether the achieved one holds the truth).
 
@@ -165,7 +165,7 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--case", choices=["siso", "miso"], default="siso")
     ap.add_argument("--miso-band", type=float, default=10.0, help="the stage's band (Hz)")
-    ap.add_argument("--levels", choices=["study", "around"], default="study",
+    ap.add_argument("--levels", choices=["study", "around"], default="around",
                     help="the second study's first levels: the study's own, or around the "
                          "first answer (half to twice)")  # fmt: skip
     args = ap.parse_args()
