@@ -290,3 +290,26 @@ def test_an_answer_on_a_log_parameters_floor_is_tested_in_linear_coordinates():
     basis = np.column_stack([np.exp(-T), np.exp(-T) + 1e-2 * T]) / 0.01
     a, d = np.linalg.lstsq(basis, ev.measured / 0.01, rcond=None)[0]
     assert again.status == 0 and again.cost <= 1.0001 * ev.cost(a=a, d=d)
+
+
+def test_a_refinement_out_of_runs_still_tries_its_step():
+    """ "No runs left" decides nothing: the stationarity test of a refinement that spent
+    its limit still simulates its step (at most MAX_TRIALS runs more), so that its verdict
+    can send the search on, to the refinement in combinations where two parameters act
+    through one (the SISO plant's damping, seed 5: warm refinements out of runs along
+    F_vm + B_s, the structure chosen at 1.0054 times the optimum's cost, exit 1)."""
+
+    def model(a: float, d: float) -> np.ndarray:
+        return (a + d) * np.exp(-T) + 1e-3 * d * T  # a valley along a + d
+
+    ev = CurveEvaluator(model, model(2.0, 0.5) + NOISE, 0.01)
+    space = Space({"a": [1.0, 2.0, 4.0], "d": [0.1, 1.0, 10.0]},
+                  {"a": (0.0, math.inf), "d": (0.0, math.inf)}, LevelingOptions())  # fmt: skip
+    start = {"a": 2.5, "d": 0.05}
+    first = ev.evaluate([start])
+    out = refine_stage("refinement", space, start, float(first.costs[0, 0]), ev,
+                       Method(cost="sse", refine="least_squares", refine_max_nfev=20),
+                       start_residuals=first.residuals[0])  # fmt: skip
+    assert out.status == 1 and "simulation limit (20)" in out.message
+    assert decided_by_trial(out.extra["stationarity"])
+    assert 20 < out.nfev <= 20 + MAX_TRIALS

@@ -203,7 +203,10 @@ class _Problem:
         At the answer's own residuals where the refinement has them; the Jacobian is the
         last one computed (at the answer, or one accepted step before it). Where the
         predicted decrease is too large, the predicted step is tried, halved down to the
-        gate (:func:`~tsid_fmu.search.verdict.trial_fractions`): a lower cost there
+        gate (:func:`~tsid_fmu.search.verdict.trial_fractions`), even where the
+        refinement is out of runs (at most 12 more: "no runs left" would decide nothing;
+        on the SISO plant's damping, warm refinements out of runs along ``F_vm + B_s``
+        then never reached the refinement in combinations): a lower cost there
         becomes the answer and the test fails. If none is lower, the first-order model
         does not hold this close to the answer (events, or a Jacobian the FMU solver's
         noise made), and it cannot show an optimum: with ``probe`` > 0, the local
@@ -232,10 +235,10 @@ class _Problem:
             return said
 
         def simulate(points: list[np.ndarray]) -> bool:
-            try:
-                self._residuals([self.space.to_x(self.space.clip(t)) for t in points])
-            except _Budget:
-                return False
+            # the trial runs even where the refinement is out of runs: "no runs left"
+            # decides nothing, and a lower trial sends the search on
+            self.limit = max(self.limit, self.evaluator.nfev - self.start + len(points))
+            self._residuals([self.space.to_x(self.space.clip(t)) for t in points])
             return True
 
         bounds = (self.space.s_lower, self.space.s_upper)
