@@ -102,42 +102,6 @@ def _again_wider(
     return status, f"{message}; again with difference steps that beat the FMU's noise: {again}"
 
 
-def _off_the_floor(
-    space: Space,
-    start: Mapping[str, float],
-    start_cost: float,
-    evaluator: Evaluator,
-    limit: int,
-    fixed: Mapping[str, float] | None,
-    start_residuals: np.ndarray | None,
-    floor: float,
-) -> tuple[dict[str, float], float, np.ndarray | None]:
-    """Try one Gauss-Newton step off a log parameter's floor, in linear coordinates.
-
-    In :meth:`anchored <tsid_fmu.search.space.Space.anchored>` coordinates about
-    ``start`` the step within the bounds, all parameters together, is simulated with its
-    halves down to the gate (:func:`~tsid_fmu.search.verdict.bounded_trials`). Measured
-    on the friction-law plant (law 2 refined from law 1's answer, ``F_vm`` = 0, on a
-    chirp): least squares in logarithmic coordinates stayed there at 36 times the
-    optimum's cost and passed its test. Returns the lowest point, its cost, residuals.
-    """
-    line = space.anchored(start)
-    problem, s0 = _problem_at(line, start, start_cost, evaluator, limit, fixed, start_residuals)
-    try:
-        jac = problem.jac(s0)
-        r = problem.last[1] if problem.last is not None else start_residuals
-        if r is not None and np.isfinite(jac).all():
-            gate = problem.gate(start_cost, floor)
-            points = bounded_trials(jac, r, s0, line.s_lower, line.s_upper, gate)
-            problem._residuals([line.to_x(t) for t in points])
-    except (_Budget, _Converged):
-        pass
-    cost, x = problem.best
-    if cost >= start_cost:
-        return dict(start), start_cost, start_residuals
-    return {**dict(start), **x}, cost, problem.best_r
-
-
 def _floor_test(
     space: Space,
     problem: _Problem,
@@ -150,26 +114,36 @@ def _floor_test(
 
     On a log parameter's floor (:meth:`~tsid_fmu.search.space.Space.floored`: 0, or
     near it) the cost is flat in that coordinate, so the test in the search's
-    coordinates holds whatever the data say. :func:`_off_the_floor` tries the step
-    there, with its own ``2 (p + 1) + 12`` runs; a point lower by more than the gate
-    becomes the answer, and the test fails (the callers refine again from it).
+    coordinates holds whatever the data say. In :meth:`anchored
+    <tsid_fmu.search.space.Space.anchored>` coordinates about the answer the step within
+    the bounds, all parameters together, is simulated with its halves down to the gate
+    (:func:`~tsid_fmu.search.verdict.bounded_trials`), with its own ``2 (p + 1) + 12``
+    runs; a point lower by more than the gate becomes the answer, and the test fails
+    (the callers refine again from it). Measured on the friction-law plant (law 2 from
+    law 1's answer, ``F_vm`` = 0, on a chirp): least squares in logarithmic coordinates
+    stayed there at 36 times the optimum's cost and passed its test.
     """
     cost, x = problem.best
     floored = space.floored(x)
     if not floored:
         return gate
-    runs = 2 * (space.dim + 1) + MAX_TRIALS
-    start, lower, r = _off_the_floor(
-        space, x, cost, problem.evaluator, runs, fixed, problem.best_r, floor
-    )
-    gain = cost - lower
-    extra["off_the_floor"] = {"parameters": floored, "cost": float(lower)}
+    line, runs = space.anchored(x), 2 * (space.dim + 1) + MAX_TRIALS
+    trial, s0 = _problem_at(line, x, cost, problem.evaluator, runs, fixed, problem.best_r)
+    try:
+        jac = trial.jac(s0)
+        if trial.last is not None and np.isfinite(jac).all():
+            points = bounded_trials(jac, trial.last[1], s0, line.s_lower, line.s_upper,
+                                    trial.gate(cost, floor))  # fmt: skip
+            trial._residuals([line.to_x(t) for t in points])
+    except (_Budget, _Converged):
+        pass
+    gain = cost - trial.best[0]
+    extra["off_the_floor"] = {"parameters": floored, "cost": float(trial.best[0])}
     where = f"{', '.join(floored)} on the floor of its logarithmic coordinate"
     if gain <= problem.gate(cost, floor):
         said = f"{gate.detail}; {where}: a step in linear coordinates is no lower"
         return Stationarity(True, gate.test, gate.gap, cost, said)
-    problem.best = (lower, {n: float(start[n]) for n in space.names})
-    problem.best_r = r
+    problem.best, problem.best_r = trial.best, trial.best_r
     said = f"{where}, where it is flat: in linear coordinates, {LOWER_TRIED} {gain:.3g}"
     return Stationarity(False, gate.test, gain, cost, said)
 
