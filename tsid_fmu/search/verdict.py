@@ -42,6 +42,7 @@ __all__ = [
     "LOWER_TRIED",
     "POOR_FIT",
     "Stationarity",
+    "bounded_step",
     "bounded_trials",
     "gauss_newton_gap",
     "gauss_newton_step",
@@ -96,21 +97,34 @@ def trial_fractions(jac: np.ndarray, r: np.ndarray, step: np.ndarray, gate: floa
     return out
 
 
+def bounded_step(
+    jac: np.ndarray, r: np.ndarray, s: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> tuple[float, np.ndarray]:
+    """Return the Gauss-Newton step within the bounds and the decrease it predicts.
+
+    The bounded linear least-squares solution, every parameter together (SciPy's
+    ``lsq_linear``): at a bound, one parameter's own gradient may point out of it while
+    a step with the others compensating lowers the cost (viscous friction up, spring
+    damping down), which the projected step (:func:`gauss_newton_step`) drops. Used at
+    a nesting point (:mod:`~tsid_fmu.search.structure.boundary`) and on a log floor
+    (:func:`bounded_trials`).
+    """
+    from scipy.optimize import lsq_linear
+
+    r = np.asarray(r, float)
+    step = lsq_linear(jac, -r, bounds=(lower - s, upper - s)).x
+    return max(float(r @ r) - float(np.sum((r + jac @ step) ** 2)), 0.0), step
+
+
 def bounded_trials(
     jac: np.ndarray, r: np.ndarray, s: np.ndarray, lower: np.ndarray, upper: np.ndarray,
     gate: float,
 ) -> list[np.ndarray]:  # fmt: skip
-    """Return the points to simulate along the Gauss-Newton step within the bounds.
+    """Return the points to simulate along :func:`bounded_step`, within the bounds.
 
-    The step is the bounded linear least-squares solution, every parameter together
-    (SciPy's ``lsq_linear``): at a bound, one parameter's own gradient may point out of
-    it while a step with the others compensating lowers the cost (viscous friction up,
-    spring damping down), which the projected step (:func:`gauss_newton_step`) drops.
     Its fractions are those of :func:`trial_fractions`.
     """
-    from scipy.optimize import lsq_linear
-
-    step = lsq_linear(jac, -r, bounds=(lower - s, upper - s)).x
+    _, step = bounded_step(jac, r, s, lower, upper)
     return [np.clip(s + f * step, lower, upper) for f in trial_fractions(jac, r, step, gate)]
 
 

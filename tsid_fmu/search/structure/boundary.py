@@ -29,9 +29,9 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from tsid_fmu.search.local.combined import _residuals
+from tsid_fmu.search.verdict import bounded_step
 
 __all__ = ["RELATIVE_STEP", "SPAN_STEP", "score_step", "significant", "tried"]
 
@@ -90,15 +90,11 @@ def score_step(
     jac = np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
     if not np.isfinite(jac).all():
         return 0.0, dict(x), ev.nfev - n0
-    # the Gauss-Newton step within the bounds, all parameters together: at a nesting
-    # value on a bound, the extra parameter's own gradient may point out of the bounds
-    # while a step with the others compensating lowers the cost (B_s up, F_vm down)
-    r = np.asarray(r0, float)
-    step = lsq_linear(jac, -r, bounds=(lower - z, upper - z)).x
-    gap = float(r @ r) - float(np.sum((r + jac @ step) ** 2))
+    # the Gauss-Newton step within the bounds, all parameters together (B_s up, F_vm down)
+    gap, step = bounded_step(jac, r0, z, lower, upper)
     moved = np.clip(z + step, lower, upper)
     point = {**x, **{n: float(v) for n, v in zip(names, moved, strict=True)}}
-    return max(gap, 0.0), point, ev.nfev - n0
+    return gap, point, ev.nfev - n0
 
 
 def tried(
