@@ -82,7 +82,7 @@ class Space:
         if self.log[j]:
             # 0 (or less) has no log10: it maps three decades below the smallest first
             # level, a finite coordinate that reads back as a tiny positive value
-            u = math.log10(v) if v > 0 else self.origin[j] - 0.5 * self.width[j] - 3.0
+            u = math.log10(v) if v > 0 else self._floor(j)
         else:
             u = v
         # plain floats: levels many decades apart overflow to inf without a numpy warning
@@ -130,14 +130,15 @@ class Space:
         flat in it whatever the data say: a refinement started there stays, and its
         stationarity test holds (:meth:`anchored` coordinates have no such floor).
         """
-        out = []
-        for j, n in enumerate(self.names):
-            if not self.log[j]:
-                continue
-            floor = 10.0 ** min(float(self.origin[j] - 0.5 * self.width[j] - 3.0), 300.0)
-            if float(x[n]) <= floor * (1.0 + 1e-9):
-                out.append(n)
-        return out
+        return [
+            n
+            for j, n in enumerate(self.names)
+            if self.log[j] and float(x[n]) <= 10.0 ** min(self._floor(j), 300.0) * (1 + 1e-9)
+        ]
+
+    def _floor(self, j: int) -> float:
+        """Log parameter ``j``'s floor, in log10: three decades below its smallest level."""
+        return float(self.origin[j] - 0.5 * self.width[j] - 3.0)
 
     def anchored(self, x: Mapping[str, float]) -> Space:
         """Linear coordinates about ``x`` with this space's local scale there.
