@@ -93,6 +93,18 @@ def me_data(fmu: Path, truth: dict[str, float]) -> Made:
     return pd.DataFrame({"time": t, "f": f, "y": y}), "the FMU's Model Exchange at 1e-10"
 
 
+def me_free_data(fmu: Path, truth: dict[str, float]) -> Made:
+    """Mass_Damper released from its start (no force measured): its Model Exchange at 1e-10."""
+    from tsid_fmu.fmu import FMUSession
+
+    t = np.arange(0, 2.0 + 1e-9, 0.002)
+    with FMUSession(
+        fmu, ["f"], ["y"], parameters=list(truth), interface="me", tolerance=1e-10
+    ) as s:
+        y = s.simulate(t, np.zeros((t.size, 1)), truth)[:, 0]
+    return pd.DataFrame({"time": t, "y": y}), "the FMU's Model Exchange at 1e-10, f = 0"
+
+
 def add_data(fmu: Path, p: dict[str, float]) -> Made:
     t = np.arange(0, 1.0 + 1e-9, 0.01)
     u1, u2 = sines(t, (1, 1, 0), (0.5, 3.3, 0)), sines(t, (1, 0.7, 1), (0.3, 5.1, 0))
@@ -186,6 +198,14 @@ CASES = [
          '"damper.d" = { levels = [1, 3, 10, 20, 40], min = 0.01 }\n'
          '"spring.c" = { levels = [1000, 3000, 10000, 20000, 40000], min = 1 }\n',
          'interface = "me"  # its Co-Simulation is a fixed explicit Euler step'),
+    Case("Mass_Damper free response", GEMSEO, OM + "Mass_Damper.fmu",
+         {"mass.m": 2.0, "damper.d": 6.0, "spring.c": 6000.0}, me_free_data, [], ["y"],
+         '"damper.d" = { levels = [1, 3, 10, 20, 40], min = 0.01 }\n'
+         '"spring.c" = { levels = [1000, 3000, 10000, 20000, 40000], min = 1 }\n',
+         'interface = "me"\nstart_values = { "mass.m" = 2.0 }  # the scale: a free '
+         "response fixes only c/m and d/m",
+         combos={"damper.d/mass.m": ("damper.d", "mass.m", -1),
+                 "spring.c/mass.m": ("spring.c", "mass.m", -1)}),
     Case("add", GEMSEO, OM + "add.fmu", {"add.k1": 2.0, "add.k2": 0.6}, add_data,
          ["u1", "u2"], ["y"],
          '"add.k1" = { levels = [0.3, 1, 3] }\n"add.k2" = { levels = [0.3, 1, 3] }\n'),

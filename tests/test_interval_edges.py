@@ -478,3 +478,61 @@ def test_the_check_re_linearises_with_a_step_shorter_than_the_events(monkeypatch
     monkeypatch.setattr(profile._Secant, "update", _keep_last)
     off, _ = profile._end(problem, 0, 1.0, 0.05, limit)
     assert off == pytest.approx(0.5, rel=0.01)
+
+
+def test_a_seen_combination_touching_a_parameter_with_an_unseen_part_is_finite():
+    """Columns g, h, h (k1 and k2 seen only through their sum) plus a little of k1 in
+    k0's column: the seen eigenvectors touch k1 and k2, whose own variances are infinite.
+    Each seen eigenvector is orthogonal to the unseen (0, 1, -1), so its standard error
+    is finite, ``sqrt(v^T C v)`` over the seen directions. OpenModelica's Mass_Damper:
+    the common scale of m, c and d touched an offset by 0.02, was called infinite on
+    that ground, never probed, and m, c, d kept finite intervals that excluded the truth."""
+    t = np.linspace(0.0, 1.0, 40)
+    g, h = 1.0 + t, np.sin(3 * t)
+    u = uncertainty(*_case(np.column_stack([g + 0.05 * h, h, h])))
+    assert u.std_error["k1"] == math.inf and u.std_error["k2"] == math.inf
+    seen = [c for c in u.combinations if c["determined"]]
+    assert len(seen) == 2
+    for c in seen:
+        v = np.asarray(c["direction"])
+        assert abs(v[1]) > 1e-3 and math.isfinite(c["std_error"])
+        assert c["std_error"] == pytest.approx(math.sqrt(v @ u.seen_cov @ v), rel=1e-12)
+    (unseen,) = [c for c in u.combinations if not c["determined"]]
+    assert unseen["std_error"] == math.inf
+    # any combination: infinite where it reaches the unseen direction, else finite
+    assert u.variance(np.array([0.0, 1.0, 0.0])) == math.inf
+    assert u.variance(np.array([0.0, 1.0, 1.0 + 1e-2])) == math.inf
+    assert 0 < u.variance(np.array([0.0, 1.0, 1.0])) < math.inf  # the sum k1 + k2
+
+
+def test_the_profiles_refit_does_not_step_along_what_the_outputs_do_not_see():
+    """Residuals ``30 w (s_a - s_b)`` (a valley along a + b) and ``w (s_c - 1)^2`` plus
+    noise: at s_c = 1 the outputs do not depend on c to first order, and the finite
+    differences give its column as rounding (1e-14 of the others), while a's carries
+    errors of 1e-8 of its size. Inverting c's rounding, the re-fit's first step moves c
+    by thousands of units to follow a's error, the square bites, and the exact valley
+    reads as a closed interval. Over the directions the outputs depend on
+    only, both ends stay open."""
+    w = np.linspace(1.0, 2.0, 10)
+    space = Space({n: [0.0, 2.0] for n in "abc"}, dict.fromkeys("abc", WIDE), LevelingOptions())
+
+    def residuals(s):
+        noise = 0.1 * np.sin(np.arange(10.0))
+        return np.concatenate([30.0 * w * (s[0] - s[1]), w * (s[2] - 1.0) ** 2 + noise])
+
+    class Ev:
+        def evaluate(self, sets):
+            rs = [residuals(space.to_s(x)) for x in sets]
+            costs = np.array([[float(r @ r)] for r in rs])
+            return Evaluation(costs, [None] * len(rs), len(rs), rs)
+
+    s0, h, rng = np.array([0.3, 0.3, 1.0]), 1e-6, np.random.default_rng(0)
+    jac = np.column_stack(
+        [(residuals(s0 + h * e) - residuals(s0 - h * e)) / (2 * h) for e in np.eye(3)]
+    )
+    # the differences' errors: relative to a column's size, and the rounding of none
+    jac = jac * (1 + 1e-8 * rng.normal(size=jac.shape)) + 1e-12 * rng.normal(size=jac.shape)
+    cost0 = float(residuals(s0) @ residuals(s0))
+    problem = profile.ProfileProblem(Ev(), space, s0, cost0, jac, 1.0)
+    out = profile.profile_intervals(problem, {"a": 0.1, "b": 0.1, "c": 0.1})
+    assert out["a"] == [None, None] and out["b"] == [None, None]

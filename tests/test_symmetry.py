@@ -213,3 +213,39 @@ def test_the_products_pair_the_parameter_that_moves_against_the_others_and_use_t
     assert [f["name"] for f in fixed] == ["C R1", "C R2"]
     assert fixed[0]["value"] == pytest.approx(4026.0 * 0.049701, rel=1e-12)
     assert fixed[1]["value"] == pytest.approx(4026.0 * 0.12428, rel=1e-12)
+
+
+def test_a_flat_combination_takes_its_direction_from_the_refitted_probes():
+    """The probes' re-fitted points lie on the valley, so the chord between them is its
+    direction; the differences' eigenvector was tilted 3 degrees. On Mass_Damper the
+    tilt named the combination across the scale ``damper.d mass.m^-0.974``, with an
+    interval that excluded the true d / m."""
+    space, x, ev, jac, u = _case(curved=0.0)
+    probe_combinations(ev, space, u, x, 0.0, 4.0, jac)
+    v = np.asarray(u.combinations[1]["direction"])
+    assert v == pytest.approx([math.sqrt(0.5), math.sqrt(0.5)], abs=1e-9)
+    assert u.combinations[1]["terms"] == {"lg a": 0.707, "lg b": 0.707}
+
+
+class _Bent(_Flat):
+    """Exactly flat along (1, 1) too, but across it the slope falls away from the answer
+    (``30 / (1 + 10 |p|)``, ``p`` the distance along): the answer's Jacobian overstates
+    it, and each chord step corrects only part of the offset, as a common scale with an
+    offset that must follow it did on Mass_Damper (rises 5.1, 0.03, 0 after 3, 4, 5)."""
+
+    def residuals(self, s: np.ndarray) -> np.ndarray:
+        d = s - self.space.to_s({"a": 3.0, "b": 3.0})
+        along, across = (d[0] + d[1]) / math.sqrt(2), (d[0] - d[1]) / math.sqrt(2)
+        return 30.0 * WEIGHTS * across / (1 + 10 * abs(along)) * math.sqrt(2)
+
+
+def test_a_probe_refits_until_the_cost_stops_falling():
+    space, x, _, jac, u = _case(curved=0.0)
+    ev = _Bent(space, 0.0)
+    tilt = math.radians(10.0)
+    u.combinations[1]["direction"] = [math.cos(math.pi / 4 + tilt), math.sin(math.pi / 4 + tilt)]
+    jac = jac[: WEIGHTS.size]
+    probe_combinations(ev, space, u, x, 0.0, 4.0, jac)
+    assert u.combinations[1]["determined"] is False
+    assert u.intervals == {"a": [None, None], "b": [None, None]}
+    assert ev.calls <= 2 * probe.REFITS + 1

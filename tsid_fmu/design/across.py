@@ -114,7 +114,7 @@ def combinations_across(
     members = [space.names[j] for j in idx]
     if basis.shape[1] == 1:  # one direction: the pairwise products, as the study names them
         u = Uncertainty(values=dict(x))
-        u.cov = cov  # type: ignore[attr-defined]
+        u.cov = cov
         u.dof = {n: 1e6 for n in space.names}
         return members, fixed_across(space, u, basis[:, 0], members)
     inside = np.eye(space.dim)[:, idx]

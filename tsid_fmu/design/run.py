@@ -41,7 +41,7 @@ from tsid_fmu.design.predict import predicted_intervals
 from tsid_fmu.evaluate.factory import make_evaluator
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.designopts import DesignOptions
-from tsid_fmu.uncertainty.intervals import UNDETERMINED
+from tsid_fmu.uncertainty.intervals import UNDETERMINED, seen_inverse
 from tsid_fmu.uncertainty.probe import FLAT, MEMBER
 
 __all__ = ["STEP", "design"]
@@ -157,7 +157,7 @@ class _Follow:
         s = self.space.clip(s0 + sign * STEP * v)
         unit = v / max(float(np.linalg.norm(v)), 1e-300)
         across = np.linalg.svd(np.eye(self.space.dim) - np.outer(unit, unit))[0][:, :-1]
-        step = np.linalg.pinv(jac @ across)
+        step = seen_inverse(jac @ across)
         for _ in range(REFITS):
             found = self.rise(self.space.to_x(s))
             if found is None:

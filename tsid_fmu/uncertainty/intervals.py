@@ -36,7 +36,17 @@ from tsid_fmu.uncertainty.longrun import long_run_covariance
 from tsid_fmu.uncertainty.residuals import ljung_box
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
 
-__all__ = ["LEVEL", "UNDETERMINED", "Z95", "Uncertainty", "quantile", "uncertainty"]
+__all__ = [
+    "LEVEL",
+    "UNDETERMINED",
+    "UNSEEN",
+    "Z95",
+    "Uncertainty",
+    "combination_terms",
+    "quantile",
+    "seen_inverse",
+    "uncertainty",
+]
 
 LEVEL = 0.95
 """Confidence level of the intervals."""
@@ -48,6 +58,25 @@ many degrees of freedom."""
 UNDETERMINED = 0.5
 """A combination whose standard error exceeds this many search units (half of a first
 range) is *not determined* by the data."""
+
+UNSEEN = 1e-14
+"""A direction whose Fisher eigenvalue is at most this share of the largest one (its
+singular value of the Jacobian at most ``sqrt(UNSEEN)`` = 1e-7 of the largest) is one
+the outputs do not depend on at all: what the finite differences give there is rounding
+and the solver's noise. The covariance gives it an infinite variance, and the re-fits
+of the profiles and probes (:func:`seen_inverse`) do not step along it."""
+
+
+def seen_inverse(a: np.ndarray) -> np.ndarray:
+    """Pseudo-inverse of ``a`` over the directions the outputs depend on (:data:`UNSEEN`).
+
+    A Gauss-Newton re-fit with NumPy's default cut-off inverts the rounding along an
+    exact symmetry: on OpenModelica's ``Mass_Damper`` (an input without effect, and
+    three offsets that only act through their sum) the profile's first re-fit put the
+    force at 2e7 N and an offset at 9e6 m, and the intervals closed around the answer
+    where the cost is flat.
+    """
+    return np.linalg.pinv(a, rcond=math.sqrt(UNSEEN))
 
 
 def json_safe(v: Any) -> Any:
@@ -109,6 +138,13 @@ class Uncertainty:
         Parameters whose standard error lies below what the profile likelihood resolves
         (:data:`tsid_fmu.uncertainty.profile.RESOLUTION`): the bound, in percent of the
         value. Their ``std_error`` and ``relative`` hold that bound, not an estimate.
+    cov : numpy.ndarray or None
+        Covariance of the search coordinates; a parameter with a direction the outputs
+        do not depend on has an infinite variance (:data:`UNSEEN`).
+    seen_cov : numpy.ndarray or None
+        The same over the directions the outputs depend on, finite.
+    unseen : numpy.ndarray or None
+        ``(p, m)`` orthonormal basis of the directions the outputs do not depend on.
     """
 
     values: dict[str, float]
@@ -132,6 +168,28 @@ class Uncertainty:
     dof: dict[str, float] = field(default_factory=dict)
     constancy: dict[str, Any] = field(default_factory=dict)
     discrepancy: Discrepancy = field(default_factory=Discrepancy)
+    cov: np.ndarray | None = field(default=None, repr=False)
+    seen_cov: np.ndarray | None = field(default=None, repr=False)
+    unseen: np.ndarray | None = field(default=None, repr=False)
+
+    def variance(self, g: np.ndarray) -> float:
+        """Variance of the combination ``g @ s`` of the search coordinates ``s``.
+
+        Infinite where ``g`` reaches a direction the outputs do not depend on (by more
+        than a thousandth of its length), else from :attr:`seen_cov`. NaN without a
+        covariance.
+        """
+        if self.cov is None:
+            return math.nan
+        g = np.asarray(g, dtype=float)
+        if self.unseen is not None and self.unseen.size:
+            reach = float(np.sum((self.unseen.T @ g) ** 2))
+            if reach > 1e-6 * float(g @ g):
+                return math.inf
+        seen = self.seen_cov
+        if seen is None:
+            seen = np.where(np.isfinite(self.cov), self.cov, 0.0)
+        return max(float(g @ seen @ g), 0.0)
 
     @property
     def sigma(self) -> dict[str, list[float]]:
@@ -202,7 +260,7 @@ def _covariances(
     """Cramer-Rao and HAC covariances, Fisher eigen-decomposition, degrees of freedom."""
     values, vectors = np.linalg.eigh(fisher)
     top = max(float(values.max()), 1e-300)
-    keep = values > 1e-14 * top
+    keep = values > UNSEEN * top
     inv = np.where(keep, 1.0 / np.maximum(values, 1e-300), 0.0)
     pinv = (vectors * inv) @ vectors.T
     found = long_run_covariance([(r, jac) for _, _, r, jac in series], pinv)
@@ -224,6 +282,7 @@ def _covariances(
     with np.errstate(divide="ignore", invalid="ignore"):
         nu = np.where(found.variance > 0, 2 * np.diag(hac) ** 2 / found.variance, white)
     dof = np.clip(np.where(floored | ~np.isfinite(nu), white, nu), 1.0, white)
+    out.seen_cov, out.unseen = cov, vectors[:, ~keep]
     if not keep.all():  # directions the data do not see at all: infinite variance
         unseen = (vectors[:, ~keep] ** 2).sum(axis=1) > 1e-6
         cov = cov + np.diag(np.where(unseen, np.inf, 0.0))
@@ -241,16 +300,35 @@ def _interval(space: Space, j: int, s: float, half: float) -> list[float | None]
     return [low, high]
 
 
-def _combinations(space: Space, values: np.ndarray, vectors: np.ndarray, cov: np.ndarray) -> list:
+def combination_terms(space: Space, v: np.ndarray) -> dict[str, float]:
+    """Name a direction ``v`` of the search coordinates by its working-domain weights.
+
+    ``{coordinate label: weight}`` of the unit vector of working-domain changes, for the
+    weights of at least 0.05.
+    """
+    u = space.u_direction(v)
+    return {space.label(j): round(float(c), 3) for j, c in enumerate(u) if abs(c) >= 0.05}
+
+
+def _combinations(
+    space: Space, values: np.ndarray, vectors: np.ndarray, found: Uncertainty
+) -> list:
+    """Return the Fisher matrix's eigenvectors as combinations, with standard errors.
+
+    A combination has an infinite one where the outputs do not depend on it at all
+    (:data:`UNSEEN`). Every other eigenvector is orthogonal to those directions, so its
+    variance is finite even where it touches a parameter that also has an unseen part:
+    on OpenModelica's ``Mass_Damper`` the common scale of mass, stiffness and damping
+    touched an offset of the spring by 0.02, was called infinite on that ground, and so
+    was never probed, while its members kept finite intervals excluding the truth.
+    """
     out = []
+    seen = values > UNSEEN * max(float(values.max()), 1e-300)
     for k in np.argsort(values)[::-1]:
         v = vectors[:, k]
-        var = float(v @ np.where(np.isfinite(cov), cov, 0.0) @ v)
-        unseen = bool(np.any(~np.isfinite(np.diag(cov))[np.abs(v) > 1e-3]))
-        se = math.inf if unseen or values[k] <= 0 else math.sqrt(max(var, 0.0))
-        u = space.u_direction(v)
-        terms = {space.label(j): round(float(c), 3) for j, c in enumerate(u) if abs(c) >= 0.05}
-        used = [j for j, c in enumerate(u) if abs(c) >= 0.05]
+        se = math.sqrt(found.variance(v)) if seen[k] else math.inf
+        terms = combination_terms(space, v)
+        used = [j for j, c in enumerate(space.u_direction(v)) if abs(c) >= 0.05]
         # standard error along the unit direction in log10 units, as a relative change
         scale = float(np.linalg.norm(v * space.width))
         percent = (
@@ -301,10 +379,10 @@ def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Un
     corr = finite / np.outer(d, d)
     for i, n in enumerate(space.names):
         out.correlation[n] = {m: float(corr[i, k]) for k, m in enumerate(space.names)}
-    out.combinations = _combinations(space, values, vectors, cov)
-    out.cov = cov  # type: ignore[attr-defined]
+    out.cov = cov
+    out.combinations = _combinations(space, values, vectors, out)
     values, vectors = np.linalg.eigh(fisher)
-    keep = values > 1e-14 * max(float(values.max()), 1e-300)
+    keep = values > UNSEEN * max(float(values.max()), 1e-300)
     inv = np.divide(1.0, values, out=np.zeros_like(values), where=keep)
     out.constancy = constancy(series, (vectors * inv) @ vectors.T)
     return out

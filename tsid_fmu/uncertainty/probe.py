@@ -9,15 +9,17 @@ finite intervals that excluded the truth, its scale called "determined" (issue 4
 So each combination that the covariance determines only loosely (a relative standard
 error of :data:`LOOSE` % or more) is profiled at two points, one each side of the
 answer, :data:`SPAN` of its 95 % half-widths away: the point along its direction, then
-re-fitted across it by up to :data:`REFITS` Gauss-Newton steps with the answer's
-Jacobian (the direction the differences give is tilted off an exact null direction,
-and across it the cost is steep). Were the profile quadratic, as the covariance says,
-it would rise by ``SPAN**2`` times the 95 % threshold; if it rises by less than
-:data:`FLAT` of that threshold on both sides, the covariance saw noise, not the data:
-the combination is marked not determined. The parameters in every combination not
-determined (so found, or by the covariance) get open intervals, and a warning names
-it. At most ``2 * REFITS`` simulations per loose combination; none where every
-combination is well determined.
+re-fitted across it by Gauss-Newton steps with the answer's Jacobian until a step gains
+less than :data:`GAIN` of the 95 % threshold, at most :data:`REFITS` simulations (the
+direction the differences give is tilted off an exact null direction, across it the
+cost is steep, and where the symmetry is curved in the search coordinates, as a common
+scale beside an offset that must follow it, the re-fit takes several steps). Were the
+profile quadratic, as the covariance says, it would rise by ``SPAN**2`` times the 95 %
+threshold; if it rises by less than :data:`FLAT` of that threshold on both sides, the
+covariance saw noise, not the data: the combination is marked not determined. The
+parameters in every combination not determined (so found, or by the covariance) get
+open intervals, and a warning names it. At most ``2 * REFITS + 1`` simulations per
+loose combination; none where every combination is well determined.
 """
 
 from __future__ import annotations
@@ -32,10 +34,16 @@ from tsid_fmu.errors import TsidError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.search.space import Space
-from tsid_fmu.uncertainty.intervals import Uncertainty, quantile
+from tsid_fmu.uncertainty.intervals import (
+    Uncertainty,
+    combination_terms,
+    quantile,
+    seen_inverse,
+)
 
 __all__ = [
     "FLAT",
+    "GAIN",
     "LOOSE",
     "REFITS",
     "SPAN",
@@ -49,14 +57,21 @@ LOOSE = 2.0
 """Relative standard error (%) from which a combination is probed. JModelica's
 ``Simple2R1C_ic``, away from its optimum, gave its exact null direction (C against R1
 and R2) 7 %: the FMU solver's noise in the central differences. The profile, not this
-threshold, decides; a lower threshold only probes more (``2 * REFITS`` runs each)."""
+threshold, decides; a lower threshold only probes more (at most ``2 * REFITS + 1`` runs
+each)."""
 SPAN = 2.0
 """How many 95 % half-widths along the combination each probe goes."""
 FLAT = 0.25
 """The largest profile rise, as a fraction of the 95 % threshold, of a direction found
 not determined (a quadratic profile rises by ``SPAN**2`` = 4 thresholds there)."""
-REFITS = 3
-"""Simulations per side: the point along the combination, then Gauss-Newton re-fits."""
+REFITS = 10
+"""Most simulations per side: the point along the combination, then Gauss-Newton
+re-fits. OpenModelica's ``Mass_Damper`` from ``tsid init`` (mass, stiffness and damping
+scaled together, the spring's offsets following the force over stiffness) rose 5.1
+after 3, 0.03 after 4 and 0 after 5; at most 3 called its exact symmetry determined."""
+GAIN = 0.01
+"""A re-fit stops once a step lowers the cost by less than this share of the 95 %
+threshold (as a profile's re-fit does, :data:`tsid_fmu.uncertainty.profile.CHORD_STEPS`)."""
 MEMBER = 0.3
 """A parameter whose share of the combination's unit direction reaches this is in it."""
 
@@ -92,10 +107,19 @@ def _level(evaluator: Evaluator, space: Space, s0: np.ndarray, v: np.ndarray, co
 
 
 def _profile(
-    evaluator: Evaluator, space: Space, s: np.ndarray, across: np.ndarray, jac: np.ndarray
+    evaluator: Evaluator,
+    space: Space,
+    s: np.ndarray,
+    across: np.ndarray,
+    jac: np.ndarray,
+    rise: float,
 ) -> tuple[float, dict[str, float] | None]:
-    """Return the lowest cost found from ``s`` re-fitted along ``across``, and its point."""
-    step = np.linalg.pinv(jac @ across)
+    """Return the lowest cost found from ``s`` re-fitted along ``across``, and its point.
+
+    The re-fit stops once a step gains less than :data:`GAIN` of ``rise`` (the 95 %
+    threshold), or after :data:`REFITS` simulations.
+    """
+    step = seen_inverse(jac @ across)
     z, best, where = np.zeros(across.shape[1]), math.inf, None
     for _ in range(REFITS):
         point = space.to_x(np.clip(s + across @ z, space.s_lower, space.s_upper))
@@ -103,9 +127,10 @@ def _profile(
         cost, r = float(ev.costs[0, 0]), ev.residuals[0] if ev.residuals else None
         if not math.isfinite(cost):
             break
+        gained = best - cost
         if cost < best:
             best, where = cost, point
-        if r is None:
+        if r is None or gained < GAIN * rise:
             break
         z = z - step @ r
     return best, where
@@ -147,6 +172,24 @@ def structural(
     return True
 
 
+def _along(space: Space, c: dict, points: list[dict[str, float]], v: np.ndarray) -> None:
+    """Take the direction of a flat combination ``c`` from its two re-fitted probes.
+
+    The points lie on the valley, so the chord between them is its direction, where the
+    finite differences' eigenvector ``v`` is tilted by the solver's noise: on
+    ``Mass_Damper`` the common scale of mass and damping came out with weights 0.552
+    and 0.538, and the combination fixed across it was named ``damper.d mass.m^-0.974``
+    with an interval that excluded the true d / m.
+    """
+    chord = space.to_s(points[0]) - space.to_s(points[1])
+    norm = float(np.linalg.norm(chord))
+    if not norm > 0 or not np.all(np.isfinite(chord)):
+        return
+    chord = chord / norm * (1.0 if float(chord @ v) >= 0 else -1.0)
+    c["direction"] = [float(e) for e in chord]
+    c["terms"] = combination_terms(space, chord)
+
+
 def probe_combinations(
     evaluator: Evaluator,
     space: Space,
@@ -174,7 +217,9 @@ def probe_combinations(
         v = v / np.linalg.norm(v)
         across = np.linalg.svd(np.eye(space.dim) - np.outer(v, v))[0][:, : space.dim - 1]
         step = SPAN * t * float(c["std_error"])
-        found = [_profile(evaluator, space, s0 + sign * step * v, across, jac) for sign in (1, -1)]
+        found = [
+            _profile(evaluator, space, s0 + sign * step * v, across, jac, rise) for sign in (1, -1)
+        ]
         finite = [f for f, _ in found if math.isfinite(f)]
         if not finite or max(finite) - _level(evaluator, space, s0, v, cost) > FLAT * rise:
             continue
@@ -183,8 +228,10 @@ def probe_combinations(
             f"profiled {step:.3g} search units along it, both ways, the cost rises by less "
             "than the noise"
         )
-        level = math.sqrt(cost / max(jac.shape[0], 1))
         points = [p for _, p in found if p is not None]
+        if len(points) == 2:
+            _along(space, c, points, v)
+        level = math.sqrt(cost / max(jac.shape[0], 1))
         c["structural"] = structural(evaluator, x, points, level)
         if c["structural"]:
             c["why"] += (
@@ -261,6 +308,13 @@ def _rounded(a: float) -> float:
     return float(k) if abs(a - k) < 0.02 * max(abs(a), 1.0) and k != 0 else a
 
 
+def _finite(interval: list[float]) -> list[float | None]:
+    """Return the interval, or ``[None, None]`` (open) where its standard error is infinite."""
+    if all(math.isfinite(e) for e in interval):
+        return list(interval)
+    return [None, None]
+
+
 def fixed_across(
     space: Space, u: Uncertainty, v: np.ndarray, members: list[str]
 ) -> list[dict[str, object]]:
@@ -275,16 +329,13 @@ def fixed_across(
     projected out (along ``v`` it measured the solver's noise, not the data). Members
     of mixed coordinates are not combined.
     """
-    cov = getattr(u, "cov", None)
     idx = [space.names.index(n) for n in members]
-    if cov is None or len(idx) < 2 or len({bool(space.log[j]) for j in idx}) > 1:
+    if u.cov is None or len(idx) < 2 or len({bool(space.log[j]) for j in idx}) > 1:
         return []
     log = bool(space.log[idx[0]])
     change = v * space.width  # how each working-domain value moves along v
-    finite = np.where(np.isfinite(cov), cov, 0.0)
     unit = v / max(float(np.linalg.norm(v)), 1e-300)
     keep = np.eye(space.dim) - np.outer(unit, unit)
-    cov_p = keep @ finite @ keep
     t = quantile(max(min(u.dof.values(), default=1.0), 1.0))
     # the pivot is the member that moves against the others (C against R1 and R2), so
     # that each pair is a product, R1 C and R2 C, not a ratio of two that move together
@@ -297,15 +348,16 @@ def fixed_across(
         g = np.zeros(space.dim)
         for i, coef in a.items():
             g[i] = coef * space.width[i]
-        se = math.sqrt(max(float(g @ cov_p @ g), 0.0))
+        se = math.sqrt(u.variance(keep @ g))
         values = [u.values[n] for n in names]
         if log and all(x > 0 for x in values):
             level = sum(coef * math.log10(u.values[space.names[i]]) for i, coef in a.items())
             name = " ".join(f"{space.names[i]}{_exponent(coef)}" for i, coef in a.items())
             interval = [10 ** (level - t * se), 10 ** (level + t * se)]
-            out.append({"name": name, "value": 10**level, "interval": interval})
+            out.append({"name": name, "value": 10**level, "interval": _finite(interval)})
         elif not log:
             level = sum(coef * u.values[space.names[i]] for i, coef in a.items())
             name = " ".join(f"{coef:+.3g} {space.names[i]}" for i, coef in a.items())
-            out.append({"name": name, "value": level, "interval": [level - t * se, level + t * se]})
+            interval = [level - t * se, level + t * se]
+            out.append({"name": name, "value": level, "interval": _finite(interval)})
     return out

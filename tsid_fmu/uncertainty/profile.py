@@ -36,6 +36,7 @@ import numpy as np
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.local.fdstep import known_noise, steps_for
 from tsid_fmu.search.space import Space
+from tsid_fmu.uncertainty.intervals import seen_inverse
 
 __all__ = ["CHI2_95", "RESOLUTION", "ProfileProblem", "profile_intervals"]
 
@@ -143,7 +144,7 @@ class _Secant:
     def pinv(self) -> np.ndarray:
         """Pseudo-inverse of the other parameters' columns."""
         if self._pinv is None:
-            self._pinv = np.linalg.pinv(self.jac[:, self.others])
+            self._pinv = seen_inverse(self.jac[:, self.others])
         return self._pinv
 
     def update(self, s: np.ndarray, r: np.ndarray) -> None:
