@@ -98,6 +98,7 @@ def me_free_data(fmu: Path, truth: dict[str, float]) -> Made:
     from tsid_fmu.fmu import FMUSession
 
     t = np.arange(0, 2.0 + 1e-9, 0.002)
+    truth = {k: truth[k] for k in ("mass.m", "damper.d", "spring.c")}
     with FMUSession(
         fmu, ["f"], ["y"], parameters=list(truth), interface="me", tolerance=1e-10
     ) as s:

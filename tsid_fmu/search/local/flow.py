@@ -77,6 +77,11 @@ def local_search(
     floor = noise_floor(evaluator, study.method.weighting == "noise")
     first = stages[0]
     why = _unsettled(stages, floor) or _collapsed(stages[-1])
+    if why:
+        before = len(stages)
+        stages = _in_combinations(ctx, stages, exps)
+        if len(stages) > before:
+            why = _unsettled(stages, floor)
     if why and first.kind == "taguchi" and any("handover" in r.extra for r in first.records):
         note(ctx, f"{why}: the Taguchi stage goes on")
         stages[0] = resume(first.records, stages[-1].cost)
