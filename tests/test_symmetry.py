@@ -249,3 +249,15 @@ def test_a_probe_refits_until_the_cost_stops_falling():
     assert u.combinations[1]["determined"] is False
     assert u.intervals == {"a": [None, None], "b": [None, None]}
     assert ev.calls <= 2 * probe.REFITS + 1
+
+
+def test_a_chord_far_from_the_direction_does_not_replace_it():
+    """A probe clipped at a bound gives a chord far off the valley: the differences'
+    direction is kept (only a tilt of up to about 25 degrees is corrected)."""
+    space, _, _, _, _ = _case(curved=0.0)
+    v = np.array([math.sqrt(0.5), math.sqrt(0.5)])
+    c = {"direction": list(v), "terms": {"lg a": 0.707, "lg b": 0.707}}
+    probe._along(space, c, [{"a": 30.0, "b": 3.0}, {"a": 3.0, "b": 3.0}], v)  # 45 degrees
+    assert c["direction"] == list(v)
+    probe._along(space, c, [{"a": 30.0, "b": 25.0}, {"a": 3.0, "b": 3.0}], v)  # 2 degrees
+    assert c["direction"] != list(v) and c["direction"][0] > c["direction"][1]

@@ -69,6 +69,10 @@ REFITS = 10
 re-fits. OpenModelica's ``Mass_Damper`` from ``tsid init`` (mass, stiffness and damping
 scaled together, the spring's offsets following the force over stiffness) rose 5.1
 after 3, 0.03 after 4 and 0 after 5; at most 3 called its exact symmetry determined."""
+CHORD_COSINE = 0.9
+"""The chord between a flat combination's two probes replaces its direction only within
+about 25 degrees of it (a cosine of this or more): the solver's noise tilts a direction
+by a few degrees; a chord further off comes from a probe clipped at a bound."""
 GAIN = 0.01
 """A re-fit stops once a step lowers the cost by less than this share of the 95 %
 threshold (as a profile's re-fit does, :data:`tsid_fmu.uncertainty.profile.CHORD_STEPS`)."""
@@ -186,6 +190,8 @@ def _along(space: Space, c: dict, points: list[dict[str, float]], v: np.ndarray)
     if not norm > 0 or not np.all(np.isfinite(chord)):
         return
     chord = chord / norm * (1.0 if float(chord @ v) >= 0 else -1.0)
+    if float(chord @ v) < CHORD_COSINE * float(np.linalg.norm(v)):
+        return  # not a tilt: a probe held at a bound, or a re-fit that went elsewhere
     c["direction"] = [float(e) for e in chord]
     c["terms"] = combination_terms(space, chord)
 
