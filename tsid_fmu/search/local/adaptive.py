@@ -9,10 +9,13 @@ sequence of stages:
 3. if the refined answer is not shown to be stationary, or is a poor fit
    (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the noise floor), or the
    refinement's trust region collapsed (SciPy's ``xtol``: its local model did not hold,
-   as on dry friction's rough cost), the refinement may sit in a local minimum: the
-   Taguchi stage goes on from where it handed over, to its own end (Case 3 or a limit)
-   or until its best set lies below the refinement's answer and an iteration stops
-   lowering it (it hands back), and its best set is refined again;
+   as on dry friction's rough cost), it is first refined in the combinations the data
+   fix where step 6's conditions hold (the SISO example's first refinement stopped in
+   the valley along ``F_vm + B_s``: 229 runs in all instead of 596); where the answer is
+   still unsettled, the refinement may sit in a local minimum: the Taguchi stage goes
+   on from where it handed over, to its own end (Case 3 or a limit) or until its best
+   set lies below the refinement's answer and an iteration stops lowering it (it hands
+   back), and its best set is refined again;
 4. while that still holds, the refinement follows a minimum over growing horizons: on
    the first :data:`HORIZONS` fractions of each experiment's samples in turn, from the
    arrays' best set, then on all of them (a model that swings or rings has few valleys
