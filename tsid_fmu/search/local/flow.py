@@ -79,7 +79,7 @@ def local_search(
     why = _unsettled(stages, floor) or _collapsed(stages[-1])
     if why:
         before = len(stages)
-        stages = _in_combinations(ctx, stages, exps)
+        stages = _in_combinations(ctx, stages, exps, "combinations_first")
         if len(stages) > before:
             why = _unsettled(stages, floor)
     if why and first.kind == "taguchi" and any("handover" in r.extra for r in first.records):
@@ -120,7 +120,9 @@ def _handed_over(stages: list[StageResult]) -> dict[str, float]:
     return answer_stage(stages).x
 
 
-def _in_combinations(ctx: Context, stages: list[StageResult], exps: list[str]) -> list[StageResult]:
+def _in_combinations(
+    ctx: Context, stages: list[StageResult], exps: list[str], key: str = "combinations"
+) -> list[StageResult]:
     """Refine the answer in the combinations the data fix, where that lowers it.
 
     :func:`~tsid_fmu.search.local.combined.refine_in_combinations`: only where the answer's
@@ -134,7 +136,7 @@ def _in_combinations(ctx: Context, stages: list[StageResult], exps: list[str]) -
         return stages  # paused: nothing more runs
     answer = answer_stage(stages)
     start = {n: float(answer.x[n]) for n in ctx.study.parameter_names}
-    done = ctx.store.stage("combinations")
+    done = ctx.store.stage(key)
     if done is not None and done.extra.get("start") == start:
         stages.append(done)
         return stages
@@ -144,7 +146,7 @@ def _in_combinations(ctx: Context, stages: list[StageResult], exps: list[str]) -
     lower.experiments = list(exps)
     lower.extra["start"] = start
     if lower.status != 2:  # a paused one is run again on --resume
-        ctx.store.write_stage("combinations", lower)
+        ctx.store.write_stage(key, lower)
     stages.append(lower)
     return stages
 
