@@ -307,7 +307,8 @@ def refine_in_combinations(
     answer = answer_stage(stages)
     if "pairs" in answer.extra:
         return None, 0  # refined in its combinations already (a study of its own)
-    if not decided_by_trial(answer.extra.get("stationarity") or {}):
+    crawled = answer.extra.get("stop") == "valley"  # stopped in the valley (:mod:`.problem`)
+    if not crawled and not decided_by_trial(answer.extra.get("stationarity") or {}):
         return None, 0
     names = list(study.parameter_names)
     found = answer.extra.get("parallel")  # from the refinement's last Jacobian

@@ -209,7 +209,9 @@ def refine_stage(
     gate = _floor_test(space, problem, gate, fixed, floor, extra) if gate.holds else gate
     (cost, x), nfev = problem.best, evaluator.nfev - n0
     extra["stationarity"] = gate.to_dict()
-    if problem.jacobian is not None and decided_by_trial(extra["stationarity"]):
+    if problem.jacobian is not None and (
+        decided_by_trial(extra["stationarity"]) or extra.get("stop") == "valley"
+    ):
         # what the refinement in combinations reads: no runs spent again on a Jacobian
         s_lin, _, jac = problem.jacobian
         extra["parallel"] = named_pairs(space, space.to_x(s_lin), jac)
