@@ -5,7 +5,11 @@ sequence of stages:
 
 1. the Taguchi stage scores its start points and runs one array over the first ranges,
    then hands over (:func:`tsid_fmu.search.taguchi.stage._handover`);
-2. the least-squares refinement polishes the best set;
+2. the least-squares refinement polishes the best set; where its trust region crawls
+   along a valley of two parameters that act through one combination (a step gaining
+   less than :data:`~tsid_fmu.search.verdict.GATE_RTOL` of the cost, parallel columns:
+   :mod:`~tsid_fmu.search.local.problem`), it stops, and goes on in that combination
+   as one stage (step 6; the SISO example: 149 runs in all instead of 229);
 3. if the refined answer is not shown to be stationary, or is a poor fit
    (:data:`~tsid_fmu.search.verdict.POOR_FIT` times the noise floor), or the
    refinement's trust region collapsed (SciPy's ``xtol``: its local model did not hold,
@@ -26,8 +30,9 @@ sequence of stages:
    start points first (where a local method alone would start), then from the next-best
    run of the arrays that lies away from every start and answer so far (the MISO
    paper's re-run from the next-best run);
-6. where the answer's test held by a trial alone, or its simulated step was lower, and
-   two parameters act through one combination, the refinement in that combination
+6. where the answer's test held by a trial alone, or its simulated step was lower, or
+   the refinement stopped crawling (step 2), and two parameters act through one
+   combination, the refinement in that combination
    (:mod:`tsid_fmu.search.local.combined`), kept where lower;
 7. the answer is the lowest-cost set of every stage, and the study has converged only
    where a stationarity test holds there (:mod:`tsid_fmu.search.verdict`). A poor fit
