@@ -100,13 +100,14 @@ def test_siso_example_identifies_the_parameters(tmp_path):
     study = load_study(EXAMPLES / "lsea_siso" / "study.toml")
     res = identify(study, tmp_path / "out", plots=False)
     assert res.success, res.message
-    # the refinement's test held by a trial; F_vm and B_s act through their sum, so the
-    # local search ends with the refinement in that combination (README, "Set up and run";
+    # F_vm and B_s act through their sum: the refinement crawls along that valley and goes
+    # on in the combination, one stage (README, "Set up and run";
     # docs/explanation/procedure.md, step 5)
-    assert [s.kind for s in res.stages] == ["taguchi", "refinement", "refinement"]
-    assert [p[:2] for p in res.stages[2].extra["pairs"]] == [["F_vm", "B_s"]]
+    assert [s.kind for s in res.stages] == ["taguchi", "refinement"]
+    assert [p[:2] for p in res.stages[1].extra["pairs"]] == [["F_vm", "B_s"]]
+    assert res.stages[1].extra["crawled"]["cost"] > res.fun
     assert siso_misses(res.params, res.intervals) == []
-    assert res.nfev <= 500
+    assert res.nfev <= 200  # 149 measured; the arrays to their end: 437
     assert res.fit["measured"]["F_o"]["fit_percent"] > 97
     assert (tmp_path / "out" / "report.md").is_file()
     # the FMU's Co-Simulation matches an accurate solution: no solver warning (issue 16)
