@@ -20,7 +20,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.local.columns import parallel_pairs
+from tsid_fmu.search.local.columns import named_pairs
 from tsid_fmu.search.local.fdstep import known_noise, noise_of, solver_noise, steps_for
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.verdict import (
@@ -138,10 +138,7 @@ class _Problem:
         if self.jacobian is None:
             return False
         s, _, jac = self.jacobian
-        x = self.space.to_x(s)
-        scales = [self.space.local_scale(k, float(x[n])) for k, n in enumerate(self.space.names)]
-        scales = np.array([v if v > 0 else 1.0 for v in scales])
-        return bool(parallel_pairs(np.asarray(jac, float) / scales))
+        return bool(named_pairs(self.space, self.space.to_x(s), jac))
 
     def jac(self, s: np.ndarray) -> np.ndarray:
         if self.last is None or not np.array_equal(self.last[0], s):
