@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.search.local.adaptive import answer_stage
-from tsid_fmu.search.local.columns import PARALLEL, parallel_pairs
+from tsid_fmu.search.local.columns import PARALLEL, UNFINISHED, parallel_pairs
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure.optima import settle, short
@@ -290,7 +290,9 @@ def refine_in_combinations(
 ) -> tuple[StageResult | None, int]:
     """Refine a structure's answer in the combinations the data fix, where that lowers it.
 
-    Only where the answer's stationarity test held by a trial alone ("step tried": the
+    Only where the refinement did not end by its own tests (:data:`~.columns.UNFINISHED`:
+    it crawled along the valley, or ran out of runs), or where the answer's stationarity
+    test held by a trial alone ("step tried": the
     first-order model does not hold this close to the answer, as on a cost made rough
     by events), or failed with its step, simulated, lower (a refinement that stopped at
     its tolerances in a valley: law-3 dev seed 116, ``B_s`` at 0.82 of 2.5, 1.009 x the
@@ -307,8 +309,8 @@ def refine_in_combinations(
     answer = answer_stage(stages)
     if "pairs" in answer.extra:
         return None, 0  # refined in its combinations already (a study of its own)
-    crawled = answer.extra.get("stop") == "valley"  # stopped in the valley (:mod:`.problem`)
-    if not crawled and not decided_by_trial(answer.extra.get("stationarity") or {}):
+    unfinished = answer.extra.get("stop") in UNFINISHED  # not ended by its own tests
+    if not unfinished and not decided_by_trial(answer.extra.get("stationarity") or {}):
         return None, 0
     names = list(study.parameter_names)
     found = answer.extra.get("parallel")  # from the refinement's last Jacobian

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.local.columns import named_pairs
+from tsid_fmu.search.local.columns import UNFINISHED, named_pairs
 from tsid_fmu.search.local.problem import (
     _FTOL,
     _GTOL,
@@ -210,7 +210,7 @@ def refine_stage(
     (cost, x), nfev = problem.best, evaluator.nfev - n0
     extra["stationarity"] = gate.to_dict()
     if problem.jacobian is not None and (
-        decided_by_trial(extra["stationarity"]) or extra.get("stop") == "valley"
+        decided_by_trial(extra["stationarity"]) or extra.get("stop") in UNFINISHED
     ):
         # what the refinement in combinations reads: no runs spent again on a Jacobian
         s_lin, _, jac = problem.jacobian
