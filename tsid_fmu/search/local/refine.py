@@ -148,6 +148,20 @@ def _floor_test(
     return Stationarity(False, gate.test, gain, cost, said)
 
 
+def _keep_pairs(problem: _Problem, space: Space, extra: dict[str, Any]) -> None:
+    """Keep the last Jacobian's parallel pairs where the refinement in combinations reads them.
+
+    That is where the test was decided by a trial, or the refinement's own tests did not
+    end it (:data:`~tsid_fmu.search.local.columns.UNFINISHED`): no runs are spent again
+    on a Jacobian there.
+    """
+    if problem.jacobian is None:
+        return
+    if decided_by_trial(extra["stationarity"]) or extra.get("stop") in UNFINISHED:
+        s_lin, _, jac = problem.jacobian
+        extra["parallel"] = named_pairs(space, space.to_x(s_lin), jac)
+
+
 def refine_stage(
     name: str,
     space: Space,
@@ -209,12 +223,7 @@ def refine_stage(
     gate = _floor_test(space, problem, gate, fixed, floor, extra) if gate.holds else gate
     (cost, x), nfev = problem.best, evaluator.nfev - n0
     extra["stationarity"] = gate.to_dict()
-    if problem.jacobian is not None and (
-        decided_by_trial(extra["stationarity"]) or extra.get("stop") in UNFINISHED
-    ):
-        # what the refinement in combinations reads: no runs spent again on a Jacobian
-        s_lin, _, jac = problem.jacobian
-        extra["parallel"] = named_pairs(space, space.to_x(s_lin), jac)
+    _keep_pairs(problem, space, extra)
     if status == 0 and not gate.holds:
         status = 1
         message += f"; not shown to be an optimum: {gate.detail}"
