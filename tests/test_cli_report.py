@@ -189,6 +189,18 @@ def test_progress_shows_each_slow_run_with_the_time_left():
     assert len(fast.getvalue().splitlines()) == 1  # fast runs: no line per run
 
 
+def test_the_last_progress_line_counts_one_iteration_in_the_singular():
+    out = io.StringIO()
+    progress = ConsoleProgress(out, clock=lambda: 0.0)
+    for nit in (1, 2):
+        res = argparse.Namespace(message="converged", nit=nit, nfev=149)
+        progress("done", {"result": res})
+    assert out.getvalue().splitlines() == [
+        "converged (1 Taguchi iteration, 149 simulations, 0.0 s)",
+        "converged (2 Taguchi iterations, 149 simulations, 0.0 s)",
+    ]
+
+
 def test_info_escapes_control_characters_from_the_model_description(tmp_path, capsys):
     import zipfile
 

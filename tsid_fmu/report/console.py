@@ -8,7 +8,7 @@ import sys
 import time
 from typing import Any, TextIO
 
-from tsid_fmu.report.style import fmt
+from tsid_fmu.report.style import counted, fmt
 
 __all__ = ["COMPILING", "SLOW_ROW", "ConsoleProgress"]
 
@@ -90,7 +90,7 @@ class ConsoleProgress:
         elif event == "done":
             res = info["result"]
             self._print(
-                f"{res.message} ({res.nit} Taguchi iterations, {res.nfev} simulations, "
+                f"{res.message} ({counted(res.nit, 'Taguchi iteration')}, {res.nfev} simulations, "
                 f"{now - self.t0:.1f} s)"
             )
 

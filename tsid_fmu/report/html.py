@@ -21,7 +21,7 @@ from tsid_fmu.report.notebook import parameter_columns, parameter_rows, sampled_
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.render import Figures, iteration_folders
 from tsid_fmu.report.scored import experiment_notes
-from tsid_fmu.report.style import cost_name, fmt, input_contribution
+from tsid_fmu.report.style import cost_name, counted, fmt, input_contribution
 from tsid_fmu.result import PAUSED, STATUS, IdentificationResult
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import atomic_write
@@ -95,7 +95,7 @@ def _headline(result: IdentificationResult, cost: str) -> str:
         f"<li>FMU: <code>{esc(fmu_label(result.study))}</code></li>",
         f"<li>Cost ({esc(cost)}) on the measured inputs of the identification experiments: "
         f"<b>{fmt(result.fun)}</b></li>",
-        f"<li>{result.nit} Taguchi iterations; {result.nfev} simulations by the stages "
+        f"<li>{counted(result.nit, 'Taguchi iteration')}; {result.nfev} simulations by the stages "
         "(the fit, interval and plot simulations not counted)</li>",
         "</ul>",
     ]

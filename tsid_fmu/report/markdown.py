@@ -8,7 +8,7 @@ from typing import Any
 from tsid_fmu.report.notebook import sampled_note
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.scored import experiment_notes
-from tsid_fmu.report.style import cost_name, fmt, input_contribution
+from tsid_fmu.report.style import cost_name, counted, fmt, input_contribution
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
@@ -249,7 +249,7 @@ def markdown_report(result: IdentificationResult) -> str:
         "",
         f"- FMU: `{escape(fmu_label(study))}`",
         f"- Result: **{escape(result.message)}** (status {result.status}: {STATUS[result.status]}; "
-        f"{result.nit} Taguchi iterations, {result.nfev} simulations)",
+        f"{counted(result.nit, 'Taguchi iteration')}, {result.nfev} simulations)",
         f"- Cost ({cost}) on the measured inputs of the identification experiments: "
         f"{fmt(result.fun)}",
         "- The whole report with tables and plots: [report.html](report.html)",

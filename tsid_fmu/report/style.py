@@ -83,6 +83,11 @@ def fmt(x: Any, sig: int = SIGNIFICANT) -> str:
     return f"{mantissa}e{int(exponent)}"
 
 
+def counted(n: int, word: str) -> str:
+    """``n`` and ``word``, plural unless ``n`` is 1: "1 Taguchi iteration", "2 simulations"."""
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
 def fmt_levels(values: Sequence[float]) -> list[str]:
     """Format the levels of one factor alike: as few figures as tell them apart (3-6)."""
     labels = [fmt(v, 3) for v in values]
