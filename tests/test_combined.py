@@ -207,12 +207,21 @@ class _Store:
         self.kept[key] = result
 
 
+def _context(ev):
+    """The search context of a study on ``ev`` (noise weighting), and its trail store."""
+    from tsid_fmu.search.context import Context, Control
+
+    study = _Study()
+    study.method = types.SimpleNamespace(leveling=LevelingOptions(), weighting="noise")
+    store = _Store()
+    return Context(study, _Evs(ev), store, None, Control()), store
+
+
 @pytest.mark.parametrize("adaptive", [False, True])
 def test_a_study_of_one_structure_is_refined_in_its_combinations_too(monkeypatch, adaptive):
     """Not only the structure route: a plain study whose refinement's test held by a trial
     in the valley (SISO law 3's own study, dev seed 122: 1.021 x the optimum, "converged")
     ends refined in the combination, read back from its trail when run again."""
-    from tsid_fmu.search.context import Context, Control
     from tsid_fmu.search.local import flow as local
 
     ev = CurveEvaluator(_model, MEASURED, 0.001)
@@ -220,10 +229,7 @@ def test_a_study_of_one_structure_is_refined_in_its_combinations_too(monkeypatch
     held = StageResult("refinement", "refinement", dict(START), ev.cost(**START), 9, "",
                        extra={"stationarity": gate})  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: held)  # the valley's stop
-    study = _Study()
-    study.method = types.SimpleNamespace(leveling=LevelingOptions(), weighting="noise")
-    store = _Store()
-    ctx = Context(study, _Evs(ev), store, None, Control())
+    ctx, store = _context(ev)
     arrays = StageResult("taguchi", "taguchi", dict(START), held.cost, 50, "")
     stages = local.local_search(ctx, [arrays], adaptive, resume=None)
     last = stages[-1]
@@ -347,7 +353,6 @@ def test_an_unsettled_refinement_is_refined_in_its_combinations_before_the_array
     the arrays went on for 369 runs (596 in all); refined in that combination from
     there first, the study ends at 18511.13 in 229 runs. The arrays go on only where
     the answer is still unsettled after it."""
-    from tsid_fmu.search.context import Context, Control
     from tsid_fmu.search.local import flow as local
 
     ev = CurveEvaluator(_model, MEASURED, 0.001)
@@ -356,9 +361,7 @@ def test_an_unsettled_refinement_is_refined_in_its_combinations_before_the_array
     stopped = StageResult("refinement", "refinement", dict(START), ev.cost(**START), 9, "",
                           status=1, extra={"stationarity": gate})  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: stopped)
-    study = _Study()
-    study.method = types.SimpleNamespace(leveling=LevelingOptions(), weighting="noise")
-    ctx = Context(study, _Evs(ev), _Store(), None, Control())
+    ctx, _ = _context(ev)
     handed = types.SimpleNamespace(extra={"handover": "after iteration 1"})
     arrays = StageResult("taguchi", "taguchi", dict(START), 1e6, 50, "", records=[handed])
 
@@ -425,7 +428,6 @@ def test_a_refinement_that_crawled_and_its_combination_are_reported_as_one_stage
     kernel), so the stage that ends there is continued, not followed: one refinement,
     its runs summed, the combination's answer and test, the crawl kept in its extra.
     Read back from the trail, the same."""
-    from tsid_fmu.search.context import Context, Control
     from tsid_fmu.search.local import flow as local
 
     ev = CurveEvaluator(_model, MEASURED, 0.001)
@@ -435,10 +437,7 @@ def test_a_refinement_that_crawled_and_its_combination_are_reported_as_one_stage
                           extra={"stationarity": gate, "stop": "valley",
                                  "parallel": [["v", "b", 1.0]]})  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: crawled)
-    study = _Study()
-    study.method = types.SimpleNamespace(leveling=LevelingOptions(), weighting="noise")
-    store = _Store()
-    ctx = Context(study, _Evs(ev), store, None, Control())
+    ctx, store = _context(ev)
     arrays = StageResult("taguchi", "taguchi", dict(START), crawled.cost, 50, "")
     stages = local.local_search(ctx, [arrays], True, resume=None)
     assert [s.kind for s in stages] == ["taguchi", "refinement"]
