@@ -352,6 +352,8 @@ def coverage(res, truth: dict[str, float]) -> dict:
                 "hac_over_crb": rel / crb if rel and crb else None,
                 "dof": u.dof.get(name),
                 "profile": u.profile.get(name),
+                # at the profile's resolution: the interval is a bound, not an estimate
+                "bound": name in u.resolution,
             }
     return {
         "inside": inside,

@@ -11,6 +11,8 @@ import math
 import statistics
 from collections.abc import Sequence
 
+import numpy as np
+
 #: ``--check``: lowest acceptable success rate of tsid, highest sims ratio.
 MIN_SUCCESS = 0.95
 MAX_SIMS_RATIO = 2.0
@@ -145,12 +147,46 @@ def coverage_lines(rows: Sequence[dict]) -> list[str]:
             f"no mismatch: median error / interval half-width {statistics.median(reach):.2f} "
             "(0.34 for calibrated 95 % intervals: lower is conservative)"
         )
+    lines += _calibration_lines(groups["no mismatch"])
     lines.append(
         f"silent misses (outside the interval, not flagged): {len(silent)} of {len(every)} "
         f"parameters ({100 * len(silent) / max(len(every), 1):.1f} %); flagged without a "
         f"mismatch drawn: {_rate(false_alarm)}"
     )
     return lines
+
+
+def _calibration_lines(rows: Sequence[dict]) -> list[str]:
+    """Calibration without a mismatch: coverage split into estimated intervals and those
+    at the profile's resolution (reported as bounds), the data sets they come from, and
+    the errors in standard errors of the hand studies (one answer per data set: a data
+    set's ``tsid init`` answer is nearly the same, and its parameters are correlated, so
+    the values are not independent and the share inside moves by more than a binomial
+    over parameters would)."""
+    kinds: dict[str, list[bool]] = {"estimates": [], "resolution bounds": []}
+    z: list[float] = []
+    for r in rows:
+        cov = r["methods"]["tsid"]["coverage"]
+        for name, hit in cov["inside"].items():
+            d = cov.get("detail", {}).get(name, {})
+            kinds["resolution bounds" if d.get("bound") else "estimates"].append(bool(hit))
+            if r["variant"] == "hand" and not d.get("bound") and d.get("z") is not None:
+                z.append(abs(float(d["z"])))
+    sets = len({(r["family"], r["seed"]) for r in rows})
+    out = [
+        f"no mismatch, {kind}: {sum(h)}/{len(h)} inside ({100 * sum(h) / len(h):.1f} %)"
+        for kind, h in kinds.items()
+        if h
+    ]
+    if z:
+        a = np.asarray(z)
+        out.append(
+            f"no mismatch, {sets} data sets; |error| / standard error of the hand studies' "
+            f"estimates ({a.size}): median {np.median(a):.2f} (0.67 calibrated), within 1 "
+            f"{100 * np.mean(a < 1):.0f} % (68 %), "
+            f"within 1.96 {100 * np.mean(a < 1.96):.0f} % (95 %)"
+        )
+    return out
 
 
 def rounds_lines(rows: Sequence[dict]) -> list[str]:
