@@ -186,14 +186,12 @@ def main() -> int:
         return 0
     study = tsid_fmu.Study.from_toml(study_file)
     first = study.experiments[0]
-    # "study": the experiment added to the study file as it is (its first levels, so the
-    # profile's resolution, a fraction of a first range, is the prediction's); "around":
-    # five levels from half to twice each answer (inside its bounds), as a user starting
-    # from the first answer might write
+    # "around": the first levels the design predicts for and reports (half to twice
+    # each answer, inside its bounds: Design.levels); "study": the experiment added to
+    # the study file as it is, its own first levels
     around = study.parameters if args.levels == "study" else [
-        tsid_fmu.Parameter(p.name, [min(max(float(base.params[p.name]) * f, p.min), p.max)
-                                    for f in (0.5, 0.7, 1.0, 1.4, 2.0)],
-                           min=p.min, max=p.max, unit=p.unit)
+        tsid_fmu.Parameter(p.name, d.levels[p.name], min=p.min, max=p.max, unit=p.unit)
+        if p.name in d.levels else p
         for p in study.parameters
     ]  # fmt: skip
     ratios: dict[str, list[float]] = {n: [] for n in names}

@@ -79,6 +79,47 @@ def test_a_design_proposes_an_input_inside_the_limits_and_predicts_narrower_inte
     assert "predicted, with the proposal" in (tmp_path / "design" / "design.md").read_text()
 
 
+def test_the_prediction_is_for_the_study_started_around_the_answer(tmp_path, monkeypatch):
+    """The predicted intervals are those of the study the user runs next: the proposal
+    added, first levels from half to twice each answer (the intervals' resolution and
+    the finite differences' steps are fractions of a first range), and the report says
+    which levels."""
+    from tsid_fmu.design import plan as plan_module
+    from tsid_fmu.design import run as run_module
+
+    result = _lag(tmp_path)
+    spaces = []
+    real = run_module.predicted_intervals
+
+    def spy(spec, proposal, outputs, noise, space, x, *args, **kwargs):
+        spaces.append((space, dict(x)))
+        return real(spec, proposal, outputs, noise, space, x, *args, **kwargs)
+
+    monkeypatch.setattr(run_module, "predicted_intervals", spy)
+    d = design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=2))
+    ((space, x),) = spaces
+    # every first range of that study runs from half to twice the answer
+    assert np.allclose(space.to_s({n: 0.5 * v for n, v in x.items()}), -0.5)
+    assert np.allclose(space.to_s({n: 2.0 * v for n, v in x.items()}), 0.5)
+    for name in d.names:
+        want = [float(result.params[name]) * f for f in plan_module.FOLLOW_UP]
+        assert d.levels[name] == pytest.approx(want)
+        assert d.to_dict()["parameters"][d.names.index(name)]["first_levels"] == pytest.approx(want)
+    assert "first levels" in d.markdown() and "half to twice each value" in d.markdown()
+
+
+def test_follow_up_levels_keep_the_studys_own_where_the_answer_leaves_no_range():
+    from tsid_fmu.design.plan import follow_up_levels
+
+    own = {"a": [1.0, 2.0, 4.0], "b": [0.5, 1.0, 2.0], "c": [0.5, 1.0, 1.5]}
+    bounds = {"a": (0.0, math.inf), "b": (-math.inf, 3.0), "c": (0.0, 2.0)}
+    study = SimpleNamespace(first_levels=lambda: own, bounds=lambda: bounds)
+    levels = follow_up_levels(study, {"a": 0.0, "b": 2.0, "c": 2.0})
+    assert levels["a"] == [1.0, 2.0, 4.0]  # an answer of 0: no range around it
+    assert levels["b"] == [1.0, 1.4, 2.0, 2.8, 3.0]  # the upper bound clips
+    assert levels["c"] == [0.5, 1.0, 1.5]  # on its bound: three levels would merge
+
+
 def test_the_criterion_ranks_the_candidates_and_the_proposal_is_the_best(tmp_path):
     result = _lag(tmp_path)
     for criterion in ("D", "A"):

@@ -69,6 +69,10 @@ def _span(iv: list | None) -> str:
     return "not determined" if low is None and high is None else f"{_fmt(low)} .. {_fmt(high)}"
 
 
+def _levels(levels: list | None) -> str:
+    return "-" if not levels else ", ".join(f"{v:.4g}" for v in levels)
+
+
 def width(iv: list | None) -> float:
     """Return an interval's width; ``inf`` for an open one."""
     if not iv or iv[0] is None or iv[1] is None:
@@ -123,6 +127,10 @@ class Design:
     discrimination : dict or None
         Its evidence: ``structures``, ``chi2`` per pair with it, ``now`` on the study's
         inputs, ``scores`` per candidate.
+    levels : dict
+        First levels of the study ``after`` is predicted for: the study with the
+        proposal added, started around the answer (half to twice each value, inside its
+        bounds; :func:`~tsid_fmu.design.plan.follow_up_levels`). Empty without a proposal.
     """
 
     names: list[str]
@@ -144,6 +152,7 @@ class Design:
     nfev: int
     separating: Signal | None = None
     discrimination: dict[str, Any] | None = None
+    levels: dict[str, list[float]] = field(default_factory=dict)
 
     @property
     def verdict(self) -> str:
@@ -166,6 +175,7 @@ class Design:
                 "value": self.values[n],
                 "study": self.study_intervals.get(n),
                 "predicted_after": None if self.after is None else self.after[j],
+                "first_levels": self.levels.get(n),
             }
             for j, n in enumerate(self.names)
         ]
@@ -220,8 +230,16 @@ class Design:
             f"Criterion: {CRITERIA_TEXT[self.criterion]}.",
             f"{len(self.candidates)} candidates, {self.nfev} simulations.",
         ]
+        if self.levels:
+            facts.append(
+                "Predicted for the study with the proposal added as a second experiment, "
+                "started from the first levels below (half to twice each value): start "
+                "it so, since the intervals' resolution and finite-difference steps are "
+                "fractions of a first range."
+            )
         rows = [[r["parameter"], f"{r['value']:.5g}", _span(r["study"]),
-                 _span(r["predicted_after"])] for r in self.table()]  # fmt: skip
+                 _span(r["predicted_after"]), _levels(r["first_levels"])]
+                for r in self.table()]  # fmt: skip
         separate = None
         if self.discrimination is not None and self.separating is not None:
             d = self.discrimination
@@ -238,7 +256,8 @@ class Design:
             )
             if fixed:
                 structural.append(f"The data fix: {fixed}.")
-        columns = ["parameter", "value", "study's 95 % interval", "predicted, with the proposal"]
+        columns = ["parameter", "value", "study's 95 % interval", "predicted, with the proposal",
+                   "first levels"]  # fmt: skip
         return {"facts": facts, "intervals": (columns, rows), "separate": separate,
                 "structural": structural}  # fmt: skip
 

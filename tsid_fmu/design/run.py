@@ -220,9 +220,11 @@ def _explore(plan: Plan, result: Any, workers: Any, timeout: Any, say: Any) -> d
 def _predict(plan: Plan, e: dict, best: int, workers: Any, timeout: Any, say: Any) -> tuple:
     """Run the study's analysis with the proposal: its intervals, and the simulations."""
     one = candidate_spec(plan, [plan.signals[best].values])
+    # for the study the user runs next: the proposal added, first levels around the answer
+    follow = Space(plan.follow, plan.study.bounds(), plan.study.method.leveling)
     say(f"proposal {plan.signals[best].name}: the study's analysis with it, to predict")
     return predicted_intervals(
-        plan.spec, one, e["outputs"][best], e["residuals"][plan.template.name], plan.space,
+        plan.spec, one, e["outputs"][best], e["residuals"][plan.template.name], follow,
         plan.x, plan.options.seed, workers=workers, timeout=timeout,
     )  # fmt: skip
 
@@ -302,4 +304,5 @@ def design(
         nfev=nfev,
         separating=None if separate is None else plan.signals[separate["best"]],
         discrimination=separate,
+        levels={n: plan.follow[n] for n in space.names} if propose else {},
     )
