@@ -183,8 +183,13 @@ class Scorer:
         return int(self.ev.nfev)
 
     def residuals(self, s: np.ndarray) -> np.ndarray:
-        """Weighted residuals at ``s`` (a large constant vector where a run fails)."""
-        ev = self.ev.evaluate([self.to_x(s)])
+        """Weighted residuals at ``s`` (a large constant vector where a run fails, or
+        where ``s`` lies so far out that the parameter set overflows)."""
+        try:
+            x = self.to_x(s)
+        except OverflowError:
+            return np.full(self.size, 1e10)
+        ev = self.ev.evaluate([x])
         r = ev.residuals[0] if ev.residuals else None
         if r is None or not np.isfinite(ev.costs[0, 0]):
             return np.full(self.size, 1e10)
@@ -198,7 +203,10 @@ class Scorer:
 
     def cost(self, s: np.ndarray) -> float:
         """The study's cost at ``s`` (1e300 where a run fails, for the optimisers)."""
-        c = self.cost_x(self.to_x(s))
+        try:
+            c = self.cost_x(self.to_x(s))
+        except OverflowError:
+            return 1e300
         return c if math.isfinite(c) else 1e300
 
 
@@ -441,7 +449,19 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="exit 1 when tsid's success < 95 %% or its sims ratio > 2",
     )
+    parser.add_argument(
+        "--merge",
+        nargs="+",
+        default=None,
+        metavar="JSON",
+        help="run nothing: report the rows of earlier runs' --json files together",
+    )
     args = parser.parse_args(argv)
+    if args.merge:
+        rows = [row for f in args.merge for row in json.loads(Path(f).read_text())]
+        text, verdict = render(rows, 0.0, markdown=args.markdown, seeds=args.seeds, workers=0)
+        print(text)
+        return 1 if args.check and not verdict else 0
     seeds = "dev" if args.quick else args.seeds
     todo = tasks(seeds, args.quick, args.family, args.count)
     t0 = time.perf_counter()
