@@ -108,6 +108,31 @@ def test_the_prediction_is_for_the_study_started_around_the_answer(tmp_path, mon
     assert "first levels" in d.markdown() and "half to twice each value" in d.markdown()
 
 
+def test_the_synthetic_noise_is_centred_so_the_answer_is_its_optimum(tmp_path):
+    """The prediction's noise has no part along the proposal's sensitivities, so its
+    profiles start at the optimum, as the achieved ones do: each predicted interval sits
+    around the answer (off-centre, every interval came out wider)."""
+    from tsid_fmu.design.predict import centred
+
+    rng = np.random.default_rng(4)
+    sigma = np.array([0.5, 2.0])
+    jac = rng.normal(size=(200 * 2, 3))
+    noise = rng.normal(size=(200, 2)) * sigma
+    out = centred(noise, jac, sigma)
+    assert np.abs(jac.T @ (out / sigma).ravel()).max() < 1e-9
+    assert 0 < np.abs(out - noise).max() < 0.5 * np.abs(noise).max()
+    bad = jac.copy()
+    bad[0, 0] = np.nan
+    assert centred(noise, bad, sigma) is noise
+
+    result = _lag(tmp_path)
+    d = design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=2))
+    for j, name in enumerate(d.names):
+        low, high = d.after[j]
+        mid, half = 0.5 * (low + high), 0.5 * (high - low)
+        assert abs(mid - float(result.params[name])) < 0.1 * half, (name, low, high)
+
+
 def test_follow_up_levels_keep_the_studys_own_where_the_answer_leaves_no_range():
     from tsid_fmu.design.plan import follow_up_levels
 

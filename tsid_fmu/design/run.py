@@ -214,7 +214,7 @@ def _explore(plan: Plan, result: Any, workers: Any, timeout: Any, say: Any) -> d
             found.append(vecs[:, k])
         nfev += ev.nfev
     return {"f0": f0, "residuals": residuals, "fishers": fishers, "outputs": outputs,
-            "weak": weak, "found": found, "nfev": nfev}  # fmt: skip
+            "jacobians": jacs, "weak": weak, "found": found, "nfev": nfev}  # fmt: skip
 
 
 def _predict(plan: Plan, e: dict, best: int, workers: Any, timeout: Any, say: Any) -> tuple:
@@ -225,7 +225,8 @@ def _predict(plan: Plan, e: dict, best: int, workers: Any, timeout: Any, say: An
     say(f"proposal {plan.signals[best].name}: the study's analysis with it, to predict")
     return predicted_intervals(
         plan.spec, one, e["outputs"][best], e["residuals"][plan.template.name], follow,
-        plan.x, plan.options.seed, workers=workers, timeout=timeout,
+        plan.x, plan.options.seed, jacobian=e["jacobians"][best], sigma=plan.sigma,
+        workers=workers, timeout=timeout,
     )  # fmt: skip
 
 
