@@ -179,7 +179,8 @@ def follow_up_levels(study: Study, x: dict[str, float]) -> dict[str, list[float]
     steps are fractions of a first range, and where the model has events (dry friction)
     the steps change the intervals. On the SISO example, predicted with the study's own
     levels and achieved from these, F_vm's interval was 1.36 times the predicted one on
-    every noise seed; predicted with these, 1.08 (``benchmarks/design.py``).
+    every noise seed; predicted with these, 1.08 (1.14 with the noise centred:
+    ``benchmarks/design.py``).
     """
     bounds = study.bounds()
     out = {}
