@@ -136,13 +136,14 @@ def test_the_synthetic_noise_is_centred_so_the_answer_is_its_optimum(tmp_path):
 def test_follow_up_levels_keep_the_studys_own_where_the_answer_leaves_no_range():
     from tsid_fmu.design.plan import follow_up_levels
 
-    own = {"a": [1.0, 2.0, 4.0], "b": [0.5, 1.0, 2.0], "c": [0.5, 1.0, 1.5]}
-    bounds = {"a": (0.0, math.inf), "b": (-math.inf, 3.0), "c": (0.0, 2.0)}
+    own = {"a": [1.0, 2.0, 4.0], "b": [0.5, 1.0, 2.0], "c": [0.5, 1.0, 1.5], "d": [-3, -1, 1]}
+    bounds = {"a": (0.0, math.inf), "b": (-math.inf, 3.0), "c": (0.0, 2.0), "d": (-9, 9)}
     study = SimpleNamespace(first_levels=lambda: own, bounds=lambda: bounds)
-    levels = follow_up_levels(study, {"a": 0.0, "b": 2.0, "c": 2.0})
+    levels = follow_up_levels(study, {"a": 0.0, "b": 2.0, "c": 2.0, "d": -1.0})
     assert levels["a"] == [1.0, 2.0, 4.0]  # an answer of 0: no range around it
     assert levels["b"] == [1.0, 1.4, 2.0, 2.8, 3.0]  # the upper bound clips
     assert levels["c"] == [0.5, 1.0, 1.5]  # on its bound: three levels would merge
+    assert levels["d"] == [-2.0, -1.4, -1.0, -0.7, -0.5]  # a negative answer: in order
 
 
 def test_the_criterion_ranks_the_candidates_and_the_proposal_is_the_best(tmp_path):

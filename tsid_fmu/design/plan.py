@@ -186,7 +186,7 @@ def follow_up_levels(study: Study, x: dict[str, float]) -> dict[str, list[float]
     out = {}
     for name, own in study.first_levels().items():
         low, high = bounds[name]
-        levels = [min(max(x[name] * f, low), high) for f in FOLLOW_UP]
+        levels = sorted(min(max(x[name] * f, low), high) for f in FOLLOW_UP)
         distinct = len(set(levels)) == len(FOLLOW_UP) and all(np.isfinite(levels))
         out[name] = levels if distinct else list(own)
     return out
