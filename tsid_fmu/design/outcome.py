@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.design.signals import Signal
+from tsid_fmu.report.style import fmt_levels
 from tsid_fmu.uncertainty.intervals import json_safe
 
 __all__ = ["CRITERIA_TEXT", "Design", "Structural"]
@@ -70,7 +71,7 @@ def _span(iv: list | None) -> str:
 
 
 def _levels(levels: list | None) -> str:
-    return "-" if not levels else ", ".join(f"{v:.4g}" for v in levels)
+    return "-" if not levels else ", ".join(fmt_levels(levels))
 
 
 def width(iv: list | None) -> float:
