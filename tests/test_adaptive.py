@@ -23,6 +23,7 @@ from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.search import context, verdict
 from tsid_fmu.search.local import adaptive
 from tsid_fmu.search.local import flow as local
+from tsid_fmu.search.local.refine import STOPPED
 from tsid_fmu.search.pipeline import run_stages
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
@@ -333,7 +334,7 @@ def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatc
     def collapsing(name, *args, **kwargs):
         stage = polish(name, *args, **kwargs)
         if name == "refinement":  # as SciPy says it when the trust region collapses
-            stage.message = "least squares: `xtol` termination condition is satisfied."
+            stage.message = f"least squares: {STOPPED['xtol']}"
             stage.extra["stop"] = "xtol"
         return stage
 

@@ -128,6 +128,7 @@ def test_the_summary_of_a_result_without_intervals_still_fits_the_schema():
         "interval": [None, None],
         "unit": "",
         "weak": None,
+        "determined": "not computed",  # no interval was computed: never "not determined"
     }
     assert summary["fun"] is None and summary["out_dir"] is None
     bad = {**summary, "surprise": 1}

@@ -43,6 +43,7 @@ def test_the_reports_register_the_views_of_a_result():
         "plot_main_effects",
         "plot_parameters",
         "fit_report",
+        "text_report",
     }
 
 

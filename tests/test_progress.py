@@ -75,12 +75,28 @@ def _progress_given(monkeypatch: pytest.MonkeyPatch, argv: list[str]) -> object:
     return seen["progress"]
 
 
-def test_the_cli_shows_progress_only_on_a_terminal_and_never_with_q(monkeypatch):
+def test_the_cli_shows_progress_on_any_stderr_and_never_with_q(monkeypatch):
+    """Off a terminal too (a CI log, a notebook cell): a plain line per iteration (issue 64)."""
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # a pipe or a log file
-    assert _progress_given(monkeypatch, []) is False
+    assert _progress_given(monkeypatch, []) is True
+    assert _progress_given(monkeypatch, ["-q"]) is False
     monkeypatch.setattr(sys, "stderr", _Terminal())
     assert _progress_given(monkeypatch, []) is True
     assert _progress_given(monkeypatch, ["-q"]) is False
+
+
+def test_off_a_terminal_progress_is_plain_lines_without_a_bar():
+    log = io.StringIO()
+    progress = ConsoleProgress(log)
+    progress("stage", {"message": "taguchi on step"})
+    progress("iteration", {"stage": "taguchi", "iteration": 1})
+    progress("row", {"stage": "taguchi", "iteration": 1, "done": 3, "total": 9, "nfev": 13})
+    progress("iteration done", {"record": _record(1, 0.25, 10)})
+    text = log.getvalue()
+    assert "\r" not in text and "\033" not in text  # no terminal control
+    lines = text.splitlines()
+    assert lines[0] == "== taguchi on step"
+    assert lines[-1].startswith("taguchi, iteration 1 (L9): best cost 0.25")
 
 
 _COMPILE = """

@@ -106,6 +106,8 @@ def _row_kinds(line: str, names: set[str]) -> list[str] | None:
     n = len(re.findall(NUMBER, line))
     if "not determined" in line:  # value, first levels: the value along an open interval
         return ["free"] + ["exact"] * (n - 1)
+    if " open .. " in line or " .. open " in line:  # half-open: the value and the one end
+        return ["free", "free"] + ["exact"] * (n - 2)  # lie along what the data leave open
     std = re.search(r"\.\.\s+\S+\s+(\S+)", line)
     rel = float(std[1]) / 100 if std and re.fullmatch(NUMBER, std[1]) else 0.0
     value = f"value {max(1e-3, rel / 2)!r}"
@@ -183,7 +185,7 @@ def test_the_figure_checks_pass_along_the_valley_and_fail_off_it():
     assert edit("F_vm", f_vm, f"{float(f_vm) * 1.008:.5g}") == []
     assert edit("B_s", b_s, "2.2398") == []
     assert edit("B_s", b_s, "3.1") == []
-    assert edit("converged", "of 0.00336 (1.8e-07", "of 0.00132 (7.1e-08") == []
+    assert edit("B_s", "open .. 5.01", "open .. 4.87") == []  # its finite end, along it
     assert edit("stage refinement (refinement)", "122 simulations", "120 simulations") == []
     # off it: a determined value, an interval, a cost, a count, the text
     k_s = row["K_s"].split()[1]
@@ -193,9 +195,10 @@ def test_the_figure_checks_pass_along_the_valley_and_fail_off_it():
     assert edit("cost (SSE", "18511", "18530")
     assert edit("stage refinement (refinement)", "122 simulations", "150 simulations")
     assert edit("stage refinement (refinement)", "18511", "18605")  # stopped in the valley
-    assert edit("converged", "(1.8e-07 of the cost)", "(0.0003 of the cost)")
-    assert edit("weakly determined", "B_s", "F_vm")
-    assert edit("B_s", "not determined", "1.2 .. 3.4")
+    assert edit("converged", "(149 simulations)", "(199 simulations)")
+    assert edit("converged", "stationary", "not shown to be an optimum")
+    assert edit("B_s", "only from above", "only from below")
+    assert edit("B_s", "open .. 5.01", "1.2 .. 3.4")
 
 
 @pytest.mark.slow

@@ -27,6 +27,14 @@ def lag(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def lag_sse(tmp_path_factory):
+    """The lag identified on the cost lmfit's statistics are defined for: SSE / noise²."""
+    d = tmp_path_factory.mktemp("lag_sse")
+    study = lag_study(d, max_iterations=4, replicates=1, cost="sse", weighting="noise")
+    return identify(study, d / "out", plots=False, workers=1), d / "out"
+
+
+@pytest.fixture(scope="module")
 def chosen(tmp_path_factory):
     """A structure study: the lag's Boolean ``offset_on`` (adds 1 to y) is chosen."""
     d = tmp_path_factory.mktemp("choice")
@@ -95,20 +103,69 @@ def test_a_folder_of_an_older_tsid_fmu_with_x_by_name_still_loads(lag):
     assert _params({"x": [0.5, 1.0], "params": {"tau": 0.5, "x0": 1.0}}) == {"tau": 0.5, "x0": 1.0}
 
 
-def test_fit_report_is_the_text_tsid_identify_prints(lag):
+def test_text_report_is_the_text_tsid_identify_prints(lag):
     res, _ = lag
-    text = res.fit_report()
+    text = res.text_report()
     lines = text.splitlines()
     assert lines[0].split()[:2] == ["parameter", "value"]
     assert any(line.startswith("tau ") and " s " in line for line in lines)
-    assert f"(exit status {res.status}): {res.message}" in text
+    assert f"{res.message} (exit status {res.status})" in lines
     assert f"{res.nfev} simulations" in text
+    assert "how the study got there:" not in text
+    verbose = res.text_report(verbose=True)
+    assert all(f"  {line}" in verbose.splitlines() for line in res.account)
+    assert "[[Fit Statistics]]" in verbose
+
+
+def test_fit_report_has_lmfits_sections_and_statistics(lag_sse, lag):
+    """lmfit's fit_report: statistics, variables, correlations above a threshold (issue 64)."""
+    iae = lag[0].fit_report()  # no chi-square for a cost that is not a sum of squares
+    assert "    chi-square         = not a sum of squares (IAE)" in iae.splitlines()
+    res, _ = lag_sse
+    text = res.fit_report()
+    for section in ("[[Fit Statistics]]", "[[Variables]]", "[[Correlations]]"):
+        assert section in text
+    for stat in ("chi-square", "reduced chi-square", "Akaike info crit", "Bayesian info crit",
+                 "# data points", "# variables", "# function evals"):  # fmt: skip
+        assert stat in text
+    n, k = res.jac.shape[0], 2
+    chi = res.fun
+    assert f"    # data points      = {n}" in text.splitlines()
+    aic = n * math.log(chi / n) + 2 * k
+    bic = n * math.log(chi / n) + math.log(n) * k
+    stats = {a.strip(): b.split()[0] for a, b in (line.split(" = ", 1) for line in text.splitlines()
+             if " = " in line and line.startswith("    ") and "C(" not in line)}  # fmt: skip
+    assert float(stats["Akaike info crit"]) == pytest.approx(aic, rel=1e-6)
+    assert float(stats["Bayesian info crit"]) == pytest.approx(bic, rel=1e-6)
+    c = res.params["tau"].correl["x0"]
+    assert c == pytest.approx(res.uncertainty.correlation["tau"]["x0"])
+    assert res.params["x0"].correl["tau"] == pytest.approx(c)
+    listed = [line for line in text.splitlines() if line.strip().startswith("C(")]
+    if abs(c) >= 0.1:
+        assert listed == [f"    C(tau, x0) = {c:+.4f}"] or listed == [f"    C(x0, tau) = {c:+.4f}"]
+    assert res.fit_report(min_correl=1.01).count("C(") == 0
+    assert f"{res.message} (exit status {res.status})" in text
+
+
+def test_the_result_is_a_scipy_optimize_result(lag):
+    from scipy.optimize import OptimizeResult
+
+    res, out = lag
+    for r in (res, load(out)):
+        assert isinstance(r, OptimizeResult)
+        assert np.array_equal(r["x"], r.x) and r["fun"] == r.fun and r["nfev"] == r.nfev
+        assert {"x", "fun", "nfev", "success", "status", "message", "nit"} <= set(r.keys())
+        assert "x" in r and dict(r)["message"] == r.message
+    again = load(out)
+    assert again.message == res.message and again.account == res.account
 
 
 def test_stage_messages_are_a_list_in_stage_order(lag):
     res, _ = lag
     assert res.messages == [f"{s.name}: {s.message}" for s in res.stages]
-    assert all(m.split(": ", 1)[1] in res.message for m in res.messages if "taguchi" in m)
+    told = " ".join(res.account)
+    assert all(m.split(": ", 1)[1].split("; ")[0] in told for m in res.messages)
+    assert len(res.message) <= 200 and res.message.startswith(("converged: ", "stopped"))
 
 
 def test_a_paused_study_has_the_status_its_exit_status_is(tmp_path):

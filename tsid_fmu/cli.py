@@ -85,23 +85,23 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         summary = {**result.summary(), "exit_status": code}
         print(json.dumps(summary, indent=1, allow_nan=False))
     else:
-        _print_result(result, out)
+        _print_result(result, out, verbose=args.verbose)
     return code
 
 
 def _show_progress(quiet: bool, stream: Any) -> bool:
-    """Return True if ``tsid identify`` shows its progress: on a terminal, unless ``-q``.
+    """Return True if ``tsid identify`` shows its progress: on any stderr, unless ``-q``.
 
-    Written to a file or a pipe (a log, a CI job), stderr gets no progress at all,
-    only the errors and warnings.
+    On a terminal the progress is a live status bar and a line per iteration; written
+    to a file or a pipe (a log, a CI job, a notebook cell) it is a plain line per
+    iteration and stage (:class:`~tsid_fmu.report.console.ConsoleProgress`).
     """
-    isatty = getattr(stream, "isatty", None)
-    return not quiet and callable(isatty) and bool(isatty())
+    return not quiet
 
 
-def _print_result(result: Any, out: Path) -> None:
-    """Print the text report (:meth:`IdentificationResult.fit_report`), then its files."""
-    print(result.fit_report())
+def _print_result(result: Any, out: Path, verbose: bool = False) -> None:
+    """Print the text report (:meth:`IdentificationResult.text_report`), then its files."""
+    print(result.text_report(verbose=verbose))
     print(f"report: {out}/report.html (text: {out}/report.md)")
 
 
@@ -295,7 +295,15 @@ def _identify_parser(sub: Any) -> None:
         "-q",
         "--quiet",
         action="store_true",
-        help="no progress display (shown only when stderr is a terminal)",
+        help="no progress on stderr (a live bar on a terminal, a line per iteration and "
+        "stage elsewhere)",
+    )
+    p.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="after the verdict, how the study got there (each stage's reasons) and the "
+        "fit statistics",
     )
     p.add_argument(
         "--json",

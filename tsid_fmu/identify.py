@@ -30,13 +30,15 @@ from tsid_fmu.report.render import draw_study
 from tsid_fmu.report.ssp import write_model_ssp
 from tsid_fmu.result import PAUSED, IdentificationResult
 from tsid_fmu.search.context import Context
-from tsid_fmu.search.local.adaptive import answer_stage, verdict
+from tsid_fmu.search.local.adaptive import answer_stage
 from tsid_fmu.search.pipeline import Control, run_stages
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure.compare import StructureResult, run_structure
 from tsid_fmu.search.taguchi.iteration import ProgressCallback
+from tsid_fmu.status import study_status
+from tsid_fmu.story import weak_reason
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.folder import NullStore, Trail
@@ -97,23 +99,6 @@ def _annotate(folder: Path, record: IterationRecord, space: Space) -> None:
         record.extra["describe"] = describe
 
 
-def _status(stages: list[StageResult]) -> tuple[int, str]:
-    """Return the study's status (its exit status) and message.
-
-    The verdict is the answer's stationarity test where one was made; a stage paused
-    for review (its status 2) pauses the study (:data:`PAUSED`, exit status 3).
-    """
-    paused = [s for s in stages if s.status == 2]  # the Taguchi stage resumed, or the last
-    if paused:
-        return PAUSED, paused[0].message
-    said = "; ".join(f"{s.name}: {s.message}" for s in stages if s.kind != "contribution")
-    tested = verdict(stages)
-    if tested is not None:
-        return tested[0], f"{said}; {tested[1]}" if tested[1] not in said else said
-    status = 0 if all(s.status == 0 for s in stages if s.kind != "contribution") else 1
-    return status, said
-
-
 def _poor_fit(answer: StageResult) -> list[str]:
     """Return the warning for an answer still far above the noise after the restarts."""
     poor = answer.extra.get("poor_fit")
@@ -135,9 +120,9 @@ def _weak(result: IdentificationResult) -> dict[str, str]:
     weak: dict[str, str] = {}
     u = result.uncertainty
     for n, rel in (u.relative if u is not None else {}).items():
-        low, high = u.intervals.get(n, [None, None])
-        if low is None or high is None:
-            weak[n] = "the data do not determine it (open 95 % interval)"
+        said = weak_reason(u.intervals.get(n, [None, None]))
+        if said:
+            weak[n] = said
         elif rel > WEAK_STD_ERROR:
             weak[n] = f"the data determine it only to +/-{rel:.2g} % (standard error)"
     return weak
@@ -252,7 +237,7 @@ def _finish(
     fidelity: tuple[Fidelity | None, ProgressCallback | None] = (None, None),
     structure: StructureResult | None = None,
 ) -> IdentificationResult:
-    status, message = _status(stages)
+    status, _, message, told = study_status(stages)
     answer = answer_stage(stages)
     x = {n: answer.x.get(n, math.nan) for n in study.parameter_names}
     nit = sum(len(s.records) for s in stages)
@@ -267,6 +252,7 @@ def _finish(
         nit=nit,
         stages=stages,
         study=study,
+        account=told,
     )
     result.warnings = list(store.notes)  # files in the output folder tsid did not write
     rounds = {str(w): evaluators.rounds(w) for w in (1, 4, 16)}

@@ -61,6 +61,13 @@ def _uncertainty(data: Mapping[str, Any] | None) -> Uncertainty | None:
     kwargs = {k: v for k, v in data.items() if k in known}
     for key in ("values", "std_error", "relative", "cramer_rao", "resolution"):
         kwargs[key] = _numbers(kwargs.get(key))
+    # strict JSON writes an infinite standard error as null: a parameter whose interval
+    # is open had one (not determined), as the fresh result says, not nan (not computed)
+    open_ended = {n for n, iv in (kwargs.get("intervals") or {}).items() if iv and None in iv}
+    for key in ("std_error", "relative"):
+        for n in open_ended:
+            if math.isnan(kwargs[key].get(n, 0.0)):
+                kwargs[key][n] = math.inf
     for key in ("condition", "inflation"):
         if key in kwargs:
             kwargs[key] = _number(kwargs[key])
@@ -243,6 +250,7 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
             status=int(data["status"]),
             message=str(data["message"]),
             nit=int(data.get("nit", 0)),
+            account=[str(line) for line in data.get("account") or []],
             stages=_stages(out, list(data.get("stages") or [])),
             intervals={str(k): list(v) for k, v in (data.get("intervals") or {}).items()},
             uncertainty=_uncertainty(data.get("uncertainty")),

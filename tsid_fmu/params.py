@@ -39,6 +39,9 @@ class Param(float):
         parameter); it then has no standard error.
     weak : str or None
         Why the data determine it poorly, where they do.
+    correl : dict or None
+        Its correlation with each other parameter the data determine, by name (lmfit's
+        ``Param.correl``); ``None`` where none was computed or it is not determined.
     """
 
     name: str
@@ -49,6 +52,7 @@ class Param(float):
     max: float
     vary: bool
     weak: str | None
+    correl: dict[str, float] | None
 
     def __new__(cls, value: float, **attrs: Any) -> Param:  # noqa: D102
         self = super().__new__(cls, value)
@@ -60,6 +64,8 @@ class Param(float):
         self.max = float(attrs.get("max", math.inf))
         self.vary = bool(attrs.get("vary", True))
         self.weak = attrs.get("weak")
+        correl = attrs.get("correl")
+        self.correl = None if correl is None else {str(k): float(v) for k, v in correl.items()}
         return self
 
     @property
@@ -119,6 +125,16 @@ def describe(result: Any) -> Parameters:
         se = math.nan
         if u is not None and name in u.std_error and name not in chosen:
             se = float(u.std_error[name])
+        correl = None
+        if u is not None and math.isfinite(se) and name in u.correlation:
+            correl = {
+                other: float(c)
+                for other, c in u.correlation[name].items()
+                if other != name
+                and other not in chosen
+                and math.isfinite(float(u.std_error.get(other, math.nan)))
+                and math.isfinite(float(c))
+            }
         out[name] = Param(
             float(value),
             name=name,
@@ -129,5 +145,6 @@ def describe(result: Any) -> Parameters:
             max=high,
             vary=name not in chosen,
             weak=result.weak.get(name),
+            correl=correl,
         )
     return out

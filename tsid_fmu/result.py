@@ -21,6 +21,7 @@ import numpy as np
 import tsid_fmu.result_views as result_views
 from tsid_fmu.errors import TsidError
 from tsid_fmu.params import Parameters, describe
+from tsid_fmu.result_mapping import ResultMapping, unshadowed
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.study.definition import Study
@@ -73,14 +74,16 @@ def _view(name: str) -> Callable[..., Any]:
         ) from None
 
 
-@dataclass
-class IdentificationResult:
+@unshadowed
+@dataclass(eq=False)
+class IdentificationResult(ResultMapping):
     """What an identification found, and the evidence for it.
 
     As in :class:`scipy.optimize.OptimizeResult`, :attr:`x` is an array; :attr:`params`
     (lmfit's name) holds the same values by name, and is what the constructor takes.
     :attr:`status` is the exit status ``tsid identify`` ends with, and
-    :meth:`fit_report` is the text report, as lmfit's.
+    :meth:`fit_report` is the report in lmfit's sections. It is a
+    :class:`scipy.optimize.OptimizeResult`: ``res["x"]``, ``res.keys()``.
 
     Attributes
     ----------
@@ -104,8 +107,13 @@ class IdentificationResult:
         The exit status of ``tsid identify`` (:data:`STATUS`): 0 converged, 1 stopped
         at a limit with a valid result, 3 paused for review.
     message : str
-        Why the study stopped: every stage's message and the verdict, in one line
-        (:attr:`messages` has them as a list).
+        The verdict in one sentence of at most 200 characters
+        (:data:`tsid_fmu.status.MESSAGES`): "converged: the answer is stationary (149
+        simulations)", "stopped at a limit (...): the answer may not be the optimum".
+    account : list of str
+        How the study got there: one line per stage, why it stopped, each clause said
+        once, and the stationarity test's verdict (``tsid identify --verbose`` and the
+        reports print it; :attr:`messages` has each stage's own message).
     nit : int
         Taguchi iterations (orthogonal arrays) run, over all stages.
     stages : list of StageResult
@@ -170,6 +178,7 @@ class IdentificationResult:
     status: int
     message: str
     nit: int = 0
+    account: list[str] = field(default_factory=list)
     stages: list[StageResult] = field(default_factory=list)
     intervals: dict[str, list[float | None]] = field(default_factory=dict)
     uncertainty: Uncertainty | None = None
@@ -297,14 +306,31 @@ class IdentificationResult:
         width = max(map(len, keys))
         return "\n".join(f"{k.rjust(width)}: {getattr(self, k)!r}" for k in keys)
 
-    def fit_report(self) -> str:
-        """Return the text report, as lmfit's ``fit_report``: what ``tsid identify`` prints.
+    def fit_report(self, min_correl: float = 0.1) -> str:
+        """Return the report in lmfit's sections, as lmfit's ``fit_report``.
+
+        ``[[Fit Statistics]]`` (method, function evaluations, data points, variables,
+        chi-square, reduced chi-square, Akaike and Bayesian information criteria),
+        ``[[Variables]]`` (value, standard error, 95 % interval, whether the data
+        determine it) and ``[[Correlations]]`` (pairs above ``min_correl``), then the
+        verdict. :meth:`text_report` is what ``tsid identify`` prints.
+
+        Parameters
+        ----------
+        min_correl : float, optional
+            Smallest absolute correlation listed (lmfit's default, 0.1).
+        """
+        return _view("fit_report")(self, min_correl)
+
+    def text_report(self, verbose: bool = False) -> str:
+        """Return the text ``tsid identify`` prints (``verbose``: ``--verbose``'s too).
 
         The parameters with their units, 95 % intervals, standard errors and flags, the
-        stages, the structure chosen, the verdict with the exit status, the cost, the
-        warnings and the validation experiments.
+        stages, the structure chosen, the one-line verdict with the exit status, the
+        cost, the warnings and the validation experiments; with ``verbose``, the
+        :attr:`account` and the fit statistics.
         """
-        return _view("fit_report")(self)
+        return _view("text_report")(self, verbose)
 
     def _repr_html_(self) -> str:
         """Return the notebook view: headline, parameters with intervals, stages."""
@@ -352,6 +378,7 @@ class IdentificationResult:
                 "success": self.success,
                 "status": self.status,
                 "message": self.message,
+                "account": list(self.account),
                 "nit": self.nit,
                 "stages": [s.to_dict() for s in self.stages],
                 "intervals": self.intervals,

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+from tsid_fmu.story import determination
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import strict
 
@@ -28,6 +29,7 @@ def summary(result: Any) -> dict[str, Any]:
             "interval": list(result.intervals.get(name) or [None, None]),
             "unit": units.get(name, ""),
             "weak": result.weak.get(name),
+            "determined": determination(result.intervals.get(name)),
             **({"sampled_interval": result.sampled.intervals[name]} if _has(result, name) else {}),
         }
         for name, value in result.params.items()
@@ -54,6 +56,7 @@ def summary(result: Any) -> dict[str, Any]:
             "status": result.status,
             "success": result.success,
             "message": result.message,
+            "account": list(result.account),
             "stages": stages,
             "warnings": list(result.warnings),
             "out_dir": None if result.out_dir is None else str(result.out_dir),
@@ -147,6 +150,7 @@ def parameters_frame(result: Any) -> pd.DataFrame:
                 "unit": units.get(p.name, ""),
                 "95% low": math.nan if low is None else low,
                 "95% high": math.nan if high is None else high,
+                "determined": determination(result.intervals.get(p.name)),
                 "std error [%]": se,
                 **_sampled_columns(result, p.name),
                 "first levels": f"{min(p.levels):.6g} .. {max(p.levels):.6g}",

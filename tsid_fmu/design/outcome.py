@@ -10,6 +10,7 @@ import numpy as np
 
 from tsid_fmu.design.signals import Signal
 from tsid_fmu.report.style import fmt_levels
+from tsid_fmu.story import interval_text
 from tsid_fmu.uncertainty.intervals import json_safe
 
 __all__ = ["CRITERIA_TEXT", "Design", "Structural"]
@@ -64,10 +65,10 @@ def _fmt(v: float | None) -> str:
 
 
 def _span(iv: list | None) -> str:
+    """Return the interval as every view shows it (:func:`tsid_fmu.story.interval_text`)."""
     if iv is None:
         return "-"
-    low, high = iv
-    return "not determined" if low is None and high is None else f"{_fmt(low)} .. {_fmt(high)}"
+    return interval_text(iv, math.nan, lambda values: [_fmt(v) for v in values])
 
 
 def _levels(levels: list | None) -> str:

@@ -13,7 +13,7 @@ from tsid_fmu.report.markdown import markdown_report, markdown_table
 from tsid_fmu.report.notebook import parameter_rows  # registers the result's views
 from tsid_fmu.report.plots import convergence_plot, fit_plot, main_effects_plot
 from tsid_fmu.report.render import Figures, draw_study
-from tsid_fmu.report.text import fit_report
+from tsid_fmu.report.text import fit_report, text_report
 
 __all__ = [
     "ConsoleProgress",
@@ -28,6 +28,7 @@ __all__ = [
     "markdown_table",
     "parameter_rows",
     "parameter_set_ssv",
+    "text_report",
     "write_html",
     "write_result_files",
 ]

@@ -90,8 +90,7 @@ class ConsoleProgress:
         elif event == "done":
             res = info["result"]
             self._print(
-                f"{res.message} ({counted(res.nit, 'Taguchi iteration')}, {res.nfev} simulations, "
-                f"{now - self.t0:.1f} s)"
+                f"{res.message} ({counted(res.nit, 'Taguchi iteration')}, {now - self.t0:.1f} s)"
             )
 
     def _iteration_done(self, rec: Any, now: float) -> None:

@@ -240,6 +240,11 @@ def _iterations(result: IdentificationResult, images: Mapping, units: Mapping, c
     return "\n".join(parts) or "<p>No Taguchi iteration.</p>"
 
 
+def _account(result: IdentificationResult) -> str:
+    """Each stage's reasons, said once, then the stationarity test (``result.account``)."""
+    return "<ul>" + "".join(f"<li>{esc(line)}</li>" for line in result.account) + "</ul>"
+
+
 def html_report(result: IdentificationResult, figures: Figures | None = None) -> str:
     """Return the text of ``report.html``."""
     study = result.study
@@ -268,6 +273,11 @@ def html_report(result: IdentificationResult, figures: Figures | None = None) ->
                 else ""
             ),
             "stages",
+        ),
+        *(
+            [_section("How the study ended", _account(result), "account")]
+            if result.account
+            else []
         ),
         _section("Fit and residuals", _fit(result, units, images), "fit"),
         _section("Residual diagnostics", diagnostics_section(result), "diagnostics"),

@@ -13,8 +13,9 @@ import math
 from typing import Any
 
 from tsid_fmu.report.html_tables import esc, table
-from tsid_fmu.report.style import fmt
+from tsid_fmu.report.style import fmt, fmt_levels
 from tsid_fmu.result import IdentificationResult
+from tsid_fmu.story import interval_text, listed_combinations
 from tsid_fmu.uncertainty.assess import NOISE_SOURCES
 from tsid_fmu.uncertainty.intervals import Uncertainty
 
@@ -28,12 +29,11 @@ RESIDUALS_NOTE = (
 )
 
 
-def _span(pair: Any) -> str:
-    """``low .. high`` of an interval, or "not determined" where a side is open."""
-    if not isinstance(pair, list | tuple) or len(pair) != 2 or None in pair:
-        return "not determined"
-    low, high = (float(v) for v in pair)
-    return f"{fmt(low)} .. {fmt(high)}" if math.isfinite(low + high) else "not determined"
+def _span(pair: Any, value: float) -> str:
+    """Return the interval as every view shows it (:func:`tsid_fmu.story.interval_text`)."""
+    if not isinstance(pair, list | tuple) or len(pair) != 2:
+        return "not computed"
+    return interval_text(pair, value, fmt_levels)
 
 
 def _parameters(u: Uncertainty) -> str:
@@ -51,8 +51,8 @@ def _parameters(u: Uncertainty) -> str:
                 se,
                 rel,
                 u.cramer_rao.get(name, math.nan),
-                _span(u.intervals.get(name)),
-                _span(u.profile.get(name)) if name in u.profile else "not computed",
+                _span(u.intervals.get(name), value),
+                _span(u.profile.get(name), value) if name in u.profile else "not computed",
             ]
         )
     cols = ["parameter", "value", "std error", "std error [%]", "Cramér-Rao bound [%]"]
@@ -87,10 +87,11 @@ def _residuals(result: IdentificationResult, u: Uncertainty) -> str:
 
 def _combinations(u: Uncertainty) -> str:
     rows = []
-    for k, c in enumerate(u.combinations, start=1):
-        terms = " ".join(f"{w:+.3g} {n}" for n, w in (c.get("terms") or {}).items())
-        said = "yes" if c.get("determined") else "no"
-        rows.append([k, terms, c.get("std_error", math.nan), c.get("percent", math.nan), said])
+    for k, c in enumerate(listed_combinations(u.combinations, u.intervals), start=1):
+        terms = " ".join(f"{w:+.3g} {n}" for n, w in c["terms"].items())
+        rows.append(
+            [k, terms, c.get("std_error", math.nan), c.get("percent", math.nan), c["state"]]
+        )
     cols = ["#", "combination (search coordinates)", "std error", "[%]", "determined"]
     note = (
         "Eigen-combinations of the Fisher matrix, best determined first (lg: log10 of "

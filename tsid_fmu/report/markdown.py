@@ -8,10 +8,11 @@ from typing import Any
 from tsid_fmu.report.notebook import sampled_note
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.scored import experiment_notes
-from tsid_fmu.report.style import cost_name, counted, fmt, input_contribution
+from tsid_fmu.report.style import cost_name, counted, fmt, fmt_levels, input_contribution
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.story import interval_text, listed_combinations, weak_reason
 from tsid_fmu.uncertainty.assess import NOISE_SOURCES
 
 __all__ = ["escape", "markdown_report", "markdown_table"]
@@ -48,6 +49,14 @@ def markdown_table(frame: Any) -> str:
 def _parameters(result: IdentificationResult) -> Any:
     """Return the parameter table, with a standard error at resolution as its bound."""
     frame = result.parameters_frame()
+    if "95% low" in frame:  # one cell, as every view shows it (tsid_fmu.story)
+        shown = [
+            interval_text(result.intervals.get(n), float(frame.loc[n, "value"]), fmt_levels)
+            for n in frame.index
+        ]
+        at = list(frame.columns).index("95% low")
+        frame = frame.drop(columns=["95% low", "95% high"])
+        frame.insert(at, "95 % interval", shown)
     bounds = result.uncertainty.resolution if result.uncertainty else {}
     if bounds and "std error [%]" in frame:
         frame["std error [%]"] = [
@@ -76,6 +85,8 @@ def _stages(result: IdentificationResult) -> list[str]:
         markdown_table(result.stages_frame()),
         "",
     ]
+    if result.account:
+        lines += ["## How the study ended", "", *[f"- {escape(a)}" for a in result.account], ""]
     phase = 0
     for st in result.stages:
         if not st.records:
@@ -159,10 +170,10 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
         "width of the first levels' range):",
         "",
     ]
-    for c in u.combinations:
+    for c in listed_combinations(u.combinations, result.intervals):
         terms = " ".join(f"{w:+.2f} {escape(n)}" for n, w in c["terms"].items())
-        state = "determined" if c["determined"] else "**not determined**"
-        lines.append(f"- {terms}: standard error {c['std_error']:.3g} ({state})")
+        state = c["state"] if c["state"] != "not determined" else "**not determined**"
+        lines.append(f"- {terms}: standard error {c['std_error']:.3g} ({escape(state)})")
     for g in u.scale_groups:
         ratios = ", ".join(f"{k} to +/-{v:.2g} %" for k, v in g["ratios"].items())
         outside = [n for n in u.values if n not in g["parameters"]]
@@ -171,9 +182,10 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
             f"common scale only to +/-{g['scale_percent']:.2g} % (standard error): only "
             f"what does not scale with them ({', '.join(outside) or 'nothing'}) sets it"
         )
-    for name, (low, high) in result.intervals.items():
-        if low is None or high is None:
-            lines.append(f"- **{name}**: the data do not determine it: its 95 % interval is open")
+    for name, interval in result.intervals.items():
+        said = weak_reason(interval)
+        if said:
+            lines.append(f"- **{escape(name)}**: {said}")
     if result.sampled is not None:
         lines += ["", escape(sampled_note(result.sampled))]
     mismatch = [w for w in result.warnings if "model or solver mismatch" in w]

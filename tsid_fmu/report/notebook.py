@@ -15,6 +15,7 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.report.html_tables import esc, table
 from tsid_fmu.report.style import fmt, fmt_levels
 from tsid_fmu.result import STATUS, register_views
+from tsid_fmu.story import interval_text
 from tsid_fmu.study.units import study_units
 
 __all__ = [
@@ -40,10 +41,8 @@ PARAMETER_COLUMNS = [
 
 
 def _interval(low: float | None, value: float, high: float | None) -> str:
-    if low is None or high is None or not (math.isfinite(low) and math.isfinite(high)):
-        return "not determined"
-    lo, _, hi = fmt_levels([low, value, high]) if low < high else [fmt(low), "", fmt(high)]
-    return f"{lo} .. {hi}"
+    """Return the interval as every view shows it (:func:`tsid_fmu.story.interval_text`)."""
+    return interval_text([low, high], value, fmt_levels)
 
 
 def _std_error(u: Any, name: str) -> float | str:
@@ -117,15 +116,15 @@ def parameter_rows(result: Any) -> list[list[Any]]:
     mark = interval_mark(result.uncertainty)
     for name in names:
         value = result.params.get(name, math.nan)
-        low, high = result.intervals.get(name, [None, None])
         se = _std_error(result.uncertainty, name)
-        shown = _interval(low, value, high)
+        # no interval at all (a paused study): "not computed", never "not determined"
+        shown = interval_text(result.intervals.get(name), value, fmt_levels)
         rows.append(
             [
                 name,
                 value,
                 units.get(name, ""),
-                shown + (mark if shown != "not determined" else ""),
+                shown + (mark if shown not in ("not determined", "not computed") else ""),
                 se,
                 first.get(name, ""),
                 result.weak.get(name, ""),

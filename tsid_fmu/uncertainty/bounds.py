@@ -82,7 +82,9 @@ def unshown_warnings(
     the truth (modestpy's ``Simple2R1C``, stopped at a limit 1.1 % off along R1 C, gave
     R1 C an interval of 200.96 .. 203.22 around a true 200).
     """
-    out = [f"{name}: {message}" for name, message, stage in messages if stage == 1]
+    # at exit 0 the answer was shown stationary after them: the account says why they
+    # stopped, and a warning beside "converged" would contradict it
+    out = [f"{name}: {message}" for name, message, stage in messages if stage == 1 and status]
     finite = [n for n, iv in intervals.items() if iv and None not in iv]
     if status == 1:
         which = f"of {', '.join(finite)} and " if finite else ""

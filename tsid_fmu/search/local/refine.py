@@ -41,7 +41,15 @@ from tsid_fmu.search.verdict import (
 )
 from tsid_fmu.study.schema import Method
 
-__all__ = ["FD_STEP", "refine_stage"]
+__all__ = ["FD_STEP", "STOPPED", "refine_stage"]
+
+STOPPED = {
+    "gtol": "the slope of the cost is below its tolerance",
+    "ftol": "the last step lowered the cost by less than its tolerance",
+    "xtol": "the last step moved the parameters by less than their tolerance",
+}
+"""Why SciPy's least squares stopped, by its tolerance's name, in a practitioner's words
+(the message is made from the code, never SciPy's own text passed through)."""
 
 
 def _solve(
@@ -67,7 +75,8 @@ def _solve(
         )
         extra["stop"] = {1: "gtol", 2: "ftol", 3: "xtol", 4: "xtol"}.get(int(out.status), "")
         extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
-        return 0, f"least squares: {out.message}"
+        said = STOPPED.get(extra["stop"], "it stopped")
+        return 0, f"least squares: {said}"
     except _Converged as stop:
         extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
         return 0, f"least squares: {stop.args[0]}; stopped before another Jacobian"
