@@ -275,6 +275,9 @@ def test_an_answer_on_a_log_parameters_floor_is_tested_in_linear_coordinates():
                   {"a": (0.0, math.inf), "d": (0.0, math.inf)}, LevelingOptions())  # fmt: skip
     assert list(space.log) == [False, True]
     assert space.floored({"a": 2.5, "d": 0.0}) == ["d"]
+    # near it too: the flat coordinate lets the refinement wander about the floor by its
+    # noise (the refinement below ends 5 % above it on one platform, at or below it on CI)
+    assert space.floored({"a": 2.5, "d": 1.05e-4}) == ["d"]
     assert space.floored({"a": 2.5, "d": 1e-3}) == []
     method = Method(cost="sse", refine="least_squares", refine_max_nfev=200)
 
