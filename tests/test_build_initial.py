@@ -197,6 +197,18 @@ end Bad;
         (_BAD_HEAD + "algorithm\n  z := 1;\n" + _BAD_TAIL, 6, "algorithm sections"),
         (_BAD_HEAD + _BAD_TAIL.replace("x - z", "foo(x)"), 8, "foo"),
         (_BAD_HEAD.replace("Real z;", "Integer z;") + _BAD_TAIL, 5, "only Real"),
+        (
+            _BAD_HEAD + "equation\n  der(x) = -x;\n  if u > 0 then\n    der(z) = 1;\n  else\n"
+            "    der(z) = 0;\n  end if;\n  z = foo(x);\n"
+            "  annotation(experiment(StopTime = 1));\nend Bad;\n",
+            8,
+            "IfEquation",
+        ),
+        (
+            _BAD_HEAD + "equation\n  der(x) = -x + der(z);\n  x = u;\nend Bad;\n",
+            8,
+            "structurally singular",
+        ),
     ],
     ids=[
         "der-init",
@@ -211,6 +223,8 @@ end Bad;
         "algorithm",
         "function",
         "integer",
+        "if-equation",
+        "singular",
     ],
 )
 def test_refusals_name_the_construct_and_line(tmp_path, source, line, fragment):
@@ -219,4 +233,5 @@ def test_refusals_name_the_construct_and_line(tmp_path, source, line, fragment):
     with pytest.raises(BuildError) as info:
         build_fmu(mo, "Bad", tmp_path)
     msg = str(info.value)
-    assert "Bad.mo" in msg and f"line {line}:" in msg and fragment in msg, msg
+    assert "Bad.mo" in msg and fragment in msg, msg
+    assert f"line {line}:" in msg or f"(line {line})" in msg, msg

@@ -128,6 +128,8 @@ class FlatModel:
         The relations that generate state events, in order of appearance.
     equation_text : list of str
         A readable form of each equation, for error messages.
+    equation_lines : list of int or None
+        The line of each equation in ``source`` (``None`` where not found).
     experiment : dict
         ``StartTime``, ``StopTime``, ``Interval`` read from ``annotation(experiment(...))``
         when present.
@@ -151,6 +153,7 @@ class FlatModel:
     residuals_frozen: list[Any] = field(default_factory=list)
     relations: list[Relation] = field(default_factory=list)
     equation_text: list[str] = field(default_factory=list)
+    equation_lines: list[int | None] = field(default_factory=list)
     experiment: dict[str, float] = field(default_factory=dict)
     info_html: str = ""
     lines: SourceLines | None = None
@@ -164,6 +167,11 @@ class FlatModel:
     def computed_states(self) -> list[Variable]:
         """The states whose initial value is computed from the parameters."""
         return [v for v in self.states if v.init is not None]
+
+    def equation_label(self, index: int) -> str:
+        """``'text'`` of equation ``index`` (0-based), with ``(line N)`` where known."""
+        line = self.equation_lines[index] if index < len(self.equation_lines) else None
+        return f"'{self.equation_text[index]}'" + (f" (line {line})" if line else "")
 
     def update_initial_starts(self) -> None:
         """Set ``start`` of each computed state to its value at the parameters' ``start``.
@@ -295,6 +303,29 @@ def _statements(text: str, start: int, end: int) -> list[tuple[int, str]]:
     return out
 
 
+_BLOCKS = ("if", "for", "when", "while")
+
+
+def _equation_starts(text: str, start: int, end: int) -> list[int]:
+    """Offsets of the equations of an equation section ``text[start:end]``.
+
+    A structured equation (``if``/``for``/``when`` ... ``end if;``) counts once, from its
+    keyword; an ``annotation(...);`` is no equation.
+    """
+    out: list[int] = []
+    depth = 0
+    for off, stmt in _statements(text, start, end):
+        words = re.findall(r"[A-Za-z_]\w*", stmt[:40])
+        first = words[0] if words else ""
+        if depth == 0 and first != "annotation":
+            out.append(off)
+        if first in _BLOCKS:
+            depth += 1
+        elif first == "end" and len(words) > 1 and words[1] in _BLOCKS:
+            depth = max(depth - 1, 0)
+    return out
+
+
 class SourceLines:
     """Line numbers of a model's declarations and equations in its Modelica source.
 
@@ -328,7 +359,7 @@ class SourceLines:
             stop = sections[k + 1][0] if k + 1 < len(sections) else hi
             if what == "equation":
                 self.equations[initial] += [
-                    self.line(off) for off, _ in _statements(self.text, head_end, stop)
+                    self.line(off) for off in _equation_starts(self.text, head_end, stop)
                 ]
         decl_end = sections[0][0] if sections else hi
         head = re.match(r"\bmodel\s+\w+\s*", self.text[lo:]) if m else None
@@ -352,9 +383,16 @@ class SourceLines:
         """Line of the declaration of ``name``."""
         return self.declarations.get(name)
 
-    def equation(self, index: int, initial: bool = False) -> int | None:
-        """Line of the ``index``-th (0-based) equation of the (initial) equation sections."""
+    def equation(self, index: int, initial: bool = False, count: int | None = None) -> int | None:
+        """Line of the ``index``-th (0-based) equation of the (initial) equation sections.
+
+        With ``count`` (the number of equations pymoca found) ``None`` unless the text
+        has as many: then the equations were not all written in this model's sections
+        (inherited, generated) and their order there is not known.
+        """
         eqs = self.equations[initial]
+        if count is not None and count != len(eqs):
+            return None
         return eqs[index] if 0 <= index < len(eqs) else None
 
     def section(self, what: str, initial: bool = False) -> int | None:
@@ -577,7 +615,7 @@ def _equations(
     conv = Converter(ca, ast, symbols, where)
     frozen = Converter(ca, ast, symbols, where, relations=fm.relations, der=conv.der)
     for i, eq in enumerate(flat.equations, start=1):
-        at = at_line(where, lines.equation(i - 1))
+        at = at_line(where, lines.equation(i - 1, count=len(flat.equations)))
         if not isinstance(eq, ast.Equation):
             raise BuildError(
                 f"{at}: equation {i} is a {type(eq).__name__}; only simple equations "
@@ -590,6 +628,7 @@ def _equations(
         frozen.where = conv.where
         fm.residuals_frozen.append(frozen(eq.left) - frozen(eq.right))
         fm.equation_text.append(txt)
+        fm.equation_lines.append(lines.equation(i - 1, count=len(flat.equations)))
     return conv.der
 
 
@@ -653,8 +692,9 @@ def _initial_equations(
     others = {v.name for v in fm.inputs + fm.outputs + fm.locals + fm.parameters}
     set_at: dict[str, int | None] = {}
     form = "only 'state = expression of parameters' (e.g. 'x = x0') is supported"
-    for i, eq in enumerate(getattr(flat, "initial_equations", None) or []):
-        line = lines.equation(i, initial=True)
+    initial_equations = getattr(flat, "initial_equations", None) or []
+    for i, eq in enumerate(initial_equations):
+        line = lines.equation(i, initial=True, count=len(initial_equations))
         at = at_line(where, line)
         if not isinstance(eq, ast.Equation):
             raise BuildError(f"{at}: initial equation {i + 1} is a {type(eq).__name__}; {form}")
