@@ -159,6 +159,13 @@ def test_rebuild_with_start_values_moves_the_declared_start(tmp_path):
     assert float(v["x1"]["start"]) == 0.5 and float(v["x2"]["start"]) == 1.0 + X2_OFF
     r = simulate_fmu(str(fmu), stop_time=0.1, output=["x1", "x2"])
     assert (r["x1"][0], r["x2"][0]) == pytest.approx((0.5, 1.0 + X2_OFF))
+    # a value for the state itself replaces its initial equation: x2 starts there
+    fmu = build_fmu(mo, "Tanks", tmp_path / "Tanks_x2.fmu", start_values={"x2": 7.0})
+    v = _variables(fmu)
+    assert v["x2"]["initial"] == "exact" and float(v["x2"]["start"]) == 7.0
+    assert v["x1"]["initial"] == "approx"
+    r = simulate_fmu(str(fmu), stop_time=0.1, output=["x1", "x2"], start_values={"x1_0": 2.0})
+    assert (r["x1"][0], r["x2"][0]) == pytest.approx((2.0, 7.0))
 
 
 _BAD_HEAD = """model Bad
