@@ -62,6 +62,7 @@ def rebuilt(tmp_path_factory):
 
 def test_find_models():
     assert list(find_models(MODELS)) == [
+        "CascadedTanks",
         "LSEA_MISO",
         "LSEA_MISO_OneMass",
         "LSEA_SISO",

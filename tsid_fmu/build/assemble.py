@@ -73,7 +73,11 @@ class Prepared:
 
 
 def _override(model: FlatModel, model_file: Path, values: Mapping[str, float]) -> dict[str, float]:
-    """Replace parameter values and state start values of ``model`` in place."""
+    """Replace parameter values and state start values of ``model`` in place.
+
+    A state whose initial value is an expression of parameters follows the new
+    parameter values; a value given for the state itself replaces that expression.
+    """
     settable = {v.name: v for v in model.parameters + model.states}
     done = {}
     for name, value in values.items():
@@ -86,6 +90,9 @@ def _override(model: FlatModel, model_file: Path, values: Mapping[str, float]) -
         if not math.isfinite(value):
             raise BuildError(f"{model_file}: start value of {name!r} must be finite, got {value}")
         settable[name].start = done[name] = value
+        if settable[name].kind == "state":
+            settable[name].init = None
+    model.update_initial_starts()
     return done
 
 

@@ -215,7 +215,7 @@ def _blocks(
     inc = csr_matrix(([1] * len(rows), (rows, cols)), shape=(n_eq, n_unk))
     match = maximum_bipartite_matching(inc, perm_type="column")  # eq i -> unknown match[i]
     if (match < 0).any():
-        bad = [model.equation_text[i] for i in range(n_eq) if match[i] < 0]
+        bad = [model.equation_label(i) for i in range(n_eq) if match[i] < 0]
         raise BuildError(
             f"{where}: the equations are structurally singular; no unknown left to solve "
             f"equation(s): {'; '.join(bad)}"
@@ -253,7 +253,7 @@ def _solve_blocks(
             if not ca.depends_on(jac, z):
                 if jac.is_zero():
                     raise BuildError(
-                        f"{where}: equation '{model.equation_text[block[0]]}' does not "
+                        f"{where}: equation {model.equation_label(block[0])} does not "
                         f"determine {unknown_names[idx[0]]}"
                     )
                 sol = ca.simplify(-ca.substitute(r, z, ca.SX(0.0)) / jac)

@@ -15,7 +15,11 @@ The CasADi functions of :mod:`.causalize` are code-generated into ``model_casadi
     and the Co-Simulation integrator;
 ``<id>_rel(t, x, u, p, c) -> (z, s)``
     one event indicator ``z_k = hi_k - lo_k`` per relation, and its scale (Model
-    Exchange, and the switches the Co-Simulation integrator locates).
+    Exchange, and the switches the Co-Simulation integrator locates);
+``<id>_init(x, p) -> x0``
+    the initial states: computed from the parameters for the states whose initial value
+    is an expression of parameters (``start = x0`` or an ``initial equation``), ``x``
+    as set for the others (only generated when the model has such states).
 
 ``model.h`` describes the value-reference layout and the relations to the generic
 wrappers in ``tsid_fmu/build/c/`` (``tsid_core.c`` with ``fmi2Functions.c`` or
@@ -104,6 +108,8 @@ def _header(model: FlatModel, causal: Causalized, guid: str, nz: int, nrel: int)
 #define NP {len(lay.parameters)}
 #define NZ {nz}
 #define NREL {nrel}
+/* States whose initial value is computed from the parameters at initialization. */
+#define NX_INIT {len(model.computed_states)}
 #define X_OFF {lay.x_off}
 #define DX_OFF {lay.dx_off}
 #define U_OFF {lay.u_off}
@@ -138,6 +144,9 @@ int model_eval_me(double t, const double *x, const double *u, const double *p,
 /* Event indicators z[k] = hi - lo of relation k, and scales s[k] = |lo| + |hi|. */
 int model_rel(double t, const double *x, const double *u, const double *p,
               const double *c, double *z, double *s);
+/* Initial states x0 from the states x as set and the parameters p: the NX_INIT states
+ * with a parameter-dependent initial value computed, the others copied. */
+int model_init(const double *x, const double *p, double *x0);
 
 #endif
 """
@@ -204,14 +213,31 @@ def generate_c(
         rel = _renamed(ca, causal_me.rel, f"{ident}_rel", me_expand)
         cg.add(ev_me)
         cg.add(rel)
+    init = None
+    if model.computed_states:
+        init = _initial_function(ca, model, causal, f"{ident}_init")
+        cg.add(init)
     cg.generate(str(outdir) + "/")
 
     nz = zc.numel_out(0) if zc is not None else 0
     (outdir / "model.h").write_text(_header(model, causal, guid, nz, len(relations)))
 
-    funcs = {"ode": ode, "eval": ev, "zc": zc, "eval_me": ev_me, "rel": rel}
+    funcs = {"ode": ode, "eval": ev, "zc": zc, "eval_me": ev_me, "rel": rel, "init": init}
     (outdir / "model.c").write_text(_model_c(model, causal, relations, funcs, step_size))
     return ["model.c", "model_casadi.c"]
+
+
+def _initial_function(ca: Any, model: FlatModel, causal: Causalized, name: str) -> Any:
+    """CasADi function ``(x, p) -> x0`` of the initial states (see the module docstring)."""
+    lay = causal.layout
+
+    def column(vs: list[Any]) -> Any:
+        return ca.vertcat(*vs) if vs else ca.SX(0, 1)
+
+    x = column([v.sym for v in lay.states])
+    p = column([v.sym for v in lay.parameters])
+    x0 = column([v.init if v.init is not None else v.sym for v in lay.states])
+    return ca.Function(name, [x, p], [x0], ["x", "p"], ["x0"])
 
 
 def _model_c(
@@ -224,7 +250,7 @@ def _model_c(
     """Text of ``model.c``: start values, names, relations and the adapters.
 
     ``funcs`` holds the generated CasADi functions ``ode``, ``eval``, ``zc``,
-    ``eval_me`` and ``rel`` (``None`` where the model has none).
+    ``eval_me``, ``rel`` and ``init`` (``None`` where the model has none).
     """
     lay = causal.layout
     all_vars = (
@@ -281,6 +307,7 @@ const int model_rel_strict[NREL + 1] = {{{rel_strict}}};
             _adapter("model_zc", funcs["zc"], ode_args, ["z"]),
             eval_me,
             _adapter("model_rel", funcs["rel"], me_args, ["z", "s"]),
+            _adapter("model_init", funcs.get("init"), ["x", "p"], ["x0"]),
         ]
     )
     return c

@@ -292,8 +292,10 @@ def variable_rows(lay: Layout, step_size: float) -> list[tuple[dict[str, str], d
 
     rows: list[tuple[str, dict[str, str], str, dict]] = []
     for v in lay.states:
+        # computed from the parameters at initialization: start is its value at their start
+        initial = "approx" if getattr(v, "init", None) is not None else "exact"
         rows.append(
-            (v.name, kind("local", "exact"), v.description, {**unit_of(v), "start": fmt(v.start)})
+            (v.name, kind("local", initial), v.description, {**unit_of(v), "start": fmt(v.start)})
         )
     for k, v in enumerate(lay.states):
         rows.append(
@@ -422,7 +424,10 @@ def _model_structure(root: ET.Element, causal: Causalized) -> None:
 
 
 def initial_unknowns(lay: Layout) -> list[int]:
-    """Return the value references of the initial unknowns: outputs and derivatives.
+    """Return the value references of the initial unknowns.
+
+    They are the outputs, the derivatives and the states whose initial value is
+    computed from the parameters (``initial="approx"``).
 
     Parameters
     ----------
@@ -436,4 +441,5 @@ def initial_unknowns(lay: Layout) -> list[int]:
     """
     unknowns = [lay.y_off + k for k in range(len(lay.outputs))]
     unknowns += [lay.dx_off + k for k in range(lay.nx)]
+    unknowns += [lay.x_off + k for k, v in enumerate(lay.states) if v.init is not None]
     return sorted(unknowns)

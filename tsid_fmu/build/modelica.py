@@ -8,9 +8,12 @@ in ``modelDescription.xml``) is done here, without pymoca's CasADi back end and 
 Supported subset: one scalar ``model`` with ``Real`` variables and ``Integer`` parameters,
 ``parameter``/``constant`` declarations with literal (or constant-foldable) values,
 ``input``/``output`` prefixes, ``der()``, arithmetic, comparison and Boolean operators,
-``if``-expressions and the usual elementary functions. Anything else raises
-:class:`~tsid_fmu.errors.BuildError` naming the file, the model and the offending
-declaration or equation.
+``if``-expressions and the usual elementary functions. A state's initial value may be an
+expression of parameters, given as its ``start`` (``Real x(start = x0, fixed = true)``)
+or by an ``initial equation`` ``x = <expression of parameters>``; the FMU computes it
+from the parameter values at initialisation. Anything else raises
+:class:`~tsid_fmu.errors.BuildError` naming the file, the model, the line and the
+offending declaration or equation.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from tsid_fmu.errors import BuildError
 
 from .expressions import Converter, Relation, expr_text
 
-__all__ = ["FlatModel", "Variable", "flatten_model", "import_build_deps"]
+__all__ = ["FlatModel", "SourceLines", "Variable", "at_line", "flatten_model", "import_build_deps"]
 
 
 def import_build_deps() -> tuple[Any, Any, Any, Any]:
@@ -75,6 +78,15 @@ class Variable:
         The CasADi ``SX`` symbol of the variable.
     integer : bool
         An ``Integer`` parameter (a structural switch: FMI ``Integer``/``Int32``).
+    init : Any
+        States only: the CasADi expression of the parameters (and constants) that gives
+        the initial value, from a parameter-dependent ``start`` or an ``initial
+        equation``; ``start`` is then its value at the parameters' values. ``None``:
+        the initial value is ``start`` itself.
+    fixed : bool
+        The declaration says ``fixed = true``.
+    line : int or None
+        Line of the declaration in the Modelica source, where found.
     """
 
     name: str
@@ -84,6 +96,9 @@ class Variable:
     start: float | None
     sym: Any = None
     integer: bool = False
+    init: Any = None
+    fixed: bool = False
+    line: int | None = None
 
 
 @dataclass
@@ -113,11 +128,15 @@ class FlatModel:
         The relations that generate state events, in order of appearance.
     equation_text : list of str
         A readable form of each equation, for error messages.
+    equation_lines : list of int or None
+        The line of each equation in ``source`` (``None`` where not found).
     experiment : dict
         ``StartTime``, ``StopTime``, ``Interval`` read from ``annotation(experiment(...))``
         when present.
     info_html : str
         The ``Documentation(info=...)`` text, if any.
+    lines : SourceLines or None
+        Line numbers of the declarations and equations in ``source``.
     """
 
     name: str
@@ -134,13 +153,52 @@ class FlatModel:
     residuals_frozen: list[Any] = field(default_factory=list)
     relations: list[Relation] = field(default_factory=list)
     equation_text: list[str] = field(default_factory=list)
+    equation_lines: list[int | None] = field(default_factory=list)
     experiment: dict[str, float] = field(default_factory=dict)
     info_html: str = ""
+    lines: SourceLines | None = None
 
     @property
     def short_name(self) -> str:
         """Last component of the qualified name (used as FMI model identifier)."""
         return self.name.rsplit(".", 1)[-1]
+
+    @property
+    def computed_states(self) -> list[Variable]:
+        """The states whose initial value is computed from the parameters."""
+        return [v for v in self.states if v.init is not None]
+
+    def equation_label(self, index: int) -> str:
+        """``'text'`` of equation ``index`` (0-based), with ``(line N)`` where known."""
+        line = self.equation_lines[index] if index < len(self.equation_lines) else None
+        return f"'{self.equation_text[index]}'" + (f" (line {line})" if line else "")
+
+    def update_initial_starts(self) -> None:
+        """Set ``start`` of each computed state to its value at the parameters' ``start``.
+
+        Called after the parameter values changed (the build's ``start_values``).
+
+        Raises
+        ------
+        BuildError
+            If a computed initial value is not finite.
+        """
+        ca, *_ = import_build_deps()
+        syms = [p.sym for p in self.parameters]
+        vals = [float(p.start) for p in self.parameters]
+        for v in self.computed_states:
+            expr = (
+                ca.substitute(ca.SX(v.init), ca.vertcat(*syms), ca.vertcat(*vals))
+                if syms
+                else ca.SX(v.init)
+            )
+            v.start = float(ca.evalf(expr))
+            if not math.isfinite(v.start):
+                where = at_line(f"{self.source}: model {self.name}", v.line)
+                raise BuildError(
+                    f"{where}: the initial value of state '{v.name}' is not finite "
+                    "at the parameters' values"
+                )
 
 
 def _literal(value: Any, ast: Any) -> Any:
@@ -212,12 +270,164 @@ def _annotations(text: str) -> tuple[dict[str, float], str]:
     return experiment, info
 
 
+_BLANK_RE = re.compile(r'"(?:[^"\\]|\\.)*"|//[^\n]*|/\*.*?\*/', re.S)
+_SECTION_RE = re.compile(r"^[ \t]*(initial\s+)?(equation|algorithm)\b", re.M)
+_PREFIX_RE = re.compile(
+    r"^\s*(?:(?:parameter|constant|input|output|discrete|final|flow|stream|inner|outer)\s+)*"
+    r"[A-Za-z_][\w.]*\s+(.*)$",
+    re.S,
+)
+
+
+def _blank(text: str) -> str:
+    """``text`` with comments and strings replaced by spaces (lines and offsets kept)."""
+    return _BLANK_RE.sub(lambda m: re.sub(r"[^\n]", " ", m.group(0)), text)
+
+
+def _statements(text: str, start: int, end: int) -> list[tuple[int, str]]:
+    """``(offset, text)`` of each ``;``-terminated statement of ``text[start:end]``."""
+    out: list[tuple[int, str]] = []
+    depth, begin = 0, start
+    for i in range(start, end):
+        ch = text[i]
+        if ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+        elif ch == ";" and depth <= 0:
+            body = text[begin:i]
+            stripped = body.lstrip()
+            if stripped:
+                out.append((begin + len(body) - len(stripped), stripped))
+            begin = i + 1
+    return out
+
+
+_BLOCKS = ("if", "for", "when", "while")
+
+
+def _equation_starts(text: str, start: int, end: int) -> list[int]:
+    """Offsets of the equations of an equation section ``text[start:end]``.
+
+    A structured equation (``if``/``for``/``when`` ... ``end if;``) counts once, from its
+    keyword; an ``annotation(...);`` is no equation.
+    """
+    out: list[int] = []
+    depth = 0
+    for off, stmt in _statements(text, start, end):
+        words = re.findall(r"[A-Za-z_]\w*", stmt[:40])
+        first = words[0] if words else ""
+        if depth == 0 and first != "annotation":
+            out.append(off)
+        if first in _BLOCKS:
+            depth += 1
+        elif first == "end" and len(words) > 1 and words[1] in _BLOCKS:
+            depth = max(depth - 1, 0)
+    return out
+
+
+class SourceLines:
+    """Line numbers of a model's declarations and equations in its Modelica source.
+
+    pymoca keeps no positions, so they are found again in the text: the model's
+    ``model Name ... end Name;`` region (the whole text if it is not found), its
+    declarations before the first section, and the statements of its ``equation`` and
+    ``initial equation`` sections in order. Lookups that do not match give ``None``.
+
+    Parameters
+    ----------
+    text : str
+        The Modelica source.
+    short_name : str
+        The model's short name.
+    """
+
+    def __init__(self, text: str, short_name: str) -> None:
+        self.text = _blank(text)
+        m = re.search(rf"\bmodel\s+{re.escape(short_name)}\b", self.text)
+        lo = m.start() if m else 0
+        e = re.search(rf"\bend\s+{re.escape(short_name)}\s*;", self.text[lo:])
+        hi = lo + e.start() if e else len(self.text)
+        sections = [
+            (s.start(), s.end(), bool(s.group(1)), s.group(2))
+            for s in _SECTION_RE.finditer(self.text, lo, hi)
+        ]
+        self.sections: dict[tuple[bool, str], list[int]] = {}
+        self.equations: dict[bool, list[int]] = {False: [], True: []}
+        for k, (start, head_end, initial, what) in enumerate(sections):
+            self.sections.setdefault((initial, what), []).append(self.line(start))
+            stop = sections[k + 1][0] if k + 1 < len(sections) else hi
+            if what == "equation":
+                self.equations[initial] += [
+                    self.line(off) for off in _equation_starts(self.text, head_end, stop)
+                ]
+        decl_end = sections[0][0] if sections else hi
+        head = re.match(r"\bmodel\s+\w+\s*", self.text[lo:]) if m else None
+        first = lo + (head.end() if head else 0)
+        self.declarations: dict[str, int] = {}
+        for off, stmt in _statements(self.text, first, decl_end):
+            d = _PREFIX_RE.match(stmt)
+            if not d:
+                continue
+            rest, base = d.group(1), off + d.start(1)
+            for part_off, part in _split_commas(rest):
+                n = re.match(r"\s*([A-Za-z_]\w*)", part)
+                if n:
+                    self.declarations.setdefault(n.group(1), self.line(base + part_off))
+
+    def line(self, offset: int) -> int:
+        """1-based line of a character offset."""
+        return self.text.count("\n", 0, offset) + 1
+
+    def declaration(self, name: str) -> int | None:
+        """Line of the declaration of ``name``."""
+        return self.declarations.get(name)
+
+    def equation(self, index: int, initial: bool = False, count: int | None = None) -> int | None:
+        """Line of the ``index``-th (0-based) equation of the (initial) equation sections.
+
+        With ``count`` (the number of equations pymoca found) ``None`` unless the text
+        has as many: then the equations were not all written in this model's sections
+        (inherited, generated) and their order there is not known.
+        """
+        eqs = self.equations[initial]
+        if count is not None and count != len(eqs):
+            return None
+        return eqs[index] if 0 <= index < len(eqs) else None
+
+    def section(self, what: str, initial: bool = False) -> int | None:
+        """Line of the first ``[initial] equation``/``algorithm`` section header."""
+        lines = self.sections.get((initial, what))
+        return lines[0] if lines else None
+
+
+def _split_commas(text: str) -> list[tuple[int, str]]:
+    """Top-level comma-separated parts of ``text`` with their offsets."""
+    out, depth, begin = [], 0, 0
+    for i, ch in enumerate(text):
+        if ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            out.append((begin, text[begin:i]))
+            begin = i + 1
+    out.append((begin, text[begin:]))
+    return out
+
+
+def at_line(where: str, line: int | None) -> str:
+    """``where`` followed by ``: line N`` when the line is known."""
+    return f"{where}: line {line}" if line else where
+
+
 def _parse_flat(
     model_file: Path, model_name: str, package_dir: str | Path | None
-) -> tuple[str, Any, str, str]:
+) -> tuple[str, Any, str, str, SourceLines]:
     """Parse the source (and its package) and flatten the model.
 
-    Returns the source text, the flat class, its qualified name and the message prefix.
+    Returns the source text, the flat class, its qualified name, the message prefix and
+    the line numbers of the model's declarations and equations.
     """
     _ca, parser, tree, ast = import_build_deps()
     try:
@@ -251,41 +461,51 @@ def _parse_flat(
     except Exception as exc:
         raise BuildError(f"{where}: flattening failed: {exc}") from exc
     flat = flat_root.classes[qname] if qname in flat_root.classes else flat_root
-    for attr, what in (
-        ("initial_equations", "initial equations"),
-        ("statements", "algorithm sections"),
-        ("initial_statements", "initial algorithm sections"),
+    lines = SourceLines(text, qname.rsplit(".", 1)[-1])
+    for attr, what, initial in (
+        ("statements", "algorithm sections", False),
+        ("initial_statements", "initial algorithm sections", True),
     ):
         if getattr(flat, attr, None):
-            raise BuildError(f"{where}: {what} are not supported")
-    return text, flat, qname, where
+            at = at_line(where, lines.section("algorithm", initial))
+            raise BuildError(f"{at}: {what} are not supported (write the assignments as equations)")
+    return text, flat, qname, where, lines
 
 
-def _declarations(flat: Any, time: Any, where: str) -> tuple[list[Variable], dict[str, Any]]:
-    """Variables (with symbols) and the symbol table of the flat class's declarations."""
+def _declarations(
+    flat: Any, time: Any, where: str, lines: SourceLines
+) -> tuple[list[Variable], dict[str, Any]]:
+    """Variables (with symbols) and the symbol table of the flat class's declarations.
+
+    A ``start`` that is not a literal may be an expression of parameters and constants
+    (declared anywhere in the model): it becomes :attr:`Variable.init`, and ``start``
+    its value at the parameters' values.
+    """
     ca, _parser, _tree, ast = import_build_deps()
     symbols: dict[str, Any] = {"time": time}
     decls: list[tuple[str, Any]] = list(flat.symbols.items())
     constants: dict[str, Any] = {}
     variables: list[Variable] = []
+    pending: list[tuple[Variable, Any, str]] = []
     for name, s in decls:
+        w = at_line(where, lines.declaration(name))
         if name == "time":
-            raise BuildError(f"{where}: a variable must not be called 'time'")
+            raise BuildError(f"{w}: a variable must not be called 'time'")
         tname = s.type if isinstance(s.type, str) else getattr(s.type, "name", str(s.type))
         prefixes = set(s.prefixes or [])
         is_param = bool(prefixes & {"parameter", "constant"})
         if tname != "Real" and not (tname == "Integer" and is_param):
             raise BuildError(
-                f"{where}: variable '{name}' has type {tname}; only Real is supported "
+                f"{w}: variable '{name}' has type {tname}; only Real is supported "
                 "(and Integer parameters)"
             )
         dims = s.dimensions
         if dims and any(
             d is not None and getattr(d, "value", None) not in (None, 1) for dd in dims for d in dd
         ):
-            raise BuildError(f"{where}: variable '{name}' is an array; only scalars are supported")
+            raise BuildError(f"{w}: variable '{name}' is an array; only scalars are supported")
         if "discrete" in prefixes:
-            raise BuildError(f"{where}: discrete variable '{name}' is not supported")
+            raise BuildError(f"{w}: discrete variable '{name}' is not supported")
         unit = _literal(s.unit, ast)
         unit = unit if isinstance(unit, str) and unit else None
         desc = s.comment or ""
@@ -294,17 +514,17 @@ def _declarations(flat: Any, time: Any, where: str) -> tuple[list[Variable], dic
         if "constant" in prefixes or "parameter" in prefixes:
             raw = s.value if value is not None else s.start
             if raw is None or (isinstance(raw, ast.Primary) and raw.value is None):
-                raise BuildError(f"{where}: parameter '{name}' has no value")
-            conv = Converter(ca, ast, {**constants, "time": time}, f"{where}: '{name}'")
+                raise BuildError(f"{w}: parameter '{name}' has no value")
+            conv = Converter(ca, ast, {**constants, "time": time}, f"{w}: '{name}'")
             expr = conv(raw)
             if not expr.is_constant():
                 raise BuildError(
-                    f"{where}: the value of parameter '{name}' is not a literal "
+                    f"{w}: the value of parameter '{name}' is not a literal "
                     "(bindings to other parameters are not supported)"
                 )
             num = float(ca.evalf(expr))
             if tname == "Integer" and not (num == int(num) and abs(num) < 2**31):
-                raise BuildError(f"{where}: Integer parameter '{name}' has the value {num}")
+                raise BuildError(f"{w}: Integer parameter '{name}' has the value {num}")
             if "constant" in prefixes:
                 constants[name] = ca.SX(num)
                 symbols[name] = ca.SX(num)
@@ -312,63 +532,136 @@ def _declarations(flat: Any, time: Any, where: str) -> tuple[list[Variable], dic
             var = Variable(name, "parameter", unit, desc, num, ca.SX.sym(name))
             var.integer = tname == "Integer"
         else:
-            st = None
+            st, expression = None, False
             if start is not None and not isinstance(start, str):
                 try:
                     st = float(start)
                 except (TypeError, ValueError):
-                    conv = Converter(ca, ast, {**constants, "time": time}, where)
-                    e = conv(s.start)
-                    if not e.is_constant():
-                        raise BuildError(
-                            f"{where}: start value of '{name}' must be a literal"
-                        ) from None
-                    st = float(ca.evalf(e))
+                    expression = True
             kind = "input" if "input" in prefixes else "output" if "output" in prefixes else "local"
             var = Variable(name, kind, unit, desc, st, ca.SX.sym(name))
+            var.fixed = _literal(getattr(s, "fixed", None), ast) is True
+            if expression:  # converted once every parameter is known
+                pending.append((var, s.start, f"{w}: start value of '{name}'"))
+        var.line = lines.declaration(name)
         variables.append(var)
         symbols[name] = var.sym
+    params = [v for v in variables if v.kind == "parameter"]
+    for var, raw, what in pending:
+        var.init = _parameter_expression(raw, symbols, params, what)
+        var.start = _at_defaults(var.init, params)
+        if not math.isfinite(var.start):
+            raise BuildError(f"{what} is not finite at the parameters' values")
+        if var.init.is_constant():
+            var.init = None
     return variables, symbols
 
 
-def _equations(flat: Any, fm: FlatModel, symbols: dict[str, Any], where: str) -> dict[str, Any]:
+def _parameter_expression(
+    raw: Any, table: dict[str, Any], params: list[Variable], what: str
+) -> Any:
+    """Convert ``raw`` to CasADi and check that it depends on parameters only.
+
+    Parameters
+    ----------
+    raw : pymoca expression
+        The expression.
+    table : dict
+        The names it may use (constants, parameters; others are reported as unknown).
+    params : list of Variable
+        The parameters.
+    what : str
+        Message prefix naming the place (file, model, line and what the expression is).
+
+    Returns
+    -------
+    casadi.SX
+        The expression.
+
+    Raises
+    ------
+    BuildError
+        If it uses anything but parameters and constants.
+    """
+    ca, _parser, _tree, ast = import_build_deps()
+    conv = Converter(ca, ast, table, what)
+    expr = ca.SX(conv(raw))
+    names = {p.name for p in params}
+    for sym in ca.symvar(expr):
+        if sym.name() not in names:
+            raise BuildError(
+                f"{what} depends on '{sym.name()}'; only parameters and constants may appear"
+            )
+    return expr
+
+
+def _at_defaults(expr: Any, params: list[Variable]) -> float:
+    """Value of a parameter expression at the parameters' ``start``."""
+    ca, *_ = import_build_deps()
+    if params:
+        expr = ca.substitute(
+            ca.SX(expr),
+            ca.vertcat(*[p.sym for p in params]),
+            ca.vertcat(*[float(p.start) for p in params]),
+        )
+    return float(ca.evalf(expr))
+
+
+def _equations(
+    flat: Any, fm: FlatModel, symbols: dict[str, Any], where: str, lines: SourceLines
+) -> dict[str, Any]:
     """Fill the residuals (live and frozen) of ``fm``; return the ``der()`` symbols."""
     ca, _parser, _tree, ast = import_build_deps()
     conv = Converter(ca, ast, symbols, where)
     frozen = Converter(ca, ast, symbols, where, relations=fm.relations, der=conv.der)
     for i, eq in enumerate(flat.equations, start=1):
+        at = at_line(where, lines.equation(i - 1, count=len(flat.equations)))
         if not isinstance(eq, ast.Equation):
             raise BuildError(
-                f"{where}: equation {i} is a {type(eq).__name__}; only simple equations "
+                f"{at}: equation {i} is a {type(eq).__name__}; only simple equations "
                 "'lhs = rhs' are supported"
             )
         txt = f"{expr_text(eq.left, ast)} = {expr_text(eq.right, ast)}"
-        conv.where = f"{where}: equation {i} '{txt}'"
+        conv.where = f"{at}: equation {i} '{txt}'"
         res = conv(eq.left) - conv(eq.right)
         fm.residuals.append(res)
         frozen.where = conv.where
         fm.residuals_frozen.append(frozen(eq.left) - frozen(eq.right))
         fm.equation_text.append(txt)
+        fm.equation_lines.append(lines.equation(i - 1, count=len(flat.equations)))
     return conv.der
 
 
 def _assign_roles(
     fm: FlatModel, variables: list[Variable], der: dict[str, Any], where: str
 ) -> None:
-    """Sort the variables of ``fm`` by role; differentiated locals become states."""
+    """Sort the variables of ``fm`` by role; differentiated locals become states.
+
+    A parameter-dependent ``start`` of a state is its computed initial value; of an
+    algebraic variable only an iteration start (its value at the parameters' values); of
+    an input it is refused.
+    """
     for var in variables:
+        w = at_line(where, var.line)
         if var.kind in ("local", "output") and var.name in der:
             if var.kind == "output":
                 raise BuildError(
-                    f"{where}: output '{var.name}' is differentiated; declare a separate "
+                    f"{w}: output '{var.name}' is differentiated; declare a separate "
                     "state and an output equation"
                 )
             var.kind = "state"
             if var.start is None:
                 var.start = 0.0
+        elif var.init is not None:
+            if var.kind == "input":
+                raise BuildError(
+                    f"{w}: the start value of input '{var.name}' depends on parameters; "
+                    "an input's start must be a literal"
+                )
+            var.init = None
         if var.kind == "input":
             if var.name in der:
-                raise BuildError(f"{where}: der() of input '{var.name}' is not supported")
+                raise BuildError(f"{w}: der() of input '{var.name}' is not supported")
             if var.start is None:
                 var.start = 0.0
     for var in variables:
@@ -383,6 +676,68 @@ def _assign_roles(
     for v in fm.parameters + fm.states + fm.inputs:
         if v.start is not None and not math.isfinite(v.start):
             raise BuildError(f"{where}: start value of '{v.name}' is not finite")
+
+
+def _initial_equations(
+    flat: Any, fm: FlatModel, symbols: dict[str, Any], where: str, lines: SourceLines
+) -> None:
+    """Apply the ``initial equation`` sections: ``state = <expression of parameters>``.
+
+    Each sets :attr:`Variable.init` (and ``start``, its value at the parameters' values)
+    of one state; either side may be the state. Anything else is refused with the
+    equation and its line.
+    """
+    _ca, _parser, _tree, ast = import_build_deps()
+    states = {v.name: v for v in fm.states}
+    others = {v.name for v in fm.inputs + fm.outputs + fm.locals + fm.parameters}
+    set_at: dict[str, int | None] = {}
+    form = "only 'state = expression of parameters' (e.g. 'x = x0') is supported"
+    initial_equations = getattr(flat, "initial_equations", None) or []
+    for i, eq in enumerate(initial_equations):
+        line = lines.equation(i, initial=True, count=len(initial_equations))
+        at = at_line(where, line)
+        if not isinstance(eq, ast.Equation):
+            raise BuildError(f"{at}: initial equation {i + 1} is a {type(eq).__name__}; {form}")
+        txt = f"{expr_text(eq.left, ast)} = {expr_text(eq.right, ast)}"
+
+        def name_of(node: Any) -> str | None:
+            if isinstance(node, ast.ComponentRef) and not getattr(node, "child", None):
+                return node.name
+            return None
+
+        left, right = name_of(eq.left), name_of(eq.right)
+        if left in states:
+            target, expr = left, eq.right
+        elif right in states:
+            target, expr = right, eq.left
+        elif left in others or right in others:
+            name = left if left in others else right
+            raise BuildError(
+                f"{at}: initial equation '{txt}' sets '{name}', which is not a state; {form}"
+            )
+        else:
+            raise BuildError(f"{at}: initial equation '{txt}' is not supported; {form}")
+        var = states[target]
+        if target in set_at:
+            first = set_at[target]
+            raise BuildError(
+                f"{at}: initial equation '{txt}' sets state '{target}' a second time"
+                + (f" (first at line {first})" if first else "")
+            )
+        if var.fixed:
+            raise BuildError(
+                f"{at}: initial equation '{txt}' sets state '{target}', whose declaration"
+                + (f" (line {var.line})" if var.line else "")
+                + " has fixed = true: its initial value would be given twice"
+            )
+        set_at[target] = line
+        what = f"{at}: initial equation '{txt}': the value of '{target}'"
+        var.init = _parameter_expression(expr, symbols, fm.parameters, what)
+        var.start = _at_defaults(var.init, fm.parameters)
+        if not math.isfinite(var.start):
+            raise BuildError(f"{what} is not finite at the parameters' values")
+        if var.init.is_constant():
+            var.init = None
 
 
 def flatten_model(
@@ -410,7 +765,7 @@ def flatten_model(
     """
     ca, *_ = import_build_deps()
     model_file = Path(model_file)
-    text, flat, qname, where = _parse_flat(model_file, model_name, package_dir)
+    text, flat, qname, where, lines = _parse_flat(model_file, model_name, package_dir)
     experiment, info = _annotations(text)
     fm = FlatModel(
         name=qname,
@@ -418,9 +773,11 @@ def flatten_model(
         source=model_file,
         experiment=experiment,
         info_html=info,
+        lines=lines,
     )
     fm.time = ca.SX.sym("time")
-    variables, symbols = _declarations(flat, fm.time, where)
-    der = _equations(flat, fm, symbols, where)
+    variables, symbols = _declarations(flat, fm.time, where, lines)
+    der = _equations(flat, fm, symbols, where, lines)
     _assign_roles(fm, variables, der, where)
+    _initial_equations(flat, fm, symbols, where, lines)
     return fm

@@ -160,10 +160,33 @@ static int allFinite(const double *v, int n, int *bad) {
 
 /* ------------------------------------------------------------------ evaluation */
 
+/* Initialization Mode: the states whose initial value is an expression of the
+ * parameters take it, from the parameter values set so far (model_init). */
+static CoreStatus initialStates(Core *core, const char *caller) {
+#if NX_INIT > 0
+    CoreData *d = &core->d;
+    double x0[NX + 1];
+    int bad = 0;
+    if (core->state != StateInitializationMode) return CoreOK;
+    if (model_init(X(d), P(d), x0) != 0 || !allFinite(x0, NX, &bad)) {
+        coreLog(core, CoreError, "logStatusError",
+                "%s: the initial value of %s computed from the parameters is not finite",
+                caller, model_names[X_OFF + bad]);
+        return CoreError;
+    }
+    memcpy(X(d), x0, NX * sizeof(double));
+#else
+    (void)core;
+    (void)caller;
+#endif
+    return CoreOK;
+}
+
 CoreStatus coreEvaluate(Core *core, const char *caller) {
     CoreData *d = &core->d;
     int bad = 0, rc;
     if (!d->dirty) return CoreOK;
+    if (initialStates(core, caller) != CoreOK) return CoreError;
     if (core->isModelExchange) {
         if (!d->modesValid && coreInitModes(core, caller) != CoreOK) return CoreError;
         rc = model_eval_me(d->time, X(d), U(d), P(d), d->c, DX(d), W(d));
@@ -245,7 +268,8 @@ CoreStatus coreExitInitializationMode(Core *core, const char *caller) {
         return CoreError;
     }
     coreInvalidate(core, 1);
-    if ((core->isModelExchange && coreInitModes(core, caller) != CoreOK) ||
+    if (initialStates(core, caller) != CoreOK ||
+        (core->isModelExchange && coreInitModes(core, caller) != CoreOK) ||
         coreEvaluate(core, caller) != CoreOK) {
         core->state = StateError;
         return CoreError;

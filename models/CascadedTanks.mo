@@ -1,0 +1,67 @@
+model CascadedTanks
+  "Cascaded tanks benchmark: a pump fills an upper tank that drains into a lower tank, whose level is measured"
+  // The Cascaded Tanks benchmark (Schoukens, Mattsson, Wigren and Noel, Workshop on
+  // Nonlinear System Identification Benchmarks, 2016): levels in sensor volts.
+  //
+  //   q1       = k_of*max(x1 - x1max, 0)        overflow of the upper tank
+  //   q2       = k_of*max(x2 - x2max, 0)        overflow of the lower tank
+  //   der(x1)  = -k1*sqrt(max(x1, 0)) + k4*u - q1
+  //   der(x2)  =  k2*sqrt(max(x1, 0)) - k3*sqrt(max(x2, 0)) + k5*q1 - q2
+  //   y        = min(x2 + c, y_max)             the sensor clips at y_max
+  //
+  // Torricelli's law gives the outflows through the openings (sqrt of the level); a
+  // level above its tank's rim flows over at the rate k_of (a stiff, if-free
+  // approximation of the hard limit x <= xmax), and the share k5 of the upper tank's
+  // overflow falls into the lower tank. The initial levels are the parameters x1_0 and
+  // x2_0 (start = parameter, fixed = true), so a study can identify them.
+  input Real u(unit = "V", start = 0) "Pump voltage";
+  output Real y(unit = "V") "Sensor voltage of the lower tank's level (clips at y_max)";
+  // Parameters (defaults: a plausible operating point of the Est record, not identified)
+  parameter Real k1 = 0.05 "Outflow coefficient of the upper tank [V^0.5/s]";
+  parameter Real k2 = 0.05 "Inflow coefficient of the lower tank from the upper one [V^0.5/s]";
+  parameter Real k3 = 0.05 "Outflow coefficient of the lower tank [V^0.5/s]";
+  parameter Real k4(unit = "1/s") = 0.04 "Pump gain (level rate per volt)";
+  parameter Real k5 = 0.5 "Share of the upper tank's overflow that falls into the lower tank";
+  parameter Real k_of(unit = "1/s") = 0.5 "Rate at which a level above its rim flows over";
+  parameter Real x1max(unit = "V") = 10 "Level at which the upper tank overflows";
+  parameter Real x2max(unit = "V") = 10 "Level at which the lower tank overflows";
+  parameter Real c(unit = "V") = 0 "Offset of the level sensor";
+  parameter Real y_max(unit = "V") = 10 "Saturation of the level sensor";
+  parameter Real x1_0(unit = "V") = 6 "Initial level of the upper tank";
+  parameter Real x2_0(unit = "V") = 5.2 "Initial level of the lower tank";
+  // States
+  Real x1(unit = "V", start = x1_0, fixed = true) "Level of the upper tank";
+  Real x2(unit = "V", start = x2_0, fixed = true) "Level of the lower tank";
+  // Auxiliary variables
+  Real q1(unit = "V/s") "Overflow of the upper tank";
+  Real q2(unit = "V/s") "Overflow of the lower tank";
+equation
+  q1 = k_of * max(x1 - x1max, 0);
+  q2 = k_of * max(x2 - x2max, 0);
+  der(x1) = -k1 * sqrt(max(x1, 0)) + k4 * u - q1;
+  der(x2) = k2 * sqrt(max(x1, 0)) - k3 * sqrt(max(x2, 0)) + k5 * q1 - q2;
+  y = min(x2 + c, y_max);
+  annotation (
+    experiment(StartTime = 0, StopTime = 4092, Interval = 4),
+    __tsid_fmu(fixedStepSize = 0.5),
+    Documentation(info = "<html>
+<p>Cascaded tanks (nonlinear system-identification benchmark, Schoukens et al. 2016): a
+pump with input voltage <code>u</code> fills an upper tank, which drains through a small
+opening into a lower tank, which drains into a reservoir. The lower tank's level is
+measured as the sensor voltage <code>y</code>. States: the levels <code>x1</code>
+(upper) and <code>x2</code> (lower), in sensor volts.</p>
+<pre>
+q1      = k_of*max(x1 - x1max, 0)
+q2      = k_of*max(x2 - x2max, 0)
+der(x1) = -k1*sqrt(max(x1, 0)) + k4*u - q1
+der(x2) =  k2*sqrt(max(x1, 0)) - k3*sqrt(max(x2, 0)) + k5*q1 - q2
+y       = min(x2 + c, y_max)
+</pre>
+<p>The outflows follow Torricelli's law. A level above its tank's rim
+(<code>x1max</code>, <code>x2max</code>) flows over at the rate <code>k_of</code>, and
+the share <code>k5</code> of the upper tank's overflow falls into the lower tank; the
+sensor clips at <code>y_max</code> (10 V in the measurements). The initial levels are
+the parameters <code>x1_0</code> and <code>x2_0</code>. The record is sampled at 4 s;
+the Co-Simulation step <code>fixedStepSize</code> defaults to 0.5 s.</p>
+</html>"));
+end CascadedTanks;
