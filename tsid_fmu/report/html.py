@@ -274,11 +274,7 @@ def html_report(result: IdentificationResult, figures: Figures | None = None) ->
             ),
             "stages",
         ),
-        *(
-            [_section("How the study ended", _account(result), "account")]
-            if result.account
-            else []
-        ),
+        *([_section("How the study ended", _account(result), "account")] if result.account else []),
         _section("Fit and residuals", _fit(result, units, images), "fit"),
         _section("Residual diagnostics", diagnostics_section(result), "diagnostics"),
     ]
