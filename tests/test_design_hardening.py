@@ -137,6 +137,31 @@ def test_the_first_levels_of_an_answer_near_zero_span_its_interval():
         [0.005, 0.007, 0.01, 0.014, 0.02])  # fmt: skip
 
 
+# finding 19: a failed simulation's reason
+
+
+def test_a_failed_simulation_keeps_its_reason_on_one_line():
+    from tsid_fmu.design.fisher import study_fisher
+    from tsid_fmu.doe.options import LevelingOptions
+    from tsid_fmu.errors import SimulationError
+    from tsid_fmu.evaluate.protocol import Simulated
+    from tsid_fmu.search.space import Space
+
+    class Failing:
+        spec = SimpleNamespace(experiments=[])
+
+        def simulate(self, sets, **kwargs):
+            why = "lag: time limit of 5 s exceeded\nFMU said: \x1b[31mdivision by zero\x1b[0m"
+            return [[Simulated("lag", None, why)] for _ in sets]
+
+    space = Space({"a": [1.0, 2.0, 3.0]}, {"a": (0.0, np.inf)}, LevelingOptions())
+    with pytest.raises(SimulationError) as info:
+        study_fisher(Failing(), space, {"a": 2.0}, 1.0)
+    said = str(info.value)
+    assert "time limit of 5 s exceeded | FMU said: [31mdivision by zero[0m" in said
+    assert "\n" not in said and "\x1b" not in said
+
+
 # finding 21: input limits
 
 
