@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import re
 from types import SimpleNamespace
 
@@ -11,7 +13,7 @@ from fmu_factory import lag_study
 
 from tsid_fmu import Method, StudyError, identify
 from tsid_fmu.cli import main
-from tsid_fmu.design import DesignOptions, design
+from tsid_fmu.design import DesignOptions, design, write_design
 from tsid_fmu.study.toml import design_options
 
 OPTIONS = {"inputs": {"u": [-1.0, 1.0]}, "bands": 1, "kinds": ["chirp"]}
@@ -47,6 +49,118 @@ def _cli_study(lag, name="study.toml", design_table=""):
         fh.write('\n[design]\ninputs = { u = [-0.5, 0.5] }\nbands = 1\nkinds = ["chirp"]\n')
         fh.write(design_table)
     return path
+
+
+# finding 1 and 18: the default output is named after the result, and never inside it
+
+
+def test_the_default_output_is_named_after_the_result_and_lies_beside_it(tmp_path, monkeypatch):
+    from tsid_fmu.design.files import default_output
+
+    assert default_output(tmp_path / "a") == tmp_path / "a.design"
+    assert default_output(tmp_path / "b") != default_output(tmp_path / "a")
+    (tmp_path / "r").mkdir()
+    monkeypatch.chdir(tmp_path / "r")
+    assert default_output(".") == tmp_path / "r.design"  # --result .: not inside it
+
+
+def test_an_output_inside_the_result_folder_is_refused(tmp_path):
+    from tsid_fmu.design.files import check_output
+
+    (tmp_path / "r").mkdir()
+    for out in (tmp_path / "r", tmp_path / "r" / "design"):
+        with pytest.raises(StudyError, match="inside the result folder"):
+            check_output(out, tmp_path / "r")
+    assert check_output(tmp_path / "r.design", tmp_path / "r") == tmp_path / "r.design"
+
+
+def test_tsid_design_with_result_dot_writes_beside_it(lag, capsys, monkeypatch):
+    _, tmp = lag
+    study = _cli_study(lag)
+    monkeypatch.chdir(tmp / "out")
+    assert main(["design", str(study), "--result", ".", "-q"]) == 0
+    capsys.readouterr()
+    assert not (tmp / "out" / "design").exists() and not (tmp / "out" / "design.json").exists()
+    assert (tmp / "out.design" / "design.json").is_file()
+
+
+# finding 2 and 27: a folder holds one whole design
+
+
+def test_a_design_without_a_proposal_leaves_no_earlier_input_behind(found, tmp_path):
+    out = tmp_path / "d"
+    first = write_design(found, out)
+    assert out / "design_input.csv" in first and (out / "design_input.csv").is_file()
+    none = dataclasses.replace(found, proposal=None, after=None, levels={}, predicted_outputs=None)
+    second = write_design(none, out)
+    assert not (out / "design_input.csv").exists()
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in second)
+    assert json.loads((out / "design.json").read_text())["proposal"] is None
+    # nothing left beside it but the lock file
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".d.lock", "d"]
+
+
+def test_an_interrupted_write_keeps_the_earlier_design_whole(found, tmp_path, monkeypatch):
+    from tsid_fmu.design import files
+
+    out = tmp_path / "d"
+    write_design(found, out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def broken(d, path):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(files, "plot_design", broken)
+    none = dataclasses.replace(found, proposal=None, after=None, levels={}, predicted_outputs=None)
+    with pytest.raises(KeyboardInterrupt):
+        write_design(none, out)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    # no half-written folder beside it, nor the earlier one moved aside
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".d.lock", "d"]
+
+
+def test_a_folder_with_other_files_is_not_replaced(found, tmp_path):
+    (tmp_path / "mine.txt").write_text("keep")
+    with pytest.raises(StudyError, match=r"not a design's \(mine.txt\)"):
+        write_design(found, tmp_path)
+    assert (tmp_path / "mine.txt").read_text() == "keep"
+    (tmp_path / "file").write_text("")
+    with pytest.raises(StudyError, match="is not a folder"):
+        write_design(found, tmp_path / "file")
+
+
+def test_two_writers_into_one_folder_take_turns(tmp_path):
+    import fcntl
+
+    from tsid_fmu.design.files import _turn
+
+    out = tmp_path / "d"
+    with _turn(out), open(tmp_path / ".d.lock", "a") as other:
+        with pytest.raises(BlockingIOError):
+            fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    with open(tmp_path / ".d.lock", "a") as other:
+        fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)  # free again
+
+
+# finding 3: an unwritable output is found before any simulation
+
+
+def test_an_unwritable_output_is_refused_before_any_simulation(lag, capsys, monkeypatch):
+    import sys
+
+    package = sys.modules["tsid_fmu.design"]  # tsid_fmu.design is the function
+    _, tmp = lag
+    (tmp / "a_file").write_text("")
+    study = _cli_study(lag)
+
+    def never(*args, **kwargs):
+        raise AssertionError("simulated before checking the output folder")
+
+    monkeypatch.setattr(package, "design", never)
+    bad = tmp / "a_file" / "sub"
+    assert main(["design", str(study), "--result", str(tmp / "out"), "-o", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(bad) in err[0] and "cannot write there" in err[0]
 
 
 # finding 5: a result of other parameters
@@ -99,6 +213,30 @@ def test_the_message_has_no_second_design_and_no_float_noise():
         design_options({"design": {"duration": 0.1 + 0.2, "sample_time": 0.1}}, "study.toml")
     assert "[design] [design]" not in str(info.value)
     assert "0.30000000000000004" not in str(info.value) and "0.3 s" in str(info.value)
+
+
+# finding 8: the Python API
+
+
+def test_the_api_takes_an_array_band_and_refuses_wrong_types(lag, found, tmp_path):
+    import tsid_fmu
+
+    result, _ = lag
+    assert DesignOptions(band=np.array([0.5, 5.0])).band == [0.5, 5.0]
+    assert DesignOptions(kinds=np.array(["chirp"])).kinds == ["chirp"]
+    with pytest.raises(StudyError, match=r"\[design\] band"):
+        DesignOptions(band={0.5: 1, 5.0: 2})
+    with pytest.raises(StudyError, match=r"\[design\] band"):
+        DesignOptions(band="0.5, 5")
+    with pytest.raises(TypeError, match="options must be DesignOptions, not str"):
+        design(result, "x")
+    with pytest.raises(TypeError, match=r"result\.study must be a Study"):
+        design(SimpleNamespace(study=found), None)
+    with pytest.raises(TypeError, match="write_design: d must be a Design"):
+        write_design(None, tmp_path / "d")
+    with pytest.raises(TypeError, match="write_design: out must be"):
+        write_design(found, None)
+    assert tsid_fmu.write_design is write_design and "write_design" in tsid_fmu.__all__
 
 
 # finding 15 and 16: the band against the record
