@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
 from types import SimpleNamespace
 
 import numpy as np
+import pandas as pd
 import pytest
 from fmu_factory import lag_study
 
@@ -307,3 +309,27 @@ def test_a_failed_simulation_keeps_its_reason_on_one_line():
 def test_huge_input_limits_are_refused_naming_the_input(span):
     with pytest.raises(StudyError, match=re.escape("[design] inputs.F_m: limits must lie")):
         design_options({"design": {"inputs": {"F_m": span}}}, "study.toml")
+
+
+# finding 13: the study changed since the result
+
+
+def test_a_changed_study_is_said_on_stderr_and_in_the_design(lag, capsys):
+    result, tmp = lag
+    study = _cli_study(lag)
+    data = result.study.experiments[0].data
+    frame = pd.read_csv(data)
+    saved = data.read_bytes()
+    try:
+        frame.loc[3, "y_meas"] += 1e-6
+        frame.to_csv(data, index=False)
+        out = tmp / "changed.design"
+        assert main(["design", str(study), "--result", str(tmp / "out"), "-o", str(out),
+                     "-q"]) == 0  # fmt: skip
+        err = capsys.readouterr().err
+        assert "tsid: warning: the study or its files changed since this run" in err
+        assert "changed since this run" in (out / "design.md").read_text()
+        assert json.loads((out / "design.json").read_text())["warnings"]
+    finally:
+        data.write_bytes(saved)
+    os.utime(data)

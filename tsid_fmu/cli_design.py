@@ -34,6 +34,8 @@ def _cmd_design(args: argparse.Namespace) -> int:
     found = design(result, workers=args.workers, timeout=args.timeout,
                    progress=(lambda line: print(f"design: {line}", file=sys.stderr,
                                                 flush=True)) if shown else None)  # fmt: skip
+    for warning in found.warnings:
+        print(f"tsid: warning: {warning}", file=sys.stderr)
     files = write_design(found, out)
     if args.json:
         print(json.dumps(found.to_dict(), indent=1, allow_nan=False))
