@@ -214,7 +214,7 @@ def write_design(d: Design, out: str | Path) -> list[Path]:
     if not isinstance(d, Design):
         raise TypeError(f"write_design: d must be a Design (from design()), not {type(d).__name__}")
     if not isinstance(out, str | os.PathLike):
-        raise TypeError(f"write_design: out must be a folder's path, got {type(out).__name__}")
+        raise TypeError(f"write_design: out must be a folder's path, not {type(out).__name__}")
     given = Path(out)
     out = check_output(given).resolve()
     new = Path(tempfile.mkdtemp(prefix=f".{out.name}.new-", dir=out.parent))
