@@ -241,7 +241,7 @@ class Design:
             f"outputs and sensors of experiment {self.template!r}.",
             f"Criterion: {CRITERIA_TEXT[self.criterion]}.",
             f"{len(self.candidates)} candidates, {self.nfev} simulations.",
-            *(f"Warning: {w}." for w in self.warnings),
+            *(f"Warning: {w}{'' if w.endswith('.') else '.'}" for w in self.warnings),
         ]
         if self.levels:
             facts.append(
