@@ -247,15 +247,25 @@ def follow_up_levels(
         value = x[name]
         factors = [value * f for f in FOLLOW_UP]
         iv = intervals.get(name)
-        if iv is not None and len(iv) == 2 and None not in iv:
+        if _finite_pair(iv):
             a, b = float(iv[0]), float(iv[1])
-            if math.isfinite(a) and math.isfinite(b) and abs(value) < 0.5 * (b - a):
+            if abs(value) < 0.5 * (b - a):
                 reach = max(value - a, b - value)
                 factors = [value + reach * f for f in (-1.0, -0.5, 0.0, 0.5, 1.0)]
         levels = sorted(min(max(v, low), high) for v in factors)
         distinct = len(set(levels)) == len(FOLLOW_UP) and all(np.isfinite(levels))
         out[name] = levels if distinct else list(own)
     return out
+
+
+def _finite_pair(iv: Any) -> bool:
+    """Whether ``iv`` is a closed interval: two finite numbers (not an open end, ``None``)."""
+    return (
+        isinstance(iv, list | tuple)
+        and len(iv) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in iv)
+        and all(math.isfinite(v) for v in iv)
+    )
 
 
 def make_plan(result: Any, options: DesignOptions | None) -> Plan:
