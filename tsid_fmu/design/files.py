@@ -65,30 +65,31 @@ def check_output(out: str | Path, result_dir: str | Path | None = None) -> Path:
         Naming ``out`` and what is wrong.
     """
     out = Path(out)
-    where = out.resolve()
-    if result_dir is not None:
-        result = Path(result_dir).resolve()
-        if where == result or result in where.parents:
+    try:
+        where = out.resolve()
+        inside = result_dir is not None and (
+            where == Path(result_dir).resolve() or Path(result_dir).resolve() in where.parents
+        )
+        if inside:
             raise StudyError(
                 f"design output {out}: is inside the result folder {result_dir}; choose "
                 "another folder (-o)"
             )
-    if where.exists() or where.is_symlink():
-        if not where.is_dir():
-            raise StudyError(f"design output {out}: exists and is not a folder")
-        others = sorted(p.name for p in where.iterdir() if p.name not in DESIGN_FILES)
-        if others:
-            shown = ", ".join(others[:3]) + (" ..." if len(others) > 3 else "")
-            raise StudyError(
-                f"design output {out}: holds files that are not a design's ({shown}); "
-                "it is replaced as a whole, so choose an empty or new folder (-o)"
-            )
-    try:
+        if where.exists():
+            if not where.is_dir():
+                raise StudyError(f"design output {out}: exists and is not a folder")
+            others = sorted(p.name for p in where.iterdir() if p.name not in DESIGN_FILES)
+            if others:
+                shown = ", ".join(others[:3]) + (" ..." if len(others) > 3 else "")
+                raise StudyError(
+                    f"design output {out}: holds files that are not a design's ({shown}); "
+                    "it is replaced as a whole, so choose an empty or new folder (-o)"
+                )
         where.parent.mkdir(parents=True, exist_ok=True)
         os.rmdir(tempfile.mkdtemp(prefix=f".{where.name}.check-", dir=where.parent))
-    except OSError as exc:
-        reason = exc.strerror or type(exc).__name__
-        raise StudyError(f"design output {out}: cannot write there ({reason})") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+        reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        raise StudyError(f"design output {out!s}: cannot write there ({reason})") from None
     return out
 
 
