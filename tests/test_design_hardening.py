@@ -121,6 +121,32 @@ def test_an_interrupted_write_keeps_the_earlier_design_whole(found, tmp_path, mo
     assert sorted(p.name for p in tmp_path.iterdir()) == [".d.lock", "d"]
 
 
+def test_an_interrupt_between_the_two_moves_puts_the_earlier_design_back(
+    found, tmp_path, monkeypatch
+):
+    from tsid_fmu.design import files
+
+    out = tmp_path / "d"
+    write_design(found, out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    real, calls = os.replace, []
+
+    def replace(src, dst):
+        calls.append((src, dst))
+        if len(calls) == 2:  # the new design into place: interrupted
+            raise KeyboardInterrupt
+        real(src, dst)
+
+    monkeypatch.setattr(files.os, "replace", replace)
+    none = dataclasses.replace(found, proposal=None, after=None, levels={}, predicted_outputs=None)
+    with pytest.raises(KeyboardInterrupt):
+        write_design(none, out)
+    monkeypatch.undo()
+    assert len(calls) == 3  # aside, (interrupted), back
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".d.lock", "d"]
+
+
 def test_a_folder_with_other_files_is_not_replaced(found, tmp_path):
     (tmp_path / "mine.txt").write_text("keep")
     with pytest.raises(StudyError, match=r"not a design's \(mine.txt\)"):

@@ -217,26 +217,24 @@ def write_design(d: Design, out: str | Path) -> list[Path]:
     if not isinstance(out, str | os.PathLike):
         raise TypeError(f"write_design: out must be a folder's path, not {type(out).__name__}")
     given = Path(out)
-    out = check_output(given).resolve()
-    new = Path(tempfile.mkdtemp(prefix=f".{out.name}.new-", dir=out.parent))
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(new, 0o777 & ~mask)  # a folder as mkdir makes it, not mkdtemp's private one
+    target = check_output(given).resolve()
+    new = Path(tempfile.mkdtemp(prefix=f".{target.name}.new-", dir=target.parent))
     old = None
     try:
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(new, 0o777 & ~mask)  # a folder as mkdir makes it, not mkdtemp's private one
         names = [p.name for p in _files(d, new)]
-        with _turn(out):
-            check_output(out)  # another writer's folder, or the user's files since
-            if out.exists() or out.is_symlink():
-                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-                os.replace(out, old / "design")
-            try:
-                os.replace(new, out)
-            except OSError:
-                if old is not None:  # the earlier design back in its place
-                    os.replace(old / "design", out)
-                raise
+        with _turn(target):
+            check_output(target)  # another writer's folder, or the user's files since
+            if target.exists() or target.is_symlink():
+                old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+                os.replace(target, old / "design")
+            os.replace(new, target)
     finally:
+        if old is not None and (old / "design").exists() and not target.exists():
+            with contextlib.suppress(OSError):  # failed or interrupted between the two
+                os.replace(old / "design", target)  # replaces: the earlier design back
         for folder in (new, old):
             if folder is not None and folder.exists():
                 shutil.rmtree(folder, ignore_errors=True)
