@@ -167,13 +167,13 @@ def test_tsid_design_writes_its_files_and_prints_json(tmp_path, capsys):
     assert out["inputs"] == {"u": [-0.5, 0.5]}
     assert out["proposal"].startswith("chirp")
     assert [c["kind"] for c in out["candidates"]] == ["chirp"]
-    frame = pd.read_csv(tmp_path / "design" / "design_input.csv")
+    frame = pd.read_csv(tmp_path / "out.design" / "design_input.csv")
     assert frame.u.min() >= -0.5 and frame.u.max() <= 0.5
     # the page stands alone (its plot embedded) and has the report's tables and style
-    page = (tmp_path / "design" / "design.html").read_text()
+    page = (tmp_path / "out.design" / "design.html").read_text()
     assert page.count("<table") == 1 and "<style>" in page and "data:image/png;base64" in page
     assert "predicted, with the proposal" in page and out["verdict"].split(":")[0] in page
-    md = (tmp_path / "design" / "design.md").read_text()
+    md = (tmp_path / "out.design" / "design.md").read_text()
     assert "with the outputs and sensors of experiment '" in md
 
 

@@ -8,7 +8,8 @@ The flat public API, over the layers of the data flow (see ``docs/explanation/ar
   study's first ranges, beside the MISO paper's eq. (7) from an L25
   (:class:`ScreeningResult`);
 - :func:`design`: the experiment that determines what a result left open, or why none
-  can (:class:`Design`, from the study's ``[design]`` table, :class:`DesignOptions`);
+  can (:class:`Design`, from the study's ``[design]`` table, :class:`DesignOptions`),
+  and :func:`write_design`, its files;
 - :func:`load`: the :class:`IdentificationResult` of a finished study's results folder;
 - :class:`Study` with :class:`Parameter`, :class:`Choice` (a discrete factor),
   :class:`ModelChoice` (a choice among FMU files), :class:`Experiment` and :class:`Method`,
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 # first of all: `tsid` on the command line holds Ctrl-C while the imports below run
 import tsid_fmu._startup  # noqa: F401  # isort: skip
-from tsid_fmu.design import Design, DesignOptions, design
+from tsid_fmu.design import Design, DesignOptions, design, write_design
 from tsid_fmu.errors import (
     ArrayError,
     BuildError,
@@ -79,4 +80,5 @@ __all__ = [
     "load",
     "screen",
     "simulate",
+    "write_design",
 ]

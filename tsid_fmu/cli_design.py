@@ -3,7 +3,8 @@
 Prints the verdict and the table of intervals (the study's, and predicted with the
 proposal); writes ``design_input.csv`` (the input to replay on the rig),
 ``design.png``, ``design.json``, ``design.md`` and ``design.html`` to the output folder
-(default ``design/`` beside the result folder). ``--json`` prints ``design.json``'s
+(default ``<result>.design/`` beside the result folder ``<result>``, checked before any
+simulation; the folder is replaced as a whole). ``--json`` prints ``design.json``'s
 content instead of the table. Errors are the package's own (exit 2, one line).
 """
 
@@ -22,15 +23,19 @@ __all__ = ["add_design_parser"]
 
 def _cmd_design(args: argparse.Namespace) -> int:
     from tsid_fmu.design import design, write_design
+    from tsid_fmu.design.files import check_output, default_output
     from tsid_fmu.load import load
 
     folder = Path(args.result)
     result = load(folder, args.study)
+    # before any simulation: a design that cannot be written is not computed
+    out = check_output(Path(args.out) if args.out else default_output(folder), folder)
     shown = not args.quiet and sys.stderr.isatty()
     found = design(result, workers=args.workers, timeout=args.timeout,
                    progress=(lambda line: print(f"design: {line}", file=sys.stderr,
                                                 flush=True)) if shown else None)  # fmt: skip
-    out = Path(args.out) if args.out else folder.parent / "design"
+    for warning in found.warnings:
+        print(f"tsid: warning: {warning}", file=sys.stderr)
     files = write_design(found, out)
     if args.json:
         print(json.dumps(found.to_dict(), indent=1, allow_nan=False))
@@ -53,7 +58,9 @@ def add_design_parser(sub: Any) -> None:
     )
     p.add_argument("study", help="study file (TOML), with an optional [design] table")
     p.add_argument("--result", required=True, metavar="DIR", help="the study's results folder")
-    p.add_argument("-o", "--out", help="output folder (default: design/ beside DIR)")
+    p.add_argument(
+        "-o", "--out", help="output folder, replaced as a whole (default: DIR.design beside DIR)"
+    )
     p.add_argument("--workers", type=worker_count, metavar="N", help="worker processes")
     p.add_argument("--timeout", type=timeout_seconds, metavar="SECONDS", help="per simulation")
     p.add_argument("--json", action="store_true", help="print design.json on stdout")

@@ -36,7 +36,7 @@ from tsid_fmu.trail.reader import read_stage
 from tsid_fmu.uncertainty.intervals import Uncertainty
 from tsid_fmu.uncertainty.sampled import Sampled
 
-__all__ = ["load"]
+__all__ = ["load", "study_changes"]
 
 _OLD = (
     "result.json has no checksum (an older tsid-fmu wrote it, or the checksum was "
@@ -200,14 +200,23 @@ def _study(
             return None, [f"the study is not attached ({exc}); pass study= to load()"]
     elif not isinstance(study, Study):
         study = Study.from_toml(study)
+    return study, study_changes(out, study)
+
+
+def study_changes(out_dir: str | Path, study: Study) -> list[str]:
+    """Return the warning that ``study`` or its files changed since the run in ``out_dir``.
+
+    Empty where they are those of the run (its ``fingerprint.json``); the warning
+    :func:`load` gives otherwise (``tsid design`` repeats it).
+    """
     try:
-        changed = differences(read_fingerprint(out / FINGERPRINT), fingerprint(study))
+        changed = differences(read_fingerprint(Path(out_dir) / FINGERPRINT), fingerprint(study))
     except StudyError as exc:
-        return study, [str(exc)]
+        return [str(exc)]
     if changed:
         shown = "; ".join(changed[:4]) + (" ..." if len(changed) > 4 else "")
-        return study, [f"the study or its files changed since this run: {shown}"]
-    return study, []
+        return [f"the study or its files changed since this run: {shown}"]
+    return []
 
 
 def load(out_dir: str | Path, study: Study | str | Path | None = None) -> IdentificationResult:

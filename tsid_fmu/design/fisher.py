@@ -20,7 +20,9 @@ its first range), so that a determinant or a variance does not depend on units.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import unicodedata
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +31,42 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.space import Space
 from tsid_fmu.uncertainty.sensitivity import sensitivities
 
-__all__ = ["candidate_fisher", "study_fisher"]
+__all__ = ["candidate_fisher", "one_line", "study_fisher"]
+
+
+REASON = 400
+"""Characters of a failed simulation's reason kept in a design's error message."""
+
+
+def one_line(text: str) -> str:
+    """Return ``text`` as one line: line breaks as `` | ``, control characters dropped.
+
+    What an FMU printed can hold newlines and terminal escapes; a CLI error is one line.
+    Longer than :data:`REASON` characters, it is cut with an ellipsis.
+    """
+    lines = [ln.strip() for ln in str(text).splitlines()]
+    joined = " | ".join(ln for ln in lines if ln)
+    kept = "".join(c for c in joined if not unicodedata.category(c).startswith("C"))
+    return kept if len(kept) <= REASON else kept[: REASON - 3] + "..."
+
+
+class _Reasons:
+    """An evaluator that keeps the first reason a simulation failed for (``first``)."""
+
+    def __init__(self, evaluator: Evaluator) -> None:
+        self.evaluator, self.spec, self.first = evaluator, evaluator.spec, None
+
+    def simulate(self, sets: Sequence[Mapping[str, float]], *args: Any, **kwargs: Any) -> Any:
+        runs = self.evaluator.simulate(sets, *args, **kwargs)
+        for row in runs:
+            for sim in row:
+                if self.first is None and sim.outputs is None:
+                    self.first = sim.error or "no reason given"
+        return runs
+
+    def because(self) -> str:
+        """Return ``": <reason>"`` for a message, or '' where no simulation failed."""
+        return f": {one_line(self.first)}" if self.first else ""
 
 
 def _fisher(jac: np.ndarray, sigma: np.ndarray) -> np.ndarray:
@@ -47,9 +84,10 @@ def study_fisher(
     And each experiment's residuals there (measured minus simulated, its scored
     samples): the sensors' noise as the data show it.
     """
-    sens = sensitivities(evaluator, evaluator.spec, space, x)  # type: ignore[attr-defined]
+    kept = _Reasons(evaluator)
+    sens = sensitivities(kept, evaluator.spec, space, x)  # type: ignore[arg-type, attr-defined]
     if sens is None:
-        raise SimulationError("design: a simulation at the answer failed")
+        raise SimulationError(f"design: a simulation at the answer failed{kept.because()}")
     total = np.zeros((space.dim, space.dim))
     for r, jac in zip(sens.residuals, sens.jacobian, strict=True):
         rms = np.sqrt(np.mean(r**2, axis=0))
@@ -67,11 +105,12 @@ def candidate_fisher(
     Jacobians are whitened by ``sigma``, one row per sample and output (sample after
     sample).
     """
-    sens = sensitivities(evaluator, evaluator.spec, space, x)  # type: ignore[attr-defined]
+    kept = _Reasons(evaluator)
+    sens = sensitivities(kept, evaluator.spec, space, x)  # type: ignore[arg-type, attr-defined]
     if sens is None:
         raise SimulationError(
-            "design: a simulation of a candidate input failed at the answer or beside it; "
-            "narrow [design] inputs or band"
+            "design: a simulation of a candidate input failed at the answer or beside it "
+            f"(narrow [design] inputs or band){kept.because()}"
         )
     whitened = [(jac / sigma[None, :, None]).reshape(-1, space.dim) for jac in sens.jacobian]
     fishers = [w.T @ w for w in whitened]

@@ -75,6 +75,11 @@ def _levels(levels: list | None) -> str:
     return "-" if not levels else ", ".join(fmt_levels(levels))
 
 
+def _plain(x: float) -> float:
+    """Return ``x`` without the float noise of a difference of sample times (4.999999999)."""
+    return float(f"{float(x):.12g}")
+
+
 def width(iv: list | None) -> float:
     """Return an interval's width; ``inf`` for an open one."""
     if not iv or iv[0] is None or iv[1] is None:
@@ -132,7 +137,11 @@ class Design:
     levels : dict
         First levels of the study ``after`` is predicted for: the study with the
         proposal added, started around the answer (half to twice each value, inside its
-        bounds; :func:`~tsid_fmu.design.plan.follow_up_levels`). Empty without a proposal.
+        bounds; the study's interval around an answer nearer zero than that interval is
+        wide; :func:`~tsid_fmu.design.plan.follow_up_levels`). Empty without a proposal.
+    warnings : list of str
+        What the design was made despite: the study or its files changed since the
+        result (:func:`tsid_fmu.load.study_changes`).
     """
 
     names: list[str]
@@ -155,6 +164,7 @@ class Design:
     separating: Signal | None = None
     discrimination: dict[str, Any] | None = None
     levels: dict[str, list[float]] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def verdict(self) -> str:
@@ -198,8 +208,8 @@ class Design:
                 "template": self.template,
                 "inputs": {n: list(lim) for n, lim in zip(self.inputs, self.limits, strict=True)},
                 "band_hz": list(self.band),
-                "duration": float(self.time[-1] - self.time[0]),
-                "sample_time": float(self.time[1] - self.time[0]),
+                "duration": _plain(self.time[-1] - self.time[0]),
+                "sample_time": _plain(self.time[1] - self.time[0]),
                 "proposal": None if self.proposal is None else self.proposal.name,
                 "parameters": self.table(),
                 "weak": self.weak,
@@ -208,6 +218,7 @@ class Design:
                 "nfev": self.nfev,
                 "separating": None if self.separating is None else self.separating.name,
                 "discrimination": self.discrimination,
+                "warnings": list(self.warnings),
             }
         )
 
@@ -231,11 +242,13 @@ class Design:
             f"outputs and sensors of experiment {self.template!r}.",
             f"Criterion: {CRITERIA_TEXT[self.criterion]}.",
             f"{len(self.candidates)} candidates, {self.nfev} simulations.",
+            *(f"Warning: {w}{'' if w.endswith('.') else '.'}" for w in self.warnings),
         ]
         if self.levels:
             facts.append(
                 "Predicted for the study with the proposal added as a second experiment, "
-                "started from the first levels below (half to twice each value): start "
+                "started from the first levels below (half to twice each value, or the "
+                "study's interval around a value near zero): start "
                 "it so, since the intervals' resolution and finite-difference steps are "
                 "fractions of a first range."
             )

@@ -14,6 +14,8 @@ sample.
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,7 +28,7 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.definition import Study, fields_of
-from tsid_fmu.study.designopts import DesignOptions
+from tsid_fmu.study.designopts import DesignOptions, check_samples
 from tsid_fmu.study.prepare import load_experiment, prepare
 from tsid_fmu.study.schema import Experiment
 from tsid_fmu.study.toml import read_design
@@ -64,6 +66,23 @@ def _options(result: Any, options: DesignOptions | None) -> DesignOptions:
     return read_design(source) if source is not None else DesignOptions()
 
 
+def _same_parameters(result: Any, study: Study) -> None:
+    """Refuse a result that lacks some of the study's parameters (another study's result)."""
+    params = getattr(result, "params", None)
+    if not isinstance(params, Mapping):
+        raise TypeError("design: result must be an identification result (tsid_fmu.load)")
+    have = [str(n) for n in params]
+    want = [*study.first_levels(), *study.choice_names]
+    missing = [n for n in want if n not in have]
+    if missing:
+        extra = [n for n in have if n not in want]
+        besides = f"; the result has {', '.join(extra)}, which the study does not" if extra else ""
+        raise StudyError(
+            f"design: the result's parameters differ from the study's: it has no "
+            f"{', '.join(missing)}{besides} (is it this study's result?)"
+        )
+
+
 def _template(study: Study, spec: EvaluationSpec, name: str) -> tuple[PreparedExperiment, Any]:
     names = [e.name for e in spec.experiments]
     if name and name not in names:
@@ -79,10 +98,41 @@ def _time(template: PreparedExperiment, opts: DesignOptions) -> np.ndarray:
     t = np.asarray(template.time, dtype=float)
     dt = opts.sample_time or float(np.median(np.diff(t)))
     duration = opts.duration or float(t[-1] - t[0])
-    n = round(duration / dt)
-    if n < 10 or n > 10_000_000:
-        raise StudyError(f"[design] duration {duration} s at {dt} s gives {n} samples")
+    n = check_samples(duration, dt)  # bounded before any array is made
     return np.round(t[0] + dt * np.arange(n + 1), 12)
+
+
+def _band(opts: DesignOptions, t: np.ndarray) -> tuple[float, float]:
+    """Return the allowed band: ``[design] band``, checked against the record, or the default.
+
+    A record of ``T`` seconds at ``dt`` carries frequencies from ``1 / T`` (one period)
+    to the Nyquist frequency ``1 / (2 dt)``; the default band runs from two periods a
+    record to a twentieth of the sample rate, and needs a record of more than 40 samples.
+    """
+    dt, span = float(t[1] - t[0]), float(t[-1] - t[0])
+    if opts.band:
+        lo, hi = float(opts.band[0]), float(opts.band[1])
+        if hi > 0.5 / dt:
+            raise StudyError(
+                f"[design] band: f_max {hi:.6g} Hz is above the Nyquist frequency "
+                f"{0.5 / dt:.6g} Hz of the sample time {dt:.6g} s (lower it, or give a "
+                "shorter [design] sample_time)"
+            )
+        if lo < 1.0 / span * (1 - 1e-9):
+            raise StudyError(
+                f"[design] band: f_min {lo:.6g} Hz is below {1.0 / span:.6g} Hz, one period "
+                f"in the record of {span:.6g} s (raise it, or give a longer [design] duration)"
+            )
+        return lo, hi
+    lo, hi = 2.0 / span, 1.0 / (20 * dt)
+    if not lo < hi:
+        raise StudyError(
+            f"[design] sample_time: the record of {span:.6g} s at {dt:.6g} s has {t.size - 1} "
+            "samples, too few for the default band (two periods a record to a twentieth of "
+            "the sample rate needs more than 40): give [design] band, or a longer duration or "
+            "a shorter sample_time"
+        )
+    return lo, hi
 
 
 def _input_columns(source: Experiment, frame: pd.DataFrame) -> list[str]:
@@ -169,7 +219,9 @@ FOLLOW_UP = (0.5, 0.7, 1.0, 1.4, 2.0)
 """First levels of the study with the proposal added, as factors of the answer."""
 
 
-def follow_up_levels(study: Study, x: dict[str, float]) -> dict[str, list[float]]:
+def follow_up_levels(
+    study: Study, x: dict[str, float], intervals: Mapping[str, Any] | None = None
+) -> dict[str, list[float]]:
     """First levels of the study the prediction is for: around the answer.
 
     Each parameter's answer times :data:`FOLLOW_UP` (half to twice it), inside its
@@ -181,27 +233,56 @@ def follow_up_levels(study: Study, x: dict[str, float]) -> dict[str, list[float]
     levels and achieved from these, F_vm's interval was 1.36 times the predicted one on
     every noise seed; predicted with these, 1.08 (1.14 with the noise centred:
     ``benchmarks/design.py``).
+
+    An answer nearer zero than its 95 % interval is wide (``intervals``, the study's)
+    gets levels that span that interval instead, centred on the answer: half to twice
+    an answer of 0.01 whose interval is -0.5 .. 0.5 lie on one side of zero, and exclude
+    most of what the data allow.
     """
     bounds = study.bounds()
+    intervals = intervals or {}
     out = {}
     for name, own in study.first_levels().items():
         low, high = bounds[name]
-        levels = sorted(min(max(x[name] * f, low), high) for f in FOLLOW_UP)
+        value = x[name]
+        factors = [value * f for f in FOLLOW_UP]
+        iv = intervals.get(name)
+        if _finite_pair(iv):
+            a, b = float(iv[0]), float(iv[1])
+            if abs(value) < 0.5 * (b - a):
+                reach = max(value - a, b - value)
+                factors = [value + reach * f for f in (-1.0, -0.5, 0.0, 0.5, 1.0)]
+        levels = sorted(min(max(v, low), high) for v in factors)
         distinct = len(set(levels)) == len(FOLLOW_UP) and all(np.isfinite(levels))
         out[name] = levels if distinct else list(own)
     return out
 
 
+def _finite_pair(iv: Any) -> bool:
+    """Whether ``iv`` is a closed interval: two finite numbers (not an open end, ``None``)."""
+    return (
+        isinstance(iv, list | tuple)
+        and len(iv) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in iv)
+        and all(math.isfinite(v) for v in iv)
+    )
+
+
 def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     """Check the study and build everything the design needs, before any simulation."""
+    if options is not None and not isinstance(options, DesignOptions):
+        raise TypeError(f"design: options must be DesignOptions, not {type(options).__name__}")
     study = getattr(result, "study", None)
     if study is None:
         raise StudyError("design: the result has no study attached (load it with its study)")
+    if not isinstance(study, Study):
+        raise TypeError(f"design: result.study must be a Study, not {type(study).__name__}")
     if study.variants is not None and study.variants.name not in study.start_values:
         raise StudyError("design: a study that chooses among FMU files is not designed yet")
     if study.copies:
         raise StudyError("design: a study with per-experiment parameters is not designed yet")
     opts = _options(result, options)
+    _same_parameters(result, study)
     spec = prepare(study)
     fixed = {n: float(result.params[n]) for n in study.choice_names}
     chosen = chosen_interface(getattr(result, "extra", None))  # as tsid simulate --result
@@ -214,9 +295,7 @@ def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     frame = load_experiment(source).frame
     columns, limits = _limits(source, frame, opts)
     t = _time(template, opts)
-    band = (
-        tuple(opts.band) if opts.band else (2.0 / float(t[-1] - t[0]), 1.0 / (20 * (t[1] - t[0])))
-    )
+    band = _band(opts, t)
     raw = [c for c in frame.columns if c not in source.derived and c != source.time_column]
     held = {str(c): float(frame[c].iloc[0]) for c in raw}
     ders = [_derivatives(source, c) for c in columns]
@@ -226,7 +305,7 @@ def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     ]
     signals = candidates(t, limits, band, opts.kinds, opts.bands, opts.seed,
                          smooth=[bool(d) for d in ders], caps=caps)  # fmt: skip
-    follow = follow_up_levels(study, x)
+    follow = follow_up_levels(study, x, getattr(result, "intervals", None))
     return Plan(study, opts, spec, space, x, template, source, held, t, columns, limits,
                 (float(band[0]), float(band[1])), signals, _sigma(result, template),
                 follow)  # fmt: skip

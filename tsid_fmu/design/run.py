@@ -306,4 +306,13 @@ def design(
         separating=None if separate is None else plan.signals[separate["best"]],
         discrimination=separate,
         levels={n: plan.follow[n] for n in space.names} if propose else {},
+        warnings=_changes(result),
     )
+
+
+def _changes(result: Any) -> list[str]:
+    """Return the warning that the study or its files changed since ``result``'s run."""
+    from tsid_fmu.load import study_changes
+
+    out = getattr(result, "out_dir", None)
+    return [] if out is None else study_changes(out, result.study)

@@ -360,7 +360,8 @@ def design_options(doc: Mapping[str, Any], source: str) -> DesignOptions:
     """Return the ``[design]`` table of a parsed study file (defaults where it is absent)."""
     where = _Where(source)
     args = _typed(_table(doc, "design", where), _DESIGN_TYPES, where, "[design]")
-    return _build(where, "[design]", DesignOptions, **args)
+    # DesignOptions names its keys "[design] ...": no second "[design]"
+    return _build(where, "", DesignOptions, **args)
 
 
 def read_design(path: str | Path) -> DesignOptions:
