@@ -196,7 +196,8 @@ def test_an_unwritable_output_is_refused_before_any_simulation(lag, capsys, monk
 
 def test_a_result_with_other_parameters_names_them(lag):
     result, _ = lag
-    other = SimpleNamespace(**{**vars(result), "params": {"tau": 0.37, "K": 1.0}})
+    fields = {k: v for k, v in result.items() if k != "x"}  # an OptimizeResult: its items
+    other = SimpleNamespace(**{**fields, "params": {"tau": 0.37, "K": 1.0}})
     with pytest.raises(StudyError, match=r"has no x0; the result has K, which the study does"):
         design(other, DesignOptions(**OPTIONS))
 
