@@ -40,7 +40,8 @@ from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.status import study_status
 from tsid_fmu.story import weak_reason
 from tsid_fmu.study.definition import Study
-from tsid_fmu.study.units import study_units
+from tsid_fmu.study.unitcheck import check_units
+from tsid_fmu.study.units import fmu_units, study_units
 from tsid_fmu.trail.folder import NullStore, Trail
 from tsid_fmu.uncertainty.assess import assess, validate
 from tsid_fmu.uncertainty.bounds import bound_warnings, on_bounds, unshown_warnings
@@ -459,6 +460,8 @@ def _run(
     plots: bool,
 ) -> IdentificationResult:
     """Run the stages into ``out`` and assess the answer; close what it opened."""
+    # before any simulation: a unit that disagrees with the FMU's is a value off by its factor
+    check_units(study.parameters, fmu_units(study.fmu), Path(study.fmu).name)
     callback, notice = _progress(progress, evaluators)
     store: Trail | NullStore = NullStore()
     try:
