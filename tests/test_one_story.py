@@ -237,3 +237,21 @@ def test_the_examples_b_s_is_one_story_in_every_view(siso):
     md = (out / "report.md").read_text()
     local = [x for x in md.splitlines() if x.startswith("- ") and "B_s" in x and "lg B_s" in x]
     assert all("determined only locally" in x or "+0." in x or "-0." in x for x in local)
+
+
+# ------------------------------------------------------------------ figures
+
+
+def test_no_figure_of_a_single_point(tmp_path):
+    """A one-iteration study drew "parameters per iteration" on one point (issue 64)."""
+    from tsid_fmu import identify
+    from tsid_fmu.report.figures import MIN_POINTS, points
+
+    study = lag_study(tmp_path, max_iterations=1, replicates=1, refine="none")
+    res = identify(study, tmp_path / "out", plots=True, workers=1)
+    assert len(res.iterations) == 1 and points(res)["parameters.png"] < MIN_POINTS
+    assert not (tmp_path / "out" / "parameters.png").exists()
+    assert not (tmp_path / "out" / "convergence.png").exists()
+    assert "parameters.png" not in (tmp_path / "out" / "report.md").read_text()
+    assert "parameters.png" not in (tmp_path / "out" / "report.html").read_text()
+    assert (tmp_path / "out" / "fit.png").exists()

@@ -170,6 +170,22 @@ def _cost_axis(ax: Any, costs: Sequence[float]) -> None:
         ax.yaxis.set_major_formatter(axis_formatter())
 
 
+def points(result: Any) -> dict[str, int]:
+    """Return the points each study figure would draw: ``{"convergence.png": n, ...}``.
+
+    A figure of fewer than two points carries nothing a sentence does not: the report
+    draws only those with two or more (:data:`MIN_POINTS`).
+    """
+    stages = result.stages
+    best = sum(len(s.records) for s in stages)
+    best += sum(1 for s in stages if not s.records and s.kind == "refinement")
+    return {"convergence.png": best, "parameters.png": len(result.iterations)}
+
+
+MIN_POINTS = 2
+"""Fewest points a convergence or parameter-trajectory figure is drawn with."""
+
+
 def convergence_figure(stages: Sequence[StageResult], cost_name: str = "cost") -> Any:
     """Best cost after each iteration: one panel per measure (set of experiments).
 

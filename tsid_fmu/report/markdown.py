@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from tsid_fmu.report.figures import MIN_POINTS, points
 from tsid_fmu.report.notebook import sampled_note
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.scored import experiment_notes
@@ -320,6 +321,10 @@ def markdown_report(result: IdentificationResult) -> str:
             "",
         ]
     lines += _contribution(result)
-    lines += ["![fit](fit.png)", "", "![convergence](convergence.png)", ""]
-    lines += ["![parameters per iteration](parameters.png)", ""]
+    lines += ["![fit](fit.png)", ""]
+    drawn = points(result)  # the figures render.py draws: none of a single point
+    if result.iterations and drawn["convergence.png"] >= MIN_POINTS:
+        lines += ["![convergence](convergence.png)", ""]
+    if drawn["parameters.png"] >= MIN_POINTS:
+        lines += ["![parameters per iteration](parameters.png)", ""]
     return "\n".join(lines)

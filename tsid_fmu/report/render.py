@@ -19,7 +19,7 @@ from typing import Any
 
 from tsid_fmu.evaluate.protocol import Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.report.figures import convergence_figure, trajectory_figure
+from tsid_fmu.report.figures import MIN_POINTS, convergence_figure, points, trajectory_figure
 from tsid_fmu.report.fitfig import FitFigure
 from tsid_fmu.report.style import cost_name, png_bytes
 from tsid_fmu.report.svgfig import fit_svg, main_effects_svg
@@ -167,9 +167,11 @@ def draw_study(
         )
         writer.put("fit.png", png_bytes(fig))
         t = figures.lap("fit.png", t)
-    if result.iterations:
+    drawn = points(result)  # no one-point figures
+    if result.iterations and drawn["convergence.png"] >= MIN_POINTS:
         writer.put("convergence.png", png_bytes(convergence_figure(result.stages, cost)))
         t = figures.lap("convergence.png", t)
+    if drawn["parameters.png"] >= MIN_POINTS:
         names = result.names
         fig = trajectory_figure(result.iterations, names, units, result.params)
         writer.put("parameters.png", png_bytes(fig))
