@@ -204,3 +204,21 @@ def test_a_study_paused_in_the_arrays_it_went_back_to_is_paused(tmp_path):
     kinds = [(s.kind, s.status) for s in res.stages]
     assert kinds[0] == ("taguchi", 2) and "handover" in res.stages[0].records[0].extra
     assert res.status == PAUSED and not res.success and res.message.startswith("paused")
+
+
+def test_the_structure_report_shows_no_dicts_or_booleans(chosen):
+    """The structure report showed raw {'model': 0.0} and True/False (issue 64)."""
+    from tsid_fmu.report.html import html_report
+    from tsid_fmu.report.markdown import markdown_report
+
+    res = chosen
+    table = res.structures_table()
+    assert len(table) == len(res.structures) >= 2
+    assert set(table["chosen"]) == {"yes", ""} and "values" not in table and "x" not in table
+    md = markdown_report(res)
+    section = md[md.index("## Structure") :]
+    section = section[: section.index("\n## ", 4)]
+    html = html_report(res)
+    part = html[html.index('id="structure"') : html.index('id="stages"')]
+    for text in (section, part):
+        assert "{" not in text and "True" not in text and "False" not in text, text

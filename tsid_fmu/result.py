@@ -408,6 +408,10 @@ class IdentificationResult(ResultMapping):
         rows = self.structures
         return pd.DataFrame(list(rows)).set_index("structure") if rows else pd.DataFrame()
 
+    def structures_table(self) -> pd.DataFrame:
+        """Return the structures table as the reports show it (no dicts, "yes" chosen)."""
+        return result_views.structures_table(self)
+
     def summary(self) -> dict[str, Any]:
         """Return the answer in brief, as strict JSON data (``tsid identify --json``).
 

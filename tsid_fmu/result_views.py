@@ -17,7 +17,38 @@ from tsid_fmu.trail.files import strict
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["parameters_frame", "simulations_frame", "stages_frame", "summary"]
+__all__ = ["parameters_frame", "simulations_frame", "stages_frame", "structures_table", "summary"]
+
+STRUCTURE_COLUMNS = (
+    "cost", "k", "AIC", "BIC", "LRT p", "LRT against", "validation cost", "simulations",
+    "chosen", "why",
+)  # fmt: skip
+"""The structures table's columns as the reports show them (the row's ``values`` and
+``x``, the choices' codes and each structure's optimum, stay in ``result.json``)."""
+
+
+def structures_table(result: Any) -> pd.DataFrame:
+    """Return the structures table for a reader: no dicts, "yes" for the chosen one.
+
+    One row per structure, indexed by its label, with :data:`STRUCTURE_COLUMNS`; a
+    validation cost that was not computed is left out as a column.
+    """
+    import pandas as pd
+
+    rows = []
+    for r in result.structures:
+        row = {"structure": r.get("structure", "")}
+        for c in STRUCTURE_COLUMNS:
+            v = r.get(c)
+            row[c] = ("yes" if v else "") if c == "chosen" else v
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    if not len(frame):
+        return frame
+    frame = frame.set_index("structure")
+    if frame["validation cost"].isna().all():
+        frame = frame.drop(columns=["validation cost"])
+    return frame
 
 
 def summary(result: Any) -> dict[str, Any]:

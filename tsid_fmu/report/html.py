@@ -194,7 +194,7 @@ def _contribution(result: IdentificationResult) -> str:
 def _structure(result: IdentificationResult) -> str:
     """Return the structures side by side, the choice and why, the discrete factors' responses."""
     found = result.extra.get("structure") or {}
-    frame = result.structures_frame()
+    frame = result.structures_table()
     parts = [
         f"<p><b>Chosen: {esc(found.get('chosen', ''))}</b>: {esc(found.get('why', ''))}</p>",
         table_from_frame(frame) if len(frame) else "",

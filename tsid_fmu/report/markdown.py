@@ -278,7 +278,7 @@ def markdown_report(result: IdentificationResult) -> str:
             "",
             f"Chosen: **{escape(found['chosen'])}**: {escape(found['why'])}",
             "",
-            markdown_table(result.structures_frame()),
+            markdown_table(result.structures_table()),
             "",
         ]
     if result.weak:
