@@ -175,6 +175,13 @@ def test_tsid_design_writes_its_files_and_prints_json(tmp_path, capsys):
     assert "predicted, with the proposal" in page and out["verdict"].split(":")[0] in page
     md = (tmp_path / "out.design" / "design.md").read_text()
     assert "with the outputs and sensors of experiment '" in md
+    # on the terminal: plain text in aligned columns, not raw markdown (issue 64)
+    assert main(["design", str(study), "--result", str(tmp_path / "out")]) == 0
+    printed = capsys.readouterr().out
+    assert "|" not in printed and "**" not in printed and "## " not in printed, printed
+    assert printed.splitlines()[0] == out["verdict"]
+    head = next(x for x in printed.splitlines() if x.startswith("parameter"))
+    assert "  " in head  # columns, aligned
 
 
 def test_tsid_design_on_a_missing_result_is_one_line_and_exit_2(tmp_path, capsys):

@@ -40,7 +40,7 @@ def _cmd_design(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(found.to_dict(), indent=1, allow_nan=False))
         return 0
-    print(found.markdown())
+    print(found.text())  # aligned columns for a terminal; design.md has the markdown
     print("wrote " + ", ".join(str(p) for p in files))
     return 0
 

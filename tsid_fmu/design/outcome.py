@@ -276,6 +276,31 @@ class Design:
         return {"facts": facts, "intervals": (columns, rows), "separate": separate,
                 "structural": structural}  # fmt: skip
 
+    def text(self) -> str:
+        """Return the design as ``tsid design`` prints it: plain text, aligned columns.
+
+        The same section as :meth:`markdown` (verdict, facts, intervals, what separates
+        the parameters, the structural directions), without markdown's markup.
+        """
+        part = self.section()
+
+        def grid(columns: list[str], rows: list[list[str]]) -> list[str]:
+            widths = [max(len(str(x)) for x in col) for col in zip(columns, *rows, strict=True)]
+            return [
+                "  ".join(str(x).ljust(w) for x, w in zip(r, widths, strict=True)).rstrip()
+                for r in [columns, *rows]
+            ]
+
+        lines = [self.verdict, ""]
+        lines += [f"- {fact}" for fact in part["facts"]] + [""]
+        lines += grid(*part["intervals"])
+        if part["separate"] is not None:
+            said, columns, rows = part["separate"]
+            lines += ["", said, "", *grid(columns, rows)]
+        for sentence in part["structural"]:
+            lines += ["", sentence] if sentence.startswith("Structural") else [sentence]
+        return "\n".join(lines)
+
     def markdown(self) -> str:
         """Return the report section, in markdown."""
         part = self.section()
