@@ -255,3 +255,32 @@ def test_no_figure_of_a_single_point(tmp_path):
     assert "parameters.png" not in (tmp_path / "out" / "report.md").read_text()
     assert "parameters.png" not in (tmp_path / "out" / "report.html").read_text()
     assert (tmp_path / "out" / "fit.png").exists()
+
+
+def test_an_error_near_zero_is_said_in_the_parameters_units(half_open):
+    """A start near zero read "below the profile's resolution (< 210)" beside "determined
+    only to +/-2.1e+02 %" (issue 64): its error is absolute, in every view."""
+    import dataclasses
+
+    from tsid_fmu.identify import _weak
+    from tsid_fmu.report.notebook import _std_error
+    from tsid_fmu.uncertainty.intervals import Uncertainty
+
+    u = Uncertainty(values={"tau": 0.37, "x0": 0.0024}, std_error={"tau": 0.004, "x0": 0.5},
+                    relative={"tau": 1.08, "x0": 210.0},
+                    intervals={"tau": [0.36, 0.38], "x0": [-0.4, 1.6]})  # fmt: skip
+    res = dataclasses.replace(half_open, params={"tau": 0.37, "x0": 0.0024}, uncertainty=u,
+                              intervals=dict(u.intervals), weak={})  # fmt: skip
+    res.describe_parameters()
+    assert _std_error(u, "x0", "m") == "+/-0.5 m (absolute)"
+    assert _std_error(u, "tau", "s") == 1.08
+    u.resolution = {"x0": 210.0}
+    assert _std_error(u, "x0", "m") == "< 0.5 m (absolute)"
+    u.resolution = {}
+    # weak against its first range (-1 .. 2): 0.5 is 17 % of it, above the 5 % mark
+    assert _weak(res)["x0"] == (
+        "the data determine it only to +/-0.5 (standard error; it is near zero)"
+    )
+    u.std_error["x0"] = 0.003  # an offset the data fix to +/-0.003: not weak
+    assert "x0" not in _weak(res)
+    assert "+/- 0.5 [95 %" in next(x for x in res.fit_report().splitlines() if "x0:" in x)

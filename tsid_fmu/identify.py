@@ -38,7 +38,7 @@ from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure.compare import StructureResult, run_structure
 from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.status import study_status
-from tsid_fmu.story import weak_reason
+from tsid_fmu.story import near_zero, weak_reason
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.unitcheck import check_units
 from tsid_fmu.study.units import fmu_units, study_units
@@ -120,10 +120,22 @@ def _poor_fit(answer: StageResult) -> list[str]:
 def _weak(result: IdentificationResult) -> dict[str, str]:
     weak: dict[str, str] = {}
     u = result.uncertainty
+    study = result.study
+    levels = study.first_levels() if study is not None else {}
+    widths = {n: float(max(v) - min(v)) for n, v in levels.items()}
+    units = study_units(study)
     for n, rel in (u.relative if u is not None else {}).items():
         said = weak_reason(u.intervals.get(n, [None, None]))
         if said:
             weak[n] = said
+        elif near_zero(rel):  # its error is absolute: weak against its first range
+            se, width = float(u.std_error.get(n, math.nan)), widths.get(n, math.nan)
+            if not se <= WEAK_STD_ERROR / 100 * width:
+                unit = f" {units[n]}" if units.get(n) else ""
+                weak[n] = (
+                    f"the data determine it only to +/-{se:.2g}{unit} (standard error; "
+                    "it is near zero)"
+                )
         elif rel > WEAK_STD_ERROR:
             weak[n] = f"the data determine it only to +/-{rel:.2g} % (standard error)"
     return weak

@@ -23,15 +23,32 @@ from typing import Any
 
 __all__ = [
     "LEADING",
+    "NEAR_ZERO",
     "determination",
     "interval_text",
     "listed_combinations",
+    "near_zero",
     "weak_reason",
 ]
 
 LEADING = 0.9
 """Share of a combination's norm above which one parameter leads it (a combination
 that is that parameter alone, for practical purposes)."""
+
+
+NEAR_ZERO = 100.0
+"""Relative standard error (percent) above which a value is near zero for its
+uncertainty: its error is said in the parameter's units, not as a share of the value."""
+
+
+def near_zero(relative: float) -> bool:
+    """Return True where a relative standard error says the value is near zero.
+
+    An error above :data:`NEAR_ZERO` % of the value (an offset of 0.002 known to
+    +/-0.004) reads as "+/-210 %" but is an absolute figure: every view says it in the
+    parameter's units instead.
+    """
+    return math.isfinite(relative) and relative > NEAR_ZERO
 
 
 def _end(v: Any) -> float | None:

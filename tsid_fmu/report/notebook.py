@@ -15,7 +15,7 @@ from tsid_fmu.errors import StudyError
 from tsid_fmu.report.html_tables import esc, table
 from tsid_fmu.report.style import fmt, fmt_levels
 from tsid_fmu.result import STATUS, register_views
-from tsid_fmu.story import interval_text
+from tsid_fmu.story import interval_text, near_zero
 from tsid_fmu.study.units import study_units
 
 __all__ = [
@@ -45,14 +45,23 @@ def _interval(low: float | None, value: float, high: float | None) -> str:
     return interval_text([low, high], value, fmt_levels)
 
 
-def _std_error(u: Any, name: str) -> float | str:
-    """Return the relative standard error, or the bound where it is below resolution."""
+def _std_error(u: Any, name: str, unit: str = "") -> float | str:
+    """Return the relative standard error, or the bound where it is below resolution.
+
+    A value near zero for its error (:func:`tsid_fmu.story.near_zero`) gets its error in
+    its own units: ``+/-0.0042 m (absolute)``.
+    """
     if u is None:
         return math.nan
+    rel = float(u.relative.get(name, math.nan))
+    absolute = float(u.std_error.get(name, math.nan))
     bound = getattr(u, "resolution", {}).get(name)
+    if near_zero(rel) and math.isfinite(absolute):
+        below = "< " if bound is not None else "+/-"
+        return f"{below}{fmt(absolute, 2)}{' ' + unit if unit else ''} (absolute)"
     if bound is not None:
         return f"below the profile's resolution (< {fmt(bound, 2)})"
-    return u.relative.get(name, math.nan)
+    return rel
 
 
 def _sampled_label(result: Any) -> str:
@@ -116,7 +125,7 @@ def parameter_rows(result: Any) -> list[list[Any]]:
     mark = interval_mark(result.uncertainty)
     for name in names:
         value = result.params.get(name, math.nan)
-        se = _std_error(result.uncertainty, name)
+        se = _std_error(result.uncertainty, name, units.get(name, ""))
         # no interval at all (a paused study): "not computed", never "not determined"
         shown = interval_text(result.intervals.get(name), value, fmt_levels)
         rows.append(

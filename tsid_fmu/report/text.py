@@ -15,7 +15,7 @@ from typing import Any
 from tsid_fmu.report.notebook import parameter_columns, parameter_rows, sampled_note
 from tsid_fmu.report.style import cost_name, fmt
 from tsid_fmu.result import register_views
-from tsid_fmu.story import determination, interval_text
+from tsid_fmu.story import determination, interval_text, near_zero
 
 __all__ = ["MIN_CORREL", "fit_report", "fit_statistics", "text_report"]
 
@@ -160,7 +160,8 @@ def fit_report(result: Any, min_correl: float = MIN_CORREL) -> str:
         if math.isfinite(se) and at_resolution:  # a bound, as every view says it
             err = f" +/- < {fmt(se, 3)} (below the profile's resolution)"
         elif math.isfinite(se):
-            rel = f" ({100 * se / abs(value):.2f}%)" if value else ""
+            share = 100 * se / abs(value) if value else math.inf
+            rel = "" if near_zero(share) else f" ({share:.2f}%)"  # near zero: absolute
             err = f" +/- {fmt(se, 7)}{rel}"
         else:
             err = " +/- inf" if math.isinf(se) else " +/- not computed"
