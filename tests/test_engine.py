@@ -248,6 +248,29 @@ def test_noise_weighting_refuses_a_noise_free_output(lag, tmp_path):
     study = dataclasses.replace(make_study(lag), experiments=[exp], weighting="noise")
     with pytest.raises(StudyError, match=r"experiment 'clean'.*but y shows no noise"):
         Evaluator(study)
+    # a noise the study states is never refused, whatever the data show (issue 65)
+    stated = dataclasses.replace(exp, noise={"y": 2.3e-5})
+    Evaluator(dataclasses.replace(study, experiments=[stated]))
+
+
+def test_sensor_noise_far_below_the_range_is_noise_not_a_noise_free_record(lag, tmp_path):
+    """A designed record with the first experiment's absolute sensor noise (1.4e-6 of its
+    range) was refused as noise-free by a fixed 1e-6-of-the-range threshold (issue 65);
+    the threshold is the data's float round-off."""
+    from tsid_fmu.study import serial_evaluator as Evaluator
+
+    _fmu, data = lag
+    frame = pd.read_csv(data)
+    rng = np.random.default_rng(3)
+    signal = 16.0 * np.sin(7.0 * frame["time"])
+    span = float(np.ptp(signal))
+    frame["y_meas"] = signal + 0.5e-6 * span * rng.standard_normal(len(frame))
+    frame.to_csv(tmp_path / "quiet.csv", index=False, float_format="%.17g")
+    exp = Experiment(data=tmp_path / "quiet.csv", inputs={"u": "u"}, outputs={"y": "y_meas"})
+    study = dataclasses.replace(make_study(lag), experiments=[exp], weighting="noise")
+    ev = Evaluator(study)  # not refused
+    sigma = 1.0 / np.sqrt(ev.prepared[0].weights[0])
+    assert sigma == pytest.approx(0.5e-6 * span, rel=0.3)
 
 
 def test_pause_after_counts_the_iterations_of_this_call(tmp_path):

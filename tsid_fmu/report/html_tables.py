@@ -27,6 +27,7 @@ table { border-collapse: collapse; margin: 6px 0 10px; font-size: 12.5px; }
 th, td { border: 1px solid #d5d5d5; padding: 2px 7px; text-align: right; vertical-align: top; }
 th { background: #f2f2f4; font-weight: 600; }
 td.text, th.text { text-align: left; }
+td.text { max-width: 34em; overflow-wrap: anywhere; }  /* long reasons wrap, not the page */
 tr.pooled td { color: #777; font-style: italic; }
 tr.total td { font-weight: 600; }
 tr.failed td { background: #fff0f0; }

@@ -75,6 +75,21 @@ def data_noise(measured: np.ndarray) -> np.ndarray:
     return np.zeros(measured.shape[1] if measured.ndim == 2 else 1)
 
 
+def resolution_noise(y: np.ndarray) -> float:
+    """Return the noise level below which a column is noise-free: its float round-off.
+
+    64 round-offs (``2**-52``) of the column's largest value: a simulation written at
+    full precision shows less. Rounding to a coarser grid (a sensor's or a file's
+    decimals) acts as noise (:func:`~tsid_fmu.evaluate.noise.noise_level`) and is not
+    refused. This replaces a fixed 1e-6 of the range, which refused real sensor noise of
+    a designed record (1.4e-6 of its range) as noise-free.
+    """
+    y = np.asarray(y, dtype=float)
+    finite = y[np.isfinite(y)]
+    top = float(np.max(np.abs(finite))) if finite.size else 0.0
+    return max(64 * np.finfo(float).eps * top, 1e-300)
+
+
 def weight_norms(study: Study) -> tuple[float, float]:
     """Return the largest output weight and the largest window weight of a study.
 
@@ -104,7 +119,11 @@ def _weights_and_scale(
     sigma = data_noise(measured)
     sigma = np.array([experiment.noise.get(n, s) for n, s in zip(names, sigma, strict=True)])
     rms = np.sqrt(np.mean(measured**2, axis=0))
-    quiet = ~(sigma > 1e-6 * np.maximum(np.ptp(measured, axis=0), 1e-300))
+    # noise-free: at most what the data's own resolution makes (a noise-free simulation
+    # written with so many decimals); a noise the study states is never refused
+    stated = np.array([n in experiment.noise for n in names])
+    floor = np.array([resolution_noise(measured[:, j]) for j in range(len(names))])
+    quiet = ~(sigma > floor) & ~stated
     if study.method.weighting == "noise" and quiet.any():
         flat = [n for n, q in zip(names, quiet, strict=True) if q]
         raise StudyError(
