@@ -20,185 +20,16 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import BuildError
 
-from .expressions import Converter, Relation, expr_text
+from .expressions import Converter, expr_text
+from .flat import FlatModel, Variable, import_build_deps
+from .sourcelines import SourceLines, at_line
 
 __all__ = ["FlatModel", "SourceLines", "Variable", "at_line", "flatten_model", "import_build_deps"]
-
-
-def import_build_deps() -> tuple[Any, Any, Any, Any]:
-    """Import the optional build dependencies.
-
-    Returns
-    -------
-    tuple
-        ``(casadi, pymoca.parser, pymoca.tree, pymoca.ast)``.
-
-    Raises
-    ------
-    BuildError
-        If pymoca or casadi is not installed.
-    """
-    try:
-        import casadi
-        import pymoca.ast
-        import pymoca.parser
-        import pymoca.tree
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise BuildError(
-            f"building FMUs needs pymoca and casadi ({exc}); "
-            "install them with: pip install tsid-fmu[build]"
-        ) from exc
-    return casadi, pymoca.parser, pymoca.tree, pymoca.ast
-
-
-@dataclass
-class Variable:
-    """One scalar variable of the flattened model.
-
-    Attributes
-    ----------
-    name : str
-        Flat Modelica name.
-    kind : str
-        One of ``"state"``, ``"input"``, ``"output"``, ``"parameter"``, ``"local"``
-        (algebraic variable that is neither input nor output).
-    unit : str or None
-        The ``unit`` attribute.
-    description : str
-        The description string of the declaration.
-    start : float or None
-        Start value (parameter value for parameters).
-    sym : Any
-        The CasADi ``SX`` symbol of the variable.
-    integer : bool
-        An ``Integer`` parameter (a structural switch: FMI ``Integer``/``Int32``).
-    init : Any
-        States only: the CasADi expression of the parameters (and constants) that gives
-        the initial value, from a parameter-dependent ``start`` or an ``initial
-        equation``; ``start`` is then its value at the parameters' values. ``None``:
-        the initial value is ``start`` itself.
-    fixed : bool
-        The declaration says ``fixed = true``.
-    line : int or None
-        Line of the declaration in the Modelica source, where found.
-    """
-
-    name: str
-    kind: str
-    unit: str | None
-    description: str
-    start: float | None
-    sym: Any = None
-    integer: bool = False
-    init: Any = None
-    fixed: bool = False
-    line: int | None = None
-
-
-@dataclass
-class FlatModel:
-    """A flattened, scalar Modelica model ready for causalization.
-
-    Attributes
-    ----------
-    name : str
-        Fully qualified model name (e.g. ``"TSID.LSEA_SISO"``).
-    description : str
-        Description string of the model.
-    source : Path
-        The Modelica file the model was read from.
-    states, inputs, outputs, parameters, locals : list of Variable
-        Variables by role, in declaration order.
-    der_syms : list
-        CasADi symbols standing for ``der(state)``, in the order of ``states``.
-    time : Any
-        CasADi symbol of ``time``.
-    residuals : list
-        One CasADi ``SX`` residual ``lhs - rhs`` per equation (relations evaluated live).
-    residuals_frozen : list
-        The same residuals with every relation outside ``noEvent`` replaced by the
-        symbol of its :class:`~.expressions.Relation` (the Model Exchange form).
-    relations : list of Relation
-        The relations that generate state events, in order of appearance.
-    equation_text : list of str
-        A readable form of each equation, for error messages.
-    equation_lines : list of int or None
-        The line of each equation in ``source`` (``None`` where not found).
-    experiment : dict
-        ``StartTime``, ``StopTime``, ``Interval`` read from ``annotation(experiment(...))``
-        when present.
-    info_html : str
-        The ``Documentation(info=...)`` text, if any.
-    lines : SourceLines or None
-        Line numbers of the declarations and equations in ``source``.
-    """
-
-    name: str
-    description: str
-    source: Path
-    states: list[Variable] = field(default_factory=list)
-    inputs: list[Variable] = field(default_factory=list)
-    outputs: list[Variable] = field(default_factory=list)
-    parameters: list[Variable] = field(default_factory=list)
-    locals: list[Variable] = field(default_factory=list)
-    der_syms: list[Any] = field(default_factory=list)
-    time: Any = None
-    residuals: list[Any] = field(default_factory=list)
-    residuals_frozen: list[Any] = field(default_factory=list)
-    relations: list[Relation] = field(default_factory=list)
-    equation_text: list[str] = field(default_factory=list)
-    equation_lines: list[int | None] = field(default_factory=list)
-    experiment: dict[str, float] = field(default_factory=dict)
-    info_html: str = ""
-    lines: SourceLines | None = None
-
-    @property
-    def short_name(self) -> str:
-        """Last component of the qualified name (used as FMI model identifier)."""
-        return self.name.rsplit(".", 1)[-1]
-
-    @property
-    def computed_states(self) -> list[Variable]:
-        """The states whose initial value is computed from the parameters."""
-        return [v for v in self.states if v.init is not None]
-
-    def equation_label(self, index: int) -> str:
-        """``'text'`` of equation ``index`` (0-based), with ``(line N)`` where known."""
-        line = self.equation_lines[index] if index < len(self.equation_lines) else None
-        return f"'{self.equation_text[index]}'" + (f" (line {line})" if line else "")
-
-    def update_initial_starts(self) -> None:
-        """Set ``start`` of each computed state to its value at the parameters' ``start``.
-
-        Called after the parameter values changed (the build's ``start_values``).
-
-        Raises
-        ------
-        BuildError
-            If a computed initial value is not finite.
-        """
-        ca, *_ = import_build_deps()
-        syms = [p.sym for p in self.parameters]
-        vals = [float(p.start) for p in self.parameters]
-        for v in self.computed_states:
-            expr = (
-                ca.substitute(ca.SX(v.init), ca.vertcat(*syms), ca.vertcat(*vals))
-                if syms
-                else ca.SX(v.init)
-            )
-            v.start = float(ca.evalf(expr))
-            if not math.isfinite(v.start):
-                where = at_line(f"{self.source}: model {self.name}", v.line)
-                raise BuildError(
-                    f"{where}: the initial value of state '{v.name}' is not finite "
-                    "at the parameters' values"
-                )
 
 
 def _literal(value: Any, ast: Any) -> Any:
@@ -270,157 +101,6 @@ def _annotations(text: str) -> tuple[dict[str, float], str]:
     return experiment, info
 
 
-_BLANK_RE = re.compile(r'"(?:[^"\\]|\\.)*"|//[^\n]*|/\*.*?\*/', re.S)
-_SECTION_RE = re.compile(r"^[ \t]*(initial\s+)?(equation|algorithm)\b", re.M)
-_PREFIX_RE = re.compile(
-    r"^\s*(?:(?:parameter|constant|input|output|discrete|final|flow|stream|inner|outer)\s+)*"
-    r"[A-Za-z_][\w.]*\s+(.*)$",
-    re.S,
-)
-
-
-def _blank(text: str) -> str:
-    """``text`` with comments and strings replaced by spaces (lines and offsets kept)."""
-    return _BLANK_RE.sub(lambda m: re.sub(r"[^\n]", " ", m.group(0)), text)
-
-
-def _statements(text: str, start: int, end: int) -> list[tuple[int, str]]:
-    """``(offset, text)`` of each ``;``-terminated statement of ``text[start:end]``."""
-    out: list[tuple[int, str]] = []
-    depth, begin = 0, start
-    for i in range(start, end):
-        ch = text[i]
-        if ch in "([{":
-            depth += 1
-        elif ch in ")]}":
-            depth -= 1
-        elif ch == ";" and depth <= 0:
-            body = text[begin:i]
-            stripped = body.lstrip()
-            if stripped:
-                out.append((begin + len(body) - len(stripped), stripped))
-            begin = i + 1
-    return out
-
-
-_BLOCKS = ("if", "for", "when", "while")
-
-
-def _equation_starts(text: str, start: int, end: int) -> list[int]:
-    """Offsets of the equations of an equation section ``text[start:end]``.
-
-    A structured equation (``if``/``for``/``when`` ... ``end if;``) counts once, from its
-    keyword; an ``annotation(...);`` is no equation.
-    """
-    out: list[int] = []
-    depth = 0
-    for off, stmt in _statements(text, start, end):
-        words = re.findall(r"[A-Za-z_]\w*", stmt[:40])
-        first = words[0] if words else ""
-        if depth == 0 and first != "annotation":
-            out.append(off)
-        if first in _BLOCKS:
-            depth += 1
-        elif first == "end" and len(words) > 1 and words[1] in _BLOCKS:
-            depth = max(depth - 1, 0)
-    return out
-
-
-class SourceLines:
-    """Line numbers of a model's declarations and equations in its Modelica source.
-
-    pymoca keeps no positions, so they are found again in the text: the model's
-    ``model Name ... end Name;`` region (the whole text if it is not found), its
-    declarations before the first section, and the statements of its ``equation`` and
-    ``initial equation`` sections in order. Lookups that do not match give ``None``.
-
-    Parameters
-    ----------
-    text : str
-        The Modelica source.
-    short_name : str
-        The model's short name.
-    """
-
-    def __init__(self, text: str, short_name: str) -> None:
-        self.text = _blank(text)
-        m = re.search(rf"\bmodel\s+{re.escape(short_name)}\b", self.text)
-        lo = m.start() if m else 0
-        e = re.search(rf"\bend\s+{re.escape(short_name)}\s*;", self.text[lo:])
-        hi = lo + e.start() if e else len(self.text)
-        sections = [
-            (s.start(), s.end(), bool(s.group(1)), s.group(2))
-            for s in _SECTION_RE.finditer(self.text, lo, hi)
-        ]
-        self.sections: dict[tuple[bool, str], list[int]] = {}
-        self.equations: dict[bool, list[int]] = {False: [], True: []}
-        for k, (start, head_end, initial, what) in enumerate(sections):
-            self.sections.setdefault((initial, what), []).append(self.line(start))
-            stop = sections[k + 1][0] if k + 1 < len(sections) else hi
-            if what == "equation":
-                self.equations[initial] += [
-                    self.line(off) for off in _equation_starts(self.text, head_end, stop)
-                ]
-        decl_end = sections[0][0] if sections else hi
-        head = re.match(r"\bmodel\s+\w+\s*", self.text[lo:]) if m else None
-        first = lo + (head.end() if head else 0)
-        self.declarations: dict[str, int] = {}
-        for off, stmt in _statements(self.text, first, decl_end):
-            d = _PREFIX_RE.match(stmt)
-            if not d:
-                continue
-            rest, base = d.group(1), off + d.start(1)
-            for part_off, part in _split_commas(rest):
-                n = re.match(r"\s*([A-Za-z_]\w*)", part)
-                if n:
-                    self.declarations.setdefault(n.group(1), self.line(base + part_off))
-
-    def line(self, offset: int) -> int:
-        """1-based line of a character offset."""
-        return self.text.count("\n", 0, offset) + 1
-
-    def declaration(self, name: str) -> int | None:
-        """Line of the declaration of ``name``."""
-        return self.declarations.get(name)
-
-    def equation(self, index: int, initial: bool = False, count: int | None = None) -> int | None:
-        """Line of the ``index``-th (0-based) equation of the (initial) equation sections.
-
-        With ``count`` (the number of equations pymoca found) ``None`` unless the text
-        has as many: then the equations were not all written in this model's sections
-        (inherited, generated) and their order there is not known.
-        """
-        eqs = self.equations[initial]
-        if count is not None and count != len(eqs):
-            return None
-        return eqs[index] if 0 <= index < len(eqs) else None
-
-    def section(self, what: str, initial: bool = False) -> int | None:
-        """Line of the first ``[initial] equation``/``algorithm`` section header."""
-        lines = self.sections.get((initial, what))
-        return lines[0] if lines else None
-
-
-def _split_commas(text: str) -> list[tuple[int, str]]:
-    """Top-level comma-separated parts of ``text`` with their offsets."""
-    out, depth, begin = [], 0, 0
-    for i, ch in enumerate(text):
-        if ch in "([{":
-            depth += 1
-        elif ch in ")]}":
-            depth -= 1
-        elif ch == "," and depth == 0:
-            out.append((begin, text[begin:i]))
-            begin = i + 1
-    out.append((begin, text[begin:]))
-    return out
-
-
-def at_line(where: str, line: int | None) -> str:
-    """``where`` followed by ``: line N`` when the line is known."""
-    return f"{where}: line {line}" if line else where
-
-
 def _parse_flat(
     model_file: Path, model_name: str, package_dir: str | Path | None
 ) -> tuple[str, Any, str, str, SourceLines]:
@@ -472,6 +152,26 @@ def _parse_flat(
     return text, flat, qname, where, lines
 
 
+def _supported(name: str, s: Any, w: str) -> tuple[str, set[str]]:
+    """Return a declaration's type name and prefixes; refuse what the build cannot take."""
+    tname = s.type if isinstance(s.type, str) else getattr(s.type, "name", str(s.type))
+    prefixes = set(s.prefixes or [])
+    is_param = bool(prefixes & {"parameter", "constant"})
+    if tname != "Real" and not (tname == "Integer" and is_param):
+        raise BuildError(
+            f"{w}: variable '{name}' has type {tname}; only Real is supported "
+            "(and Integer parameters)"
+        )
+    dims = s.dimensions
+    if dims and any(
+        d is not None and getattr(d, "value", None) not in (None, 1) for dd in dims for d in dd
+    ):
+        raise BuildError(f"{w}: variable '{name}' is an array; only scalars are supported")
+    if "discrete" in prefixes:
+        raise BuildError(f"{w}: discrete variable '{name}' is not supported")
+    return tname, prefixes
+
+
 def _declarations(
     flat: Any, time: Any, where: str, lines: SourceLines
 ) -> tuple[list[Variable], dict[str, Any]]:
@@ -491,21 +191,7 @@ def _declarations(
         w = at_line(where, lines.declaration(name))
         if name == "time":
             raise BuildError(f"{w}: a variable must not be called 'time'")
-        tname = s.type if isinstance(s.type, str) else getattr(s.type, "name", str(s.type))
-        prefixes = set(s.prefixes or [])
-        is_param = bool(prefixes & {"parameter", "constant"})
-        if tname != "Real" and not (tname == "Integer" and is_param):
-            raise BuildError(
-                f"{w}: variable '{name}' has type {tname}; only Real is supported "
-                "(and Integer parameters)"
-            )
-        dims = s.dimensions
-        if dims and any(
-            d is not None and getattr(d, "value", None) not in (None, 1) for dd in dims for d in dd
-        ):
-            raise BuildError(f"{w}: variable '{name}' is an array; only scalars are supported")
-        if "discrete" in prefixes:
-            raise BuildError(f"{w}: discrete variable '{name}' is not supported")
+        tname, prefixes = _supported(name, s, w)
         unit = _literal(s.unit, ast)
         unit = unit if isinstance(unit, str) and unit else None
         desc = s.comment or ""
