@@ -150,3 +150,22 @@ def test_cs_tolerance_reaches_the_fmu(quirky, version):
     with FMUSession(fmu, ["u"], ["y"]) as s:  # default: none defined
         assert s._inst.tolerance is None
     assert seen == [1e-7]
+
+
+def test_tsid_info_says_whether_the_fmu_was_probed(quirky, capsys):
+    from tsid_fmu.cli import main
+
+    assert main(["info", str(quirky[("STALE_CLOCK", "2.0")]), "--probe"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("Conformance"))
+    assert "not probed: the FMU has inputs" in line
+
+
+def test_tsid_info_probes_an_fmu_without_inputs(tmp_path, capsys):
+    from vdp_factory import build_vdp_fmu
+
+    from tsid_fmu.cli import main
+
+    fmu = build_vdp_fmu(tmp_path, "VdP", interfaces=("cs",))
+    assert main(["info", str(fmu), "--probe"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("Conformance"))
+    assert "a reset instance reproduces a fresh one" in line, line

@@ -27,7 +27,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import threading
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -37,11 +37,26 @@ from tsid_fmu.errors import SimulationError, TsidError
 from tsid_fmu.evaluate.runner import SetRunner
 from tsid_fmu.evaluate.spec import EvaluationSpec
 
-__all__ = ["TOLERANCE", "cached", "fmu_digest", "probe", "problem", "remember", "warnings"]
+__all__ = [
+    "DEFAULT_SAMPLES",
+    "TOLERANCE",
+    "cached",
+    "fmu_digest",
+    "info_line",
+    "judge",
+    "probe",
+    "probe_defaults",
+    "problem",
+    "remember",
+    "warnings",
+]
 
 TOLERANCE = 1e-9
 """Largest difference of two runs that still counts as the same, relative to each
 output's range over the first run (exactly equal is typical)."""
+
+DEFAULT_SAMPLES = 101
+"""Samples of a probe at an FMU's defaults (:func:`probe_defaults`)."""
 
 _lock = threading.Lock()
 _verdicts: dict[tuple[str, str], dict[str, Any]] = {}
@@ -135,14 +150,79 @@ def probe(spec: EvaluationSpec, params: Mapping[str, float]) -> dict[str, Any]:
         ``simulations`` and ``message``.
     """
     one = dataclasses.replace(spec, experiments=spec.experiments[:1], fresh=False)
+    return judge(spec.fmu, spec.interface, lambda fresh: _runs(one, params, fresh))
+
+
+def probe_defaults(path: Path, interface: str = "auto") -> dict[str, Any]:
+    """Probe an FMU without inputs at its own start values (for ``tsid info``).
+
+    Its Real outputs over its default experiment (0 to 1 s where it declares none), at
+    :data:`DEFAULT_SAMPLES` samples; see :func:`probe` for the record.
+    """
+    from tsid_fmu.fmu import FMUSession
+
+    def runs(fresh: bool) -> list[np.ndarray]:
+        with FMUSession(path, [], _outputs_of(path), interface=interface, fresh=fresh) as s:
+            de = s.model_description.defaultExperiment
+            t0 = float(getattr(de, "startTime", None) or 0.0)
+            t1 = float(getattr(de, "stopTime", None) or t0 + 1.0)
+            t = np.linspace(t0, t1, DEFAULT_SAMPLES)
+            return [s.simulate(t, None, {}), s.simulate(t, None, {})]
+
+    return judge(Path(path), interface, runs)
+
+
+INFO_LIMIT = 60.0
+"""Seconds ``tsid info --probe`` gives its probe (in a child process)."""
+
+
+def info_line(path: Path, run: bool) -> str:
+    """Return ``tsid info``'s conformance line: the probe at the FMU's defaults (``run``).
+
+    An FMU with inputs needs data to be run: it is "not probed" here, and ``tsid
+    identify`` probes it on the study's first experiment.
+    """
+    from tsid_fmu.evaluate.isolated import IsolatedCalls
+    from tsid_fmu.fmu.info import read_fmu_description
+
+    head = "Conformance      "
+    md = read_fmu_description(Path(path))
+    if any(v.causality == "input" for v in md.modelVariables):
+        return head + "not probed: the FMU has inputs (tsid identify probes it on the data)"
+    if not run:
+        return head + "not probed (--probe: reset and determinism at the FMU's defaults)"
+    calls = IsolatedCalls(INFO_LIMIT, Path(path).name)
+    try:
+        record = calls.call(probe_defaults, Path(path))
+    except SimulationError as exc:
+        return head + f"not probed: {exc}"
+    finally:
+        calls.close()
+    return head + str(record["message"])
+
+
+def _outputs_of(path: Path) -> list[str]:
+    from tsid_fmu.fmu.info import read_fmu_description
+    from tsid_fmu.fmu.variables import REAL_TYPES
+
+    md = read_fmu_description(Path(path))
+    return [v.name for v in md.modelVariables if v.causality == "output" and v.type in REAL_TYPES]
+
+
+def judge(fmu: Path, interface: str, runs: Callable[[bool], list[np.ndarray]]) -> dict[str, Any]:
+    """Return the probe's record from ``runs(fresh)``: two runs on one session each.
+
+    ``runs(False)``: a fresh instance, then the same instance reset; ``runs(True)``
+    (only where those differ): a new session with a fresh instance for each run.
+    """
     record: dict[str, Any] = {
         "probed": False,
-        "sha256": fmu_digest(spec.fmu),
-        "interface": spec.interface,
+        "sha256": fmu_digest(fmu),
+        "interface": interface,
         "simulations": 0,
     }
     try:
-        first, again = _runs(one, params, fresh=False)
+        first, again = runs(False)
         record["simulations"] = 2
         reset = _difference(first, again)
         record.update(probed=True, reset=reset <= TOLERANCE, difference=_finite(reset))
@@ -150,13 +230,13 @@ def probe(spec: EvaluationSpec, params: Mapping[str, float]) -> dict[str, Any]:
             record.update(deterministic=True, fresh=False)
             record["message"] = "a reset instance reproduces a fresh one (2 simulations)"
             return record
-        runs = _runs(one, params, fresh=True)
+        fresh = runs(True)
         record["simulations"] = 4
     except TsidError as exc:
         record.update(probed=False, reason=f"a probe simulation failed: {exc}")
         record["message"] = f"not probed: {record['reason']}"
         return record
-    worst = max(_difference(first, y) for y in runs)
+    worst = max(_difference(first, y) for y in fresh)
     record.update(deterministic=worst <= TOLERANCE, fresh=worst <= TOLERANCE)
     if record["deterministic"]:
         record["message"] = (
