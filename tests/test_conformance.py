@@ -105,8 +105,9 @@ def test_the_probe_finds_a_nondeterministic_fmu(quirky, tmp_path, version):
     assert conformance.problem(record)
 
 
-def test_a_study_on_the_stale_clock_fmu_ends_at_the_optimum(quirky, tmp_path):
-    study = _study(tmp_path, quirky[("STALE_CLOCK", "2.0")])
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+def test_a_study_on_the_stale_clock_fmu_ends_at_the_optimum(quirky, tmp_path, version):
+    study = _study(tmp_path, quirky[("STALE_CLOCK", version)])
     result = identify(study, tmp_path / "out", plots=False, workers=1, timeout=0)
     record = result.extra["conformance"]
     assert record["fresh"] and not record["reset"]
@@ -118,8 +119,9 @@ def test_a_study_on_the_stale_clock_fmu_ends_at_the_optimum(quirky, tmp_path):
     assert '"conformance"' in (tmp_path / "out" / "result.json").read_text()
 
 
-def test_a_study_on_a_nondeterministic_fmu_does_not_exit_0(quirky, tmp_path):
-    study = _study(tmp_path, quirky[("NONDETERMINISTIC", "2.0")], max_iterations=2)
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+def test_a_study_on_a_nondeterministic_fmu_does_not_exit_0(quirky, tmp_path, version):
+    study = _study(tmp_path, quirky[("NONDETERMINISTIC", version)], max_iterations=2)
     result = identify(study, plots=False, workers=1, timeout=0)
     assert result.status == 1 and not result.success
     assert result.message.startswith("stopped: the FMU does not reproduce its runs")
