@@ -171,3 +171,15 @@ def test_tsid_info_probes_an_fmu_without_inputs(tmp_path, capsys):
     assert main(["info", str(fmu), "--probe"]) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("Conformance"))
     assert "a reset instance reproduces a fresh one" in line, line
+
+
+@pytest.mark.parametrize("solver", ["rk45", "cvode"])
+def test_fresh_instances_for_model_exchange_too(tmp_path, solver):
+    fmu = build_c_fmu(tmp_path, "LagME", interfaces=("me",))
+    runs = []
+    with FMUSession(fmu, ["u"], ["y"], parameters=["tau"], me_solver=solver, fresh=True) as s:
+        for _ in range(3):
+            runs.append(s.simulate(T, U, {"tau": 0.3})[:, 0])
+        assert s.instantiations == 3
+    assert np.array_equal(runs[0], runs[1]) and np.array_equal(runs[0], runs[2])
+    np.testing.assert_allclose(runs[0], lag_response(T, U, 0.3), atol=1e-3)  # CVode: 1e-5
