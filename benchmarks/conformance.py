@@ -8,7 +8,10 @@ and runs what a user runs: ``tsid info``, ``tsid init`` then ``tsid identify`` o
 study init wrote, unedited, and a hand-written study. A parameter whose 95 % interval is
 finite on both sides is "determined"; it passes when it lies within 1 % of the truth and
 the truth lies inside its interval. It is a measurement, not a test: it exits 0 whatever
-the rows say. ``docs/benchmarks/conformance.md`` holds the table of the last run.
+the rows say. ``docs/benchmarks/conformance.md`` holds the table of the last run. A
+study's FMU conformance probe (a broken reset, a non-deterministic FMU; issue 62) is in
+its notes where it found something or could not run; the synthetic quirk FMUs are the
+test suite's (``tests/test_conformance.py``), built with the C compiler, not fetched.
 
 Run (downloads into ``benchmarks/.cache``, git-ignored; a few minutes on two cores)::
 
@@ -397,6 +400,9 @@ def identify(folder: Path, env: dict[str, str], study: str, out: str, workers: i
     except json.JSONDecodeError:
         last = (proc.stderr.strip().splitlines() or ["(no output)"])[-1]
         return f"exit {proc.returncode}, no JSON", None, f"{last} ({secs:.0f} s)", "?"
+    probe = summary.get("conformance") or {}  # reset and determinism (issue 62)
+    odd = probe.get("fresh") or probe.get("deterministic") is False or not probe.get("probed")
+    probed = f"; conformance: {probe.get('message')}" if probe and odd else ""
     try:  # what "auto" became: the fidelity check's record in result.json
         record = json.loads((folder / out / "result.json").read_text(encoding="utf-8"))
         fidelity = record["extra"]["fidelity"]
@@ -407,6 +413,7 @@ def identify(folder: Path, env: dict[str, str], study: str, out: str, workers: i
     short = [w if len(w) < 90 else w[:80] + "…" for w in warns[:2]]
     more = f" (+{len(warns) - 2} more warnings)" if len(warns) > 2 else ""
     note = f"{secs:.0f} s, status {summary['status']}" + "".join(f"; ⚠ {w}" for w in short) + more
+    note += probed
     return f"exit {proc.returncode}, nfev {summary['nfev']}", summary, note, ran
 
 

@@ -75,8 +75,13 @@ _C_COMMON = r"""
 extern int tsid_dep_value(void);
 #endif
 
+/* quirks (issue 62), each a -D define: STALE_CLOCK: reset keeps the FMU's clock, so a step
+   to a time it has passed does nothing, and fmi2SetupExperiment restores the default
+   parameters (20-sim 4.6); NONDETERMINISTIC: y grows by 1e-3 per run of the library */
+static int tsid_runs = 0;
+
 typedef struct {
-    double u, tau, x0, t_fail, t_nan, x, time;
+    double u, tau, x0, t_fail, t_nan, x, time, clock;
     int gain, offset_on;
     void *env;
     const char *name;
@@ -85,7 +90,12 @@ typedef struct {
 
 static double model_y(const Model *m) {
     if (m->time > m->t_nan) return NAN;
+#ifdef NONDETERMINISTIC
+    return m->gain * m->x + (m->offset_on ? 1.0 : 0.0) + 1e-3 * tsid_runs;
+#else
+    (void)tsid_runs;
     return m->gain * m->x + (m->offset_on ? 1.0 : 0.0);
+#endif
 }
 
 static double model_get(const Model *m, unsigned vr) {
@@ -123,6 +133,10 @@ static void model_defaults(Model *m) {
 static int model_step(Model *m, double t, double h) {
     if (m->tau <= 0.0) return 1;
     if (t + h > m->t_fail) return 2;
+#ifdef STALE_CLOCK
+    if (t + h <= m->clock) { m->time = t + h; return 0; }  /* "already there" */
+    m->clock = t + h;
+#endif
     m->x = m->u + (m->x - m->u) * exp(-h / m->tau);
     m->time = t + h;
     return 0;
@@ -179,11 +193,15 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
 void fmi2FreeInstance(fmi2Component c) { free(c); }
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol,
                                fmi2Real start, fmi2Boolean stopDef, fmi2Real stop) {
-    (void)tolDef; (void)tol; (void)stopDef; (void)stop; M->time = start; return fmi2OK; }
+    (void)tolDef; (void)tol; (void)stopDef; (void)stop; M->time = start;
+#ifdef STALE_CLOCK
+    M->tau = 1.0; M->x0 = 0.0;
+#endif
+    return fmi2OK; }
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) { (void)c; return fmi2OK; }
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     if (M->tau <= 0.0) { LOG(fmi2Error, "tau must be positive"); return fmi2Error; }
-    M->x = M->x0; return fmi2OK; }
+    tsid_runs++; M->x = M->x0; return fmi2OK; }
 fmi2Status fmi2Terminate(fmi2Component c) { (void)c; return fmi2OK; }
 fmi2Status fmi2Reset(fmi2Component c) { model_defaults(M); return fmi2OK; }
 
@@ -348,7 +366,7 @@ EXPORT int fmi3EnterInitializationMode(void *c, bool tolDef, double tol, double 
     (void)tolDef; (void)tol; (void)stopDef; (void)stop; M->time = start; return 0; }
 EXPORT int fmi3ExitInitializationMode(void *c) {
     if (M->tau <= 0.0) { LOG(3, "tau must be positive"); return 3; }
-    M->x = M->x0; return 0; }
+    tsid_runs++; M->x = M->x0; return 0; }
 EXPORT int fmi3Terminate(void *c) { (void)c; return 0; }
 EXPORT int fmi3Reset(void *c) { model_defaults(M); return 0; }
 EXPORT int fmi3GetFloat64(void *c, const unsigned vr[], size_t n, double v[], size_t nv) {
@@ -595,6 +613,7 @@ def build_c_fmu(
     link_library: Path | None = None,
     chatty: bool = False,
     needs_resources: bool = False,
+    quirks: Sequence[str] = (),
 ) -> Path:
     """Build the first-order-lag FMU ``<tmp_dir>/<name>.fmu`` and return its path.
 
@@ -607,6 +626,11 @@ def build_c_fmu(
     or ``"3.0"`` (Co-Simulation only).  ``link_library`` (from :func:`build_stub_library`)
     makes the FMU's shared library depend on it, so deleting it afterwards gives an FMU
     whose binary cannot be loaded.
+
+    ``quirks`` (issue 62): ``"STALE_CLOCK"`` -- reset keeps the FMU's clock, so after
+    the first run no step integrates and ``y`` stays at its initial value (and FMI 2's
+    ``fmi2SetupExperiment`` restores the default parameters), as 20-sim 4.6's FMUs do;
+    ``"NONDETERMINISTIC"`` -- ``y`` grows by 1e-3 with every run of the loaded library.
     """
     guid = new_guid()
     if fmi_version == "2.0":
@@ -619,6 +643,7 @@ def build_c_fmu(
         raise ValueError(f"unsupported FMI version {fmi_version}")
     defines: list[str] = ["-DCHATTY"] if chatty else []
     defines += ["-DNEEDS_RESOURCES"] if needs_resources else []
+    defines += [f"-D{q}" for q in quirks]
     libs: list[str] = []
     if link_library is not None:
         link_library = Path(link_library)

@@ -191,9 +191,11 @@ def _write_csv(path: Path, spec: Any, simulated: Sequence[Any]) -> list[Path]:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
+    from tsid_fmu.evaluate.conformance import info_line
     from tsid_fmu.fmu import fmu_info
 
     print(fmu_info(args.fmu))
+    print(info_line(Path(args.fmu), args.probe))
     if args.all:
         print(_all_variables(Path(args.fmu)))
     return 0
@@ -343,6 +345,11 @@ def _other_parsers(sub: Any) -> None:
     p.add_argument("fmu", help="the .fmu file")
     p.add_argument(
         "--all", action="store_true", help="also list every variable (locals too) with causality"
+    )
+    p.add_argument(
+        "--probe",
+        action="store_true",
+        help="probe reset and determinism at the FMU's defaults (an FMU without inputs)",
     )
     p.set_defaults(func=_cmd_info)
 

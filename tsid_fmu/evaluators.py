@@ -31,12 +31,19 @@ class StudyEvaluators:
         self.pool: dict[tuple, Evaluator] = {}
         self.specs: dict[tuple, EvaluationSpec] = {}
         self.interface: str | None = None  # chosen by the fidelity check
+        self.fresh = False  # a fresh instance for every run (the FMU's reset is broken)
+        self.conformance: dict[str, Any] | None = None  # the FMU probe's verdict
         self.children: list[StudyEvaluators] = []  # those of a study's candidate structures
 
     def use(self, interface: str) -> None:
         """Simulate every sub-problem with ``interface`` from now on."""
         self.interface = interface
         self.specs = {k: dataclasses.replace(s, interface=interface) for k, s in self.specs.items()}
+
+    def use_fresh(self) -> None:
+        """Instantiate afresh for every run from now on (:mod:`tsid_fmu.conformance`)."""
+        self.fresh = True
+        self.specs = {k: dataclasses.replace(s, fresh=True) for k, s in self.specs.items()}
 
     def _key(
         self, params: list[str], exps: list[str], fixed: Mapping[str, float], fraction: float = 1.0
@@ -72,6 +79,7 @@ class StudyEvaluators:
                 start_values=start,
                 experiments=experiments,
                 interface=self.interface or base.interface,
+                fresh=self.fresh,
             )
         return self.specs[key]
 

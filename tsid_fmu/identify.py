@@ -18,7 +18,9 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.conformance import check_conformance, record_conformance
 from tsid_fmu.errors import StudyError
+from tsid_fmu.evaluate.conformance import problem
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluators import StudyEvaluators
 from tsid_fmu.fmu.compiled import CompileNotice, warm_up
@@ -250,7 +252,7 @@ def _finish(
     fidelity: tuple[Fidelity | None, ProgressCallback | None] = (None, None),
     structure: StructureResult | None = None,
 ) -> IdentificationResult:
-    status, _, message, told = study_status(stages)
+    status, _, message, told = study_status(stages, problem(evaluators.conformance))
     answer = answer_stage(stages)
     x = {n: answer.x.get(n, math.nan) for n in study.parameter_names}
     nit = sum(len(s.records) for s in stages)
@@ -268,6 +270,7 @@ def _finish(
         account=told,
     )
     result.warnings = list(store.notes)  # files in the output folder tsid did not write
+    record_conformance(result, evaluators.conformance)
     rounds = {str(w): evaluators.rounds(w) for w in (1, 4, 16)}
     if None not in rounds.values():  # the wall time on 1, 4, 16 workers, in simulations
         result.extra["rounds"] = rounds
@@ -356,6 +359,9 @@ def _stages(
         made = StudyEvaluators(sub, evaluators.runner, evaluators.given)
         if evaluators.interface is not None:
             made.use(evaluators.interface)
+        if evaluators.fresh:
+            made.use_fresh()
+        made.conformance = evaluators.conformance
         evaluators.children.append(made)
         return made
 
@@ -480,6 +486,7 @@ def _run(
         if out is not None:
             store = Trail(out, study, resume=resume, on_iteration=_annotate)
         start = _fidelity(study, evaluators, start_point(study), "start point", callback)
+        check_conformance(study, evaluators, callback)  # a broken reset: fresh instances
         final, stages, used, found = _stages(study, evaluators, store, callback, control)
         result = _finish(final, stages, used, store, plots, (start, callback), found)
         result.study = study

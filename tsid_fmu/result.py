@@ -50,7 +50,7 @@ RUNS_NOTE = (
 
 _VIEWS: dict[str, Callable[..., Any]] = {}
 
-_WRITTEN = ("fidelity", "structure")
+_WRITTEN = ("fidelity", "structure", "conformance")
 """Keys of :attr:`IdentificationResult.extra` written to ``result.json``."""
 
 

@@ -92,6 +92,11 @@ def summary(result: Any) -> dict[str, Any]:
             "warnings": list(result.warnings),
             "out_dir": None if result.out_dir is None else str(result.out_dir),
             **_structure_summary(result),
+            **(
+                {"conformance": result.extra["conformance"]}
+                if "conformance" in result.extra
+                else {}
+            ),
         }
     )
 

@@ -38,6 +38,9 @@ class Verdict(enum.Enum):
     """Exit 1: a stage stopped at a limit and no test was made."""
     PAUSED = "paused"
     """Exit 3: paused for review (``--pause-after``)."""
+    FMU = "fmu"
+    """Exit 1: the FMU does not reproduce its runs (:mod:`tsid_fmu.conformance`): its
+    costs are not reproducible, so no answer can be shown to be the optimum."""
 
 
 MESSAGES = {
@@ -50,6 +53,8 @@ MESSAGES = {
     "({nfev} simulations)",
     Verdict.PAUSED: "paused for review after {nit} ({nfev} simulations): "
     "edit the levels, then --resume",
+    Verdict.FMU: "stopped: the FMU does not reproduce its runs ({why}); the answer cannot be "
+    "trusted ({nfev} simulations)",
 }
 """The one-line verdict of each :class:`Verdict`, formatted with the study's counts."""
 
@@ -112,11 +117,15 @@ def _test(stages: Sequence[StageResult]) -> dict | None:
     return test if isinstance(test, dict) and test else None
 
 
-def study_status(stages: Sequence[StageResult]) -> tuple[int, Verdict, str, list[str]]:
+def study_status(
+    stages: Sequence[StageResult], fmu: str | None = None
+) -> tuple[int, Verdict, str, list[str]]:
     """Return the study's exit status, its verdict, the one-line message and the account.
 
     The verdict is the answer's stationarity test where one was made; a stage paused
-    for review (its status 2) pauses the study (exit status 3).
+    for review (its status 2) pauses the study (exit status 3). ``fmu``: why the FMU
+    does not reproduce its runs (:func:`tsid_fmu.evaluate.conformance.problem`), which
+    decides the verdict of a study that was not paused.
     """
     nfev = sum(s.nfev for s in stages)
     nit = sum(len(s.records) for s in stages)
@@ -126,6 +135,9 @@ def study_status(stages: Sequence[StageResult]) -> tuple[int, Verdict, str, list
     if paused:
         code, status = Verdict.PAUSED, PAUSED
         told = [*told, f"{paused[0].name}: {paused[0].message}"]
+    elif fmu:
+        code, status = Verdict.FMU, 1
+        told = [*told, f"FMU: {fmu}"]
     elif test is not None:
         code = Verdict.STATIONARY if test.get("holds") else Verdict.NOT_SHOWN
         status = 0 if code is Verdict.STATIONARY else 1
@@ -140,6 +152,8 @@ def study_status(stages: Sequence[StageResult]) -> tuple[int, Verdict, str, list
         reason = _clauses(first.message)[0] if _clauses(first.message) else "a limit"
         reason = reason if len(reason) <= _WHY else reason[: _WHY - 3].rstrip() + "..."
         why = f"{first.name}: {reason}"
+    elif code is Verdict.FMU:
+        why = str(fmu)[:_WHY]
     iterations = f"{nit} Taguchi iteration" + ("" if nit == 1 else "s")
     message = MESSAGES[code].format(nfev=nfev, nit=iterations, why=why)
     return status, code, message[:MAX_MESSAGE], told

@@ -171,6 +171,8 @@ class SetRunner:
             interface=spec.interface,  # type: ignore[arg-type]
             step_size=spec.step_size,
             tolerance=spec.tolerance,
+            cs_tolerance=spec.cs_tolerance,
+            fresh=spec.fresh,
             start_values=start,
             capture_output=True,
             **options,

@@ -308,6 +308,11 @@ class EvaluationSpec:
     variants : Variants, optional
         A choice among FMU files (:mod:`tsid_fmu.evaluate.variants`): each set is then
         simulated by the variant its value of the choice names (``fmu`` is the first).
+    cs_tolerance : float, optional
+        Relative tolerance of a Co-Simulation FMU's own solver (default: not passed).
+    fresh : bool, optional
+        Instantiate afresh for every run instead of resetting: the FMU's reset was found
+        broken (:mod:`tsid_fmu.evaluate.conformance`). Default False.
 
     Raises
     ------
@@ -324,6 +329,8 @@ class EvaluationSpec:
     step_size: float | None = None
     tolerance: float | None = None
     variants: Variants | None = None
+    cs_tolerance: float | None = None
+    fresh: bool = False
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -340,6 +347,8 @@ class EvaluationSpec:
             raise StudyError(f"tolerance must be between 0 and 1, got {self.tolerance}")
         if self.interface not in INTERFACES:
             raise StudyError(f"interface must be one of {INTERFACES}, got {self.interface!r}")
+        if self.cs_tolerance is not None and not 0 < self.cs_tolerance < 1:
+            raise StudyError(f"cs_tolerance must be between 0 and 1, got {self.cs_tolerance}")
         if not self.experiments:
             raise StudyError("an evaluation needs at least one experiment")
         if not all(isinstance(e, PreparedExperiment) for e in self.experiments):

@@ -71,6 +71,12 @@ class Instance:
         self.instantiations = 0
         #: the values of the last run that choose the structure (see :meth:`renew`)
         self.structure: tuple[tuple[str, float], ...] = ()
+        #: relative tolerance passed to ``fmi2SetupExperiment`` / FMI 3's
+        #: ``fmi3EnterInitializationMode`` (None: not defined, the FMU's own default)
+        self.tolerance: float | None = None
+        #: free and instantiate afresh before every run instead of resetting (an FMU
+        #: whose reset is broken, :mod:`tsid_fmu.evaluate.conformance`)
+        self.fresh = False
 
     def instantiate(self) -> None:
         """Make a new instance; FMUError if the FMU refuses.
@@ -131,9 +137,10 @@ class Instance:
         ``structure`` holds the run's values of discrete ``fixed`` variables and FMI 3
         structural parameters (:func:`~tsid_fmu.fmu.variables.restarts_instance`): where
         one differs from the last run's, the instance is freed and made anew, so that an
-        FMU that fixes its structure when it is instantiated honours the new value.
+        FMU that fixes its structure when it is instantiated honours the new value. With
+        :attr:`fresh` every run gets a new instance (the library stays loaded).
         """
-        if structure != self.structure:
+        if self.fresh or structure != self.structure:
             self.free()
             self.instantiate()
         else:
@@ -219,7 +226,7 @@ class Instance:
         fmu = self.fmu
         try:
             if self.major == 2:
-                fmu.setupExperiment(startTime=t0, stopTime=t_end)
+                fmu.setupExperiment(tolerance=self.tolerance, startTime=t0, stopTime=t_end)
                 self.apply(values, variables, t0)
                 fmu.enterInitializationMode()
                 if u0.size:
@@ -231,7 +238,7 @@ class Instance:
                     self.apply(config, variables, t0)
                     fmu.exitConfigurationMode()
                 self.apply([v for v in values if v not in config], variables, t0)
-                fmu.enterInitializationMode(startTime=t0, stopTime=t_end)
+                fmu.enterInitializationMode(tolerance=self.tolerance, startTime=t0, stopTime=t_end)
                 if u0.size:
                     fmu.setFloat64(list(vr_in), list(u0))
             fmu.exitInitializationMode()

@@ -104,6 +104,11 @@ class FMUSession:
         Capture what the FMU prints natively during instantiation and each run
         (:mod:`tsid_fmu.fmu.native`): it is echoed on stderr, kept as :attr:`printed`,
         and its tail ends the message of a failed run (default False).
+    cs_tolerance : float, optional
+        Co-Simulation: relative tolerance of the FMU's own solver, passed to
+        ``fmi2SetupExperiment`` / ``fmi3EnterInitializationMode`` (default: not defined).
+    fresh : bool, optional
+        Instantiate afresh before every run instead of resetting (a broken reset).
 
     Attributes
     ----------
@@ -140,6 +145,8 @@ class FMUSession:
         me_solver: Literal["rk45", "cvode"] = "rk45",
         tolerance: float | None = None,
         capture_output: bool = False,
+        cs_tolerance: float | None = None,
+        fresh: bool = False,
     ) -> None:
         self.path = Path(path)
         self.input_names = tuple(inputs)
@@ -165,18 +172,17 @@ class FMUSession:
                 raise FMUError(
                     f"{self.path.name}: me_solver must be 'rk45' or 'cvode', not {me_solver!r}"
                 )
-            self.me_solver, self.tolerance = (
-                me_solver,
-                grid.check_tolerance(self.path.name, tolerance),
-            )
-            self._open(interface, dict(start_values or {}), dict(hold or {}))
+            self.me_solver = me_solver
+            self.tolerance = grid.check_tolerance(self.path.name, tolerance)
+            cs_tol = grid.check_tolerance(self.path.name, cs_tolerance)
+            self._open(interface, dict(start_values or {}), dict(hold or {}), (cs_tol, fresh))
         except BaseException:
             self.close()
             raise
 
     # -- opening --------------------------------------------------------------------------
 
-    def _open(self, interface: str, start_values: dict[str, float], hold: dict[str, str]) -> None:
+    def _open(self, interface: str, start: dict, hold: dict, cs: tuple) -> None:
         unzipdir = self._extract()
         md = read_description(unzipdir / "modelDescription.xml", self.path)
         self.model_description = md
@@ -202,12 +208,14 @@ class FMUSession:
                 raise FMUError(f"{name}: {pname!r} is both an input from the data and a parameter")
             self._setter(pname, role="parameter")
         self._start_values: dict[str, float] = {}
-        for sname, value in start_values.items():
+        for sname, value in start.items():
             self._setter(sname, role="start value")
             self._start_values[sname] = value
         self._set_hold(hold)
         fmu = load_fmu(name, unzipdir, md, self.interface, self._major)
         self._inst = Instance(fmu, self._major, self._log, name)
+        self._inst.tolerance = cs[0] if self.interface == "cs" else None
+        self._inst.fresh = cs[1]
         if self.interface == "cs":
             self._loop_funcs = loop_functions(fmu.dll, self._major)
         elif self.me_solver == "rk45":

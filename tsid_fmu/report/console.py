@@ -70,7 +70,7 @@ class ConsoleProgress:
                 self._print(info.get("message", COMPILING))
         elif event == "start":
             self.stage, self.best = str(info["stage"]), float(info["cost"])
-        elif event in ("fidelity", "sampled"):
+        elif event in ("fidelity", "sampled", "conformance"):
             self._print(info["message"])
         elif event in ("stage", "rerun"):
             if event == "stage":

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.conformance import check_conformance
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.factory import make_evaluator
 from tsid_fmu.evaluate.protocol import Evaluator, Progress
@@ -100,7 +101,9 @@ def _console() -> Progress:
 def _evaluator(study: Study, runner: dict[str, Any]) -> Evaluator:
     """Return the search's evaluator of every parameter on the identification experiments."""
     exps = study.identify_names()
-    spec = StudyEvaluators(study, runner, None).spec(study.parameter_names, exps, {})
+    evaluators = StudyEvaluators(study, runner, None)
+    check_conformance(study, evaluators, None)  # a broken reset: a fresh instance per run
+    spec = evaluators.spec(study.parameter_names, exps, {})
     plain = tuple(dataclasses.replace(e, noisy_inputs=()) for e in spec.experiments)
     return make_evaluator(dataclasses.replace(spec, experiments=plain), **runner)
 

@@ -254,6 +254,7 @@ def prepare(
         interface=interface,
         step_size=step,
         tolerance=study.method.tolerance,
+        cs_tolerance=study.method.cs_tolerance,
         variants=None if model is None else variants_of(model.name, model.paths),
     )
 

@@ -381,6 +381,12 @@ class Method:
         default such as FMPy's 1e-5 leaves errors near or above the noise of good data
         (the solver's absolute tolerance is this times each state's nominal value, often
         1, whatever the state's size), and the parameters absorb them.
+    cs_tolerance : float, optional
+        Relative tolerance of a Co-Simulation FMU's own solver, passed to
+        ``fmi2SetupExperiment`` (``toleranceDefined``) or FMI 3's
+        ``fmi3EnterInitializationMode``. Default: none passed, and the FMU's solver
+        runs at its exporter's default (Dymola's CS solvers at the tolerance set when the
+        FMU was exported); give e.g. ``1e-8`` to tighten it.
     fidelity : bool
         Check the solver's fidelity at the start point and at the answer (a few
         simulations with a reference solver each; see ``interface``). Default true.
@@ -412,6 +418,7 @@ class Method:
     interface: str | None = None
     step: float | None = None
     tolerance: float = 1e-10
+    cs_tolerance: float | None = None
     fidelity: bool = True
     uncertainty: str = "analytic"
     uncertainty_replicates: int = DEFAULT_SAMPLED
@@ -456,6 +463,10 @@ class Method:
                 raise StudyError(f"step must be at least 1e-9 s, got {self.step}")
         if not 0 < check_number(self.tolerance, "tolerance") < 1:
             raise StudyError(f"tolerance must be between 0 and 1, got {self.tolerance}")
+        if self.cs_tolerance is not None:
+            self.cs_tolerance = check_number(self.cs_tolerance, "cs_tolerance")
+            if not 0 < self.cs_tolerance < 1:
+                raise StudyError(f"cs_tolerance must be between 0 and 1, got {self.cs_tolerance}")
         self.uncertainty, self.uncertainty_replicates = check_uncertainty(
             self.uncertainty, self.uncertainty_replicates, self.cost
         )

@@ -86,6 +86,7 @@ _METHOD_TYPES: dict[str, type] = {
     "interface": str,
     "step": float,
     "tolerance": float,
+    "cs_tolerance": float,
     "fidelity": bool,
     "uncertainty": str,
     "uncertainty_replicates": int,
