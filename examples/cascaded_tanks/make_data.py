@@ -44,9 +44,7 @@ def split(source: Path, out: Path = HERE) -> tuple[Path, Path]:
     time = np.arange(len(data)) * ts
     paths = []
     for record, name in (("Est", "est"), ("Val", "val")):
-        frame = pd.DataFrame(
-            {"time": time, "u": data[f"u{record}"], "y": data[f"y{record}"]}
-        )
+        frame = pd.DataFrame({"time": time, "u": data[f"u{record}"], "y": data[f"y{record}"]})
         path = out / f"{name}.csv"
         frame.to_csv(path, index=False, float_format="%.6g")
         paths.append(path)
