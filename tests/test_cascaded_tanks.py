@@ -17,7 +17,7 @@ EXAMPLE = REPO / "examples" / "cascaded_tanks"
 SHORT = """\
 [study]
 fmu = "{fmu}"
-start_values = {{ k5 = 0.54, k_of = 0.097, x1max = 18.7, x2max = 11.8, x1_0 = 11.6 }}
+start_values = {{ k5 = 1, k_of = 0.096, x1max = 10, x2max = 11.8, x1_0 = 6.2 }}
 [[experiments]]
 name = "est"
 file = "est.csv"
@@ -34,7 +34,7 @@ start = "centre"
 max_iterations = 2
 fidelity = false
 [parameters]
-k1 = {{ levels = [0.03, 0.06, 0.1], min = 0 }}
+k1 = {{ levels = [0.02, 0.045, 0.1], min = 0 }}
 k3 = {{ levels = [0.02, 0.04, 0.08], min = 0 }}
 c = {{ levels = [-2, -1, 0], unit = "V" }}
 x2_0 = {{ levels = [5, 7, 9], min = 0, unit = "V" }}
