@@ -170,8 +170,10 @@ def _validation(result: IdentificationResult, cost: str) -> str:
         fits = "; ".join(f"{o} {fmt(m['fit_percent'], 4)} %" for o, m in metrics)
         rows.append([exp, v["cost"], rmse, nrmse, fits])
     return table(["experiment", f"cost ({cost})", "RMSE", "NRMSE", "fit %"], rows) + (
-        '<p class="note">All inputs together, at the identified parameters (the MISO '
-        "paper's superposition check); not used by any stage.</p>"
+        '<p class="note">Simulated at the identified parameters and never fitted: no stage '
+        "uses them (with all inputs together, the MISO paper's superposition check). RMSE "
+        "in the output's unit; NRMSE = RMSE / the measured output's standard deviation; "
+        "fit % = 100 (1 - NRMSE).</p>"
     )
 
 
