@@ -75,3 +75,24 @@ def test_the_json_summary_holds_rmse_nrmse_fit_and_unit_per_output(validated):
     )
     assert y["fit_percent"] == pytest.approx(100 * (1 - y["nrmse"]))
     assert summary["fit"]["lag"]["y"]["unit"] == "V"
+
+
+def test_tsid_identify_json_prints_the_validation_rmse_with_its_unit(tmp_path, capsys, monkeypatch):
+    """The command line's ``--json``, not only ``summary()``: the same figures on stdout."""
+    from tsid_fmu.cli import main
+
+    plain = lag_study(tmp_path, max_iterations=2, replicates=1, cost="sse", weighting="noise")
+    fitted = plain.experiments[0]
+    check = Experiment(
+        data=fitted.data, inputs={"u": "u"}, outputs={"y": "y_meas"}, name="check",
+        role="validate",
+    )  # fmt: skip
+    study = Study(fmu=plain.fmu, parameters=plain.parameters, experiments=[fitted, check],
+                  method=plain.method).to_toml(tmp_path / "lag.toml")  # fmt: skip
+    real = units_module.fmu_units
+    monkeypatch.setattr(units_module, "fmu_units", lambda fmu: {**real(fmu), "y": "V"})
+    main(["identify", str(study), "--out", str(tmp_path / "out"), "--json", "-q",
+          "--no-plots", "--workers", "1"])  # fmt: skip
+    summary = json.loads(capsys.readouterr().out)
+    y = summary["validation"]["check"]["outputs"]["y"]
+    assert y["unit"] == "V" and 0 < y["rmse"] < 1 and 0 < y["fit_percent"] <= 100
