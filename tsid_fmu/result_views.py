@@ -91,6 +91,15 @@ def summary(result: Any) -> dict[str, Any]:
             "stages": stages,
             "warnings": list(result.warnings),
             "out_dir": None if result.out_dir is None else str(result.out_dir),
+            "fit": _fit_summary(result.fit, units),
+            "validation": {
+                name: (
+                    {"cost": v["cost"], "outputs": _output_fit(v.get("fit", {}), units)}
+                    if "cost" in v
+                    else {"error": str(v.get("error", ""))}
+                )
+                for name, v in result.validation.items()
+            },
             **_structure_summary(result),
             **(
                 {"conformance": result.extra["conformance"]}
@@ -99,6 +108,23 @@ def summary(result: Any) -> dict[str, Any]:
             ),
         }
     )
+
+
+_FIT_KEYS = ("rmse", "nrmse", "fit_percent")
+
+
+def _output_fit(per_output: Any, units: dict[str, str]) -> dict[str, Any]:
+    """RMSE (in the output's unit), NRMSE and fit % of each output of one experiment."""
+    return {
+        output: {**{k: m.get(k) for k in _FIT_KEYS}, "unit": units.get(output, "")}
+        for output, m in per_output.items()
+        if isinstance(m, dict)
+    }
+
+
+def _fit_summary(fit: Any, units: dict[str, str]) -> dict[str, Any]:
+    """:func:`_output_fit` of each identification experiment (``result.fit``)."""
+    return {exp: _output_fit(per_output, units) for exp, per_output in fit.items()}
 
 
 def _has(result: Any, name: str) -> bool:

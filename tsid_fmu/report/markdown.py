@@ -9,11 +9,19 @@ from tsid_fmu.report.figures import MIN_POINTS, points
 from tsid_fmu.report.notebook import sampled_note
 from tsid_fmu.report.provenance import fmu_label
 from tsid_fmu.report.scored import experiment_notes
-from tsid_fmu.report.style import cost_name, counted, fmt, fmt_levels, input_contribution
+from tsid_fmu.report.style import (
+    cost_name,
+    counted,
+    fit_text,
+    fmt,
+    fmt_levels,
+    input_contribution,
+)
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.story import interval_text, listed_combinations, weak_reason
+from tsid_fmu.study.units import study_units
 from tsid_fmu.uncertainty.assess import NOISE_SOURCES
 
 __all__ = ["escape", "markdown_report", "markdown_table"]
@@ -121,6 +129,7 @@ def _fit(result: IdentificationResult) -> list[str]:
         "unit (IAE times s).",
         "",
     ]
+    units = study_units(result.study)
     for exp, per_output in result.fit.items():
         for output, m in per_output.items():
             if not isinstance(m, dict):
@@ -134,10 +143,16 @@ def _fit(result: IdentificationResult) -> list[str]:
                 beside = f"{beside[:-1]}; RMSE {fmt(m['rmse'] / sigma, 2)} x it)"
             lines.append(
                 f"- {escape(exp)} / {escape(output)}: fit {fmt(m['fit_percent'])} %, RMSE "
-                f"{fmt(m['rmse'])}{beside}, IAE {fmt(m['iae'])}"
+                f"{fmt(m['rmse'])}{_unit(units.get(output))}{beside}, NRMSE "
+                f"{fmt(m['nrmse'])}, IAE {fmt(m['iae'])}"
             )
     notes = [line for note in experiment_notes(result) for line in ("", note)]
     return [*lines, *notes, ""]
+
+
+def _unit(unit: str | None) -> str:
+    """`` unit`` (with its space), or nothing where the output declares none."""
+    return f" {escape(unit)}" if unit else ""
 
 
 def _failed_runs(records: Sequence[IterationRecord]) -> list[str]:
@@ -298,13 +313,15 @@ def markdown_report(result: IdentificationResult) -> str:
             else "## Validation experiments",
             "",
         ]
+        units = study_units(result.study)
         for exp, v in result.validation.items():
             lines.append(
                 f"- {escape(exp)}: "
                 + (
                     f"simulation failed: {escape(v['error'])}"
                     if "error" in v
-                    else f"cost ({cost}) {fmt(v['cost'])}"
+                    else (f"{fit_text(v['fit'], units)}; " if v.get("fit") else "")
+                    + f"cost ({cost}) {fmt(v['cost'])}"
                 )
             )
         lines.append("")

@@ -25,6 +25,7 @@ __all__ = [
     "TICK_PT",
     "axis_formatter",
     "cost_name",
+    "fit_text",
     "fmt",
     "fmt_levels",
     "input_contribution",
@@ -96,6 +97,39 @@ def fmt_levels(values: Sequence[float]) -> list[str]:
         if len(set(labels)) == len(set(float(v) for v in values)):
             break
     return labels
+
+
+def fit_text(per_output: Any, units: Any = None) -> str:
+    """Return the fit of one experiment in the outputs' units, one clause per output.
+
+    Parameters
+    ----------
+    per_output : mapping
+        Output name -> the :func:`~tsid_fmu.evaluate.cost.metrics` of that output
+        (``rmse``, ``nrmse``, ``fit_percent``), as ``result.fit[experiment]`` or
+        ``result.validation[experiment]["fit"]`` hold them; an entry that is not a
+        mapping (a failed simulation's message) is given as it is.
+    units : mapping, optional
+        Output name -> unit (``study_units``); an output without one is shown bare.
+
+    Returns
+    -------
+    str
+        ``"RMSE y 0.35 V, NRMSE 0.167, fit 83.3 %"``, the outputs joined by ``"; "``.
+    """
+    units = units or {}
+    parts = []
+    for output, m in per_output.items():
+        if not isinstance(m, dict):
+            parts.append(f"{output}: {m}")
+            continue
+        unit = units.get(output)
+        rmse = f"{fmt(m.get('rmse'), 3)} {unit}" if unit else fmt(m.get("rmse"), 3)
+        parts.append(
+            f"RMSE {output} {rmse}, NRMSE {fmt(m.get('nrmse'), 3)}, "
+            f"fit {fmt(m.get('fit_percent'), 3)} %"
+        )
+    return "; ".join(parts)
 
 
 def with_unit(name: str, unit: str | None) -> str:

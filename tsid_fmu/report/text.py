@@ -13,7 +13,7 @@ import math
 from typing import Any
 
 from tsid_fmu.report.notebook import parameter_columns, parameter_rows, sampled_note
-from tsid_fmu.report.style import cost_name, fmt
+from tsid_fmu.report.style import cost_name, fit_text, fmt
 from tsid_fmu.result import register_views
 from tsid_fmu.story import determination, interval_text, near_zero
 
@@ -39,8 +39,10 @@ def text_report(result: Any, verbose: bool = False) -> str:
     str
         The parameter table (value, unit, 95 % interval, standard error, flags), the
         stages, the structure chosen, the one-line verdict with the exit status, the
-        cost, the warnings, the weakly determined parameters and the validation
-        experiments, one finding a line.
+        cost, the fit of each identification experiment (RMSE in the outputs' units,
+        NRMSE, fit %), the warnings, the weakly determined parameters and the
+        validation experiments (the same figures beside their cost), one finding a
+        line.
     """
     rows = [[fmt(v) if not isinstance(v, str) else v for v in r] for r in parameter_rows(result)]
     shown = {r[0] for r in rows if r[-1]}  # rows whose "weakly determined" cell is filled
@@ -64,11 +66,15 @@ def text_report(result: Any, verbose: bool = False) -> str:
     lines.append(f"{result.message} (exit status {result.status})")
     cost = cost_name(result.study)
     lines.append(f"cost ({cost}) {fmt(result.fun)} on the measured inputs")
+    units = _output_units(result)
+    lines += [f"fit {name}: {fit_text(f, units)}" for name, f in result.fit.items() if f]
     lines += [f"warning: {w}" for w in result.warnings]
     # the table's last column says why a parameter is weak; each finding is said once
     lines += [f"weakly determined: {n}: {why}" for n, why in result.weak.items() if n not in shown]
     lines += [
-        f"validation {name}: cost ({cost}) {fmt(v['cost'])}"
+        f"validation {name}: "
+        + (f"{fit_text(v['fit'], units)}; " if v.get("fit") else "")
+        + f"cost ({cost}) {fmt(v['cost'])}"
         for name, v in result.validation.items()
         if "cost" in v
     ]
@@ -76,6 +82,13 @@ def text_report(result: Any, verbose: bool = False) -> str:
         lines += ["", "how the study got there:", *[f"  {line}" for line in result.account]]
         lines += ["", *_statistics_lines(result)]
     return "\n".join(lines)
+
+
+def _output_units(result: Any) -> dict[str, str]:
+    """Units of the outputs by name (the FMU's declared ones); ``{}`` without a study."""
+    from tsid_fmu.study.units import study_units
+
+    return study_units(getattr(result, "study", None))
 
 
 def fit_statistics(result: Any) -> dict[str, Any]:

@@ -50,6 +50,7 @@ __all__ = [
     "consistent",
     "follow",
     "measure",
+    "movable",
     "settle",
     "short",
     "update",
@@ -89,6 +90,19 @@ def _space(study: Study) -> Space:
     return Space(study.first_levels(), study.bounds(), study.method.leveling)
 
 
+def _changed(ev: Any, sets: list[dict[str, float]], names: Any, r0: np.ndarray) -> list[str]:
+    """Return the ``names`` whose set (one each, in order) changes the residuals from ``r0``."""
+    if not sets:
+        return []
+    ev_out = ev.evaluate(sets)
+    tol = 1e-9 * max(float(np.linalg.norm(r0)), 1e-300)
+    return [
+        n
+        for n, r in zip(names, ev_out.residuals or [None] * len(sets), strict=True)
+        if r is None or float(np.linalg.norm(r - r0)) > tol
+    ]
+
+
 def _active(ev: Any, study: Study, x: Mapping[str, float], r0: np.ndarray) -> list[str]:
     """Return the Real parameters that change the outputs at ``x`` (the structure's free ones)."""
     space = _space(study)
@@ -98,13 +112,26 @@ def _active(ev: Any, study: Study, x: Mapping[str, float], r0: np.ndarray) -> li
         v = space.value(j, s + ACTIVE_STEP)
         v = v if v != x[n] else space.value(j, s - ACTIVE_STEP)
         sets.append({**x, n: v})
-    ev_out = ev.evaluate(sets)
-    tol = 1e-9 * max(float(np.linalg.norm(r0)), 1e-300)
-    out = []
-    for n, r in zip(space.names, ev_out.residuals or [None] * len(sets), strict=True):
-        if r is None or float(np.linalg.norm(r - r0)) > tol:
-            out.append(n)
-    return out
+    return _changed(ev, sets, space.names, r0)
+
+
+def movable(
+    ev: Any, study: Study, x: Mapping[str, float], r0: np.ndarray, active: list[str]
+) -> list[str]:
+    """Return the Real parameters the structure may move: those that act here or away.
+
+    ``active`` act at ``x``. A parameter at the value that switches its term off (a
+    viscous coefficient fitted to 3.8e-11 in logarithmic coordinates) changes nothing at
+    ``x``, yet the structure estimated it: moved to the centre of its first levels it
+    acts. The count of these is
+    the structure's ``k`` (its AIC, BIC and the likelihood-ratio test's degrees of
+    freedom); one simulation per parameter not active at ``x``.
+    """
+    space = _space(study)
+    rest = [n for n in space.names if n not in active]
+    centre = [{**x, n: space.value(space.names.index(n), 0.0)} for n in rest]
+    moved = set(_changed(ev, centre, rest, r0))
+    return [n for n in space.names if n in active or n in moved]
 
 
 def measure(
@@ -125,12 +152,13 @@ def measure(
     r0 = scored.residuals[0] if scored.residuals else None
     r0 = np.zeros(0) if r0 is None else np.asarray(r0)
     active = _active(ev, study, x, r0) if r0.size else list(study.parameter_names)
+    may_move = movable(ev, study, x, r0, active) if r0.size else active
     out = {
         "x": x,
         "cost": float(scored.costs[0, 0]),
         "chi2": float(r0 @ r0) if r0.size else math.inf,
         "n": int(r0.size),
-        "k": len(active),
+        "k": len(may_move),
         "active": active,
         "validation": validate(x) if validate is not None else None,
         "residuals": r0,

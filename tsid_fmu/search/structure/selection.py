@@ -153,7 +153,12 @@ def _close(a: Candidate, b: Candidate) -> bool:
 
 
 def _lrt(small: Candidate, big: Candidate) -> float:
-    return likelihood_ratio(small.chi2, big.chi2, small.n, big.k - small.k)[1]
+    """Return the p-value of a nested pair's LRT: never of 0 degrees of freedom.
+
+    ``k`` counts the parameters each structure may move (not those that happen to act at
+    its answer), so the richer one has more; a nested pair has at least one extra.
+    """
+    return likelihood_ratio(small.chi2, big.chi2, small.n, max(big.k - small.k, 1))[1]
 
 
 def _nested_step(
