@@ -472,7 +472,7 @@ def test_a_poor_fit_that_the_horizons_reach_again_needs_no_restart(monkeypatch):
 
 
 def test_the_poor_fit_warning_says_which_search_found_no_lower_basin():
-    from tsid_fmu.identify import _poor_fit
+    from tsid_fmu.weak import poor_fit as _poor_fit
 
     stage = StageResult("refinement", "refinement", {"w": 3.0}, 1e6, 10, "")
     assert _poor_fit(stage) == []

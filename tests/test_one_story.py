@@ -262,9 +262,9 @@ def test_an_error_near_zero_is_said_in_the_parameters_units(half_open):
     only to +/-2.1e+02 %" (issue 64): its error is absolute, in every view."""
     import dataclasses
 
-    from tsid_fmu.identify import _weak
     from tsid_fmu.report.notebook import _std_error
     from tsid_fmu.uncertainty.intervals import Uncertainty
+    from tsid_fmu.weak import weak_parameters as _weak
 
     u = Uncertainty(values={"tau": 0.37, "x0": 0.0024}, std_error={"tau": 0.004, "x0": 0.5},
                     relative={"tau": 1.08, "x0": 210.0},

@@ -40,7 +40,6 @@ from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure.compare import StructureResult, run_structure
 from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.status import study_status
-from tsid_fmu.story import near_zero, weak_reason
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.unitcheck import check_units
 from tsid_fmu.study.units import fmu_units, study_units
@@ -57,12 +56,9 @@ from tsid_fmu.uncertainty.fidelity import (
 )
 from tsid_fmu.uncertainty.sampled import for_study
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian
+from tsid_fmu.weak import WEAK_STD_ERROR, poor_fit, weak_parameters
 
-__all__ = ["identify"]
-
-WEAK_STD_ERROR = 5.0
-"""Relative standard error (percent) above which a parameter is reported as weakly
-determined by the data."""
+__all__ = ["WEAK_STD_ERROR", "identify"]
 
 
 def _progress(
@@ -100,47 +96,6 @@ def _annotate(folder: Path, record: IterationRecord, space: Space) -> None:
     }
     if describe:
         record.extra["describe"] = describe
-
-
-def _poor_fit(answer: StageResult) -> list[str]:
-    """Return the warning for an answer still far above the noise after the restarts."""
-    poor = answer.extra.get("poor_fit")
-    if not poor:
-        return []
-    if poor.get("horizons_agree"):
-        searched = "following the data from their first part reached the same answer"
-    else:
-        searched = f"{poor['restarts']} restart(s) found no lower basin"
-    return [
-        f"the answer's cost is {poor['ratio']:.3g} times the noise floor, and {searched}: the"
-        " model may not explain these data, the noise may be strongly coloured, or the answer"
-        " is a local minimum the search did not leave (try wider first levels, or other start"
-        " values)"
-    ]
-
-
-def _weak(result: IdentificationResult) -> dict[str, str]:
-    weak: dict[str, str] = {}
-    u = result.uncertainty
-    study = result.study
-    levels = study.first_levels() if study is not None else {}
-    widths = {n: float(max(v) - min(v)) for n, v in levels.items()}
-    units = study_units(study)
-    for n, rel in (u.relative if u is not None else {}).items():
-        said = weak_reason(u.intervals.get(n, [None, None]))
-        if said:
-            weak[n] = said
-        elif near_zero(rel):  # its error is absolute: weak against its first range
-            se, width = float(u.std_error.get(n, math.nan)), widths.get(n, math.nan)
-            if not se <= WEAK_STD_ERROR / 100 * width:
-                unit = f" {units[n]}" if units.get(n) else ""
-                weak[n] = (
-                    f"the data determine it only to +/-{se:.2g}{unit} (standard error; "
-                    "it is near zero)"
-                )
-        elif rel > WEAK_STD_ERROR:
-            weak[n] = f"the data determine it only to +/-{rel:.2g} % (standard error)"
-    return weak
 
 
 def _compare_ungrouped(
@@ -302,7 +257,7 @@ def _finish(
     result.extra["on_bound"] = on_bounds(x, study.bounds(), study.first_levels())
     stopped = [(s.name, s.message, s.status) for s in stages]
     result.warnings = [
-        *_poor_fit(answer),
+        *poor_fit(answer),
         *bound_warnings(result.extra["on_bound"], x, study.bounds()),
         *found.warnings,
         *unshown_warnings(stopped, status, result.intervals),
@@ -311,7 +266,7 @@ def _finish(
     ]
     checked = _fidelity(study, evaluators, x, "answer", callback, found.sensitivities)
     _record(result, start, checked)
-    result.weak = _weak(result)
+    result.weak = weak_parameters(result)
     if study.contribution.enabled and study.contribution.compare_ungrouped:
         result.extra["comparison"] = _compare_ungrouped(study, evaluators, store, result)
     checks = [e.name for e in study.experiments if e.role == "validate"]
