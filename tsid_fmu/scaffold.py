@@ -27,6 +27,7 @@ The file runs as written: ``tsid identify study.toml``.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import shlex
@@ -46,7 +47,7 @@ from tsid_fmu.fmu.variables import (
     variable_info,
 )
 from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, numerical_setting
-from tsid_fmu.study.tomltext import toml_key, toml_string
+from tsid_fmu.study.tomltext import comment_text, toml_key, toml_string
 
 __all__ = ["decade_levels", "init_study"]
 
@@ -170,6 +171,36 @@ def _as_written(path: Path, base: Path) -> Path:
     return path if rel.parts[:3] == ("..", "..", "..") else rel
 
 
+def _refused(v: VariableInfo, n: int) -> str | None:
+    """Return ``v``'s entry commented out with why a study cannot hold it, or None.
+
+    A study refuses a parameter whose name is empty or holds control characters, and
+    levels that are not ``n`` distinct finite numbers (a start value near the float
+    range's ends, bounds closer than the levels' figures): rather than a study that
+    ``tsid identify`` refuses, ``init`` writes the FMU's value kept, and why.
+    """
+    if not v.name or not v.name.isprintable():
+        return (
+            f"# {toml_key(v.name)}  # not written: a study's parameter name must be "
+            "non-empty printable text; the FMU's value is kept"
+        )
+    start = parse_start(v)
+    start = start if start is not None else 0.0
+    low = v.min if v.min is not None and v.max is not None and v.min < v.max else None
+    high = v.max if low is not None else None
+    try:
+        levels = bounded_levels(start, low, high, n)
+        ok = len(set(levels)) == n and math.isfinite(levels[-1] - levels[0])
+    except (ValueError, OverflowError, ZeroDivisionError):
+        ok = False
+    if ok:
+        return None
+    return (
+        f"# {toml_key(v.name)}  # not written: no {n} distinct finite levels around its "
+        f"start {v.start} within its min/max; the FMU's value is kept"
+    )
+
+
 MOST_FREE = 40
 """Parameters ``tsid init`` frees at most: the 40 three-level columns of L81."""
 
@@ -187,8 +218,17 @@ def _parameter_lines(
     written commented out, with the reason.
     """
     lines, count = [], 0
+    seen: set[str] = set()
     for v in variables:
+        if v.name in seen and (v.name in held or v.causality == "parameter"):
+            lines.append(f"# {toml_key(v.name)}  # not written: a second variable of this name")
+            continue
         if v.name in held and v.type in REAL_TYPES and not v.shape:
+            seen.add(v.name)
+            refused = _refused(v, n)
+            if refused is not None:
+                lines.append(refused)
+                continue
             entry, _, own = _entry(v, n)
             note = "  # an input without a data column, held at one value over each run"
             lines.append(entry + note + (f"; {own}" if own else ""))
@@ -196,8 +236,13 @@ def _parameter_lines(
             continue
         if v.causality != "parameter" or v.variability not in ("fixed", "tunable"):
             continue
+        seen.add(v.name)
         if v.type not in REAL_TYPES:
             lines.append(_choice_line(v))
+            continue
+        refused = _refused(v, n)
+        if refused is not None:
+            lines.append(refused)
             continue
         entry, bounded, own = _entry(v, n)
         reason = numerical_setting(v)
@@ -377,7 +422,9 @@ def init_study(
         "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
         *params,
     ]
-    text = "\n".join(lines) + "\n"
+    # what tsid copies into a comment (descriptions, names, columns) stays in it: a
+    # newline there would start a line of TOML; in a TOML string the escapes mean the same
+    text = "\n".join(comment_text(line) for line in lines) + "\n"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
     return text
