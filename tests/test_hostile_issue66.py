@@ -1,0 +1,116 @@
+"""Hostile input of issue 66: ``--set`` names, FMU paths tsid cannot read, CSV dialects.
+
+Each ends in one line naming what is at fault (exit 2), or in the right result.
+"""
+
+from __future__ import annotations
+
+import builtins
+import os
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from tsid_fmu.cli import main
+from tsid_fmu.cli_values import parse_assignments
+from tsid_fmu.errors import FMUError, StudyError
+from tsid_fmu.fmu.info import read_fmu_description
+from tsid_fmu.scaffold import init_study
+
+REPO = Path(__file__).resolve().parents[1]
+SISO = REPO / "examples" / "lsea_siso"
+FMU = REPO / "fmus" / "LSEA_SISO.fmu"
+
+# -- 23: --set NAME=VALUE with names holding '=' or spaces at their ends ----------------
+
+
+@pytest.mark.parametrize(
+    ("item", "name", "value"),
+    [
+        ("K_s=5000", "K_s", "5000"),
+        (" K_s = 5000 ", "K_s", "5000"),
+        ("a=b=5", "a=b", "5"),
+        ("x==1", "x=", "1"),
+        ('" x "=1', " x ", "1"),
+        ('"a=b "=2.5', "a=b ", "2.5"),
+        ('"q\\"uote\\u0041"=3', 'q"uoteA', "3"),
+        ("model=Drag", "model", "Drag"),
+    ],
+)
+def test_set_splits_at_the_last_equals_and_takes_a_quoted_name_as_it_is(item, name, value):
+    assert parse_assignments([item], "--set", last=True) == {name: value}
+
+
+@pytest.mark.parametrize("item", ["=5", "a=", "K_s", '""=1', '"a"b"=1', '"a" # c"=1'])
+def test_set_refuses_what_is_no_assignment(item):
+    with pytest.raises(StudyError, match="--set"):
+        parse_assignments([item], "--set", last=True)
+
+
+def test_set_names_a_parameter_with_equals_in_the_cli(tmp_path, capsys):
+    """``a=b=5`` was read as ``a`` set to ``b=5``: "not a number"."""
+    argv = ["simulate", str(SISO / "study.toml"), "--plot", str(tmp_path / "s.png")]
+    assert main([*argv, "--set", "K=s=5000"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a parameter of the study: 'K=s'" in err
+
+
+def test_derived_still_splits_at_the_first_equals():
+    assert parse_assignments(["F=a == b"], "--derived") == {"F": "a == b"}
+
+
+# -- 24: an FMU path that is a folder, a pipe or cannot be read -------------------------
+
+
+def _init_err(capsys, fmu: Path, tmp_path: Path) -> str:
+    code = main(["init", str(fmu), str(SISO / "measured.csv"), "-o", str(tmp_path / "s.toml")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    return err
+
+
+def test_an_unpacked_fmu_folder_is_called_a_folder(tmp_path, capsys):
+    folder = tmp_path / "Plant.fmu"
+    with zipfile.ZipFile(FMU) as archive:
+        archive.extract("modelDescription.xml", folder)
+    err = _init_err(capsys, folder, tmp_path)
+    assert f"{folder} is a folder: give the .fmu archive" in err
+    assert "unpacked FMU" in err and "not found" not in err
+
+
+def test_a_pipe_is_not_read_as_an_fmu(tmp_path, capsys):
+    """A FIFO would block ``zipfile.is_zipfile`` until a writer came."""
+    fifo = tmp_path / "plant.fmu"
+    os.mkfifo(fifo)
+    err = _init_err(capsys, fifo, tmp_path)
+    assert "is not a regular file" in err and str(fifo) in err
+
+
+def test_an_fmu_without_read_permission_says_so(tmp_path, capsys, monkeypatch):
+    """Tests run as root, who reads any file: opening the FMU is made to fail as it would."""
+    locked = tmp_path / "locked.fmu"
+    locked.write_bytes(FMU.read_bytes())
+    real_open = builtins.open
+
+    def denying(file, *args, **kwargs):
+        if os.fspath(file) == os.fspath(locked):
+            raise PermissionError(13, "Permission denied", os.fspath(file))
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", denying)
+    err = _init_err(capsys, locked, tmp_path)
+    assert f"cannot read FMU file {locked}: permission denied" in err
+    assert "ZIP archive" not in err
+    with pytest.raises(FMUError, match="permission denied"):
+        read_fmu_description(locked)
+
+
+def test_a_missing_fmu_is_still_not_found(tmp_path, capsys):
+    err = _init_err(capsys, tmp_path / "none.fmu", tmp_path)
+    assert "FMU file not found" in err
+
+
+def test_init_study_refuses_a_folder_in_python(tmp_path):
+    with pytest.raises(FMUError, match="is a folder"):
+        init_study(tmp_path, SISO / "measured.csv", tmp_path / "s.toml")
