@@ -114,3 +114,43 @@ def test_a_missing_fmu_is_still_not_found(tmp_path, capsys):
 def test_init_study_refuses_a_folder_in_python(tmp_path):
     with pytest.raises(FMUError, match="is a folder"):
         init_study(tmp_path, SISO / "measured.csv", tmp_path / "s.toml")
+
+
+# -- 25: a European CSV: ';' between cells, decimal commas -------------------------------
+
+
+def _european(path: Path, point: bool = False, bom: bool = False) -> Path:
+    import numpy as np
+
+    t = np.arange(0.0, 1.0, 0.01)
+    rows = ["time;F_m;x_m"] + [f"{a:.3f};{np.sin(a):.6f};{-1.5e-3 * a:.4e}" for a in t]
+    text = "\n".join(rows) + "\n"
+    path.write_text(("\ufeff" if bom else "") + (text if point else text.replace(".", ",")))
+    return path
+
+
+@pytest.mark.parametrize("bom", [False, True])
+def test_a_european_csv_is_read_with_its_decimal_commas(tmp_path, bom):
+    """It was "its first line does not look like a header of column names"."""
+    import numpy as np
+
+    from tsid_fmu.data.measured import load_data
+
+    data = load_data(_european(tmp_path / "eu.csv", bom=bom))
+    assert data.names == ["time", "F_m", "x_m"]
+    assert data.sample_time == pytest.approx(0.01)
+    assert data.column("F_m")[1] == pytest.approx(np.sin(0.01), abs=1e-6)
+    assert data.column("x_m")[-1] == pytest.approx(-1.5e-3 * 0.99, rel=1e-3)
+
+
+def test_a_semicolon_csv_with_decimal_points_is_read_as_before(tmp_path):
+    from tsid_fmu.data.measured import load_data
+
+    data = load_data(_european(tmp_path / "pt.csv", point=True))
+    assert data.column("time")[1] == pytest.approx(0.01)
+
+
+def test_init_on_a_european_csv_writes_a_study(tmp_path, capsys):
+    data = _european(tmp_path / "eu.csv")
+    assert main(["init", str(FMU), str(data), "-o", str(tmp_path / "s.toml")]) == 0
+    assert "x_m" in (tmp_path / "s.toml").read_text()

@@ -30,6 +30,7 @@ from tsid_fmu.data.textfile import (
     header_fields,
     hide_names_unless_table,
     read_head,
+    sniff_decimal,
     sniff_delimiter,
 )
 from tsid_fmu.errors import DataError
@@ -291,6 +292,9 @@ def _text_options(path: Path, suffix: str, options: dict[str, Any]) -> dict[str,
         defaults["sep"] = _TSV_SEP
     elif "sep" not in options and "delimiter" not in options:
         defaults["sep"] = sniff_delimiter(line)
+        if "decimal" not in options and sniff_decimal(path, defaults["sep"], encoding) == ",":
+            # a European CSV, 0,25;1,5: pandas' python engine misreads 1,5e-3 with it
+            defaults.update(decimal=",", engine="c")
     merged = {**defaults, **options}
     sep = merged.get("sep") or merged.get("delimiter")
     if isinstance(sep, str) and sep and not {"header", "names", "skiprows"} & set(options):
@@ -393,7 +397,8 @@ def load_data(
     ----------
     path : str or pathlib.Path
         The data file; the reader follows the extension: ``.csv`` (default, separator
-        sniffed), ``.tsv``/``.txt`` (whitespace, tab, comma or semicolon), ``.parquet``,
+        sniffed; ``;`` with decimal commas, ``0,25;1,5``, read as such),
+        ``.tsv``/``.txt`` (whitespace, tab, comma or semicolon), ``.parquet``,
         ``.feather`` (need ``pyarrow``), ``.xlsx`` (needs ``openpyxl``), ``.mat``
         (1-D variables of equal length).
     time_column : str, optional
