@@ -154,3 +154,59 @@ def test_init_on_a_european_csv_writes_a_study(tmp_path, capsys):
     data = _european(tmp_path / "eu.csv")
     assert main(["init", str(FMU), str(data), "-o", str(tmp_path / "s.toml")]) == 0
     assert "x_m" in (tmp_path / "s.toml").read_text()
+
+
+# -- 12: memory of a long CSV, for init and for the reader -------------------------------
+
+_MEASURE = """
+import resource, sys
+from tsid_fmu.data.measured import load_data
+from tsid_fmu.scaffold import init_study
+import pandas, numpy
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+if sys.argv[1] == "init":
+    init_study(sys.argv[3], sys.argv[2], sys.argv[4])
+else:
+    load_data(sys.argv[2])
+print((resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024)
+"""
+
+
+@pytest.fixture(scope="module")
+def long_csv(tmp_path_factory) -> Path:
+    """500 000 rows of 5 columns: 20 MB of float64, 40 MB of text."""
+    import numpy as np
+    import pandas as pd
+
+    n = 500_000
+    t = np.arange(n) * 1e-3
+    frame = pd.DataFrame({"time": t, "F_m": np.sin(t), "F_o": np.cos(t), "x_m": t, "x_o": -t})
+    path = tmp_path_factory.mktemp("long") / "long.csv"
+    frame.to_csv(path, index=False)
+    return path
+
+
+def _peak_mib(*argv: str) -> float:
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    done = subprocess.run(
+        [sys.executable, "-c", _MEASURE, *argv], capture_output=True, text=True, env=env,
+        timeout=300, check=True,
+    )  # fmt: skip
+    return float(done.stdout.split()[-1])
+
+
+def test_init_on_a_long_csv_reads_the_time_column_only(long_csv, tmp_path):
+    """The python engine's reader had taken 280 MiB over the imports' for this file."""
+    out = tmp_path / "s.toml"
+    grown = _peak_mib("init", str(long_csv), str(FMU), str(out))
+    assert grown < 40, f"{grown:.0f} MiB"
+    assert "windows = [[49.9999, 499.999]]" in out.read_text()  # the whole record's
+
+
+def test_the_reader_holds_a_long_csv_in_a_few_copies_of_its_floats(long_csv):
+    """20 MB of float64: it took 280 MiB over the imports' (per-cell Python objects)."""
+    grown = _peak_mib("load", str(long_csv))
+    assert grown < 120, f"{grown:.0f} MiB"

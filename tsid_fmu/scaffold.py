@@ -35,7 +35,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from tsid_fmu.data.measured import load_data
+from tsid_fmu.data.measured import MeasuredData, load_data
 from tsid_fmu.doe.arrays import COMPOSITION, select_array
 from tsid_fmu.errors import StudyError
 from tsid_fmu.fmu.info import read_fmu_description
@@ -367,7 +367,7 @@ def init_study(
     md = read_fmu_description(fmu)
     variables = [variable_info(v) for v in md.modelVariables]
     time = _time_column(data)
-    probe = load_data(data, time_column=time, derived=derived)
+    probe, first, last = _probe(data, time, derived)
     columns = [c for c in probe.names if c != time]
     match = _match(variables, columns)
     found = derived_hints(match.missing_outputs + match.missing_inputs, columns, match.unused)
@@ -391,7 +391,7 @@ def init_study(
     base = out.resolve().parent
     rel = {p: _as_written(p, base) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
-    lines += _window_hint(float(probe.time[0]), float(probe.time[-1]))
+    lines += _window_hint(first, last)
     lines += _initial_hint([v.name for v in variables if initial_state(v)], match.outputs)
     lines += hints
     lines += [
@@ -428,6 +428,32 @@ def init_study(
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
     return text
+
+
+SAMPLE_ROWS = 1000
+"""Rows of a text data file that ``tsid init`` reads in full (the names, ``--derived``)."""
+
+
+def _probe(
+    data: Path, time: str, derived: Mapping[str, str] | None
+) -> tuple[MeasuredData, float, float]:
+    """Return the data's first rows, and the first and last time of the whole record.
+
+    ``init`` needs the columns' names and the time range only: of a text file it reads
+    :data:`SAMPLE_ROWS` rows in full (names, derived channels checked) and then the time
+    column alone (checked as ``identify`` checks it), so that a file of millions of rows
+    is never held whole. Other formats are read whole.
+    """
+    if data.suffix.lower() not in (".csv", ".tsv", ".txt", ""):
+        probe = load_data(data, time_column=time, derived=derived)
+        return probe, float(probe.time[0]), float(probe.time[-1])
+    probe = load_data(data, time_column=time, derived=derived, read_options={"nrows": SAMPLE_ROWS})
+    if len(probe) < SAMPLE_ROWS:
+        return probe, float(probe.time[0]), float(probe.time[-1])
+    whole = load_data(
+        data, time_column=time, read_options={"usecols": lambda c: str(c).strip(" ") == time}
+    )
+    return probe, float(whole.time[0]), float(whole.time[-1])
 
 
 def _time_column(data: Path) -> str:
