@@ -210,3 +210,37 @@ def test_the_reader_holds_a_long_csv_in_a_few_copies_of_its_floats(long_csv):
     """20 MB of float64: it took 280 MiB over the imports' (per-cell Python objects)."""
     grown = _peak_mib("load", str(long_csv))
     assert grown < 120, f"{grown:.0f} MiB"
+
+
+# -- 20: what an FMU printed, with ESC, OSC, BEL and NUL, in the error line and the HTML --
+
+FMU_PRINTED = "The FMU printed: \x1b]0;owned\x07\x1b[2J\x00 done\x7f\x9b"
+
+
+def test_the_error_line_escapes_control_characters(capsys, monkeypatch):
+    import tsid_fmu.cli as cli
+    from tsid_fmu.errors import SimulationError
+
+    def failing(args):
+        raise SimulationError(f"fmi2DoStep returned Error at t=0.35. {FMU_PRINTED}")
+
+    monkeypatch.setattr(cli, "_cmd_info", failing)
+    assert main(["info", str(FMU)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.rstrip("\n").isprintable()
+    assert "\\x1b]0;owned\\x07\\x1b[2J\\x00 done\\x7f\\x9b" in err
+
+
+def test_a_path_with_an_escape_sequence_is_escaped_in_the_error_line(tmp_path, capsys):
+    err = _init_err(capsys, tmp_path / "a\x1b]0;owned\x07b.fmu", tmp_path)
+    assert err.rstrip("\n").isprintable() and "a\\x1b]0;owned\\x07b.fmu" in err
+
+
+def test_report_html_escapes_control_characters():
+    from tsid_fmu.report.html_tables import esc, table
+
+    assert esc(FMU_PRINTED) == "The FMU printed: \\x1b]0;owned\\x07\\x1b[2J\\x00 done\\x7f\\x9b"
+    assert esc("a <b>\n\tc") == "a &lt;b&gt;\n\tc"  # line breaks and tabs stay
+    html = table(["run", "reason"], [[1, FMU_PRINTED]])
+    assert not any(c in html for c in "\x1b\x07\x00\x7f\x9b")
