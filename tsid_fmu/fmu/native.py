@@ -36,9 +36,7 @@ TAIL = 600
 #: characters of one run's output kept at most (its end)
 KEPT = 20000
 #: what a run printed when the FMU closed the descriptors of the capture
-CLOSED_NOTE = (
-    "[tsid: the FMU closed its output descriptor; what it printed in this call is lost]\n"
-)
+CLOSED_NOTE = "[tsid: the FMU closed its output descriptor; what it printed in this call is lost]\n"
 
 _ACTIVE = threading.Lock()  # one capture of the process's descriptors at a time
 _SINK_LOCK = threading.Lock()
