@@ -244,3 +244,13 @@ def test_report_html_escapes_control_characters():
     assert esc("a <b>\n\tc") == "a &lt;b&gt;\n\tc"  # line breaks and tabs stay
     html = table(["run", "reason"], [[1, FMU_PRINTED]])
     assert not any(c in html for c in "\x1b\x07\x00\x7f\x9b")
+
+
+def test_read_options_only_the_python_engine_takes_still_work(tmp_path):
+    """The C parser refuses ``skipfooter``: such a study keeps the python engine."""
+    from tsid_fmu.data.measured import load_data
+
+    path = tmp_path / "footer.csv"
+    path.write_text("time,y\n0,1\n0.1,2\n0.2,3\nend of record\n")
+    data = load_data(path, read_options={"skipfooter": 1})
+    assert list(data.column("y")) == [1.0, 2.0, 3.0]

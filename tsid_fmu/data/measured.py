@@ -297,7 +297,8 @@ def _text_options(path: Path, suffix: str, options: dict[str, Any]) -> dict[str,
             defaults["decimal"] = ","  # a European CSV, 0,25;1,5 (read by the C parser)
     merged = {**defaults, **options}
     sep = merged.get("sep") or merged.get("delimiter")
-    if "engine" not in options and isinstance(sep, str) and len(sep) == 1:
+    python_only = "skipfooter" in options or callable(options.get("on_bad_lines"))
+    if "engine" not in options and isinstance(sep, str) and len(sep) == 1 and not python_only:
         # pandas' C parser reads numbers straight into float64, in chunks; the python
         # engine holds a Python object a cell first (1.27 GiB peak for a 2-million-row,
         # 5-column file of 155 MiB, 0.34 GiB with the C parser)
