@@ -143,3 +143,11 @@ def test_init_refuses_when_nothing_a_study_can_hold_is_left(tmp_path):
     fmu = hostile_fmu(tmp_path, [("", "1.0", "", None), ("k", "1e308", "", None)])
     with pytest.raises(StudyError, match="no real parameter to identify"):
         init_study(fmu, data_file(tmp_path), tmp_path / "study.toml")
+
+
+def test_the_no_match_error_keeps_a_name_with_a_newline_on_its_line(tmp_path):
+    fmu = hostile_fmu(tmp_path, [("k", "1.0", "", None)], output="y")
+    data = data_file(tmp_path, ("z\nfake line",))
+    with pytest.raises(StudyError) as info:
+        init_study(fmu, data, tmp_path / "study.toml")
+    assert "\n" not in str(info.value) and "z\\nfake line" in str(info.value)

@@ -373,11 +373,12 @@ def init_study(
     found = derived_hints(match.missing_outputs + match.missing_inputs, columns, match.unused)
     hints = _hint_lines([str(fmu), str(data), str(out)], derived or {}, found)
     if not match.outputs:
-        outs = [v.name for v in variables if v.causality == "output"]
+        outs = [comment_text(v.name) for v in variables if v.causality == "output"]
+        shown = [comment_text(c) for c in columns]  # a newline in a name: no line of its own
         raise StudyError(
             f"{data}: no column matches an output of {fmu.name} ({', '.join(outs) or 'none'}); "
-            f"columns: {', '.join(columns)}; add one, or give it with --derived NAME=EXPRESSION"
-            + "".join(f"\n{line.removeprefix('# ')}" for line in hints)
+            f"columns: {', '.join(shown)}; add one, or give it with --derived NAME=EXPRESSION"
+            + "".join(f"\n{comment_text(line.removeprefix('# '))}" for line in hints)
         )
     held = match.missing_inputs
     params, count = _parameter_lines(variables, held=held)
