@@ -155,7 +155,7 @@ def _quoted_name(name: str, what: str, item: str) -> str:
         value = tomllib.loads(f"name = {text}")["name"]
     except tomllib.TOMLDecodeError:
         raise StudyError(
-            f"{what} {item!r}: a quoted name must be a TOML basic string (\\\" for a quote)"
+            f'{what} {item!r}: a quoted name must be a TOML basic string (\\" for a quote)'
         ) from None
     if not value:
         raise StudyError(f"{what} must look like NAME=VALUE, got {item!r}")
