@@ -88,3 +88,22 @@ def test_without_capture_nothing_is_kept(chatty):
     session, exc = _run(chatty, 0.35, capture=False)
     with session:
         assert session.printed == "" and "The FMU printed" not in str(exc)
+
+
+def test_the_solver_fidelity_check_captures_and_records_what_the_fmu_prints(study, tmp_path, capfd):
+    """Its runs were uncaptured: on stderr without limit, none in fmu_output.log (issue 66, 9)."""
+    from tsid_fmu.fmu.native import KEPT, recording
+    from tsid_fmu.study import Study, prepare
+    from tsid_fmu.uncertainty.solvers import Solver, SolverRuns
+
+    loaded = Study.from_toml(study)
+    x = {p.name: p.levels[len(p.levels) // 2] for p in loaded.parameters}
+    log = tmp_path / "fmu_output.log"
+    with recording(log):
+        SolverRuns(prepare(loaded), x).run(Solver("cs"), 0)
+    text = log.read_text()
+    assert "[solver fidelity check, Co-Simulation" in text
+    assert "chatty FMU | debug | first step" in text and "== parameter set: " in text
+    out, err = capfd.readouterr()
+    assert "first step" not in out and "chatty FMU | debug | first step" in err  # echoed
+    assert len(err) <= KEPT + 200

@@ -122,7 +122,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         values.update(saved["params"])
         interface = chosen_interface(saved.get("extra"))
     chosen = {c.name: c for c in study.choices}  # a choice as its label (model=Drag)
-    for name, text in parse_assignments(args.set, "--set").items():
+    for name, text in parse_assignments(args.set, "--set", last=True).items():
         if name in chosen:
             values[name] = choice_value(chosen[name], name, text)
             continue
@@ -330,7 +330,9 @@ def _other_parsers(sub: Any) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="value of one study parameter (repeatable); applied after --result",
+        help="value of one study parameter (repeatable); applied after --result; split at "
+        "the last '=' (a name may hold one); a name in double quotes, TOML's escapes "
+        "allowed, keeps spaces at its ends",
     )
     p.add_argument("--result", help="use the parameters of a result folder or result.json")
     p.add_argument("--plot", default="simulate.png", help="PNG to write (default simulate.png)")

@@ -14,7 +14,14 @@ import os
 import sys
 from collections.abc import Iterator, Sequence
 
-__all__ = ["environment", "error", "interrupted", "native_output_to_stderr", "quiet_stdout"]
+__all__ = [
+    "environment",
+    "error",
+    "interrupted",
+    "native_output_to_stderr",
+    "quiet_stdout",
+    "terminal_safe",
+]
 
 
 def environment(exc: OSError) -> str:
@@ -72,9 +79,25 @@ def native_output_to_stderr() -> Iterator[None]:
             sys.stdout = before
 
 
+def terminal_safe(message: str) -> str:
+    r"""Return ``message`` with its control and format characters written as escapes.
+
+    An error quotes what an FMU printed, a file's names, a study's text: a raw ESC, OSC,
+    BEL or NUL there would drive the terminal (``"\x1b]0;title\x07"`` retitles it).
+    Each is written as its Python escape (``\x1b``); the message's own line breaks stay.
+    """
+    return "\n".join(
+        "".join(c if c.isprintable() else repr(c)[1:-1] for c in line)
+        for line in str(message).split("\n")
+    )
+
+
 def error(message: str, status: int) -> int:
-    """Print ``tsid: error: <message>`` on stderr; return the exit status ``status``."""
-    print(f"tsid: error: {message}", file=sys.stderr)
+    """Print ``tsid: error: <message>`` on stderr; return the exit status ``status``.
+
+    Control characters in ``message`` are written as escapes (:func:`terminal_safe`).
+    """
+    print(f"tsid: error: {terminal_safe(message)}", file=sys.stderr)
     return status
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -112,8 +113,20 @@ def choice_value(choice: Any, name: str, text: str) -> float:
     )
 
 
-def parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
-    """Return ``{NAME: VALUE}`` of options such as ``--set NAME=VALUE``.
+def parse_assignments(items: Sequence[str], what: str, last: bool = False) -> dict[str, str]:
+    r"""Return ``{NAME: VALUE}`` of options such as ``--set NAME=VALUE``.
+
+    Parameters
+    ----------
+    items : sequence of str
+        The options' texts.
+    what : str
+        The option, named in an error (``--set``).
+    last : bool, optional
+        Split at the last ``=``, for values that cannot hold one (``--set``'s numbers and
+        labels): a name may then hold ``=`` (``--set a=b=5`` sets ``a=b``). A name
+        written as a TOML basic string (``--set '" x "=5'``) is taken as it is, spaces
+        at its ends and escapes (``\"``, ``\u0041``) included; others are stripped.
 
     Raises
     ------
@@ -122,11 +135,31 @@ def parse_assignments(items: Sequence[str], what: str) -> dict[str, str]:
     """
     out = {}
     for item in items:
-        name, sep, value = item.partition("=")
+        name, sep, value = item.rpartition("=") if last else item.partition("=")
         if not sep or not name.strip() or not value.strip():
             raise StudyError(f"{what} must look like NAME=VALUE, got {item!r}")
-        out[name.strip()] = value.strip()
+        out[_quoted_name(name, what, item) if last else name.strip()] = value.strip()
     return out
+
+
+def _quoted_name(name: str, what: str, item: str) -> str:
+    """``name`` stripped, or the text of a TOML basic string ``"..."``."""
+    import tomllib
+
+    text = name.strip()
+    if not (len(text) >= 2 and text[0] == text[-1] == '"'):
+        return text
+    try:
+        if not re.fullmatch(r'"(?:[^"\\\x00-\x1f\x7f]|\\.)*"', text):
+            raise tomllib.TOMLDecodeError("not one basic string")
+        value = tomllib.loads(f"name = {text}")["name"]
+    except tomllib.TOMLDecodeError:
+        raise StudyError(
+            f'{what} {item!r}: a quoted name must be a TOML basic string (\\" for a quote)'
+        ) from None
+    if not value:
+        raise StudyError(f"{what} must look like NAME=VALUE, got {item!r}")
+    return value
 
 
 def saved_result(path: Path) -> dict[str, Any]:

@@ -27,6 +27,7 @@ The file runs as written: ``tsid identify study.toml``.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import shlex
@@ -34,7 +35,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from tsid_fmu.data.measured import load_data
+from tsid_fmu.data.measured import MeasuredData, load_data
 from tsid_fmu.doe.arrays import COMPOSITION, select_array
 from tsid_fmu.errors import StudyError
 from tsid_fmu.fmu.info import read_fmu_description
@@ -46,7 +47,7 @@ from tsid_fmu.fmu.variables import (
     variable_info,
 )
 from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, numerical_setting
-from tsid_fmu.study.tomltext import toml_key, toml_string
+from tsid_fmu.study.tomltext import comment_text, toml_key, toml_string
 
 __all__ = ["decade_levels", "init_study"]
 
@@ -170,6 +171,36 @@ def _as_written(path: Path, base: Path) -> Path:
     return path if rel.parts[:3] == ("..", "..", "..") else rel
 
 
+def _refused(v: VariableInfo, n: int) -> str | None:
+    """Return ``v``'s entry commented out with why a study cannot hold it, or None.
+
+    A study refuses a parameter whose name is empty or holds control characters, and
+    levels that are not ``n`` distinct finite numbers (a start value near the float
+    range's ends, bounds closer than the levels' figures): rather than a study that
+    ``tsid identify`` refuses, ``init`` writes the FMU's value kept, and why.
+    """
+    if not v.name or not v.name.isprintable():
+        return (
+            f"# {toml_key(v.name)}  # not written: a study's parameter name must be "
+            "non-empty printable text; the FMU's value is kept"
+        )
+    start = parse_start(v)
+    start = start if start is not None else 0.0
+    low = v.min if v.min is not None and v.max is not None and v.min < v.max else None
+    high = v.max if low is not None else None
+    try:
+        levels = bounded_levels(start, low, high, n)
+        ok = len(set(levels)) == n and math.isfinite(levels[-1] - levels[0])
+    except (ValueError, OverflowError, ZeroDivisionError):
+        ok = False
+    if ok:
+        return None
+    return (
+        f"# {toml_key(v.name)}  # not written: no {n} distinct finite levels around its "
+        f"start {v.start} within its min/max; the FMU's value is kept"
+    )
+
+
 MOST_FREE = 40
 """Parameters ``tsid init`` frees at most: the 40 three-level columns of L81."""
 
@@ -187,8 +218,17 @@ def _parameter_lines(
     written commented out, with the reason.
     """
     lines, count = [], 0
+    seen: set[str] = set()
     for v in variables:
+        if v.name in seen and (v.name in held or v.causality == "parameter"):
+            lines.append(f"# {toml_key(v.name)}  # not written: a second variable of this name")
+            continue
         if v.name in held and v.type in REAL_TYPES and not v.shape:
+            seen.add(v.name)
+            refused = _refused(v, n)
+            if refused is not None:
+                lines.append(refused)
+                continue
             entry, _, own = _entry(v, n)
             note = "  # an input without a data column, held at one value over each run"
             lines.append(entry + note + (f"; {own}" if own else ""))
@@ -196,8 +236,13 @@ def _parameter_lines(
             continue
         if v.causality != "parameter" or v.variability not in ("fixed", "tunable"):
             continue
+        seen.add(v.name)
         if v.type not in REAL_TYPES:
             lines.append(_choice_line(v))
+            continue
+        refused = _refused(v, n)
+        if refused is not None:
+            lines.append(refused)
             continue
         entry, bounded, own = _entry(v, n)
         reason = numerical_setting(v)
@@ -322,17 +367,18 @@ def init_study(
     md = read_fmu_description(fmu)
     variables = [variable_info(v) for v in md.modelVariables]
     time = _time_column(data)
-    probe = load_data(data, time_column=time, derived=derived)
+    probe, first, last = _probe(data, time, derived)
     columns = [c for c in probe.names if c != time]
     match = _match(variables, columns)
     found = derived_hints(match.missing_outputs + match.missing_inputs, columns, match.unused)
     hints = _hint_lines([str(fmu), str(data), str(out)], derived or {}, found)
     if not match.outputs:
-        outs = [v.name for v in variables if v.causality == "output"]
+        outs = [comment_text(v.name) for v in variables if v.causality == "output"]
+        shown = [comment_text(c) for c in columns]  # a newline in a name: no line of its own
         raise StudyError(
             f"{data}: no column matches an output of {fmu.name} ({', '.join(outs) or 'none'}); "
-            f"columns: {', '.join(columns)}; add one, or give it with --derived NAME=EXPRESSION"
-            + "".join(f"\n{line.removeprefix('# ')}" for line in hints)
+            f"columns: {', '.join(shown)}; add one, or give it with --derived NAME=EXPRESSION"
+            + "".join(f"\n{comment_text(line.removeprefix('# '))}" for line in hints)
         )
     held = match.missing_inputs
     params, count = _parameter_lines(variables, held=held)
@@ -346,7 +392,7 @@ def init_study(
     base = out.resolve().parent
     rel = {p: _as_written(p, base) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
-    lines += _window_hint(float(probe.time[0]), float(probe.time[-1]))
+    lines += _window_hint(first, last)
     lines += _initial_hint([v.name for v in variables if initial_state(v)], match.outputs)
     lines += hints
     lines += [
@@ -377,10 +423,38 @@ def init_study(
         "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
         *params,
     ]
-    text = "\n".join(lines) + "\n"
+    # what tsid copies into a comment (descriptions, names, columns) stays in it: a
+    # newline there would start a line of TOML; in a TOML string the escapes mean the same
+    text = "\n".join(comment_text(line) for line in lines) + "\n"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text, encoding="utf-8")
     return text
+
+
+SAMPLE_ROWS = 1000
+"""Rows of a text data file that ``tsid init`` reads in full (the names, ``--derived``)."""
+
+
+def _probe(
+    data: Path, time: str, derived: Mapping[str, str] | None
+) -> tuple[MeasuredData, float, float]:
+    """Return the data's first rows, and the first and last time of the whole record.
+
+    ``init`` needs the columns' names and the time range only: of a text file it reads
+    :data:`SAMPLE_ROWS` rows in full (names, derived channels checked) and then the time
+    column alone (checked as ``identify`` checks it), so that a file of millions of rows
+    is never held whole. Other formats are read whole.
+    """
+    if data.suffix.lower() not in (".csv", ".tsv", ".txt", ""):
+        probe = load_data(data, time_column=time, derived=derived)
+        return probe, float(probe.time[0]), float(probe.time[-1])
+    probe = load_data(data, time_column=time, derived=derived, read_options={"nrows": SAMPLE_ROWS})
+    if len(probe) < SAMPLE_ROWS:
+        return probe, float(probe.time[0]), float(probe.time[-1])
+    whole = load_data(
+        data, time_column=time, read_options={"usecols": lambda c: str(c).strip(" ") == time}
+    )
+    return probe, float(whole.time[0]), float(whole.time[-1])
 
 
 def _time_column(data: Path) -> str:

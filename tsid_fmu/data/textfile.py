@@ -41,6 +41,7 @@ __all__ = [
     "header_fields",
     "hide_names_unless_table",
     "read_head",
+    "sniff_decimal",
     "sniff_delimiter",
 ]
 
@@ -120,6 +121,30 @@ def sniff_delimiter(line: str) -> str:
         return csv.Sniffer().sniff(line, delimiters=DELIMITERS).delimiter
     except csv.Error:  # one column, or no usual delimiter: then not split at all
         return ","
+
+
+_COMMA_NUMBER = re.compile(r"\s*[+-]?\d*,\d+(?:[eE][+-]?\d+)?\s*")
+_POINT_NUMBER = re.compile(r"\s*[+-]?(?:\d+\.\d*|\.\d+)(?:[eE][+-]?\d+)?\s*")
+
+
+def sniff_decimal(path: Path, sep: str, encoding: str = "utf-8-sig") -> str:
+    """Return ``","`` if the rows below the header write decimal commas, else ``"."``.
+
+    A European spreadsheet writes ``0,25;1,5``: with ``;`` as the delimiter (never
+    ``,``), the first :data:`TABLE_ROWS` rows of the first :data:`HEAD_BYTES` are
+    looked at, and decimal commas are taken where some cell is a number with a comma
+    (``0,25``, ``-1,5e-3``) and none one with a point.
+    """
+    if sep == "," or len(sep) != 1:
+        return "."
+    with open(path, "rb") as fh:
+        head = fh.read(HEAD_BYTES)
+    text = head.decode(encoding, errors="replace")
+    rows = [x for x in re.split(r"\r\n|\r|\n", text) if x.strip()][1 : TABLE_ROWS + 1]
+    cells = [c for row in rows for c in row.split(sep)]
+    comma = any(_COMMA_NUMBER.fullmatch(c) for c in cells)
+    point = any(_POINT_NUMBER.fullmatch(c) for c in cells)
+    return "," if comma and not point else "."
 
 
 def header_fields(line: str, sep: str) -> list[str]:

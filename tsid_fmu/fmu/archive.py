@@ -27,6 +27,7 @@ import zlib
 from pathlib import Path, PurePosixPath
 
 from tsid_fmu.errors import FMUError, ResourceError
+from tsid_fmu.fmu.fmufile import check_fmu_file
 
 __all__ = ["MAX_BYTES", "MAX_MEMBERS", "NOT_RUN", "safe_extract"]
 
@@ -109,10 +110,7 @@ def _too_big(fmu: Path, what: str, size: int, limit: int) -> FMUError:
 
 
 def _open(fmu: Path) -> zipfile.ZipFile:
-    if not fmu.is_file():
-        raise FMUError(f"FMU file not found: {fmu}")
-    if not zipfile.is_zipfile(fmu):
-        raise FMUError(f"{fmu}: not an FMU (an FMU is a ZIP archive)")
+    check_fmu_file(fmu)
     try:
         return zipfile.ZipFile(fmu)
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:

@@ -33,12 +33,12 @@ import os
 import shutil
 import tempfile
 import threading
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from tsid_fmu.errors import FMUError, ResourceError
 from tsid_fmu.fmu.archive import safe_extract
+from tsid_fmu.fmu.fmufile import check_fmu_file
 
 __all__ = ["PREFIX", "borrow", "folders", "give_back"]
 
@@ -74,15 +74,12 @@ os.register_at_fork(after_in_child=_new_lock_in_child)
 
 def _key(fmu: Path) -> _Key:
     """Return the identity of the FMU file; FMUError if it is missing or not an FMU."""
+    check_fmu_file(fmu)
     try:
         st = fmu.stat()
         resolved = fmu.resolve()
-    except OSError:
-        raise FMUError(f"FMU file not found: {fmu}") from None
-    if not fmu.is_file():
-        raise FMUError(f"FMU file not found: {fmu}")
-    if not zipfile.is_zipfile(fmu):
-        raise FMUError(f"{fmu}: not an FMU (an FMU is a ZIP archive)")
+    except OSError as exc:
+        raise FMUError(f"cannot read FMU file {fmu}: {exc.strerror or exc}") from None
     return (str(resolved), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
 
 

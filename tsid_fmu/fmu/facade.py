@@ -29,6 +29,7 @@ import numpy as np
 
 from tsid_fmu.errors import DataError, FMUError
 from tsid_fmu.fmu.delay import check_delays, delayed_inputs, split_delays
+from tsid_fmu.fmu.fmufile import check_fmu_file
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.session import FMUSession
 from tsid_fmu.fmu.variables import REAL_TYPES, read_description, suggest
@@ -60,7 +61,7 @@ atexit.register(clear_cache)
 
 def _fmu_path(fmu: str | os.PathLike[str]) -> tuple[Path, tuple[Any, ...]]:
     """Return the resolved FMU path and its identity (path, size, modification time)."""
-    path = Path(fmu).expanduser()
+    path = check_fmu_file(Path(fmu).expanduser())
     try:
         stat = path.stat()
         path = path.resolve()

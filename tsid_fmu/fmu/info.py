@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from tsid_fmu.errors import FMUError
+from tsid_fmu.fmu.fmufile import check_fmu_file
 from tsid_fmu.fmu.variables import VariableInfo, check_fmi_version, variable_info
 
 __all__ = ["fmu_info", "printable", "read_fmu_description"]
@@ -43,10 +44,7 @@ def read_fmu_description(path: Path) -> Any:
     """
     from fmpy.model_description import read_model_description
 
-    if not path.is_file():
-        raise FMUError(f"FMU file not found: {path}")
-    if not zipfile.is_zipfile(path):
-        raise FMUError(f"{path}: not an FMU (an FMU is a ZIP archive)")
+    check_fmu_file(path)
     try:
         with zipfile.ZipFile(path) as archive:
             size = archive.getinfo("modelDescription.xml").file_size

@@ -23,7 +23,7 @@ import tempfile
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import IO, Any, TypeVar
+from typing import Any, TypeVar
 
 from tsid_fmu.errors import TsidError
 
@@ -35,6 +35,8 @@ T = TypeVar("T")
 TAIL = 600
 #: characters of one run's output kept at most (its end)
 KEPT = 20000
+#: what a run printed when the FMU closed the descriptors of the capture
+CLOSED_NOTE = "[tsid: the FMU closed its output descriptor; what it printed in this call is lost]\n"
 
 _ACTIVE = threading.Lock()  # one capture of the process's descriptors at a time
 _SINK_LOCK = threading.Lock()
@@ -73,7 +75,7 @@ class NativeOutput:
         self.enabled = enabled
         self.echo = echo
         self.text = ""  # what the last captured call printed
-        self._file: IO[bytes] | None = None
+        self._fd: int | None = None  # the private file, a raw descriptor (see _restore)
 
     @contextlib.contextmanager
     def capture(self) -> Iterator[None]:
@@ -103,30 +105,56 @@ class NativeOutput:
                 with contextlib.suppress(Exception):
                     stream.flush()
             _flush_c()
-            if self._file is None:
-                self._file = tempfile.TemporaryFile()
-            fd = self._file.fileno()
+            if self._fd is None:
+                fd, name = tempfile.mkstemp(prefix="tsid-fmu-output-")
+                os.unlink(name)
+                self._fd = fd
             saved = os.dup(1), os.dup(2)
         except (OSError, ValueError):
             return None
-        os.dup2(fd, 1)
-        os.dup2(fd, 2)
+        os.dup2(self._fd, 1)
+        os.dup2(self._fd, 2)
         return saved
 
     def _restore(self, saved: tuple[int, int]) -> None:
+        """Put descriptors 1 and 2 back and read what was printed.
+
+        An FMU may close descriptors it does not own (a runtime that closes every one
+        above 2): the private file's or the saved copies of 1 and 2. Then what it
+        printed is lost, and :attr:`text` says so in one line; the file is made anew at
+        the next call. Its descriptor is never closed again by tsid: the number may
+        already be another file's.
+        """
         _flush_c()
+        lost = False
         for fd, copy in zip((1, 2), saved, strict=True):
-            os.dup2(copy, fd)
-            os.close(copy)
-        assert self._file is not None
-        fd = self._file.fileno()  # written through descriptors 1 and 2, read through it
-        size = os.fstat(fd).st_size
-        if not size:
+            try:
+                os.dup2(copy, fd)
+            except OSError:  # the FMU closed the copy: the descriptor cannot be put back
+                lost = True
+                with contextlib.suppress(OSError):
+                    null = os.open(os.devnull, os.O_WRONLY)
+                    os.dup2(null, fd)
+                    os.close(null)
+                continue
+            with contextlib.suppress(OSError):
+                os.close(copy)
+        fd, data = self._fd, b""
+        try:
+            if fd is None:
+                raise OSError("closed")
+            size = os.fstat(fd).st_size  # written through descriptors 1 and 2
+            if size:
+                os.lseek(fd, max(0, size - KEPT), os.SEEK_SET)
+                data = os.read(fd, KEPT)
+                os.ftruncate(fd, 0)
+                os.lseek(fd, 0, os.SEEK_SET)
+        except OSError:
+            self._fd, lost = None, True  # not closed: the FMU did; the number may be reused
+        if lost:
+            data = CLOSED_NOTE.encode() + data
+        if not data:
             return
-        os.lseek(fd, max(0, size - KEPT), os.SEEK_SET)
-        data = os.read(fd, KEPT)
-        os.ftruncate(fd, 0)
-        os.lseek(fd, 0, os.SEEK_SET)
         self.text = data.decode("utf-8", errors="replace")
         if self.echo:
             with contextlib.suppress(OSError):
@@ -163,9 +191,10 @@ class NativeOutput:
 
     def close(self) -> None:
         """Close the private file."""
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        if self._fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(self._fd)
+            self._fd = None
 
 
 @contextlib.contextmanager

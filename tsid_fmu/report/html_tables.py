@@ -46,8 +46,13 @@ code { background: #f4f4f4; padding: 0 3px; border-radius: 3px; }
 
 
 def esc(text: Any) -> str:
-    """Return ``text`` escaped for HTML."""
-    return html.escape(str(text), quote=True)
+    r"""Return ``text`` escaped for HTML, its control characters written as escapes.
+
+    Messages quote what an FMU printed: a raw ESC, BEL or NUL (``\x1b]0;x\x07``) is
+    shown as its Python escape, as ``report.md`` shows it; line breaks and tabs stay.
+    """
+    text = "".join(c if c.isprintable() or c in "\n\t" else repr(c)[1:-1] for c in str(text))
+    return html.escape(text, quote=True)
 
 
 def _cell(v: Any, tag: str = "td") -> str:

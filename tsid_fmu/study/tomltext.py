@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["toml_key", "toml_string"]
+__all__ = ["comment_text", "toml_key", "toml_string"]
 
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
 _ESCAPES = {
@@ -51,3 +51,32 @@ def toml_string(text: str) -> str:
 def toml_key(name: str) -> str:
     """Return ``name`` as a TOML key: bare if TOML allows it, else quoted."""
     return name if _BARE.fullmatch(name) else toml_string(name)
+
+
+_COMMENT_ESCAPES = {"\t": "\\t", "\n": "\\n", "\r": "\\r"}
+
+
+def comment_text(text: str) -> str:
+    r"""Return ``text`` fit for a TOML comment: one line, no control characters.
+
+    Free text that tsid copies into a ``#`` comment (an FMU variable's description, a
+    name, a data column) must not end the comment: a newline in it would start a line
+    of TOML. Tab, newline and carriage return are written ``\t``, ``\n``, ``\r``;
+    every other C0 or C1 control character, DEL and the line and paragraph separators
+    U+2028 and U+2029 as ``\uXXXX`` (TOML forbids control characters in comments).
+
+    Examples
+    --------
+    >>> comment_text("x\n[design]")
+    'x\\n[design]'
+    """
+    out = []
+    for ch in str(text):
+        code = ord(ch)
+        if ch in _COMMENT_ESCAPES:
+            out.append(_COMMENT_ESCAPES[ch])
+        elif code < 0x20 or 0x7F <= code <= 0x9F or code in (0x2028, 0x2029):
+            out.append(f"\\u{code:04X}")
+        else:
+            out.append(ch)
+    return "".join(out)

@@ -21,6 +21,7 @@ from tsid_fmu.evaluate.isolated import IsolatedCalls
 from tsid_fmu.evaluate.spec import EvaluationSpec, PreparedExperiment
 from tsid_fmu.fmu.delay import delayed_inputs, split_delays
 from tsid_fmu.fmu.info import read_fmu_description
+from tsid_fmu.fmu.native import record
 from tsid_fmu.fmu.session import FMUSession
 from tsid_fmu.study.prepare import NOISE_FLOOR, data_noise
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
@@ -149,6 +150,11 @@ def _finer_grid(
     return fine, held
 
 
+def _fidelity_text(solver: Solver, printed: str) -> str:
+    """Return what a fidelity run printed, headed by its solver ('' if nothing)."""
+    return f"[solver fidelity check, {solver.label}]\n{printed}" if printed.strip() else ""
+
+
 def simulate_solver(
     spec: EvaluationSpec, x: Mapping[str, float], solver: Solver, index: int, k: int, held: bool
 ) -> np.ndarray:
@@ -176,8 +182,12 @@ def simulate_solver(
         start_values=start,
         hold={} if held else dict(e.hold),
         tolerance=solver.tolerance,
+        capture_output=True,  # as every run of a study: echoed, capped, on record
     ) as session:
-        return session.simulate(t, u, values)[::k]
+        try:
+            return session.simulate(t, u, values)[::k]
+        finally:
+            record(x, _fidelity_text(solver, session.printed))
 
 
 class SolverRuns:
