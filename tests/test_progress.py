@@ -120,3 +120,36 @@ def test_a_first_numba_compile_is_announced_and_a_cached_load_is_not(tmp_path):
     again = subprocess.run(run, env=env, capture_output=True, text=True, timeout=300, cwd=REPO)
     assert again.returncode == 0, again.stderr
     assert again.stdout.split() == []
+
+
+def test_the_bar_s_best_follows_the_array_s_runs_and_its_eta_says_something():
+    """On a terminal the bar's "best" did not follow the array's runs, and its ETA read
+    0 s (issue 64)."""
+    now = [0.0]
+    term = _Terminal()
+    progress = ConsoleProgress(term, clock=lambda: now[0])
+    progress("iteration", {"stage": "taguchi", "iteration": 1})
+    now[0] += 0.5
+    progress("row", {"stage": "taguchi", "iteration": 1, "done": 1, "total": 9, "cost": 7.5})
+    bar = term.getvalue().rsplit("\r", 1)[-1]
+    assert "best 7.5" in bar and "ETA" not in bar  # one run: no ETA yet
+    now[0] += 0.5
+    progress("row", {"stage": "taguchi", "iteration": 1, "done": 2, "total": 9, "cost": 2.5})
+    bar = term.getvalue().rsplit("\r", 1)[-1]
+    assert "best 2.5" in bar and "ETA 4 s" in bar
+    now[0] += 0.5
+    progress("row", {"stage": "taguchi", "iteration": 1, "done": 3, "total": 9, "cost": 9.0})
+    assert "best 2.5" in term.getvalue().rsplit("\r", 1)[-1]
+
+
+def test_the_evaluator_keeps_the_cost_of_the_set_it_last_scored(tmp_path):
+    from fmu_factory import lag_study
+
+    from tsid_fmu.study import serial_evaluator
+
+    study = lag_study(tmp_path, replicates=1)
+    with serial_evaluator(study) as ev:
+        seen = []
+        out = ev.evaluate([{"tau": 0.37, "x0": 0.8}, {"tau": 1.0, "x0": 0.0}],
+                          progress=lambda d, t: seen.append(ev.last_cost))  # fmt: skip
+    assert seen == [float(out.costs[0, 0]), float(out.costs[1, 0])]

@@ -87,6 +87,7 @@ class MemoEvaluator:
             raise TypeError(f"an evaluator needs an EvaluationSpec, got {type(spec).__name__}")
         self.spec = spec
         self._nfev = 0
+        self.last_cost: float | None = None  # the cost of the set last scored (progress)
         self._costs: dict[Key, tuple[np.ndarray, str | None]] = {}
         self._residuals = _LRU(max(1, residual_cache))
         self._outputs = _LRU(max(0, output_cache))
@@ -150,7 +151,7 @@ class MemoEvaluator:
                 jobs.append((k, ("run", self.spec.values(k), known is None)))
                 continue
             fresh[k] = self._residuals.get(k)
-            done = self._report(progress, done, len(keys), len(where[k]))
+            done = self._report(progress, done, len(keys), len(where[k]), known[0][0])
         nfev = 0
 
         def on_result(index: int, result: SetResult) -> None:
@@ -164,7 +165,7 @@ class MemoEvaluator:
                 result.costs.flags.writeable = False
                 self._costs[k] = (result.costs, result.error)
             fresh[k] = result.residuals  # the LRU may drop it before this batch ends
-            done = self._report(progress, done, len(keys), len(where[k]))
+            done = self._report(progress, done, len(keys), len(where[k]), result.costs[0])
 
         try:
             self._run(jobs, on_result)
@@ -249,8 +250,9 @@ class MemoEvaluator:
         """
         return sum(-(-b // max(workers, 1)) for b in self.batches)
 
-    @staticmethod
-    def _report(progress: Progress | None, done: int, total: int, n: int) -> int:
+    def _report(self, progress: Progress | None, done: int, total: int, n: int, cost: float) -> int:
+        """Count ``n`` sets done; :attr:`last_cost` is the cost of the set just scored."""
+        self.last_cost = float(cost)
         for _ in range(n):
             done += 1
             if progress is not None:

@@ -108,6 +108,9 @@ class ConsoleProgress:
         """Show the runs done, and the time left (on a terminal always, else when slow)."""
         done, total = info["done"], info["total"]
         self.nfev = max(self.nfev, int(info.get("nfev", 0)))
+        cost = info.get("cost")
+        if cost is not None and math.isfinite(cost):  # the best follows the array's runs
+            self.best = min(self.best, float(cost))
         per_run = (now - self._array_t0) / max(done, 1)
         left = per_run * (total - done)
         if not self.live:
@@ -131,7 +134,8 @@ class ConsoleProgress:
             f"[{bar:<{_BAR}}] {done}/{total} runs",
             f"{self.nfev} simulations" if self.nfev else "",
             f"best {fmt(self.best)}" if math.isfinite(self.best) else "",
-            f"ETA {left:.0f} s" if done < total else "",
+            # an ETA only once it says something: not before a second run, never "0 s"
+            f"ETA {left:.0f} s" if done < total and done >= 2 and left >= 0.5 else "",
         ]
         text = " | ".join(p for p in parts if p)
         width = shutil.get_terminal_size((100, 24)).columns - 1

@@ -157,8 +157,10 @@ def run_iteration(
     start = evaluator.nfev
 
     def rows(done: int, total: int) -> None:
-        if progress is not None:
-            progress("row", {"stage": stage, "iteration": index, "done": done, "total": total})
+        if progress is not None:  # the run's cost, where the evaluator keeps it: the bar's best
+            cost = getattr(evaluator, "last_cost", None)
+            info = {"stage": stage, "iteration": index, "done": done, "total": total}
+            progress("row", {**info, "cost": cost} if cost is not None else info)
 
     ev = evaluator.evaluate(sets, progress=rows)
     if all(e is not None for e in ev.errors):
