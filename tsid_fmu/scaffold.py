@@ -347,6 +347,31 @@ def _initial_hint(states: list[str], outputs: Mapping[str, str]) -> list[str]:
     ]
 
 
+def _method_lines(array: str, count: int, n: int) -> list[str]:
+    """Return the study's ``[method]`` table and the commented ``[design]`` hint."""
+    return [
+        "",
+        "[method]",
+        f'array = "{array}"      # the smallest standard array for {count} '
+        f"{'five' if n == 5 else 'three'}-level factors",
+        'cost = "sse"         # sum of squared errors ...',
+        'weighting = "noise"  # ... each output weighted by 1/noise², noise from the data',
+        "replicates = 1       # no input-noise replicates",
+        "# sampled intervals beside the profile ones, a check that does not linearise:",
+        "# re-fits (about 5 simulations each) to a block bootstrap of the residuals",
+        '# uncertainty = "bootstrap"   # or "monte_carlo": noise from their AR model',
+        "# uncertainty_replicates = 100",
+        "",
+        "# what to measure next: tsid design STUDY --result DIR proposes the input that",
+        "# determines what these data leave open, inside the limits the rig can apply",
+        "# [design]",
+        "# inputs = { INPUT = [-1.0, 1.0] }  # [min, max]; default: the range the data applied",
+        "# band = [0.1, 10.0]                # Hz; default 2 periods a record to 1/20 of the rate",
+        '# kinds = ["steps", "chirp", "multisine", "prbs"]',
+        "",
+    ]
+
+
 def init_study(
     fmu: str | os.PathLike[str],
     data: str | os.PathLike[str],
@@ -395,26 +420,8 @@ def init_study(
     lines += _window_hint(first, last)
     lines += _initial_hint([v.name for v in variables if initial_state(v)], match.outputs)
     lines += hints
+    lines += _method_lines(array.name, count, n)
     lines += [
-        "",
-        "[method]",
-        f'array = "{array.name}"      # the smallest standard array for {count} '
-        f"{'five' if n == 5 else 'three'}-level factors",
-        'cost = "sse"         # sum of squared errors ...',
-        'weighting = "noise"  # ... each output weighted by 1/noise², noise from the data',
-        "replicates = 1       # no input-noise replicates",
-        "# sampled intervals beside the profile ones, a check that does not linearise:",
-        "# re-fits (about 5 simulations each) to a block bootstrap of the residuals",
-        '# uncertainty = "bootstrap"   # or "monte_carlo": noise from their AR model',
-        "# uncertainty_replicates = 100",
-        "",
-        "# what to measure next: tsid design STUDY --result DIR proposes the input that",
-        "# determines what these data leave open, inside the limits the rig can apply",
-        "# [design]",
-        "# inputs = { INPUT = [-1.0, 1.0] }  # [min, max]; default: the range the data applied",
-        "# band = [0.1, 10.0]                # Hz; default 2 periods a record to 1/20 of the rate",
-        '# kinds = ["steps", "chirp", "multisine", "prbs"]',
-        "",
         "[parameters]",
         f"# {'five' if n == 5 else 'three'} log-spaced levels over one decade around the "
         "FMU's start value, within the",

@@ -54,7 +54,7 @@ def _std_error(u: Any, name: str, unit: str = "") -> float | str:
     if u is None:
         return math.nan
     rel = float(u.relative.get(name, math.nan))
-    absolute = float(u.std_error.get(name, math.nan))
+    absolute = float(getattr(u, "std_error", {}).get(name, math.nan))
     bound = getattr(u, "resolution", {}).get(name)
     if near_zero(rel) and math.isfinite(absolute):
         below = "< " if bound is not None else "+/-"
