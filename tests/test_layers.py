@@ -70,3 +70,24 @@ def test_every_module_of_search_is_on_the_architecture_pages_map():
         if n.startswith("tsid_fmu.search.") and p.name != "__init__.py"
     }
     assert modules and modules - listed == set()
+
+
+def test_search_and_uncertainty_share_numerics_only_through_the_neutral_module():
+    """search/ and uncertainty/ imported each other (issue 61): local/columns.py took
+    UNSEEN from uncertainty/intervals.py, and uncertainty/ took Space from search/space.py
+    and the noise cache from local/fdstep.py. Both now import tsid_fmu.numerics."""
+    graph = {n: _imports(n, ast.parse(p.read_text(encoding="utf-8"))) for n, p in MODULES.items()}
+    crossing = sorted(
+        (a, b)
+        for a, imported in graph.items()
+        for b in imported
+        if (a.startswith("tsid_fmu.search.") and b.startswith("tsid_fmu.uncertainty"))
+        or (a.startswith("tsid_fmu.uncertainty.") and b.startswith("tsid_fmu.search"))
+    )
+    assert crossing == []
+    numerics = {n for n in MODULES if n.startswith("tsid_fmu.numerics")}
+    assert numerics and all(
+        not b.startswith(("tsid_fmu.search", "tsid_fmu.uncertainty"))
+        for n in numerics
+        for b in graph[n]
+    )

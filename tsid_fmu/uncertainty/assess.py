@@ -14,7 +14,7 @@ from tsid_fmu.evaluate.cost import Cost
 from tsid_fmu.evaluate.noise import quantum
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.search.space import Space
+from tsid_fmu.numerics.space import Space
 from tsid_fmu.study.prepare import data_noise
 from tsid_fmu.uncertainty.discrepancy import judge
 from tsid_fmu.uncertainty.intervals import Uncertainty, quantile, scale_groups, uncertainty

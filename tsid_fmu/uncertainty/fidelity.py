@@ -42,7 +42,7 @@ import numpy as np
 from tsid_fmu.errors import SimulationError, TsidError
 from tsid_fmu.evaluate.isolated import IsolatedCalls
 from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.search.space import Space
+from tsid_fmu.numerics.space import Space
 from tsid_fmu.study.definition import Study
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
 from tsid_fmu.uncertainty.solvers import (

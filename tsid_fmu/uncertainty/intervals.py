@@ -30,7 +30,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from tsid_fmu.search.space import Space
+from tsid_fmu.numerics.rank import UNSEEN
+from tsid_fmu.numerics.space import Space
 from tsid_fmu.uncertainty.discrepancy import Discrepancy, constancy
 from tsid_fmu.uncertainty.longrun import long_run_covariance
 from tsid_fmu.uncertainty.residuals import ljung_box
@@ -58,13 +59,6 @@ many degrees of freedom."""
 UNDETERMINED = 0.5
 """A combination whose standard error exceeds this many search units (half of a first
 range) is *not determined* by the data."""
-
-UNSEEN = 1e-14
-"""A direction whose Fisher eigenvalue is at most this share of the largest one (its
-singular value of the Jacobian at most ``sqrt(UNSEEN)`` = 1e-7 of the largest) is one
-the outputs do not depend on at all: what the finite differences give there is rounding
-and the solver's noise. The covariance gives it an infinite variance, and the re-fits
-of the profiles and probes (:func:`seen_inverse`) do not step along it."""
 
 
 def seen_inverse(a: np.ndarray) -> np.ndarray:

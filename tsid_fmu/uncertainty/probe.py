@@ -33,7 +33,7 @@ import numpy as np
 from tsid_fmu.errors import TsidError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.serial import SerialEvaluator
-from tsid_fmu.search.space import Space
+from tsid_fmu.numerics.space import Space
 from tsid_fmu.uncertainty.intervals import (
     Uncertainty,
     combination_terms,

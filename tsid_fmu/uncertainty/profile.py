@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.search.local.fdstep import known_noise, steps_for
-from tsid_fmu.search.space import Space
+from tsid_fmu.numerics.fdstep import known_noise, steps_for
+from tsid_fmu.numerics.space import Space
 from tsid_fmu.uncertainty.intervals import seen_inverse
 
 __all__ = ["CHI2_95", "RESOLUTION", "ProfileProblem", "profile_intervals"]
@@ -168,7 +168,7 @@ class _Secant:
             return False
         cols = []
         # where the FMU's own solver is noisy, steps that beat its noise (one rule with
-        # the refinement's Jacobian, :mod:`tsid_fmu.search.local.fdstep`)
+        # the refinement's Jacobian, :mod:`tsid_fmu.numerics.fdstep`)
         wide = steps_for(np.full(s0.size, CHECK_STEP), self.jac, known_noise(problem.evaluator))
         for k in range(s0.size):
             s = s0.copy()

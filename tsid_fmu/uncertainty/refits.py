@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tsid_fmu.search.space import Space
+from tsid_fmu.numerics.space import Space
 
 __all__ = ["MAX_STEPS", "TOL", "Replicate", "SharedModel", "refit", "tolerance"]
 

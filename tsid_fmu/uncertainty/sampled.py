@@ -17,7 +17,7 @@ rescaled by ``sqrt(n / (n - p))``, the AR models are corrected as the HAC interv
 
 Each replicate is re-fitted from the answer (its own data move its optimum by about a
 standard error) by a short least squares of the study's ``sse`` cost in the search
-coordinates (:mod:`tsid_fmu.search.space`), within the bounds, at most
+coordinates (:mod:`tsid_fmu.numerics.space`), within the bounds, at most
 :data:`~.refits.MAX_STEPS` simulations each: the replicates share one local model of
 the residuals, learnt from all their simulations (:mod:`.refits`), and step in
 lockstep, every step of every replicate still moving in one batch to the evaluator (in
@@ -38,7 +38,7 @@ import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.search.space import Space
+from tsid_fmu.numerics.space import Space
 from tsid_fmu.uncertainty.intervals import LEVEL, json_safe
 from tsid_fmu.uncertainty.longrun import ArNoise, long_run_covariance
 from tsid_fmu.uncertainty.refits import MAX_STEPS, Replicate, SharedModel, refit, tolerance

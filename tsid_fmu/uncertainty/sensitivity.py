@@ -2,7 +2,7 @@
 
 The derivative of every simulated output sample with respect to each parameter's search
 coordinate (``log10`` of the value for parameters whose ranges span decades, the value
-otherwise; :mod:`tsid_fmu.search.space`), for the measured inputs. The ``2p + 1``
+otherwise; :mod:`tsid_fmu.numerics.space`), for the measured inputs. The ``2p + 1``
 simulations go to the evaluator as one batch, so a parallel evaluator runs them side by
 side.
 """
@@ -16,7 +16,7 @@ import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.search.space import Space
+from tsid_fmu.numerics.space import Space
 
 __all__ = ["STEP", "Sensitivities", "residual_jacobian", "sensitivities"]
 
@@ -120,7 +120,7 @@ def residual_jacobian(
         The experiments of ``sens``, for their residual scales.
     space : Space, optional
         With ``x``: convert the columns from search coordinates to parameter units,
-        dividing each by :meth:`~tsid_fmu.search.space.Space.local_scale` at ``x`` (the
+        dividing each by :meth:`~tsid_fmu.numerics.space.Space.local_scale` at ``x`` (the
         linearisation the standard errors use).
     x : mapping, optional
         The parameter set ``sens`` was computed at.

@@ -15,8 +15,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from tsid_fmu.numerics.rank import UNSEEN
 from tsid_fmu.search.space import Space
-from tsid_fmu.uncertainty.intervals import UNSEEN
 
 __all__ = ["EXACT", "PARALLEL", "UNFINISHED", "named_pairs", "parallel_pairs"]
 
@@ -44,7 +44,7 @@ another run's arithmetic, predicting 2.12, had failed it and gone on to the opti
 EXACT = 2.0 * UNSEEN
 """Two columns closer than this (``1 - |cos|``) are exactly parallel: the smallest
 eigenvalue of their Gram matrix is then at most
-:data:`~tsid_fmu.uncertainty.intervals.UNSEEN` of the largest, so the direction along the
+:data:`~tsid_fmu.numerics.rank.UNSEEN` of the largest, so the direction along the
 pair is one the outputs do not see at all, with no slope to follow (OpenModelica's
 ``Mass_Damper``: its three offsets and the force act only through their sum, ``1 - |cos|``
 of 0 to 4e-16). The covariance reports it open; a refinement along it only wanders

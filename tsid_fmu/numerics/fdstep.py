@@ -1,0 +1,131 @@
+"""Finite-difference steps chosen from the FMU's own noise.
+
+An FMU that integrates with its own adaptive solver (most Co-Simulation FMUs) returns
+outputs that are not smooth functions of the parameters: a change of a parameter by
+1e-5 of its range can change the solver's step sequence, and the outputs move by the
+solver's error, not by the derivative. A forward difference with such a step is then
+mostly noise (JModelica's Simple2R1C: column norms 20 % off and a Gauss-Newton step
+pointing the wrong way at a point 13 % above the optimum's cost).
+
+The rule used here has two parts:
+
+- :func:`solver_noise` measures the noise of the residuals as the parameters move, with
+  the ECnoise estimator of More and Wild (SIAM J. Sci. Comput. 33, 2011): the residuals
+  at ``s + k h p`` (``k = 0 .. 4``, ``p`` a fixed direction, ``h`` the difference step)
+  give difference tables whose ``k``-th differences of a smooth function vanish while
+  those of noise of standard deviation ``sigma`` have variance
+  ``C(2k, k) sigma**2``. Four simulations, once per evaluator (per study). The scale
+  of the differences is the RMS of their smallest 90 %, as for the data's noise
+  (:func:`tsid_fmu.evaluate.noise.trimmed_rms`), not their RMS: an event that moves with the
+  parameters (dry friction's stick and slip) touches a few samples, and a solver's
+  error all of them; only the latter spoils every column (a toy with step events read
+  0.25 by RMS, and its parallel columns were lost to steps 1000 times wider).
+- :func:`steps_for` widens the step of every column whose forward difference the noise
+  would spoil by more than 1 / :data:`SHARE`: a forward difference carries noise of
+  norm ``sqrt(2 n) sigma / h``, so the step that makes it ``1 / SHARE`` of the column's
+  norm ``|J_j|`` is ``h = SHARE sqrt(2 n) sigma / |J_j|``, capped at :data:`MAX_STEP`.
+  For a smooth FMU (the project's own solver at ``rtol`` 1e-8, an exact discretisation)
+  no step changes.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from tsid_fmu.evaluate.noise import trimmed_rms
+
+__all__ = ["MAX_STEP", "SHARE", "known_noise", "noise_of", "solver_noise", "steps_for"]
+
+SHARE = 100.0
+"""A column's difference must be this many times its noise (1 % error)."""
+
+MAX_STEP = 1e-2
+"""Largest forward-difference step, in search coordinates (1 % of a first range)."""
+
+POINTS = 4
+"""Simulations of :func:`solver_noise` (beyond the point itself)."""
+
+
+_CACHE: weakref.WeakKeyDictionary[Any, float] = weakref.WeakKeyDictionary()
+
+
+def solver_noise(
+    residuals: Callable[[list[np.ndarray]], list[np.ndarray]],
+    s: np.ndarray,
+    r0: np.ndarray,
+    step: float,
+    upper: np.ndarray,
+) -> float:
+    """Return the standard deviation of the residuals' noise under parameter changes.
+
+    Parameters
+    ----------
+    residuals : callable
+        Residual vectors of a list of points in search coordinates (simulations).
+    s : numpy.ndarray
+        The point, whose residuals are ``r0``.
+    r0 : numpy.ndarray
+        The residuals at ``s``.
+    step : float
+        The spacing of the points (the forward-difference step).
+    upper : numpy.ndarray
+        Upper bounds of the search coordinates: the direction turns back before them.
+
+    Returns
+    -------
+    float
+        Per-sample noise, the median of the estimates from differences of orders 2 to 4.
+    """
+    d = s.size
+    p = np.where(np.arange(d) % 2 == 0, 1.0, -1.0) / math.sqrt(d)
+    p = np.where(s + POINTS * step * p > upper, -np.abs(p), p)
+    table = np.array([r0, *residuals([s + k * step * p for k in range(1, POINTS + 1)])])
+    if not np.all(np.isfinite(table)):
+        return 0.0
+    estimates = []
+    for k in range(1, POINTS + 1):
+        table = np.diff(table, axis=0)
+        gamma = math.factorial(k) ** 2 / math.factorial(2 * k)
+        if k >= 2:  # trimmed: events touch a few differences (module doc)
+            estimates.append(math.sqrt(gamma) * trimmed_rms(table.ravel()))
+    return float(np.median(estimates))
+
+
+def noise_of(owner: Any, measure: Callable[[], float]) -> float:
+    """Return ``owner``'s noise from the cache, measuring it once (:func:`solver_noise`)."""
+    try:
+        return _CACHE[owner]
+    except KeyError:
+        pass
+    except TypeError:  # an owner that takes no weak reference: measure each time
+        return measure()
+    value = measure()
+    _CACHE[owner] = value
+    return value
+
+
+def known_noise(owner: Any) -> float:
+    """Return the noise measured for ``owner`` so far, or 0 if none was."""
+    try:
+        return _CACHE.get(owner, 0.0)
+    except TypeError:
+        return 0.0
+
+
+def steps_for(steps: np.ndarray, jac: np.ndarray, noise: float) -> np.ndarray:
+    """Return the steps at which every column of ``jac`` beats the noise (module doc).
+
+    ``jac`` holds forward differences taken with ``steps``; a column's step grows to
+    ``SHARE sqrt(2 n) noise / |J_j|`` where that is larger, at most :data:`MAX_STEP`,
+    and never shrinks.
+    """
+    if noise <= 0:
+        return steps
+    norms = np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
+    need = SHARE * math.sqrt(2.0 * jac.shape[0]) * noise / norms
+    return np.maximum(np.abs(steps), np.minimum(need, MAX_STEP)) * np.sign(steps)
