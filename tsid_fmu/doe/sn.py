@@ -14,11 +14,8 @@ Special values, identical for the three:
 
 * **Perfect rows.** A mean square of 0 (smaller-the-better), an infinite ``1/y**2``
   mean (larger-the-better, some ``y == 0``) or a zero variance (nominal-the-best) would
-  give ``±inf``. Those exact values alone are set to ``±SN_CAP`` (300 dB, i.e. a mean
-  square of 1e-30), so that level means stay finite. A finite S/N is never clipped: a
-  bad row whose cost is 8.5e15 reads -318.6 dB, not the cap, so the ANOVA still tells
-  it from a row of 1e15. The mean square is computed scaled by the row's largest
-  ``|y|``, so costs up to the largest float give a finite S/N.
+  give ``±inf``. The result is clipped to ``±SN_CAP`` (300 dB, i.e. a mean square of
+  1e-30), so that level means stay finite.
 * **Failed rows.** A row with any NaN or ±inf replicate is a failed run (simulation
   error, time-out, diverged cost). It gets ``min(valid S/N) - failed_penalty`` (20 dB
   by default, i.e. ten times the RMS cost of the worst valid row), so that it is
@@ -59,8 +56,7 @@ def _replicates(y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 def _finish(sn: np.ndarray, failed: np.ndarray, failed_penalty: float) -> np.ndarray:
     if failed_penalty < 0:
         raise StudyError(f"failed_penalty must be >= 0 dB, got {failed_penalty}")
-    # only the exact fits (and the exact zeros of larger-the-better) are capped
-    sn = np.where(np.isposinf(sn), SN_CAP, np.where(np.isneginf(sn), -SN_CAP, sn)) + 0.0
+    sn = np.clip(sn, -SN_CAP, SN_CAP) + 0.0  # + 0.0 turns -0.0 into 0.0
     sn[failed] = sn[~failed].min() - failed_penalty
     return sn
 
@@ -79,8 +75,8 @@ def sn_smaller_the_better(y: ArrayLike, *, failed_penalty: float = 20.0) -> np.n
     Returns
     -------
     numpy.ndarray
-        ``-10 log10(mean(y**2))`` per run, shape ``(runs,)``, in dB; an exact fit
-        gives ``SN_CAP``; see the module notes for zero and failed rows.
+        ``-10 log10(mean(y**2))`` per run, shape ``(runs,)``, in dB, clipped to
+        ``±SN_CAP``; see the module notes for zero and failed rows.
 
     Raises
     ------
@@ -93,13 +89,10 @@ def sn_smaller_the_better(y: ArrayLike, *, failed_penalty: float = 20.0) -> np.n
     array([ 0., 20.])
     """
     arr, failed = _replicates(y)
-    safe = np.abs(np.where(failed[:, None], 1.0, arr))
-    top = safe.max(axis=1)  # mean(y**2) = top**2 mean((y / top)**2), without overflow
-    scale = np.where(top > 0, top, 1.0)
+    safe = np.where(failed[:, None], 1.0, arr)
+    msd = np.mean(safe**2, axis=1)
     with np.errstate(divide="ignore"):
-        sn = -20.0 * np.log10(np.where(top > 0, top, 0.0)) - 10.0 * np.log10(
-            np.mean((safe / scale[:, None]) ** 2, axis=1)
-        )
+        sn = -10.0 * np.log10(msd)
     return _finish(sn, failed, failed_penalty)
 
 
@@ -117,8 +110,8 @@ def sn_larger_the_better(y: ArrayLike, *, failed_penalty: float = 20.0) -> np.nd
     Returns
     -------
     numpy.ndarray
-        ``-10 log10(mean(1 / y**2))`` per run, shape ``(runs,)``, in dB (a zero
-        replicate: ``-SN_CAP``).
+        ``-10 log10(mean(1 / y**2))`` per run, shape ``(runs,)``, in dB, clipped to
+        ``±SN_CAP``.
 
     Raises
     ------
@@ -149,7 +142,7 @@ def sn_nominal_the_best(y: ArrayLike, *, ddof: int = 1, failed_penalty: float = 
     -------
     numpy.ndarray
         ``10 log10(mean(y)**2 / var(y))`` per run (``var`` with ``ddof``), shape
-        ``(runs,)``, in dB (zero variance: ``SN_CAP``; zero mean: ``-SN_CAP``).
+        ``(runs,)``, in dB, clipped to ``±SN_CAP``.
 
     Raises
     ------
