@@ -360,3 +360,21 @@ def test_a_changed_study_is_said_on_stderr_and_in_the_design(lag, capsys):
     finally:
         data.write_bytes(saved)
     os.utime(data)
+
+
+def test_the_derivative_check_of_a_low_band_needs_bounded_memory():
+    """A low band minimum on a study with a der() input made the derivative-accuracy
+    check need memory in proportion to 1/(f_min dt): 3.6 GB at 1e-5 Hz (finding 11)."""
+    import resource
+    import time
+
+    from tsid_fmu.design import plan
+
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    low = plan._cap(["der(x_o)", "der(x_o, 2)"], "x_o", 1e-3, (1e-5, 10.0))
+    grown = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024  # MiB
+    assert grown < 200 and time.perf_counter() - t0 < 60
+    # the cap itself is the one the band from 0.2 Hz finds (the error is at the top)
+    assert low == pytest.approx(plan._cap(["der(x_o)", "der(x_o, 2)"], "x_o", 1e-3, (0.2, 10.0)),
+                                rel=0.35)  # fmt: skip
