@@ -161,7 +161,11 @@ def _miso_claims() -> dict[str, float]:
     para = para[: para.index("grouping does not pay")]
     rms = re.search(r"residual RMS ends within ([\d.]+) %", para)
     ratios = re.search(r"m1/K_s and C_1/K_s come within ([\d.]+) % and ([\d.]+) %", para)
-    sims = re.search(r"exit status 0, (\d+) simulations in phases", para)
+    sims = re.search(
+        r"exit status 0, (\d+) simulations in all \((\d+) for the contribution analyses, "
+        r"(\d+) for the refinement\)",
+        para,
+    )
     ungrouped = re.search(r"reaches the same cost in (\d+) simulations", para)
     assert rms and ratios and sims and ungrouped, para
     assert "every 95 % interval holds the truth" in para
@@ -170,12 +174,21 @@ def _miso_claims() -> dict[str, float]:
         "m1/K_s": float(ratios[1]) / 100,
         "C_1/K_s": float(ratios[2]) / 100,
         "nfev": float(sims[1]),
+        "contribution": float(sims[2]),
+        "refinement": float(sims[3]),
         "ungrouped": float(ungrouped[1]),
     }
 
 
 def _miso_matches_the_tutorial(res) -> None:
-    """What the tutorial says of the MISO example, to its precision (issue 27)."""
+    """What the tutorial says of the MISO example, to its precision (issues 27, 64).
+
+    Tolerances: the RMS and the ratios are bounds the page states (``within 1.6 %``); the
+    simulation counts (in all, the contribution analyses', the refinement's, the ungrouped
+    comparison's) to 10 % of the page's, the project's convention for counts, which are
+    the same from run to run on one machine but not from one machine to another; the
+    ungrouped comparison's cost to 1e-4 of the phased one.
+    """
     claims = _miso_claims()
     assert res.status == 0 and res.success, res.message
     x = res.params
@@ -189,6 +202,9 @@ def _miso_matches_the_tutorial(res) -> None:
             assert abs(fit["rmse"] / res.noise[exp][out] - 1) < claims["rms"], (exp, out)
     # simulation counts to within 10 %; the ungrouped comparison at the same cost
     assert abs(res.nfev / claims["nfev"] - 1) <= 0.10, res.nfev
+    stages = {s.kind: s.nfev for s in res.stages if s.kind in ("contribution", "refinement")}
+    for kind in ("contribution", "refinement"):
+        assert abs(stages[kind] / claims[kind] - 1) <= 0.10, (kind, stages)
     comp = res.extra["comparison"]
     assert abs(comp["ungrouped"]["nfev"] / claims["ungrouped"] - 1) <= 0.10, comp
     assert comp["ungrouped"]["cost"] == pytest.approx(comp["phased"]["cost"], rel=1e-4)
@@ -197,5 +213,7 @@ def _miso_matches_the_tutorial(res) -> None:
 def test_the_tutorial_states_the_miso_figures():
     """The paragraph the slow MISO test reads is there and parses (fast)."""
     claims = _miso_claims()
-    assert set(claims) == {"rms", "m1/K_s", "C_1/K_s", "nfev", "ungrouped"}
+    assert set(claims) == {
+        "rms", "m1/K_s", "C_1/K_s", "nfev", "contribution", "refinement", "ungrouped"
+    }  # fmt: skip
     assert all(v > 0 for v in claims.values()), claims

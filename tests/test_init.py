@@ -18,6 +18,7 @@ import pandas as pd
 import pytest
 
 from tsid_fmu import Study
+from tsid_fmu.cli import main
 from tsid_fmu.errors import StudyError
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.variables import VariableInfo, variable_info
@@ -167,7 +168,7 @@ def test_init_writes_the_declared_bounds_and_comments_out_the_rest_threshold(tmp
     }  # fmt: skip
 
 
-def test_init_siso_comments_out_V_z_and_proposes_F_o(tmp_path):
+def test_init_siso_comments_out_V_z_and_proposes_F_o(tmp_path, capsys):
     out = tmp_path / "s" / "study.toml"
     text = init_study(REPO / "fmus" / "LSEA_SISO.fmu", SISO / "measured.csv", out)
     assert _parameters(text) == ["F_cm", "F_vm", "M_m", "K_s", "B_s"]
@@ -179,9 +180,13 @@ def test_init_siso_comments_out_V_z_and_proposes_F_o(tmp_path):
     command = re.search(r"^# to add them, run: tsid init (.*)$", text, re.MULTILINE).group(1)
     args = shlex.split(command)
     derived = dict(a.split("=", 1) for a in args[args.index("--derived") + 1 :: 2])
-    assert derived == {"F_o": "F_of - F_or"} and args[2:4] == ["-o", str(out)]
-    again = init_study(args[0], args[1], args[3], derived=derived)
+    assert derived == {"F_o": "F_of - F_or"} and args[2:5] == ["-o", str(out), "--force"]
+    # as a user runs it: the study file it rewrites exists, so it needs its --force
+    assert main(["init", *args]) == 0, capsys.readouterr().err
+    again = out.read_text(encoding="utf-8")
     assert 'outputs = { F_o = "F_o", x_m = "x_m" }' in again and "has no column" not in again
+    assert main(["init", *(a for a in args if a != "--force")]) == 2
+    assert "the file exists; give --force" in capsys.readouterr().err
     assert [e.outputs for e in Study.from_toml(out).experiments] == [{"F_o": "F_o", "x_m": "x_m"}]
 
 

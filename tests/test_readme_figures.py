@@ -1,8 +1,8 @@
 """The figures of the README and the CLI reference match a fresh run of their commands.
 
 Each test reads the command and the figures out of ``README.md`` or
-``docs/reference/cli.md`` and runs the command (the SISO example, about 20 s each on 2
-shared cores), so it fails when either drifts (issues 26, 49):
+``docs/reference/cli.md`` and runs the command (the SISO example, 11 to 13 s each on a
+2-core machine shared with other work), so it fails when either drifts (issues 26, 49):
 
 * README, "Set up and run": the first command's stdout, line for line, its exit status,
   the stage counts, the errors against the truth and "every 95 % interval holds the

@@ -281,7 +281,10 @@ def _hint_lines(
     if hints:
         fmu, data, out = (shlex.quote(p) for p in paths)
         options = [_derived_option(k, e) for k, e in {**derived, **hints}.items()]
-        lines.append(f"# to add them, run: tsid init {fmu} {data} -o {out} {' '.join(options)}")
+        # --force: the command rewrites this very file, which then exists
+        lines.append(
+            f"# to add them, run: tsid init {fmu} {data} -o {out} --force {' '.join(options)}"
+        )
     return lines
 
 

@@ -106,7 +106,9 @@ TABLES = (
         {"choices": (Choice, "choices"), "fmus": (ModelChoice, "choices")},
         need="required",
         form="One entry per parameter, `NAME = { levels = [1, 2, 3], min = 0 }`; a "
-        "discrete factor gives `choices` only, a choice among FMU files `fmus` only.",
+        "discrete factor gives `choices` only, a choice among FMU files `fmus` only. "
+        '`"delay(<input>)" = { levels = [0, 0.5e-3, 1e-3] }` identifies a delay of that '
+        "input in seconds (docs/how-to/input-delay.md).",
     ),
     Table(("method",), "[method]", _METHOD_TYPES, (Method,), kinds=_METHOD_TYPES),
     Table(("leveling",), "[leveling]", _LEVELING_TYPES, (LevelingOptions,), kinds=_LEVELING_TYPES),
