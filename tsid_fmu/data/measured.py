@@ -222,6 +222,8 @@ def _reason(exc: BaseException) -> str:
         return f"not {exc.encoding} text (byte {exc.start + 1})"
     if isinstance(exc, pd.errors.ParserError | csv.Error | FileNotFoundError | PermissionError):
         text = str(exc) if not isinstance(exc, OSError) else (exc.strerror or "")
+        # pandas' C parser says "Error tokenizing data. C error: ..." before the reason
+        text = text.removeprefix("Error tokenizing data. C error: ")
         return text.splitlines()[0][:200] if text else type(exc).__name__
     return type(exc).__name__
 
