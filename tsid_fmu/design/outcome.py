@@ -276,13 +276,27 @@ class Design:
         return {"facts": facts, "intervals": (columns, rows), "separate": separate,
                 "structural": structural}  # fmt: skip
 
+    def _body(self, grid: Any) -> list[str]:
+        """Return the lines :meth:`text` and :meth:`markdown` share, tables by ``grid``.
+
+        The facts, the intervals, what separates the parameters, the structural directions.
+        """
+        part = self.section()
+        lines = [f"- {fact}" for fact in part["facts"]] + [""]
+        lines += grid(*part["intervals"])
+        if part["separate"] is not None:
+            said, columns, rows = part["separate"]
+            lines += ["", said, "", *grid(columns, rows)]
+        for sentence in part["structural"]:
+            lines += ["", sentence] if sentence.startswith("Structural") else [sentence]
+        return lines
+
     def text(self) -> str:
         """Return the design as ``tsid design`` prints it: plain text, aligned columns.
 
         The same section as :meth:`markdown` (verdict, facts, intervals, what separates
         the parameters, the structural directions), without markdown's markup.
         """
-        part = self.section()
 
         def grid(columns: list[str], rows: list[list[str]]) -> list[str]:
             widths = [max(len(str(x)) for x in col) for col in zip(columns, *rows, strict=True)]
@@ -291,30 +305,14 @@ class Design:
                 for r in [columns, *rows]
             ]
 
-        lines = [self.verdict, ""]
-        lines += [f"- {fact}" for fact in part["facts"]] + [""]
-        lines += grid(*part["intervals"])
-        if part["separate"] is not None:
-            said, columns, rows = part["separate"]
-            lines += ["", said, "", *grid(columns, rows)]
-        for sentence in part["structural"]:
-            lines += ["", sentence] if sentence.startswith("Structural") else [sentence]
-        return "\n".join(lines)
+        return "\n".join([self.verdict, "", *self._body(grid)])
 
     def markdown(self) -> str:
         """Return the report section, in markdown."""
-        part = self.section()
 
         def grid(columns: list[str], rows: list[list[str]]) -> list[str]:
             return ["| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns),
                     *("| " + " | ".join(r) + " |" for r in rows)]  # fmt: skip
 
-        lines = ["## Experiment design", "", f"**{self.verdict}**", ""]
-        lines += [f"- {fact}" for fact in part["facts"]] + [""]
-        lines += grid(*part["intervals"])
-        if part["separate"] is not None:
-            said, columns, rows = part["separate"]
-            lines += ["", said, "", *grid(columns, rows)]
-        for sentence in part["structural"]:
-            lines += ["", sentence] if sentence.startswith("Structural") else [sentence]
-        return "\n".join(lines) + "\n"
+        head = ["## Experiment design", "", f"**{self.verdict}**", ""]
+        return "\n".join([*head, *self._body(grid)]) + "\n"
