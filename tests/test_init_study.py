@@ -27,7 +27,8 @@ def test_the_init_study_of_the_siso_example_converges_at_the_least_squares_optim
     init_study(ROOT / "fmus" / "LSEA_SISO.fmu", ROOT / "examples/lsea_siso/measured.csv", path)
     res = tsid_fmu.identify(path, workers=1, plots=False)
     assert res.status == 0 and res.success, res.message
-    assert "stationary at the answer" in res.message
+    assert res.message.startswith("converged: the answer is stationary")
+    assert res.account[-1].startswith("verdict: stationary at the answer")
 
     study = tsid_fmu.Study.from_toml(path)
     (exp,) = study.experiments

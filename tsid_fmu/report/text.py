@@ -13,7 +13,7 @@ import math
 from typing import Any
 
 from tsid_fmu.report.notebook import parameter_columns, parameter_rows, sampled_note
-from tsid_fmu.report.style import cost_name, fit_text, fmt
+from tsid_fmu.report.style import cost_name, fit_text, fmt, fmt_levels
 from tsid_fmu.result import register_views
 from tsid_fmu.story import determination, interval_text, near_zero
 
@@ -162,7 +162,8 @@ def fit_report(result: Any, min_correl: float = MIN_CORREL) -> str:
     for name, p in result.params.items():
         value, se = float(p), float(getattr(p, "stderr", math.nan))
         unit = f" {p.unit}" if getattr(p, "unit", "") else ""
-        interval = interval_text(result.intervals.get(name), value, _pair)
+        # the interval as every view shows it (the value keeps lmfit's 7 figures)
+        interval = interval_text(result.intervals.get(name), value, fmt_levels)
         state = determination(result.intervals.get(name))
         if not getattr(p, "vary", True):
             lines.append(
@@ -199,10 +200,6 @@ def fit_report(result: Any, min_correl: float = MIN_CORREL) -> str:
         lines.append(f"    {f'C({a}, {b})'.ljust(width)} = {c:+.4f}")
     lines.append(f"{result.message} (exit status {result.status})")
     return "\n".join(lines)
-
-
-def _pair(values: list[float]) -> list[str]:
-    return [fmt(v, 7) for v in values]
 
 
 register_views(fit_report=fit_report, text_report=text_report)
