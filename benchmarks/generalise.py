@@ -72,6 +72,8 @@ SEED_BASE = {"dev": 0, "dev2": 20_000, "eval": 10_000}
 STREAM = {"dev": 0, "dev2": 2, "eval": 1}
 #: ``--quick``: (family, problem index) drawn from the dev seeds.
 QUICK = [("duffing", 0), ("second_order", 0), ("local_minima", 0)]
+#: Problems per seed set of a family outside the default mix, run with ``--family``.
+ALONE = 6
 #: Success: final cost within this factor of the lowest cost any method found.
 TOLERANCE = 1.001
 #: The method a user writing a study must give for the noise-weighted SSE (what
@@ -103,6 +105,7 @@ def hand_study(gp: GenProblem) -> Study:
             derived=e.derived,
             name=e.name,
             hold={k: v for k, v in gp.hold.items() if k in e.inputs},
+            noise={k: v for k, v in gp.noise.items() if k in e.outputs},
         )
         for e in prob.experiments
     ]
@@ -111,7 +114,7 @@ def hand_study(gp: GenProblem) -> Study:
         parameters=params,
         experiments=exps,
         start_values=dict(prob.start_values),
-        method=Method(**USER_METHOD),
+        method=Method(**{**USER_METHOD, **gp.method}),
         name=prob.name,
     )
 
@@ -403,6 +406,17 @@ def run_problem(family: str, index: int, seeds: str, de: bool) -> list[dict]:
     return out
 
 
+def _counts(family: str | None, count: int | None) -> dict[str, int]:
+    """Problems per family: ``count`` or its own; one outside the mix only when named."""
+    out = {}
+    for f, (_, n) in FAMILIES.items():
+        if n:
+            out[f] = count or n
+        elif f == family:
+            out[f] = count or ALONE
+    return out
+
+
 def tasks(
     seeds: str, quick: bool, family: str | None, count: int | None = None
 ) -> list[tuple[str, int]]:
@@ -410,7 +424,7 @@ def tasks(
     if quick:
         chosen = list(QUICK)
     else:
-        chosen = [(f, k) for f, (_, n) in FAMILIES.items() for k in range(count or n)]
+        chosen = [(f, k) for f, n in _counts(family, count).items() for k in range(n)]
     return [t for t in chosen if family is None or t[0] == family]
 
 

@@ -75,6 +75,12 @@ class GenProblem:
         Per input, how the hand-written study holds it (default ``previous``).
     notes : dict of str to str
         What was drawn (placements, level styles, mismatch, noise), for the table.
+    method : dict of str to object
+        ``[method]`` keys the hand-written study gives beyond the user's defaults (a
+        family that reproduces a published study, e.g. the SISO example's).
+    noise : dict of str to float
+        Sensor noise the hand-written study states (an encoder's quantisation); the
+        others are estimated from the data, as for a user who does not know them.
     """
 
     family: str
@@ -83,6 +89,8 @@ class GenProblem:
     init: InitCase
     hold: dict[str, str] = field(default_factory=dict)
     notes: dict[str, str] = field(default_factory=dict)
+    method: dict[str, object] = field(default_factory=dict)
+    noise: dict[str, float] = field(default_factory=dict)
 
 
 def pick(rng: np.random.Generator, weights: dict[str, float]) -> str:
