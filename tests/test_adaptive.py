@@ -367,6 +367,43 @@ def test_a_continued_stage_hands_back_once_below_the_refinement_and_stalled():
     assert ev.nfev == 0 and again.message == on.message
 
 
+def test_a_crawl_continued_to_an_optimum_in_its_combination_ends_the_search(monkeypatch):
+    """The combination's stage merges into the refinement that crawled: judged again."""
+    polish = context.polish
+
+    def crawling(name, *args, **kwargs):
+        stage = polish(name, *args, **kwargs)
+        if name == "refinement":  # stopped in a valley, its test failing
+            stage.extra["stop"] = "valley"
+            stage.extra["stationarity"] = {"holds": False, "test": "projected Gauss-Newton"}
+            stage.cost *= 1.01
+        return stage
+
+    def combined(study, evs, stages, progress=None):
+        answer = adaptive.answer_stage(stages)
+        test = {"holds": True, "test": "projected Gauss-Newton", "gap": 0.0}
+        extra = {"stationarity": test, "pairs": [["a", "k", 1.0]]}
+        lower = StageResult(
+            "refinement in the combinations the data fix: a + 1 k",
+            "refinement",
+            dict(answer.x),
+            answer.cost / 1.01,
+            3,
+            "least squares in the combinations; stationary",
+            0,
+            extra=extra,
+        )
+        return lower, 3
+
+    monkeypatch.setattr(context, "polish", crawling)
+    monkeypatch.setattr(local, "refine_in_combinations", combined)
+    study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
+    stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
+    assert "resumed" not in stages[0].extra  # the arrays did not go on
+    assert stages[1].extra["crawled"]["nfev"] > 0  # the combination continued the crawl
+    assert adaptive.verdict(stages)[0] == 0
+
+
 def test_the_pipeline_continues_the_arrays_only_to_below_the_refinements_answer(monkeypatch):
     polish = context.polish
 
@@ -480,3 +517,18 @@ def test_the_poor_fit_warning_says_which_search_found_no_lower_basin():
     assert "1.25e+03 times the noise floor, and 2 restart(s)" in _poor_fit(stage)[0]
     stage.extra["poor_fit"].update(restarts=0, horizons_agree=True)
     assert "from their first part reached the same answer" in _poor_fit(stage)[0]
+
+
+def test_a_stationarity_test_reads_back_typed_and_an_old_trails_as_the_models():
+    """What decided a test is a field, not a phrase of its message."""
+    tried = verdict.Stationarity(False, verdict.GN_TEST, 40.0, 9.0e3, "lower", "trial", 55.0)
+    back = verdict.Stationarity.from_dict(tried.to_dict())
+    assert back == tried and back.by_trial
+    probed = verdict.Stationarity(False, "local probes", 3.0, 9.0e3, "lower", "probe", 3.0)
+    assert not verdict.Stationarity.from_dict(probed.to_dict()).by_trial
+    old = {"holds": False, "test": verdict.GN_TEST, "gap": 40.0, "cost": 9.0e3,
+           "detail": f"a decrease of 40; {verdict.LOWER_TRIED} 55"}  # fmt: skip
+    read = verdict.Stationarity.from_dict(old)
+    assert read.decided_by == "model" and not read.by_trial  # the message is not parsed
+    assert verdict.Stationarity.from_dict({}) is None
+    assert verdict.stationarity_of(StageResult("r", "refinement", {}, 1.0, 0, "")) is None

@@ -150,7 +150,8 @@ def test_an_answer_whose_failed_test_found_a_lower_point_is_refined_in_combinati
     law-3 dev seed 116: ``B_s`` 0.82 of 2.5, 1.009 x the least-squares cost)."""
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     detail = f"the projected Gauss-Newton step predicts a decrease of 40; {LOWER_TRIED} 55"
-    gate = {"holds": False, "test": "projected Gauss-Newton", "detail": detail}
+    gate = {"holds": False, "test": "projected Gauss-Newton", "detail": detail,
+            "decided_by": "trial", "lower": 55.0}  # fmt: skip
     stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 5, "",
                         extra={"stationarity": gate})  # fmt: skip
     lower, runs = refine_in_combinations(_Study(), _Evs(ev), [stage])
@@ -357,7 +358,8 @@ def test_an_unsettled_refinement_is_refined_in_its_combinations_before_the_array
 
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     detail = f"the projected Gauss-Newton step predicts a decrease of 40; {LOWER_TRIED} 55"
-    gate = {"holds": False, "test": "projected Gauss-Newton", "detail": detail}
+    gate = {"holds": False, "test": "projected Gauss-Newton", "detail": detail,
+            "decided_by": "trial", "lower": 55.0}  # fmt: skip
     stopped = StageResult("refinement", "refinement", dict(START), ev.cost(**START), 9, "",
                           status=1, extra={"stationarity": gate})  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: stopped)

@@ -50,6 +50,7 @@ __all__ = [
     "noise_floor",
     "probe_points",
     "probe_test",
+    "stationarity_of",
 ]
 
 GATE_RTOL = 1e-4
@@ -161,14 +162,10 @@ def trial_detail(fractions: list[float], reached: bool, lower: float = 0.0) -> s
 def decided_by_trial(gate: Mapping[str, Any]) -> bool:
     """Whether a test (its ``to_dict`` form) was decided by simulating its step.
 
-    It held by a trial alone ("step tried": the first-order model does not hold this
-    close to the answer), or it failed with its step, simulated, lower: where the
-    refinement in combinations (:mod:`~tsid_fmu.search.local.combined`) runs.
+    :attr:`Stationarity.by_trial` of the test read back.
     """
-    if gate.get("test") == GN_TRIED:
-        return True
-    detail = str(gate.get("detail", ""))
-    return not gate.get("holds", True) and (LOWER_TRIED in detail or LOWER_PROBED in detail)
+    test = Stationarity.from_dict(gate)
+    return test is not None and test.by_trial
 
 
 POOR_FIT = 20.0
@@ -195,6 +192,13 @@ class Stationarity:
         The cost at the answer.
     detail : str
         One sentence for the log and the report.
+    decided_by : {"model", "trial", "probe"}
+        What decided it: the first-order model alone (no simulation), simulated steps
+        along the model's step (the model does not hold this close), or local probes.
+    lower : float
+        How much a simulated step or probe lowered the cost, where that is more than
+        the gate (0 otherwise: a point lower by no more than it refutes nothing): the
+        test then fails with a lower point in hand.
     """
 
     holds: bool
@@ -202,6 +206,8 @@ class Stationarity:
     gap: float
     cost: float
     detail: str
+    decided_by: str = "model"
+    lower: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """Return the JSON form kept in a stage's ``extra["stationarity"]``."""
@@ -211,7 +217,51 @@ class Stationarity:
             "gap": self.gap if math.isfinite(self.gap) else None,
             "cost": self.cost if math.isfinite(self.cost) else None,
             "detail": self.detail,
+            "decided_by": self.decided_by,
+            "lower": self.lower,
         }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any] | None) -> Stationarity | None:
+        """Read back :meth:`to_dict`'s form (None where no test was made).
+
+        A test written before ``decided_by`` existed reads as decided by the model,
+        with no lower point.
+        """
+        if not data:
+            return None
+
+        def number(key: str) -> float:
+            value = data.get(key)
+            return math.inf if value is None else float(value)
+
+        return cls(
+            holds=bool(data.get("holds", False)),
+            test=str(data.get("test", "")),
+            gap=number("gap"),
+            cost=number("cost"),
+            detail=str(data.get("detail", "")),
+            decided_by=str(data.get("decided_by", "model")),
+            lower=float(data.get("lower") or 0.0),
+        )
+
+    @property
+    def by_trial(self) -> bool:
+        """Whether simulating its step decided it: held by a trial alone, or found lower.
+
+        Held by a trial alone ("step tried": the first-order model does not hold this
+        close to the answer), or failed with its step, simulated, lower: where the
+        refinement in combinations (:mod:`~tsid_fmu.search.local.combined`) runs.
+        """
+        if self.test == GN_TRIED:
+            return True
+        return not self.holds and self.decided_by != "probe" and self.lower > 0
+
+
+def stationarity_of(stage: Any) -> Stationarity | None:
+    """Return the stationarity test a stage made at its answer (None where it made none)."""
+    extra = getattr(stage, "extra", None) or {}
+    return Stationarity.from_dict(extra.get("stationarity"))
 
 
 def _active(
@@ -321,7 +371,7 @@ def probe_test(
     probes = probe_points(space, x, step)
     if not probes:
         detail = "no probe fits within the bounds"
-        return Stationarity(True, "local probes", 0.0, cost, detail), dict(x), cost
+        return Stationarity(True, "local probes", 0.0, cost, detail, "probe"), dict(x), cost
     costs = evaluator.evaluate(probes).costs[:, 0]
     costs = np.where(np.isfinite(costs), costs, math.inf)
     k = int(np.argmin(costs))
@@ -331,12 +381,13 @@ def probe_test(
             f"a probe {step:g} of a first range away lowers the cost by {gap:.3g}: "
             "not shown to be an optimum"
         )
-        return Stationarity(False, "local probes", gap, cost, detail), probes[k], float(costs[k])
+        found = Stationarity(False, "local probes", gap, cost, detail, "probe", gap)
+        return found, probes[k], float(costs[k])
     detail = (
         f"no probe {step:g} of a first range either side of the answer along any "
         f"parameter ({len(probes)} probes) lowers the cost"
     )
-    return Stationarity(True, "local probes", 0.0, cost, detail), dict(x), cost
+    return Stationarity(True, "local probes", 0.0, cost, detail, "probe"), dict(x), cost
 
 
 def noise_floor(evaluator: Evaluator, weighted: bool) -> float:
@@ -408,7 +459,9 @@ def gauss_newton_test(
         return Stationarity(False, GN_TEST, gap, cost, detail)
     lower = cost - lowest()
     if lower > gate:  # a point lower by no more than the gate refutes nothing
-        return Stationarity(False, GN_TEST, gap, cost, f"{detail}; {LOWER_TRIED} {lower:.3g}")
+        said = f"{detail}; {LOWER_TRIED} {lower:.3g}"
+        return Stationarity(False, GN_TEST, gap, cost, said, "trial", lower)
     reached = trial_reaches_gate(jac, r, step, gate, fractions)
     detail += "; " + trial_detail(fractions, reached, lower)
-    return Stationarity(reached, GN_TRIED if reached else GN_TEST, gap, cost, detail)
+    test = GN_TRIED if reached else GN_TEST
+    return Stationarity(reached, test, gap, cost, detail, "trial")

@@ -52,6 +52,7 @@ import numpy as np
 
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.verdict import stationarity_of
 
 __all__ = [
     "AGREE",
@@ -96,13 +97,12 @@ def answer_stage(stages: Sequence[StageResult]) -> StageResult:
 
 def verdict(stages: Sequence[StageResult]) -> tuple[int, str] | None:
     """Return (status, reason) from the answer's stationarity test, if one was made."""
-    stage = answer_stage(stages)
-    test = stage.extra.get("stationarity")
-    if not test:
+    test = stationarity_of(answer_stage(stages))
+    if test is None:
         return None
-    if test.get("holds"):
-        return 0, f"stationary at the answer ({test.get('test')}): {test.get('detail')}"
-    return 1, f"not shown to be an optimum ({test.get('test')}): {test.get('detail')}"
+    if test.holds:
+        return 0, f"stationary at the answer ({test.test}): {test.detail}"
+    return 1, f"not shown to be an optimum ({test.test}): {test.detail}"
 
 
 def _points(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float]]]:

@@ -17,7 +17,7 @@ from tsid_fmu.search.local.combined import refine_in_combinations
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.verdict import POOR_FIT, noise_floor, probe_test
+from tsid_fmu.search.verdict import POOR_FIT, noise_floor, probe_test, stationarity_of
 
 __all__ = ["check", "local_search"]
 
@@ -29,9 +29,10 @@ Resume = Callable[[list[IterationRecord], float], StageResult]
 def _unsettled(stages: list[StageResult], floor: float) -> str | None:
     """Why the answer so far needs more search: no stationarity shown, or a poor fit."""
     answer = answer_stage(stages)
-    test = answer.extra.get("stationarity") or {}
-    if not test.get("holds", False):
-        return f"the refined answer is not shown to be an optimum ({test.get('detail', '')})"
+    test = stationarity_of(answer)
+    if test is None or not test.holds:
+        detail = test.detail if test is not None else "no stationarity test was made"
+        return f"the refined answer is not shown to be an optimum ({detail})"
     if floor > 0 and answer.cost > POOR_FIT * floor:
         return (
             f"the refined answer is a poor fit (cost {answer.cost:.6g}, "
@@ -78,10 +79,10 @@ def local_search(
     first = stages[0]
     why = _unsettled(stages, floor) or _collapsed(stages[-1])
     if why:
-        before = len(stages)
+        # judged again from what it left: a refinement in the combinations that
+        # continues one which crawled is merged into it (the count stays the same)
         stages = _in_combinations(ctx, stages, exps, "combinations_first")
-        if len(stages) > before:
-            why = _unsettled(stages, floor)
+        why = _unsettled(stages, floor) or _collapsed(stages[-1])
     if why and first.kind == "taguchi" and any("handover" in r.extra for r in first.records):
         note(ctx, f"{why}: the Taguchi stage goes on")
         stages[0] = resume(first.records, stages[-1].cost)
@@ -229,8 +230,8 @@ def _horizons(ctx: Context, stages: list[StageResult], floor: float, exps: list[
         x = {n: float(stage.x[n]) for n in names}
     last = refinement(ctx, x, exps, "horizon_full", "refinement after the horizons")
     stages.append(last)
-    held = (last.extra.get("stationarity") or {}).get("holds", False)
-    if held and abs(last.cost - before.cost) <= AGREE * before.cost:
+    test = stationarity_of(last)
+    if test is not None and test.holds and abs(last.cost - before.cost) <= AGREE * before.cost:
         note(ctx, "the horizons reached the same answer: no restart")
         last.extra["agrees"] = before.name
         return False

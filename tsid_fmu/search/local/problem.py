@@ -275,12 +275,14 @@ class _Problem:
         try:
             self._residuals(probe_points(self.space, x, probe))
         except _Budget:
-            return Stationarity(False, test, gap, cost, detail + "; no runs left for probes")
-        if cost - self.best[0] > gate:
-            detail += f"; {LOWER_PROBED} {cost - self.best[0]:.3g} ({probe:g} of a first range)"
-            return Stationarity(False, test, gap, cost, detail)
+            said = detail + "; no runs left for probes"
+            return Stationarity(False, test, gap, cost, said, "probe")
+        lower = cost - self.best[0]
+        if lower > gate:
+            detail += f"; {LOWER_PROBED} {lower:.3g} ({probe:g} of a first range)"
+            return Stationarity(False, test, gap, cost, detail, "probe", lower)
         detail += f"; no probe {probe:g} of a first range either side is lower"
-        return Stationarity(True, test, gap, cost, detail)
+        return Stationarity(True, test, gap, cost, detail, "probe")
 
 
 def _problem_at(

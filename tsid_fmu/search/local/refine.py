@@ -151,10 +151,10 @@ def _floor_test(
     where = f"{', '.join(floored)} on the floor of its logarithmic coordinate"
     if gain <= problem.gate(cost, floor):
         said = f"{gate.detail}; {where}: a step in linear coordinates is no lower"
-        return Stationarity(True, gate.test, gate.gap, cost, said)
+        return Stationarity(True, gate.test, gate.gap, cost, said, gate.decided_by)
     problem.best, problem.best_r = trial.best, trial.best_r
     said = f"{where}, where it is flat: in linear coordinates, {LOWER_TRIED} {gain:.3g}"
-    return Stationarity(False, gate.test, gain, cost, said)
+    return Stationarity(False, gate.test, gain, cost, said, "trial", gain)
 
 
 def _keep_pairs(problem: _Problem, space: Space, extra: dict[str, Any]) -> None:
