@@ -333,6 +333,8 @@ def test_two_row_data_give_no_numpy_warnings(lag, tmp_path, capsys):
         run(tmp_path, text, capsys, "--workers", "1", status=1)
     assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], caught
     assert "RuntimeWarning" not in capsys.readouterr().err
+    log = tmp_path / "out" / "warnings.log"  # where -q puts the warnings (issue 62)
+    assert not log.exists() or "RuntimeWarning" not in log.read_text(encoding="utf-8")
 
 
 def test_levels_about_extreme_logs_give_no_numpy_warnings():
