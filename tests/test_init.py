@@ -158,14 +158,13 @@ def test_init_writes_the_declared_bounds_and_comments_out_the_rest_threshold(tmp
     text = init_study(fmu, data, tmp_path / "study.toml")
     assert "e = { levels = [0.5, 0.5916, 0.7, 0.8367, 1.0], min = 0.5, max = 1 }" in text
     assert "loss = { levels = [0.09487, 0.1687, 0.3, 0.5335, 0.9487], min = 0, max = 1 }" in text
-    assert 'g = { levels = [-31.02, -17.44, -9.81, -9.396, -9.0], max = -9, unit = "m/s2" }' in (
+    # gravity is held (issue 62), its entry written with the bounds the FMU declares
+    assert '# g = { levels = [-31.02, -17.44, -9.81, -9.396, -9.0], max = -9, unit = "m/s2" }' in (
         text
     )
-    assert _parameters(text) == ["e", "loss", "g"] and _commented(text) == ["v_min"]
+    assert _parameters(text) == ["e", "loss"] and _commented(text) == ["g", "v_min"]
     study = Study.from_toml(tmp_path / "study.toml")
-    assert {p.name: p.bounds for p in study.parameters} == {
-        "e": (0.5, 1.0), "loss": (0.0, 1.0), "g": (-np.inf, -9.0)
-    }  # fmt: skip
+    assert {p.name: p.bounds for p in study.parameters} == {"e": (0.5, 1.0), "loss": (0.0, 1.0)}
 
 
 def test_init_siso_comments_out_V_z_and_proposes_F_o(tmp_path, capsys):

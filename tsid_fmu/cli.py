@@ -11,6 +11,7 @@ traceback, and exits with 70, so that a script never takes a crash for a result.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 from collections.abc import Sequence
@@ -35,6 +36,7 @@ from tsid_fmu.cli_values import (
     timeout_seconds,
     worker_count,
 )
+from tsid_fmu.cli_warnings import warnings_to_log
 from tsid_fmu.errors import ResourceError, StudyError, TsidError
 from tsid_fmu.interrupt import (
     delivered_interrupts,
@@ -61,10 +63,20 @@ exit status:
 """
 
 
+def _identify_out(args: argparse.Namespace) -> Path:
+    """Return the output folder of ``tsid identify``: ``--out``, else results/ beside it."""
+    return Path(args.out) if args.out else Path(args.study).with_suffix("").parent / "results"
+
+
+def _warnings_folder(args: argparse.Namespace) -> Path | None:
+    """Return the folder whose ``warnings.log`` holds a quiet command's warnings, or None."""
+    return _identify_out(args) if args.command == "identify" else None
+
+
 def _cmd_identify(args: argparse.Namespace) -> int:
     from tsid_fmu.identify import identify
 
-    out = Path(args.out) if args.out else Path(args.study).with_suffix("").parent / "results"
+    out = _identify_out(args)
     result = identify(
         args.study,
         out,
@@ -298,7 +310,7 @@ def _identify_parser(sub: Any) -> None:
         "--quiet",
         action="store_true",
         help="no progress on stderr (a live bar on a terminal, a line per iteration and "
-        "stage elsewhere)",
+        "stage elsewhere), and no library warnings: they go to OUT/warnings.log",
     )
     p.add_argument(
         "-v",
@@ -424,7 +436,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Ctrl-C and SIGTERM neither lost nor raised inside an import
         with terminated_as_interrupt() as terminated, delivered_interrupts():
             args = make_parser().parse_args(argv)
-            with native_output_to_stderr():
+            quiet = getattr(args, "quiet", False)  # -q: warnings to the log, not stderr
+            kept = warnings_to_log(_warnings_folder(args)) if quiet else contextlib.nullcontext()
+            with native_output_to_stderr(), kept:
                 status = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, not at exit
         return status

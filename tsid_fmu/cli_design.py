@@ -64,5 +64,7 @@ def add_design_parser(sub: Any) -> None:
     p.add_argument("--workers", type=worker_count, metavar="N", help="worker processes")
     p.add_argument("--timeout", type=timeout_seconds, metavar="SECONDS", help="per simulation")
     p.add_argument("--json", action="store_true", help="print design.json on stdout")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument(
+        "-q", "--quiet", action="store_true", help="no progress lines or library warnings on stderr"
+    )
     p.set_defaults(func=_cmd_design)

@@ -129,5 +129,7 @@ def add_screen_parser(sub: Any) -> None:
     p.add_argument("--workers", type=worker_count, metavar="N", help="worker processes")
     p.add_argument("--timeout", type=timeout_seconds, metavar="SECONDS", help="per simulation")
     p.add_argument("--no-contribution", action="store_true", help="skip eq. 7 (the L25)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+    p.add_argument(
+        "-q", "--quiet", action="store_true", help="no progress display, no library warnings"
+    )
     p.set_defaults(func=_cmd_screen)

@@ -15,10 +15,15 @@ The study written:
   over one decade (``start / sqrt(10)`` to ``start * sqrt(10)``), kept inside the
   ``min``/``max`` the FMU declares, which are written as the parameter's bounds (else
   ``min = 0`` for a positive start, ``max = 0`` for a negative one), with its unit;
-- writes a parameter that looks like a numerical setting rather than a physical one (a
-  solver step, a tolerance, a threshold such as a velocity "below which the motor side
-  is considered at rest", a regularisation) commented out, with the reason, so that the
-  FMU's value is kept (:func:`~tsid_fmu.scaffold_rules.numerical_setting`);
+- writes a parameter that the data should not decide commented out, with the reason, so
+  that the FMU's value is kept (:func:`~tsid_fmu.scaffold_rules.held_reason`): a
+  numerical setting rather than a physical parameter (a solver step such as Hopsan's
+  ``timestep``, a tolerance, a threshold such as a velocity "below which the motor side
+  is considered at rest", a regularisation), a constant of the medium or the
+  environment (gravity, the ambient pressure and temperature, a resistor's reference
+  temperature and temperature coefficient), a signal source's time (a ramp's start time
+  and duration, a pulse's period); past :data:`MOST_FREE` free parameters, in the
+  order the FMU declares them, the rest are written commented out too;
 - uses ``cost = "sse"``, ``weighting = "noise"``, ``replicates = 1`` and the smallest
   orthogonal array that fits.
 
@@ -46,7 +51,7 @@ from tsid_fmu.fmu.variables import (
     parse_start,
     variable_info,
 )
-from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, numerical_setting
+from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, held_reason
 from tsid_fmu.study.tomltext import comment_text, toml_key, toml_string
 
 __all__ = ["decade_levels", "init_study"]
@@ -202,7 +207,10 @@ def _refused(v: VariableInfo, n: int) -> str | None:
 
 
 MOST_FREE = 40
-"""Parameters ``tsid init`` frees at most: the 40 three-level columns of L81."""
+"""Parameters ``tsid init`` frees at most: the 40 three-level columns of L81.
+
+The first 40 that no rule holds, in the order the FMU declares them, are free; the rest
+are written commented out, to be screened (``tsid screen``) and swapped in by hand."""
 
 
 def _parameter_lines(
@@ -245,11 +253,10 @@ def _parameter_lines(
             lines.append(refused)
             continue
         entry, bounded, own = _entry(v, n)
-        reason = numerical_setting(v)
+        reason = held_reason(v)
         if reason is not None:
             lines.append(
-                f"# {entry}  # numerical, not physical ({reason}): the FMU's {v.start} is "
-                "kept; uncomment to identify it"
+                f"# {entry}  # {reason}: the FMU's {v.start} is kept; uncomment to identify it"
             )
             continue
         if count >= most:
@@ -428,7 +435,8 @@ def init_study(
         "[parameters]",
         f"# {'five' if n == 5 else 'three'} log-spaced levels over one decade around the "
         "FMU's start value, within the",
-        "# FMU's min/max; numerical settings (steps, tolerances, thresholds) commented out;",
+        "# FMU's min/max; numerical settings (steps, tolerances, thresholds), constants of",
+        "# the medium or the environment and signal sources' times commented out;",
         "# per_experiment = true in an entry identifies one value per experiment (reported",
         "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
         *params,

@@ -1,8 +1,10 @@
 """What ``tsid init`` reads into an FMU's variables and a data file's columns.
 
-- :func:`numerical_setting`: whether a real parameter is a numerical setting (a solver
-  step, a tolerance, a threshold, a regularisation) rather than a physical parameter,
-  from its name, description and unit;
+- :func:`held_reason`: why ``init`` holds a real parameter at the FMU's value rather
+  than freeing it, or None: :func:`numerical_setting` (a solver step, a tolerance, a
+  threshold, a regularisation), :func:`environment_constant` (a property of the medium,
+  gravity, the ambient temperature or pressure) or :func:`source_time` (a ramp's start
+  time, a pulse's period), each from the parameter's name, description and unit;
 - :func:`bounded_levels`: five levels around the start value inside the bounds that the
   FMU declares;
 - :func:`derived_hints`: for an FMU input or output without a column, the columns that
@@ -20,18 +22,27 @@ from collections.abc import Mapping, Sequence
 
 from tsid_fmu.fmu.variables import VariableInfo
 
-__all__ = ["bounded_levels", "decade_levels", "derived_hints", "numerical_setting"]
+__all__ = [
+    "bounded_levels",
+    "decade_levels",
+    "derived_hints",
+    "environment_constant",
+    "held_reason",
+    "numerical_setting",
+    "source_time",
+]
 
 _NAME_WORDS = frozenset(
     {"tol", "tolerance", "rtol", "atol", "reltol", "abstol", "eps", "epsilon", "threshold"}
     | {"thresh", "regularization", "regularisation", "stepsize"}
 )
 """Words of a parameter's name that make it a numerical setting."""
-_TIME_STEP_WORDS = frozenset({"dt", "h", "ts", "step", "sample", "sampling"})
+_TIME_STEP_WORDS = frozenset({"dt", "h", "ts", "step", "timestep", "sample", "sampling"})
 """Words of a name that, with the unit ``s``, make it a time step."""
 _STRONG = re.compile(
     r"\btolerances?\b|\bepsilon\b|\bregulari[sz]\w*|\bsmoothing\b|\bstep[ -]?size\b|"
-    r"\bsolver\b|\bintegrator\b|\bnumerical(?:ly)?\b|\bsampl(?:e|ing) (?:time|period)\b|"
+    r"\btime[ -]?steps?\b|\bsolver\b|\bintegrator\b|\bnumerical(?:ly)?\b|"
+    r"\bsampl(?:e|ing) (?:time|period)\b|"
     r"\b(?:used )?for scaling\b|\bscaling (?:factor|nominal)\b",
     re.IGNORECASE,
 )
@@ -57,6 +68,11 @@ def _words(name: str) -> list[str]:
     return [w.lower() for w in re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+|\d+", name)]
 
 
+def _leaf(name: str) -> str:
+    """Return the last part of a dotted name, without an array index (``pipe.g``: ``g``)."""
+    return re.sub(r"\[[^\]]*\]$", "", name).rsplit(".", 1)[-1]
+
+
 def numerical_setting(v: VariableInfo) -> str | None:
     """Return why ``v`` looks like a numerical setting, or None for a physical parameter.
 
@@ -68,11 +84,13 @@ def numerical_setting(v: VariableInfo) -> str | None:
 
     - a word of the name: ``tol``, ``eps``, ``epsilon``, ``threshold``, ``rtol``, ...,
       or ``step`` followed by ``size``;
-    - a time step: ``dt``, ``h``, ``Ts``, ``step``, ``sample`` in the name, with unit ``s``;
+    - a time step: ``dt``, ``h``, ``Ts``, ``step``, ``timestep``, ``sample`` in the last
+      part of the name, with unit ``s`` (Hopsan's ``timestep``; not ``step.startTime``,
+      a Step source's start time);
     - a tool's internal setting: the last part of its name starts with ``_``
       (JModelica.org's ``_cs_rel_tol``, ``_nle_solver_max_residual_scaling_factor``);
     - the description says tolerance, epsilon, regularisation, smoothing, step size,
-      solver, integrator, numerical, sampling time or scaling (OpenModelica's
+      time step, solver, integrator, numerical, sampling time or scaling (OpenModelica's
       ``damper.s_nominal``, "Nominal value of s_rel (used for scaling)");
     - the description says threshold, or "below which ... is considered ...", "considered
       at rest", unless it also names a physical property (mass, stiffness, friction,
@@ -87,7 +105,7 @@ def numerical_setting(v: VariableInfo) -> str | None:
     )
     if hit is not None:
         return f"its name says {hit!r}"
-    if v.unit == "s" and any(w in _TIME_STEP_WORDS for w in words):
+    if v.unit == "s" and any(w in _TIME_STEP_WORDS for w in _words(_leaf(v.name))):
         return "a time step (its name, unit s)"
     text = v.description or ""
     found = _STRONG.search(text)
@@ -95,6 +113,132 @@ def numerical_setting(v: VariableInfo) -> str | None:
         found = _WEAK.search(text)
     if found is not None:
         return f"its description says {found.group(0)!r}"
+    return None
+
+
+_WORLD_PARTS = frozenset({"medium", "system", "ambient", "environment", "world"})
+"""Components of a name's path (before its last part) that hold the environment:
+Modelica.Fluid's ``system``, MultiBody's ``world``, a ``medium`` record."""
+_WORLD_WORDS = frozenset({"ambient", "amb", "environment"})
+"""Words of a name's last part that name the environment (``p_ambient``, ``T_amb``)."""
+_GRAVITY_UNITS = frozenset({"m/s2", "m/s^2", "m.s-2", "m/(s2)", "m/(s.s)"})
+"""Units of an acceleration, which make a parameter named ``g`` gravity."""
+_WORLD_TEXT = re.compile(
+    r"\bmedi(?:um|a)\b|\bambient\b|\benvironment(?:al)?\b|\bgravit(?:y|ational)\b|"
+    r"\breference temperature\b|\btemperature coefficient\b|\bdevice temperature\b",
+    re.IGNORECASE,
+)
+"""Words of a description that make a parameter a constant of the medium or the world
+(Dymola's ``resistor.T_ref`` "Reference temperature", ``resistor.alpha`` "Temperature
+coefficient of resistance", ``resistor.T`` "Fixed device temperature ...")."""
+_PLANT_TEXT = re.compile(
+    r"\bbetween\b|\bwall\b|\bheat transfer\b|\bconductance\b|\bvolume\b|\barea\b|"
+    r"\blength\b|\bdiameter\b|\bradius\b|\bheight\b|\bcent(?:er|re) of gravity\b",
+    re.IGNORECASE,
+)
+"""Words of a description that keep it a plant's parameter although it names the medium
+or the ambient ("heat transfer coefficient between wall and medium", "thermal
+conductance to ambient", "volume of medium in the tank", "centre of gravity")."""
+
+
+def environment_constant(v: VariableInfo) -> str | None:
+    """Return why ``v`` looks like a constant of the medium or the environment, or None.
+
+    Gravity, the ambient pressure and temperature, a medium's density or a resistor's
+    reference temperature act on the plant, but a test rig's data do not decide them
+    (they are known, or trade with a plant parameter: a resistor's ``alpha`` acts only
+    through ``R * (1 + alpha * (T - T_ref))``); freed, they move the model outside the
+    medium's range ("Temperature outside scope of model!"). The rules:
+
+    - a component of the name's path: ``medium``, ``system``, ``ambient``,
+      ``environment``, ``world`` (Modelica.Fluid's ``system.p_ambient``, MultiBody's
+      ``world.g``);
+    - a word of the last part: ``ambient``, ``amb``, ``environment`` (``p_ambient``,
+      ``T_amb``);
+    - the last part ``g`` with the unit of an acceleration (``pipe.g``, unit ``m/s2``);
+    - the description says medium, ambient, environment, gravity, reference
+      temperature, temperature coefficient or device temperature, unless it also names
+      the plant's geometry or a transfer (between, wall, heat transfer, conductance,
+      volume, area, length, diameter, radius, height, centre of gravity).
+    """
+    parts = [re.sub(r"\[[^\]]*\]|\d+$", "", p).lower() for p in v.name.split(".")[:-1]]
+    hit = next((p for p in parts if p in _WORLD_PARTS), None)
+    if hit is not None:
+        return f"its name's path holds {hit!r}"
+    leaf = _leaf(v.name)
+    word = next((w for w in _words(leaf) if w in _WORLD_WORDS), None)
+    if word is not None:
+        return f"its name says {word!r}"
+    unit = (v.unit or "").replace(" ", "")
+    if leaf == "g" and unit in _GRAVITY_UNITS:
+        return f"g in {v.unit}: gravity"
+    text = v.description or ""
+    found = _WORLD_TEXT.search(text)
+    if found is not None and not _PLANT_TEXT.search(text):
+        return f"its description says {found.group(0)!r}"
+    return None
+
+
+_SOURCE_TIME_WORDS = frozenset({"starttime", "duration", "period", "offset"})
+"""Last parts of a name (lower case, ``_`` removed) that, with the unit ``s``, make it a
+source's time (Modelica.Blocks.Sources' ``ramp.startTime``, ``ramp.duration``,
+``pulse.period``, ``step.startTime``)."""
+_SOURCE_TEXT = re.compile(
+    r"\bstart(?:ing)? time\b|\bfor time < ?\w+|\bduration of (?:the )?"
+    r"(?:ramp|step|pulse|signal|source|input)\b|\btime for one period\b|"
+    r"\b(?:delay|start) of (?:the )?(?:ramp|step|pulse|signal|source|input)\b",
+    re.IGNORECASE,
+)
+"""Words of a description that make a parameter in seconds a source's time (MSL's
+"Output y = offset for time < startTime", "Duration of ramp (= 0.0 gives a Step)",
+"Time for one period")."""
+
+
+def source_time(v: VariableInfo) -> str | None:
+    """Return why ``v`` looks like the time of a signal source's event, or None.
+
+    A ramp's start time and duration, a step's start time, a pulse's period set when
+    the model's own input moves: a setting of the experiment, which the data record
+    rather than decide (freed, the levels move the input away from the measured one).
+    The rules, for a parameter in seconds (or without a unit, for the description):
+
+    - the last part of the name is ``startTime``, ``start_time``, ``duration``,
+      ``period`` or ``offset``, with unit ``s``;
+    - the description says start time, "for time < ...", "duration of ramp" (step,
+      pulse, signal, source, input), "time for one period", "delay of" or "start of" a
+      ramp (step, ...).
+
+    A time constant, a delay time of the plant or a period of a plant's oscillation
+    stays free.
+    """
+    if v.unit not in ("s", None, ""):
+        return None
+    leaf = _leaf(v.name)
+    if v.unit == "s" and leaf.replace("_", "").lower() in _SOURCE_TIME_WORDS:
+        return f"its name says {leaf!r}, unit s"
+    found = _SOURCE_TEXT.search(v.description or "")
+    if found is not None:
+        return f"its description says {found.group(0)!r}"
+    return None
+
+
+def held_reason(v: VariableInfo) -> str | None:
+    """Return why ``tsid init`` holds ``v`` at the FMU's value, or None to free it.
+
+    One reason, the first that applies: a numerical setting
+    (:func:`numerical_setting`), a constant of the medium or the environment
+    (:func:`environment_constant`), a signal source's time (:func:`source_time`). The
+    reason is written beside the parameter's entry, which is commented out.
+    """
+    reason = numerical_setting(v)
+    if reason is not None:
+        return f"numerical, not physical ({reason})"
+    reason = environment_constant(v)
+    if reason is not None:
+        return f"a constant of the medium or the environment ({reason})"
+    reason = source_time(v)
+    if reason is not None:
+        return f"a setting of a signal source (its time), not a parameter of the plant ({reason})"
     return None
 
 

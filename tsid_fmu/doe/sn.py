@@ -90,9 +90,9 @@ def sn_smaller_the_better(y: ArrayLike, *, failed_penalty: float = 20.0) -> np.n
     """
     arr, failed = _replicates(y)
     safe = np.where(failed[:, None], 1.0, arr)
-    msd = np.mean(safe**2, axis=1)
-    with np.errstate(divide="ignore"):
-        sn = -10.0 * np.log10(msd)
+    # a cost past 1e154 squares to inf: -inf dB, clipped to -SN_CAP like any huge cost
+    with np.errstate(divide="ignore", over="ignore"):
+        sn = -10.0 * np.log10(np.mean(safe**2, axis=1))
     return _finish(sn, failed, failed_penalty)
 
 
@@ -155,6 +155,10 @@ def sn_nominal_the_best(y: ArrayLike, *, ddof: int = 1, failed_penalty: float = 
             f"nominal-the-best S/N needs more than {ddof} replicates per run, got {arr.shape[1]}"
         )
     safe = np.where(failed[:, None], 1.0, arr)
+    # mean**2 / var does not depend on the row's scale: scaled to at most 1, responses
+    # past 1e154 neither overflow nor give inf / inf = NaN
+    peak = np.max(np.abs(safe), axis=1, keepdims=True)
+    safe = safe / np.where(peak > 0, peak, 1.0)
     mean = safe.mean(axis=1)
     var = safe.var(axis=1, ddof=ddof)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -10,18 +10,24 @@ process, is installed once; each session's callbacks carry their own id as the
 id.  Messages of FMUs not opened by a session (plain FMPy use) go to FMPy's printer.
 
 FMI 3.0 loggers are not variadic: the session passes :meth:`LogCapture.fmi3` to FMPy.
+
+A message is kept as the characters it means: the XML references some tools leave in
+their text (Dymola's ``Failed condition: T &gt;= 200``) are read (:func:`unescape_xml`),
+so that a report escapes the text once, not twice.
 """
 
 from __future__ import annotations
 
+import html
 import itertools
 import logging
+import re
 from collections import deque
 from collections.abc import Callable
 from ctypes import byref
 from typing import Any
 
-__all__ = ["STATUS_NAMES", "LogCapture", "Logger", "fmi2_callbacks"]
+__all__ = ["STATUS_NAMES", "LogCapture", "Logger", "fmi2_callbacks", "unescape_xml"]
 
 #: FMI status names by value
 STATUS_NAMES = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
@@ -29,6 +35,20 @@ STATUS_NAMES = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 N_KEPT = 8
 
 Logger = logging.Logger | Callable[[str], None]
+
+_XML_REFERENCE = re.compile(r"&(?:lt|gt|amp|quot|apos|#[0-9]{1,7}|#[xX][0-9a-fA-F]{1,6});")
+"""XML's five named references and its character references (with their ``;``)."""
+
+
+def unescape_xml(text: str) -> str:
+    """Return ``text`` with the XML references in it as the characters they stand for.
+
+    ``T &gt;= 200`` gives ``T >= 200``, ``&amp;gt;`` gives ``&gt;`` (one pass: what a
+    tool escaped once is read once); HTML's other names (``&copy;``), a reference
+    without its ``;`` and a bare ``&`` stay as written.
+    """
+    return _XML_REFERENCE.sub(lambda m: html.unescape(m.group(0)), text)
+
 
 _TARGETS: dict[int, LogCapture] = {}
 _IDS = itertools.count(1)
@@ -57,8 +77,8 @@ class LogCapture:
     def add(self, status: int, category: bytes | None, message: bytes | None) -> None:
         """Keep and forward one message."""
         label = STATUS_NAMES[status] if 0 <= status < len(STATUS_NAMES) else str(status)
-        text = (message or b"").decode("utf-8", errors="replace").strip()
-        cat = (category or b"").decode("utf-8", errors="replace")
+        text = unescape_xml((message or b"").decode("utf-8", errors="replace").strip())
+        cat = unescape_xml((category or b"").decode("utf-8", errors="replace"))
         line = f"[{label}] {cat + ': ' if cat else ''}{text}"
         self.messages.append(line)
         if self.logger is None:

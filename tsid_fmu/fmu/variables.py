@@ -18,6 +18,7 @@ from typing import IO, Any
 from xml.etree import ElementTree
 
 from tsid_fmu.errors import FMUError
+from tsid_fmu.fmu.logs import unescape_xml
 
 __all__ = [
     "BOOL_TYPES",
@@ -111,7 +112,8 @@ def variable_info(variable: Any) -> VariableInfo:
         initial=variable.initial,
         start=None if variable.start is None else str(variable.start),
         unit=_declared_unit(variable),
-        description=variable.description,
+        # a tool that escaped its text twice (&amp;gt;) leaves FMPy's reading escaped once
+        description=None if variable.description is None else unescape_xml(variable.description),
         min=_declared_bound(variable, "min"),
         max=_declared_bound(variable, "max"),
         items=tuple(

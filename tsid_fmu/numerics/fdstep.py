@@ -87,13 +87,17 @@ def solver_noise(
     table = np.array([r0, *residuals([s + k * step * p for k in range(1, POINTS + 1)])])
     if not np.all(np.isfinite(table)):
         return 0.0
+    # the estimates scale with the residuals: taken of the table scaled to at most 1,
+    # residuals past 1e154 neither overflow in the differences nor in their squares
+    peak = float(np.max(np.abs(table))) or 1.0
+    table = table / peak
     estimates = []
     for k in range(1, POINTS + 1):
         table = np.diff(table, axis=0)
         gamma = math.factorial(k) ** 2 / math.factorial(2 * k)
         if k >= 2:  # trimmed: events touch a few differences (module doc)
             estimates.append(math.sqrt(gamma) * trimmed_rms(table.ravel()))
-    return float(np.median(estimates))
+    return float(np.median(estimates)) * peak  # a float product: inf, not a warning
 
 
 def noise_of(owner: Any, measure: Callable[[], float]) -> float:
@@ -126,6 +130,7 @@ def steps_for(steps: np.ndarray, jac: np.ndarray, noise: float) -> np.ndarray:
     """
     if noise <= 0:
         return steps
-    norms = np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
+    with np.errstate(over="ignore"):  # a column past 1e154: norm inf, its step kept
+        norms = np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
     need = SHARE * math.sqrt(2.0 * jac.shape[0]) * noise / norms
     return np.maximum(np.abs(steps), np.minimum(need, MAX_STEP)) * np.sign(steps)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -27,17 +28,26 @@ from tsid_fmu.uncertainty.assess import NOISE_SOURCES
 __all__ = ["escape", "markdown_report", "markdown_table"]
 
 
+_TAG_OPEN = re.compile(r"<(?=[A-Za-z/!?])")
+"""A ``<`` that opens an HTML tag, comment, declaration or autolink in Markdown."""
+_REFERENCE = re.compile(r"&(?=[A-Za-z][A-Za-z0-9]*;|#[0-9]{1,7};|#[xX][0-9a-fA-F]{1,6};)")
+"""An ``&`` that starts an entity or character reference in Markdown."""
+
+
 def escape(text: Any) -> str:
     r"""Return ``text`` as it may be printed into the report: no control characters, no HTML.
 
     Names and messages come from study files, data files and FMUs; a terminal escape
     sequence (ESC ``[2J``), a newline or a bidirectional override in one of them is
     shown as its Python escape (``\x1b[2J``) instead of acting on whoever reads the
-    report. ``&``, ``<`` and ``>`` become HTML entities, as in ``report.html``: Markdown
-    viewers render raw HTML, so a study named ``<script>...`` would run in them.
+    report. Markdown viewers render raw HTML, so a study named ``<script>...`` would run
+    in them: a ``<`` that would open a tag (``<s``, ``</``, ``<!``, ``<?``) becomes
+    ``&lt;`` and an ``&`` that would start a reference (``&gt;``, ``&#62;``) ``&amp;``.
+    The rest stays as written, so that the file reads the same as text and rendered:
+    an FMU's ``Failed condition: T >= 200``, ``(< 0.015)``, ``R & D``.
     """
     text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
-    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    return _TAG_OPEN.sub("&lt;", _REFERENCE.sub("&amp;", text))
 
 
 def _cell(v: Any) -> str:

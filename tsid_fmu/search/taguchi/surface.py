@@ -38,7 +38,8 @@ def principal_axes(
     curvatures : numpy.ndarray
         ``(p,)`` eigenvalues of ``J^T J``, decreasing.
     None
-        Too few runs (fewer than ``p + 2``) or residuals of different lengths.
+        Too few runs (fewer than ``p + 2``), residuals of different lengths, or
+        residuals so large (past about 1e154) that the curvature is not finite.
     """
     p = len(centre)
     usable = [(s, r) for s, r in points if r is not None]
@@ -47,9 +48,15 @@ def principal_axes(
     x = np.column_stack([np.ones(len(usable)), np.array([s - centre for s, _ in usable])])
     if np.linalg.matrix_rank(x) < p + 1:
         return None
-    coef = np.linalg.lstsq(x, np.array([r for _, r in usable]), rcond=None)[0]
-    jac = coef[1:]  # (p, N): row k = effect of coordinate k on the residual signal
-    curvature = jac @ jac.T
+    signals = np.array([r for _, r in usable])
+    if not np.all(np.isfinite(signals)):
+        return None
+    with np.errstate(over="ignore", invalid="ignore"):  # huge residuals: checked below
+        coef = np.linalg.lstsq(x, signals, rcond=None)[0]
+        jac = coef[1:]  # (p, N): row k = effect of coordinate k on the residual signal
+        curvature = jac @ jac.T
+    if not np.all(np.isfinite(curvature)):
+        return None  # no axes: the next frame keeps the kind it has
     values, vectors = np.linalg.eigh(curvature)
     order = np.argsort(values)[::-1]
     vectors = vectors[:, order]
