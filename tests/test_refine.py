@@ -317,3 +317,64 @@ def test_a_refinement_out_of_runs_still_tries_its_step():
     assert out.status == 1 and "simulation limit (20)" in out.message
     assert decided_by_trial(out.extra["stationarity"])
     assert 20 < out.nfev <= 20 + MAX_TRIALS
+
+
+def test_a_floor_test_held_by_its_trials_hands_its_linear_pairs_to_the_combinations(
+    monkeypatch,
+):
+    """On the floor of ``d``'s logarithmic coordinate its column is zero, so the
+    refinement's own Jacobian shows no valley; the floor test's linear one does. Where
+    that test's trials along the Gauss-Newton step find nothing lower (a rough cost's
+    differences: SISO rig, eval seed 10003, B_s at 2.4e-17 and 1.003 x the optimum, the
+    cost falling 65 per unit of B_s along F_vm + B_s), it held by simulation, and its
+    pairs go on to the refinement in the combinations, which leaves the floor."""
+    from tsid_fmu.search.local.combined import refine_in_combinations
+    from tsid_fmu.search.local.problem import _problem_at
+    from tsid_fmu.search.stage import StageResult
+    from tsid_fmu.search.verdict import GN_TEST, Stationarity
+
+    def model(a: float, d: float) -> np.ndarray:
+        return (a + d) * np.exp(-T) + 1e-2 * d * T  # the valley along a + d; d seen alone
+
+    ev = CurveEvaluator(model, model(2.0, 0.5) + NOISE, 0.01)
+    levels = {"a": [1.0, 2.0, 4.0], "d": [0.1, 1.0, 10.0]}
+    bounds = {"a": (0.0, math.inf), "d": (0.0, math.inf)}
+    space = Space(levels, bounds, LevelingOptions())
+    monkeypatch.setattr(refine, "bounded_trials", lambda jac, r, s, *_: [s])  # it misses
+    start = {"a": 2.5, "d": 0.0}
+    first = ev.evaluate([start])
+    cost = float(first.costs[0, 0])
+    problem, _ = _problem_at(space, start, cost, ev, 100, None, first.residuals[0])
+    held = Stationarity(True, GN_TEST, 0.0, cost, "no decrease predicted")
+    extra: dict = {}
+    # a gate of 1e-4 of a noise floor of 1e4: the differences' own steps are no lower
+    test, pairs = refine._floor_test(space, problem, held, None, 1e4, extra)
+    assert test.holds and test.decided_by == "trial" and test.by_trial
+    assert [p[:2] for p in pairs] == [["a", "d"]] and abs(pairs[0][2] - 1) < 0.05
+
+    class Study:
+        parameter_names = ("a", "d")
+        method = Method(cost="sse")
+
+        def identify_names(self):
+            return ["measured"]
+
+        def first_levels(self):
+            return levels
+
+        def bounds(self):
+            return bounds
+
+    class Evs:
+        def get(self, names, experiments, fixed):
+            return ev
+
+    found = {"stationarity": test.to_dict(), "parallel": pairs, "stop": "xtol"}
+    stage = StageResult("refinement", "refinement", start, cost, 5, "", extra=found)
+    lower, _ = refine_in_combinations(Study(), Evs(), [stage])
+    assert lower is not None and lower.cost < 0.5 * cost
+    assert abs(lower.x["d"] / 0.5 - 1) < 0.1
+    # the rule removed (held as the model's test, no pairs): nothing follows
+    plain = {"stationarity": held.to_dict(), "stop": "xtol"}
+    stage = StageResult("refinement", "refinement", start, cost, 5, "", extra=plain)
+    assert refine_in_combinations(Study(), Evs(), [stage]) == (None, 0)

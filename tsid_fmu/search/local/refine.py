@@ -33,6 +33,7 @@ from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.search.verdict import (
+    GN_TRIED,
     LOWER_TRIED,
     MAX_TRIALS,
     Stationarity,
@@ -118,7 +119,7 @@ def _floor_test(
     fixed: Mapping[str, float] | None,
     floor: float,
     extra: dict[str, Any],
-) -> Stationarity:
+) -> tuple[Stationarity, list[list] | None]:
     """Test the answer again in linear coordinates where it is on a log floor.
 
     On a log parameter's floor (:meth:`~tsid_fmu.search.space.Space.floored`: 0, or
@@ -131,16 +132,25 @@ def _floor_test(
     (the callers refine again from it). Measured on the friction-law plant (law 2 from
     law 1's answer, ``F_vm`` = 0, on a chirp): least squares in logarithmic coordinates
     stayed there at 36 times the optimum's cost and passed its test.
+
+    Held by those trials, the test was decided by simulation (``GN_TRIED``), and the
+    linear Jacobian's parallel pairs are returned with it: there the floored parameter
+    has the slope that its logarithmic column lacks, so the refinement in the
+    combinations (:mod:`~tsid_fmu.search.local.combined`) can follow a valley off the
+    floor that a step along the Gauss-Newton direction does not find. Returns the test
+    and those pairs (None where the answer is not on a floor, or no Jacobian was made).
     """
     cost, x = problem.best
     floored = space.floored(x)
     if not floored:
-        return gate
+        return gate, None
     line, runs = space.anchored(x), 2 * (space.dim + 1) + MAX_TRIALS
     trial, s0 = _problem_at(line, x, cost, problem.evaluator, runs, fixed, problem.best_r)
+    pairs = None
     try:
         jac = trial.jac(s0)
         if trial.last is not None and np.isfinite(jac).all():
+            pairs = named_pairs(line, line.to_x(s0), jac)
             points = bounded_trials(jac, trial.last[1], s0, line.s_lower, line.s_upper,
                                     trial.gate(cost, floor))  # fmt: skip
             trial._residuals([line.to_x(t) for t in points])
@@ -151,10 +161,12 @@ def _floor_test(
     where = f"{', '.join(floored)} on the floor of its logarithmic coordinate"
     if gain <= problem.gate(cost, floor):
         said = f"{gate.detail}; {where}: a step in linear coordinates is no lower"
-        return Stationarity(True, gate.test, gate.gap, cost, said, gate.decided_by)
+        tried = pairs is not None  # its trials decided it
+        test, by = (GN_TRIED, "trial") if tried else (gate.test, gate.decided_by)
+        return Stationarity(True, test, gate.gap, cost, said, by), pairs
     problem.best, problem.best_r = trial.best, trial.best_r
     said = f"{where}, where it is flat: in linear coordinates, {LOWER_TRIED} {gain:.3g}"
-    return Stationarity(False, gate.test, gain, cost, said, "trial", gain)
+    return Stationarity(False, gate.test, gain, cost, said, "trial", gain), pairs
 
 
 def _keep_pairs(problem: _Problem, space: Space, extra: dict[str, Any]) -> None:
@@ -229,10 +241,14 @@ def refine_stage(
     if status == 0 and problem.spoiled and problem.doubtful(floor):
         status, message = _again_wider(problem, space, limit, extra, message)
     gate = problem.stationarity(floor, method.leveling.tolerance)
-    gate = _floor_test(space, problem, gate, fixed, floor, extra) if gate.holds else gate
+    floor_pairs = None
+    if gate.holds:
+        gate, floor_pairs = _floor_test(space, problem, gate, fixed, floor, extra)
     (cost, x), nfev = problem.best, evaluator.nfev - n0
     extra["stationarity"] = gate.to_dict()
     _keep_pairs(problem, space, extra)
+    if floor_pairs is not None and gate.by_trial:
+        extra["parallel"] = floor_pairs  # where the floored parameter has a slope
     if status == 0 and not gate.holds:
         status = 1
         message += f"; not shown to be an optimum: {gate.detail}"
