@@ -90,6 +90,7 @@ FREE = [
     _var("c", "Offset of the level sensor", "V"), _var("ramp.height", "Height of ramps"),
     _var("T_start", "Start value of temperature", "K"), _var("systemGain"),
     _var("plant.period", "Period of the pendulum's swing"),
+    _var("mgl", "Gravity torque at 90 degrees (m g l)", "N.m"),
 ]  # fmt: skip
 """A plant's parameters, which ``init`` must leave free."""
 

@@ -159,7 +159,9 @@ def environment_constant(v: VariableInfo) -> str | None:
     - the description says medium, ambient, environment, gravity, reference
       temperature, temperature coefficient or device temperature, unless it also names
       the plant's geometry or a transfer (between, wall, heat transfer, conductance,
-      volume, area, length, diameter, radius, height, centre of gravity).
+      volume, area, length, diameter, radius, height, centre of gravity); gravity only
+      with the unit of an acceleration, or none: a pendulum's "Gravity torque at 90
+      degrees (m g l)" in N.m is the plant's.
     """
     parts = [re.sub(r"\[[^\]]*\]|\d+$", "", p).lower() for p in v.name.split(".")[:-1]]
     hit = next((p for p in parts if p in _WORLD_PARTS), None)
@@ -174,9 +176,11 @@ def environment_constant(v: VariableInfo) -> str | None:
         return f"g in {v.unit}: gravity"
     text = v.description or ""
     found = _WORLD_TEXT.search(text)
-    if found is not None and not _PLANT_TEXT.search(text):
-        return f"its description says {found.group(0)!r}"
-    return None
+    if found is None or _PLANT_TEXT.search(text):
+        return None
+    if found.group(0).lower().startswith("gravit") and unit and unit not in _GRAVITY_UNITS:
+        return None  # a quantity gravity acts through ("gravity torque m g l", N.m)
+    return f"its description says {found.group(0)!r}"
 
 
 _SOURCE_TIME_WORDS = frozenset({"starttime", "duration", "period", "offset"})

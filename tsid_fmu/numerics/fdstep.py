@@ -54,6 +54,11 @@ POINTS = 4
 _CACHE: weakref.WeakKeyDictionary[Any, float] = weakref.WeakKeyDictionary()
 
 
+OVERFLOW = 1e150
+"""Residuals above this are scaled before their differences are squared (their squares
+would overflow past about 1e154)."""
+
+
 def solver_noise(
     residuals: Callable[[list[np.ndarray]], list[np.ndarray]],
     s: np.ndarray,
@@ -87,10 +92,13 @@ def solver_noise(
     table = np.array([r0, *residuals([s + k * step * p for k in range(1, POINTS + 1)])])
     if not np.all(np.isfinite(table)):
         return 0.0
-    # the estimates scale with the residuals: taken of the table scaled to at most 1,
-    # residuals past 1e154 neither overflow in the differences nor in their squares
-    peak = float(np.max(np.abs(table))) or 1.0
-    table = table / peak
+    # the estimates scale with the residuals: residuals past 1e150 are scaled to at
+    # most 1, so that neither their differences nor their squares overflow; below, the
+    # table is taken as it is (a scaling changes the estimate in its last digits, and
+    # with it the difference steps and where a refinement's trust region ends)
+    peak = float(np.max(np.abs(table)))
+    peak = peak if peak > OVERFLOW else 1.0
+    table = table / peak if peak != 1.0 else table
     estimates = []
     for k in range(1, POINTS + 1):
         table = np.diff(table, axis=0)
