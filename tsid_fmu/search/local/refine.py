@@ -183,6 +183,30 @@ def _keep_pairs(problem: _Problem, space: Space, extra: dict[str, Any]) -> None:
         extra["parallel"] = named_pairs(space, space.to_x(s_lin), jac)
 
 
+def _tested(
+    space: Space,
+    problem: _Problem,
+    fixed: Mapping[str, float] | None,
+    floor: float,
+    tolerance: float,
+    extra: dict[str, Any],
+) -> Stationarity:
+    """Run the stationarity test at the answer and keep it in ``extra``.
+
+    On a log floor the test is made again in linear coordinates (:func:`_floor_test`);
+    the parallel pairs the combination step reads are kept with it (:func:`_keep_pairs`).
+    """
+    gate = problem.stationarity(floor, tolerance)
+    floor_pairs = None
+    if gate.holds:
+        gate, floor_pairs = _floor_test(space, problem, gate, fixed, floor, extra)
+    extra["stationarity"] = gate.to_dict()
+    _keep_pairs(problem, space, extra)
+    if floor_pairs is not None and gate.by_trial:
+        extra["parallel"] = floor_pairs  # where the floored parameter has a slope
+    return gate
+
+
 def refine_stage(
     name: str,
     space: Space,
@@ -240,15 +264,8 @@ def refine_stage(
     status, message = _solve(problem, s0, space, limit, extra)
     if status == 0 and problem.spoiled and problem.doubtful(floor):
         status, message = _again_wider(problem, space, limit, extra, message)
-    gate = problem.stationarity(floor, method.leveling.tolerance)
-    floor_pairs = None
-    if gate.holds:
-        gate, floor_pairs = _floor_test(space, problem, gate, fixed, floor, extra)
+    gate = _tested(space, problem, fixed, floor, method.leveling.tolerance, extra)
     (cost, x), nfev = problem.best, evaluator.nfev - n0
-    extra["stationarity"] = gate.to_dict()
-    _keep_pairs(problem, space, extra)
-    if floor_pairs is not None and gate.by_trial:
-        extra["parallel"] = floor_pairs  # where the floored parameter has a slope
     if status == 0 and not gate.holds:
         status = 1
         message += f"; not shown to be an optimum: {gate.detail}"
