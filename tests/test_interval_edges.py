@@ -52,7 +52,8 @@ def _case(columns: np.ndarray, residuals: np.ndarray | None = None):
 def test_a_fisher_matrix_below_one_is_inverted_as_it_is():
     """Small sensitivities: every eigenvalue of F below 1. The standard errors (the
     floor: ``sqrt(diag(F^-1))``), the condition number and the combinations' errors
-    (``sqrt(v^T C v)`` along each eigenvector) come from F itself."""
+    (along each eigenvector ``v``, the larger of ``v^T H v`` of the HAC covariance and
+    its own bound ``v^T F^-1 v = 1 / lambda``) come from F itself."""
     n = 200
     t = np.linspace(0.0, 1.0, n)
     cols = 0.005 * np.column_stack([1.0 + t, 1.0 - 0.5 * t])
@@ -60,15 +61,17 @@ def test_a_fisher_matrix_below_one_is_inverted_as_it_is():
     u = uncertainty(sens, space, x)
     fisher = cols.T @ cols
     values, vectors = np.linalg.eigh(fisher)
-    cov = u.cov
     assert values.max() < 0.05
     assert u.values == x
     se = np.sqrt(np.diag(np.linalg.inv(fisher)))
     assert [u.std_error[k] for k in x] == pytest.approx(2 * se, rel=1e-9)
     assert u.condition == pytest.approx(values.max() / values.min(), rel=1e-9)
+    hac, crb = u.bounds_of
+    assert crb == pytest.approx(np.linalg.inv(fisher), rel=1e-9)
     for combo, k in zip(u.combinations, np.argsort(values)[::-1], strict=True):
         v = vectors[:, k]
-        assert combo["std_error"] == pytest.approx(math.sqrt(v @ cov @ v), rel=1e-9)
+        own = max(float(v @ hac @ v), 1.0 / values[k])
+        assert combo["std_error"] == pytest.approx(math.sqrt(own), rel=1e-9)
         assert combo["determined"] is (combo["std_error"] < 0.5)
 
 
@@ -484,7 +487,7 @@ def test_a_seen_combination_touching_a_parameter_with_an_unseen_part_is_finite()
     """Columns g, h, h (k1 and k2 seen only through their sum) plus a little of k1 in
     k0's column: the seen eigenvectors touch k1 and k2, whose own variances are infinite.
     Each seen eigenvector is orthogonal to the unseen (0, 1, -1), so its standard error
-    is finite, ``sqrt(v^T C v)`` over the seen directions. OpenModelica's Mass_Damper:
+    is finite, over the seen directions. OpenModelica's Mass_Damper:
     the common scale of m, c and d touched an offset by 0.02, was called infinite on
     that ground, never probed, and m, c, d kept finite intervals that excluded the truth."""
     t = np.linspace(0.0, 1.0, 40)
@@ -496,7 +499,9 @@ def test_a_seen_combination_touching_a_parameter_with_an_unseen_part_is_finite()
     for c in seen:
         v = np.asarray(c["direction"])
         assert abs(v[1]) > 1e-3 and math.isfinite(c["std_error"])
-        assert c["std_error"] == pytest.approx(math.sqrt(v @ u.seen_cov @ v), rel=1e-12)
+        hac, crb = u.bounds_of  # over the seen directions: its own HAC variance or bound
+        own = max(float(v @ hac @ v), float(v @ crb @ v))
+        assert c["std_error"] == pytest.approx(math.sqrt(own), rel=1e-12)
     (unseen,) = [c for c in u.combinations if not c["determined"]]
     assert unseen["std_error"] == math.inf
     # any combination: infinite where it reaches the unseen direction, else finite

@@ -87,3 +87,34 @@ def test_intervals_are_calibrated_on_five_noise_seeds_with_coloured_noise(lag_fm
             total += 1
         assert res.uncertainty.inflation > 1.5  # the HAC covariance saw the correlation
     assert inside >= 0.9 * total, (inside, total)
+
+
+def test_a_weak_difference_does_not_spread_onto_a_determined_sum():
+    """Issue 65, item 2: the Cramer-Rao floor of each parameter's variance is its own.
+
+    Two parameters whose difference the outputs barely see (a singular value 1e-3 of
+    the sum's): each parameter's variance is that of the difference, and its floor at the
+    Cramer-Rao bound, added on the diagonal, reached every combination of the two. With
+    negatively correlated residuals (HAC below the bound) the sum, fixed to 0.03, was
+    called "not determined" at +/-42."""
+    from tsid_fmu.doe.options import LevelingOptions
+    from tsid_fmu.search.space import Space
+    from tsid_fmu.uncertainty.intervals import uncertainty
+    from tsid_fmu.uncertainty.sensitivity import Sensitivities
+
+    n = 2000
+    t = np.linspace(0.0, 20.0, n)
+    f, g = np.sin(t), np.cos(7 * t)
+    jac = np.stack([f, f + 1e-3 * g], axis=-1)[:, None, :]
+    e = np.random.default_rng(0).normal(0.0, 1.0, n + 1)
+    r = (e[1:] - 0.9 * e[:-1])[:, None]  # long-run variance below the variance
+    sens = Sensitivities(["a", "b"], [r], [jac], ["e"], [["y"]])
+    free = (-np.inf, np.inf)
+    space = Space({"a": [-1, 1], "b": [-1, 1]}, {"a": free, "b": free},
+                  LevelingOptions(scale="linear"))  # fmt: skip
+    u = uncertainty(sens, space, {"a": 0.0, "b": 0.0})
+    total, difference = u.combinations
+    assert set(total["terms"]) == {"a", "b"} and total["terms"]["a"] * total["terms"]["b"] > 0
+    assert total["determined"] and total["std_error"] < 0.1
+    assert not difference["determined"]
+    assert u.std_error["a"] > 50  # each parameter alone stays as undetermined as before

@@ -137,6 +137,9 @@ class Uncertainty:
         do not depend on has an infinite variance (:data:`UNSEEN`).
     seen_cov : numpy.ndarray or None
         The same over the directions the outputs depend on, finite.
+    bounds_of : tuple of numpy.ndarray or None
+        The HAC covariance and the Cramer-Rao bound over those directions, each
+        combination's variance being the larger of its two (:meth:`variance`).
     unseen : numpy.ndarray or None
         ``(p, m)`` orthonormal basis of the directions the outputs do not depend on.
     """
@@ -165,13 +168,20 @@ class Uncertainty:
     cov: np.ndarray | None = field(default=None, repr=False)
     seen_cov: np.ndarray | None = field(default=None, repr=False)
     unseen: np.ndarray | None = field(default=None, repr=False)
+    bounds_of: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     def variance(self, g: np.ndarray) -> float:
         """Variance of the combination ``g @ s`` of the search coordinates ``s``.
 
         Infinite where ``g`` reaches a direction the outputs do not depend on (by more
-        than a thousandth of its length), else from :attr:`seen_cov`. NaN without a
-        covariance.
+        than a thousandth of its length), else the larger of its HAC variance and its
+        Cramer-Rao bound (:attr:`bounds_of`; :attr:`seen_cov` without them). NaN without
+        a covariance.
+
+        The bound is the combination's own: the parameters' covariance floors each
+        diagonal entry at its bound, and a parameter in a weak direction has a large one,
+        which ``g @ seen_cov @ g`` would add to every combination of it, however well
+        determined (the sum of two parameters whose difference is weak).
         """
         if self.cov is None:
             return math.nan
@@ -180,6 +190,9 @@ class Uncertainty:
             reach = float(np.sum((self.unseen.T @ g) ** 2))
             if reach > 1e-6 * float(g @ g):
                 return math.inf
+        if self.bounds_of is not None:  # g's own HAC variance, at least its own bound
+            hac, crb = self.bounds_of
+            return max(float(g @ hac @ g), float(g @ crb @ g), 0.0)
         seen = self.seen_cov
         if seen is None:
             seen = np.where(np.isfinite(self.cov), self.cov, 0.0)
@@ -277,6 +290,7 @@ def _covariances(
         nu = np.where(found.variance > 0, 2 * np.diag(hac) ** 2 / found.variance, white)
     dof = np.clip(np.where(floored | ~np.isfinite(nu), white, nu), 1.0, white)
     out.seen_cov, out.unseen = cov, vectors[:, ~keep]
+    out.bounds_of = (hac, crb)
     if not keep.all():  # directions the data do not see at all: infinite variance
         unseen = (vectors[:, ~keep] ** 2).sum(axis=1) > 1e-6
         cov = cov + np.diag(np.where(unseen, np.inf, 0.0))
