@@ -44,7 +44,7 @@ from tsid_fmu.study.definition import Study
 from tsid_fmu.study.unitcheck import check_units
 from tsid_fmu.study.units import fmu_units, study_units
 from tsid_fmu.trail.folder import NullStore, Trail
-from tsid_fmu.uncertainty.assess import assess, validate
+from tsid_fmu.uncertainty.assess import answer_space, assess, validate
 from tsid_fmu.uncertainty.bounds import bound_warnings, on_bounds, unshown_warnings
 from tsid_fmu.uncertainty.fidelity import (
     Fidelity,
@@ -242,10 +242,11 @@ def _finish(
     exps = study.identify_names()
     spec = evaluators.spec(study.parameter_names, exps, {})
     ev = evaluators.get(study.parameter_names, exps, {})
-    # in log10 where positive: relative precision, products and ratios as combinations
-    log = dataclasses.replace(study.method.leveling, scale="log")
-    space = Space(study.first_levels(), study.bounds(), log)
-    found = assess(ev, spec, space, x, study_noise(study))
+    found = assess(
+        ev, spec, answer_space(study.first_levels(), study.bounds(), study.method.leveling), x,
+        study_noise(study),
+    )  # fmt: skip
+    space = found.space
     for key in ("fun", "fit", "noise", "noise_source"):  # the noise the cost uses, and whence
         setattr(result, key, getattr(found, key))
     result.uncertainty = found.uncertainty

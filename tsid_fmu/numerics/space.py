@@ -130,6 +130,54 @@ class Space:
             return max(abs(float(value)), smallest) * math.log(10.0) * float(self.width[j])
         return float(self.width[j])
 
+    def rate(self, j: int, value: float) -> float:
+        """Change of parameter ``j``'s value per unit of its coordinate, at ``value``.
+
+        The derivative itself: for a log parameter ``value ln 10`` times its width in
+        decades, which is 0 at 0 (compare :meth:`local_scale`, which keeps a usable scale).
+        """
+        if self.log[j]:
+            return max(float(value), 0.0) * math.log(10.0) * float(self.width[j])
+        return float(self.width[j])
+
+    def near(self, x: Mapping[str, float]) -> Space:
+        """Return this space with the log coordinates degenerate at ``x`` made linear.
+
+        Below its smallest first level a log coordinate is stretched: a unit step moves
+        the value by a fraction of the value itself, nothing at all at 0, so differences
+        and steps there see no effect of an offset the data fix well. Each such parameter
+        gets the linear coordinate ``(value - x_j) / local_scale`` (its scale at the
+        smallest first level, :meth:`local_scale`); the others keep theirs. Near ``x`` a
+        unit step then means what it means at the first levels, for every parameter.
+        """
+        j_of = [
+            j
+            for j, n in enumerate(self.names)
+            if self.log[j] and float(x[n]) < 10.0 ** (self.origin[j] - 0.5 * self.width[j])
+        ]
+        out = object.__new__(Space)
+        out.names, out.bounds = self.names, self.bounds
+        out.log, out.origin, out.width = self.log.copy(), self.origin.copy(), self.width.copy()
+        out.s_lower, out.s_upper = self.s_lower.copy(), self.s_upper.copy()
+        for j in j_of:
+            value, (low, high) = float(x[self.names[j]]), self.bounds[self.names[j]]
+            out.log[j], out.origin[j] = False, value
+            out.width[j] = max(self.local_scale(j, value), 1e-300)
+            out.s_lower[j] = (low - value) / out.width[j]
+            out.s_upper[j] = (high - value) / out.width[j]
+        return out
+
+    def carry(self, d: np.ndarray, x: Mapping[str, float], other: Space) -> np.ndarray:
+        """Return direction ``d`` in this space's coordinates at ``x`` in ``other``'s.
+
+        The same change of the parameters to first order: each component scaled by the
+        ratio of the two spaces' :meth:`rate` at ``x``.
+        """
+        ratio = [
+            self.rate(j, x[n]) / max(other.rate(j, x[n]), 1e-300) for j, n in enumerate(self.names)
+        ]
+        return np.asarray(d, dtype=float) * np.array(ratio)
+
     def floored(self, x: Mapping[str, float]) -> list[str]:
         """Return the log parameters that ``x`` puts on their floor (0, or near it).
 

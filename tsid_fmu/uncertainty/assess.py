@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -22,7 +23,27 @@ from tsid_fmu.uncertainty.probe import probe_combinations
 from tsid_fmu.uncertainty.profile import ProfileProblem, profile_intervals
 from tsid_fmu.uncertainty.sensitivity import Sensitivities, residual_jacobian, sensitivities
 
-__all__ = ["MISMATCH", "NOISE_SOURCES", "Assessment", "assess", "standard_errors", "validate"]
+__all__ = [
+    "MISMATCH",
+    "NOISE_SOURCES",
+    "Assessment",
+    "answer_space",
+    "assess",
+    "standard_errors",
+    "validate",
+]
+
+
+def answer_space(
+    levels: Mapping[str, Any], bounds: Mapping[str, tuple[float, float]], leveling: LevelingOptions
+) -> Space:
+    """Return the coordinates an answer is assessed in: ``log10`` where levels are positive.
+
+    Relative precision, and products and ratios as combinations; :func:`assess` makes
+    them linear where they are degenerate at the answer (:meth:`Space.near`).
+    """
+    return Space(levels, bounds, dataclasses.replace(leveling, scale="log"))
+
 
 MISMATCH = 1.5
 """Residual RMS above this many times an output's noise estimate is reported as model
@@ -42,6 +63,9 @@ class Assessment:
     warnings: list[str] = field(default_factory=list)
     nfev: int = 0
     sensitivities: Sensitivities | None = None
+    space: Space | None = None
+    """The coordinates of ``sensitivities`` and of the uncertainty's covariance and
+    combinations: the space :func:`assess` was given, :meth:`~Space.near` the answer."""
 
 
 NOISE_SOURCES = {"study": "stated in the study", "data": "estimated from the data"}
@@ -111,6 +135,9 @@ def assess(
     fit, warnings = _fit(spec, sims, noise)
     out = Assessment(fun, fit, noise, source, sims, warnings=warnings)
     varied = {n: float(x[n]) for n in space.names}
+    # a log coordinate below its smallest first level is degenerate (an offset at 0 has
+    # no effect in it): linear there, every derivative and interval below means its value
+    space = out.space = space.near(varied)
     sens = sensitivities(evaluator, spec, space, varied) if math.isfinite(fun) else None
     if sens is not None:
         out.uncertainty = uncertainty(sens, space, varied)
