@@ -304,6 +304,74 @@ def test_the_first_levels_of_an_answer_near_zero_span_its_interval():
         [0.005, 0.007, 0.01, 0.014, 0.02])  # fmt: skip
 
 
+# finding 14: a log parameter at its bound 0, an offset the data fix
+
+
+@pytest.fixture(scope="module")
+def offset(tmp_path_factory):
+    """A slow lag (tau 20 s over 5 s: x0 acts as an offset) whose x0 is 0, at its bound 0.
+
+    x0's first levels are positive and span decades, so the search and the assessment
+    take it in log10, where 0 has no coordinate and a step near it moves nothing.
+    """
+    from fmu_factory import lag_data
+
+    from tsid_fmu import Experiment, Parameter, Study
+
+    tmp = tmp_path_factory.mktemp("offset")
+    fmu, data = lag_data(tmp, 20.0, 0.0)
+    study = Study(
+        fmu=fmu,
+        parameters=[
+            Parameter("tau", [2.0, 20.0, 200.0], min=0.0, unit="s"),
+            Parameter("x0", [0.01, 0.1, 1.0], min=0.0),
+        ],
+        experiments=[Experiment(data=data, inputs={"u": "u"}, outputs={"y": "y_meas"})],
+    )
+    return identify(study, tmp / "out", plots=False, workers=1, timeout=0)
+
+
+def test_an_offset_at_its_bound_0_gets_the_interval_the_data_give(offset):
+    """Its sensitivity is taken in its value, not in a log coordinate that is flat at 0:
+    the noise (1 % of y's spread, about 5e-4 over 501 samples) fixes it to about 5e-5.
+    In log10 the upper end came out 0.0028, fifty times wider."""
+    assert offset.status == 0 and offset.params["x0"] < 1e-3
+    low, high = offset.intervals["x0"]
+    assert low is None or low <= 0.0  # open at the bound: the truth, 0, is in it
+    assert high is not None and 1e-5 < high < 3e-4
+
+
+def test_an_offset_at_its_bound_0_is_not_called_structural(offset):
+    """The design steps near 0 in the offset's value, and away from the bound: in log10
+    a quarter of a first range from 0 moved it by 2e-5, and a step into the bound moved
+    nothing, so no input seemed to separate it ("fix x0 (a datasheet ...)")."""
+    found = design(offset, DesignOptions(**OPTIONS))
+    assert found.structural == []
+    assert found.proposal is not None
+    before, after = offset.intervals["x0"][1], found.after[found.names.index("x0")][1]
+    assert after is not None and after <= 1.05 * before  # the added test does not widen it
+
+
+def test_near_makes_only_degenerate_log_coordinates_linear():
+    from tsid_fmu.doe.options import LevelingOptions
+    from tsid_fmu.search.space import Space
+
+    levels = {"a": [0.01, 0.1, 1.0], "b": [1.0, 10.0, 100.0], "c": [-1.0, 1.0]}
+    bounds = {"a": (0.0, 10.0), "b": (0.0, np.inf), "c": (-5.0, 5.0)}
+    space = Space(levels, bounds, LevelingOptions())
+    x = {"a": 0.0, "b": 20.0, "c": 0.5}
+    near = space.near(x)
+    assert list(space.log) == [True, True, False] and list(near.log) == [False, True, False]
+    assert near.to_s(x)[0] == 0.0 and near.s_lower[0] == 0.0
+    # a unit step in a means what it means at its smallest first level, 0.01
+    assert near.to_x(np.array([1.0, near.to_s(x)[1], near.to_s(x)[2]]))["a"] == pytest.approx(
+        space.local_scale(0, 0.01))  # fmt: skip
+    assert np.array_equal(near.to_s(x)[1:], space.to_s(x)[1:])
+    # a direction carried between them means the same change of the parameters
+    d = np.array([0.0, 1.0, 1.0])
+    assert np.allclose(space.carry(d, x, near), d)
+
+
 # finding 19: a failed simulation's reason
 
 

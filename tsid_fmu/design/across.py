@@ -50,14 +50,72 @@ def _roughness(coefficients: np.ndarray) -> float:
     return float(np.sum(np.abs(2 * coefficients - np.round(2 * coefficients))))
 
 
+SIMPLE = 0.02
+"""How near a whole or half number a coefficient may lie to be written as one."""
+POWERS = (-2, -1, 0, 1, 2)
+"""The exponents a named monomial may have (``J L Kt^-1``)."""
+MONOMIAL_MEMBERS = 6
+"""Members of a subspace up to which every monomial of :data:`POWERS` is tried (5^6)."""
+
+
 def _simple(a: float) -> float:
-    """Return ``a`` rounded to a whole or half number where it lies within 2 %."""
+    """Return ``a`` rounded to a whole or half number where it lies within :data:`SIMPLE`."""
     k = round(2 * a) / 2
-    return k if k != 0 and abs(a - k) < 0.02 * max(abs(a), 1.0) else a
+    return k if k != 0 and abs(a - k) < SIMPLE * max(abs(a), 1.0) else a
 
 
-def _named(space: Space, idx: list[int], g: np.ndarray, x: dict) -> tuple[str, Any, np.ndarray]:
-    """Return the name, the value function and its coefficients of combination ``g``."""
+def _monomials(
+    space: Space, idx: list[int], basis: np.ndarray, cov: np.ndarray, reach: float, most: int
+) -> list[np.ndarray]:
+    """Return up to ``most`` independent monomials of the members that the subspace fixes.
+
+    A product of the members' powers (:data:`POWERS`) has the direction ``c`` in the
+    search coordinates (``e_j`` times the width of ``lg x_j``). The subspace fixes it
+    when ``reach`` along the subspace (the distance the design followed it) changes it
+    by less than the data determine it: ``reach |basis^T c| <= sqrt(c^T cov c)``. Where
+    one exists it is a global invariant and the simplest name (a DC motor measured by
+    its speed: ``J L Kt^-1``, its transfer function's leading coefficient, lies across
+    the subspace to 1e-5 of its length; the nearest others, ``R^2 J b``, to 0.015,
+    which moves them a hundred times their standard error). The simplest are taken first
+    (fewest members, then smallest powers). Returned as exponent vectors over ``idx``;
+    none unless every member is a log coordinate.
+    """
+    if not all(space.log[j] for j in idx) or len(idx) > MONOMIAL_MEMBERS or most <= 0:
+        return []
+    finite = np.where(np.isfinite(cov), cov, 0.0)[np.ix_(idx, idx)]
+    width, near = space.width[idx], basis[idx]
+    grid = np.array(np.meshgrid(*[POWERS] * len(idx), indexing="ij")).reshape(len(idx), -1).T
+    grid = grid[np.any(grid != 0, axis=1)]
+    order = np.count_nonzero(grid, axis=1) * 100 + np.abs(grid).sum(axis=1)
+    found: list[np.ndarray] = []
+    for e in grid[np.argsort(order, kind="stable")]:
+        if e[np.flatnonzero(e)[0]] < 0:  # one sign of each: x y^-1, not x^-1 y
+            continue
+        c = e * width
+        if reach * np.linalg.norm(near.T @ c) > np.sqrt(max(float(c @ finite @ c), 0.0)):
+            continue
+        if np.linalg.matrix_rank(np.array([*found, e])) > len(found):
+            found.append(e.astype(float))
+            if len(found) == most:
+                break
+    return found
+
+
+def _product(names: list[str], coef: np.ndarray) -> tuple[str, Any]:
+    """Name and value function of the product of ``names`` to the powers ``coef``."""
+    name = " ".join(
+        f"{n}" + ("" if c == 1 else f"^{c:g}") for n, c in zip(names, coef, strict=True) if c
+    )
+    return name, (lambda v: float(np.prod(v**coef)))
+
+
+def _named(
+    space: Space, idx: list[int], g: np.ndarray, x: dict
+) -> tuple[str, Any, np.ndarray, str]:
+    """Return the name, value function, coefficients and form of combination ``g``.
+
+    The form is ``"product"`` (coefficients: powers) or ``"sum"`` (weights).
+    """
     names = [space.names[j] for j in idx]
     values = np.array([x[n] for n in names], dtype=float)
     log = all(space.log[j] for j in idx)
@@ -69,20 +127,18 @@ def _named(space: Space, idx: list[int], g: np.ndarray, x: dict) -> tuple[str, A
     elif not any(space.log[j] for j in idx):
         forms.append(("sum", g / g[np.argmax(np.abs(g))]))
     if not forms:
-        return "", None, g
+        return "", None, g, ""
     kind, coef = min(forms, key=lambda f: _roughness(f[1]))
     coef = np.array([_simple(float(c)) for c in coef])
     if kind == "product":
-        name = " ".join(
-            f"{n}" + ("" if c == 1 else f"^{c:g}") for n, c in zip(names, coef, strict=True) if c
-        )
-        return name, (lambda v: float(np.prod(v**coef))), coef
+        name, value = _product(names, coef)
+        return name, value, coef, kind
     name = " ".join(
         f"{'+' if c > 0 else '-'} {'' if abs(c) == 1 else f'{abs(c):g} '}{n}"
         for n, c in zip(names, coef, strict=True)
         if c
     ).lstrip("+ ")
-    return name, (lambda v: float(np.dot(coef, v))), coef
+    return name, (lambda v: float(np.dot(coef, v))), coef, kind
 
 
 def _interval(space: Space, idx: list[int], value: Any, x: dict, cov: np.ndarray) -> list:
@@ -102,12 +158,15 @@ def _interval(space: Space, idx: list[int], value: Any, x: dict, cov: np.ndarray
 
 
 def combinations_across(
-    space: Space, x: dict, basis: np.ndarray, cov: np.ndarray
+    space: Space, x: dict, basis: np.ndarray, cov: np.ndarray, reach: float = 0.25
 ) -> tuple[list[str], list[dict[str, Any]]]:
     """Return the members of a structural subspace and the combinations the data fix.
 
     ``basis`` holds the subspace's orthonormal directions as columns (search
-    coordinates); ``cov`` is the covariance of the determined directions.
+    coordinates); ``cov`` is the covariance of the determined directions; ``reach`` how
+    far along the subspace the design found the outputs unmoved (search units). Several
+    directions: the simplest monomials the subspace fixes first (:func:`_monomials`),
+    then the rest in reduced row-echelon form.
     """
     weight = np.sqrt((basis**2).sum(axis=1))
     idx = [j for j in range(space.dim) if weight[j] >= MEMBER]
@@ -121,14 +180,35 @@ def combinations_across(
     across = inside - basis @ (basis.T @ inside)
     u, s, _ = np.linalg.svd(across, full_matrices=False)
     keep = u[:, s > 0.5]  # a member's axis is a unit vector: what lies across has norm ~1
-    rows = _rref((keep.T)[:, idx]) if keep.size else np.zeros((0, len(idx)))
+    names = [space.names[j] for j in idx]
+    base = np.array([x[n] for n in names], dtype=float)
     out = []
+    most = keep.shape[1] if np.all(base > 0) else 0
+    monomials = _monomials(space, idx, basis, cov, reach, most)
+    for e in monomials:
+        name, value = _product(names, e)
+        out.append({"name": name, "value": value(base),
+                    "interval": _interval(space, idx, value, x, cov), "form": "product",
+                    "coefficients": _coefficients(names, e)})  # fmt: skip
+    if monomials:  # the rest: what lies across the monomials too
+        taken = np.zeros((space.dim, len(monomials)))
+        taken[idx] = np.array([e * space.width[idx] for e in monomials]).T
+        q = np.linalg.qr(taken)[0]
+        rest = keep - q @ (q.T @ keep)
+        u, s, _ = np.linalg.svd(rest, full_matrices=False)
+        keep = u[:, s > 0.5] if rest.size else rest
+    rows = _rref((keep.T)[:, idx]) if keep.size else np.zeros((0, len(idx)))
     for r in rows:
         g = r / space.width[idx]  # coefficients on the working values (lg x or x)
-        name, value, _ = _named(space, idx, g, x)
+        name, value, coef, form = _named(space, idx, g, x)
         if not name:
             continue
-        base = np.array([x[space.names[j]] for j in idx], dtype=float)
         out.append({"name": name, "value": value(base),
-                    "interval": _interval(space, idx, value, x, cov)})  # fmt: skip
+                    "interval": _interval(space, idx, value, x, cov), "form": form,
+                    "coefficients": _coefficients(names, coef)})  # fmt: skip
     return members, out
+
+
+def _coefficients(names: list[str], coef: np.ndarray) -> dict[str, float]:
+    """Return the powers (a product) or weights (a sum) of a combination, by parameter."""
+    return {n: float(c) for n, c in zip(names, coef, strict=True) if c}

@@ -119,6 +119,7 @@ def plot_design(d: Design, path: Path) -> Path:
         axes[1].legend(fontsize=8)
     ax = axes[-1]
     y = np.arange(len(d.names))
+    labelled: set[str] = set()  # each kind once in the legend, at its first closed interval
     for j, n in enumerate(d.names):
         value = abs(d.values[n]) or 1.0
         for iv, colour, dy, label in (
@@ -128,14 +129,16 @@ def plot_design(d: Design, path: Path) -> Path:
             w = width(iv)
             if math.isfinite(w):
                 ax.plot([iv[0] / value, iv[1] / value], [y[j] + dy] * 2, color=colour, lw=3,  # type: ignore[index]
-                        label=label if j == 0 else None)  # fmt: skip
+                        label=None if label in labelled else label)  # fmt: skip
+                labelled.add(label)
             elif iv is not None:
                 ax.text(1.0, y[j] + dy, "open", color=colour, fontsize=8, va="center")
     ax.axvline(1.0, color="0.8", lw=0.8)
     ax.set_yticks(y, d.names)
     ax.set_xlabel("95 % interval / value")
     ax.set_title("intervals")
-    ax.legend(fontsize=8, loc="lower right")
+    if labelled:  # every interval open: nothing to name
+        ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

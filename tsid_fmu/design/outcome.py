@@ -37,15 +37,21 @@ class Structural:
     fixed : list of dict
         The combinations across it that the data fix (``{"name": "C R1", "value",
         "interval"}``), predicted with the proposed experiment where there is one.
+    tried : str or None
+        The best candidate, where its own prediction left the members open (the design
+        then proposes nothing); ``None`` for a subspace that no candidate moved.
     """
 
     members: list[str]
     terms: list[dict[str, float]]
     fixed: list[dict[str, Any]] = field(default_factory=list)
+    tried: str | None = None
 
     def advice(self) -> str:
         """Say what would fix the rest: known values or another measurement."""
         names = ", ".join(self.members)
+        if self.tried is not None:
+            names += f" (the best, {self.tried}, is predicted to leave them open)"
         k = len(self.terms)
         which = (
             "one of them at a known value"
@@ -170,9 +176,11 @@ class Design:
     def verdict(self) -> str:
         """One line: what the design proposes, or why nothing."""
         if self.proposal is None:
-            return "no experiment of this kind helps: " + "; ".join(
-                s.advice() for s in self.structural
-            )
+            advice = "; ".join(s.advice() for s in self.structural)
+            if self.separating is not None:  # the headline says what the section proposes
+                line = f"run {self.separating.name}: it tells the structures apart best"
+                return line + (f"; for the parameters, {advice}" if advice else "")
+            return "no experiment of this kind helps" + (f": {advice}" if advice else "")
         what = "what the study left weak" if self.weak else "every parameter"
         line = f"run {self.proposal.name}: it determines {what} best ({self.criterion}-optimal)"
         if self.separating is not None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,7 +34,7 @@ from tsid_fmu.study.schema import Experiment
 from tsid_fmu.study.toml import read_design
 from tsid_fmu.uncertainty.fidelity import chosen_interface
 
-__all__ = ["Plan", "candidate_spec", "make_plan"]
+__all__ = ["Plan", "at_bounds", "candidate_spec", "make_plan", "unused"]
 
 
 @dataclass
@@ -45,6 +45,8 @@ class Plan:
     options: DesignOptions
     spec: EvaluationSpec
     space: Space
+    """The search coordinates near the answer (:meth:`~tsid_fmu.search.space.Space.near`:
+    a log parameter below its smallest first level, an offset at 0, is linear there)."""
     x: dict[str, float]
     template: PreparedExperiment
     source: Experiment
@@ -57,6 +59,8 @@ class Plan:
     sigma: np.ndarray
     follow: dict[str, list[float]]
     """First levels of the study the prediction is for (:func:`follow_up_levels`)."""
+    levels: dict[str, list[float]]
+    """The study's first levels of the parameters the answer has (:func:`unused`)."""
 
 
 def _options(result: Any, options: DesignOptions | None) -> DesignOptions:
@@ -66,13 +70,35 @@ def _options(result: Any, options: DesignOptions | None) -> DesignOptions:
     return read_design(source) if source is not None else DesignOptions()
 
 
-def _same_parameters(result: Any, study: Study) -> None:
-    """Refuse a result that lacks some of the study's parameters (another study's result)."""
+def unused(result: Any, study: Study) -> list[str]:
+    """Return the study's Real parameters that the result's chosen structure does not use.
+
+    A structure in which a parameter has no effect (a Stribeck velocity under Coulomb
+    friction) gives it no value (:mod:`tsid_fmu.structure`): the design leaves it out,
+    as the answer does. Only a result that chose a structure has such parameters; a
+    parameter missing from any other result is another study's (:func:`_same_parameters`).
+    """
+    structure = (getattr(result, "extra", None) or {}).get("structure")
+    params = getattr(result, "params", None)
+    if not study.choice_names or not isinstance(structure, Mapping):
+        return []
+    if not isinstance(params, Mapping):
+        return []
+    if any(n not in params for n in study.choice_names):
+        return []
+    return [n for n in study.first_levels() if n not in params]
+
+
+def _same_parameters(result: Any, study: Study, left: Sequence[str] = ()) -> None:
+    """Refuse a result that lacks some of the study's parameters (another study's result).
+
+    ``left`` are those the chosen structure does not use (:func:`unused`).
+    """
     params = getattr(result, "params", None)
     if not isinstance(params, Mapping):
         raise TypeError("design: result must be an identification result (tsid_fmu.load)")
     have = [str(n) for n in params]
-    want = [*study.first_levels(), *study.choice_names]
+    want = [*(n for n in study.first_levels() if n not in left), *study.choice_names]
     missing = [n for n in want if n not in have]
     if missing:
         extra = [n for n in have if n not in want]
@@ -258,19 +284,38 @@ def follow_up_levels(
     intervals = intervals or {}
     out = {}
     for name, own in study.first_levels().items():
+        if name not in x:  # not used by the chosen structure (unused)
+            continue
         low, high = bounds[name]
         value = x[name]
         factors = [value * f for f in FOLLOW_UP]
-        iv = intervals.get(name)
+        iv = at_bounds(intervals.get(name), low, high)
         if _finite_pair(iv):
             a, b = float(iv[0]), float(iv[1])
             if abs(value) < 0.5 * (b - a):
                 reach = max(value - a, b - value)
                 factors = [value + reach * f for f in (-1.0, -0.5, 0.0, 0.5, 1.0)]
+                # near a bound (an offset at 0) the bound cuts the span: even over what is left
+                ends = min(max(factors[0], low), high), min(max(factors[-1], low), high)
+                if ends != (factors[0], factors[-1]):
+                    factors = list(np.linspace(ends[0], ends[1], len(FOLLOW_UP)))
         levels = sorted(min(max(v, low), high) for v in factors)
         distinct = len(set(levels)) == len(FOLLOW_UP) and all(np.isfinite(levels))
         out[name] = levels if distinct else list(own)
     return out
+
+
+def at_bounds(iv: Any, low: float, high: float) -> Any:
+    """Return interval ``iv`` with an open end (``None``) at a finite bound on its side.
+
+    The study's interval is open below where the data allow the parameter down to its
+    bound: an offset whose answer is 0 and whose bound is 0 is ``open .. 0.003``.
+    """
+    if not isinstance(iv, list | tuple) or len(iv) != 2:
+        return iv
+    a = low if iv[0] is None and math.isfinite(low) else iv[0]
+    b = high if iv[1] is None and math.isfinite(high) else iv[1]
+    return [a, b]
 
 
 def _finite_pair(iv: Any) -> bool:
@@ -297,15 +342,18 @@ def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     if study.copies:
         raise StudyError("design: a study with per-experiment parameters is not designed yet")
     opts = _options(result, options)
-    _same_parameters(result, study)
-    spec = prepare(study)
+    left = unused(result, study)
+    _same_parameters(result, study, left)
+    levels = {n: v for n, v in study.first_levels().items() if n not in left}
+    spec = prepare(study, parameters=list(levels))  # the unused ones are not set
     fixed = {n: float(result.params[n]) for n in study.choice_names}
     chosen = chosen_interface(getattr(result, "extra", None))  # as tsid simulate --result
     spec = dataclasses.replace(
         spec, start_values={**spec.start_values, **fixed}, interface=chosen or spec.interface
     )
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    x = {n: float(result.params[n]) for n in space.names}
+    searched = Space(levels, study.bounds(), study.method.leveling)
+    x = {n: float(result.params[n]) for n in searched.names}
+    space = searched.near(x)
     template, source = _template(study, spec, opts.experiment)
     frame = load_experiment(source).frame
     columns, limits = _limits(source, frame, opts)
@@ -323,7 +371,7 @@ def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     follow = follow_up_levels(study, x, getattr(result, "intervals", None))
     return Plan(study, opts, spec, space, x, template, source, held, t, columns, limits,
                 (float(band[0]), float(band[1])), signals, _sigma(result, template),
-                follow)  # fmt: skip
+                follow, levels)  # fmt: skip
 
 
 def candidate_spec(plan: Plan, signals: list[np.ndarray]) -> EvaluationSpec:
@@ -355,7 +403,7 @@ def candidate_spec(plan: Plan, signals: list[np.ndarray]) -> EvaluationSpec:
             )
         )
     study = Study(**{**fields_of(plan.study), "experiments": experiments, "phases": []})
-    spec = prepare(study)
+    spec = prepare(study, parameters=list(plan.levels))
     return dataclasses.replace(
         spec, start_values=plan.spec.start_values, interface=plan.spec.interface
     )

@@ -27,7 +27,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -36,11 +36,12 @@ from tsid_fmu.design.across import combinations_across
 from tsid_fmu.design.discriminate import discriminate, tied
 from tsid_fmu.design.fisher import candidate_fisher, study_fisher
 from tsid_fmu.design.outcome import Design, Structural
-from tsid_fmu.design.plan import Plan, candidate_spec, make_plan
+from tsid_fmu.design.plan import Plan, at_bounds, candidate_spec, make_plan
 from tsid_fmu.design.predict import predicted_intervals
 from tsid_fmu.evaluate.factory import make_evaluator
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.designopts import DesignOptions
+from tsid_fmu.uncertainty.assess import answer_space
 from tsid_fmu.uncertainty.intervals import UNDETERMINED, seen_inverse
 from tsid_fmu.uncertainty.probe import FLAT, MEMBER
 
@@ -62,14 +63,21 @@ def _basis(vectors: list[np.ndarray], dim: int) -> np.ndarray:
     return u[:, s > 0.5 * s.max()]
 
 
-def _weak(result: Any, space: Space, f0: np.ndarray) -> np.ndarray:
-    """Return the directions the study leaves weak (orthonormal columns, search coordinates).
+def _weak(
+    result: Any,
+    space: Space,
+    f0: np.ndarray,
+    assessed: Space | None = None,
+    x: Mapping[str, float] | None = None,
+) -> np.ndarray:
+    """Return the directions the study leaves weak (orthonormal columns, ``space``'s).
 
     The combinations the study found not determined; for each parameter with an open
     interval that none of those explains, the direction its profile follows (the
     parameter moving, the others re-fitted: the valley of F_vm and B_s, which act on
     one output through their sum only); and the directions the information ``f0``
-    itself leaves undetermined.
+    itself leaves undetermined. ``assessed`` is the space the study's combinations
+    are in at its answer ``x``, where it is not ``space``.
     """
     vectors = []
     values, vecs = np.linalg.eigh(f0)
@@ -81,6 +89,8 @@ def _weak(result: Any, space: Space, f0: np.ndarray) -> np.ndarray:
     for c in getattr(u, "combinations", None) or []:
         if c.get("determined") is False and "direction" in c:
             v = np.asarray(c["direction"], dtype=float)
+            if assessed is not None and x is not None:  # the study's, to the design's
+                v = assessed.carry(v, x, space)
             v = v / max(float(np.linalg.norm(v)), 1e-300)
             vectors.append(v)
             explained |= {j for j in range(space.dim) if abs(v[j]) >= MEMBER}
@@ -145,18 +155,26 @@ class _Follow:
         rms = np.array([float(np.max(np.sqrt(np.mean(d**2, axis=0)))) for d in r])
         return rms, np.concatenate([d.ravel() for d in r])
 
-    def flat(self, v: np.ndarray, jac: np.ndarray) -> bool:
+    def flat(self, v: np.ndarray, jac: np.ndarray, held: np.ndarray | None = None) -> bool:
         """Whether no candidate tells the answer from :data:`STEP` along ``v`` (re-fitted).
 
         Up to :data:`REFITS` Gauss-Newton steps across ``v`` with the candidates'
         Jacobian at the answer: in linear coordinates a symmetry (``R C`` fixed) is
-        curved, and the point along its tangent lies off it.
+        curved, and the point along its tangent lies off it. The re-fit stays outside
+        the span of ``held`` (columns: every weak direction tested with ``v``): in a
+        symmetry of two directions it slid along the other one without end (a DC motor
+        measured by its speed, J to 48.5 and then to 1e300).
         """
         s0 = self.space.to_s(self.x)
-        sign = 1.0 if np.all(s0 + STEP * v <= self.space.s_upper) else -1.0
-        s = self.space.clip(s0 + sign * STEP * v)
-        unit = v / max(float(np.linalg.norm(v)), 1e-300)
-        across = np.linalg.svd(np.eye(self.space.dim) - np.outer(unit, unit))[0][:, :-1]
+        # the side that stays within the bounds (a parameter at 0 steps up, not into 0),
+        # else the one the bounds cut least
+        ends = [self.space.clip(s0 + sign * STEP * v) for sign in (1.0, -1.0)]
+        s = max(ends, key=lambda end: float(np.linalg.norm(end - s0)))
+        span = _basis([v, *(() if held is None else held.T)], self.space.dim)
+        rank = span.shape[1]
+        across = np.linalg.svd(np.eye(self.space.dim) - span @ span.T)[0][
+            :, : self.space.dim - rank
+        ]
         step = seen_inverse(jac @ across)
         for _ in range(REFITS):
             found = self.rise(self.space.to_x(s))
@@ -173,7 +191,7 @@ def _structural(space: Space, x: dict, found: list[np.ndarray], cov: np.ndarray)
     if not found:
         return []
     basis = _basis(found, space.dim)
-    members, fixed = combinations_across(space, x, basis, cov)
+    members, fixed = combinations_across(space, x, basis, cov, STEP)
     return [Structural(members, [_terms(space, v) for v in basis.T], fixed)]
 
 
@@ -199,7 +217,10 @@ def _explore(plan: Plan, result: Any, workers: Any, timeout: Any, say: Any) -> d
     say(f"{len(plan.signals)} candidate inputs: {n * len(plan.signals)} simulations")
     with make_evaluator(cspec, workers=workers, timeout=timeout) as ev:
         fishers, outputs, jacs = candidate_fisher(ev, space, x, plan.sigma)
-        weak = _weak(result, space, f0)
+        # the study's combinations are in the coordinates its answer was assessed in
+        study = plan.study
+        assessed = answer_space(plan.levels, study.bounds(), study.method.leveling)
+        weak = _weak(result, space, f0, assessed.near(x), x)
         # what the study says it does not determine, it does not: the differences'
         # curvature along those directions is the solver's noise, not the data's
         drop = np.eye(space.dim) - weak @ weak.T
@@ -208,8 +229,9 @@ def _explore(plan: Plan, result: Any, workers: Any, timeout: Any, say: Any) -> d
         jac = np.vstack(jacs)
         found = []
         vecs = np.linalg.eigh(f0 + sum(fishers))[1]
-        for k in range(weak.shape[1]):  # the pooled information's weakest directions
-            if not follow.flat(vecs[:, k], jac):
+        held = vecs[:, : weak.shape[1]]  # the pooled information's weakest directions
+        for k in range(weak.shape[1]):  # tested together: each re-fit outside them all
+            if not follow.flat(vecs[:, k], jac, held):
                 break
             found.append(vecs[:, k])
         nfev += ev.nfev
@@ -221,7 +243,8 @@ def _predict(plan: Plan, e: dict, best: int, workers: Any, timeout: Any, say: An
     """Run the study's analysis with the proposal: its intervals, and the simulations."""
     one = candidate_spec(plan, [plan.signals[best].values])
     # for the study the user runs next: the proposal added, first levels around the answer
-    follow = Space(plan.follow, plan.study.bounds(), plan.study.method.leveling)
+    # in the coordinates the study will assess its answer in (identify's, answer_space)
+    follow = answer_space(plan.follow, plan.study.bounds(), plan.study.method.leveling)
     say(f"proposal {plan.signals[best].name}: the study's analysis with it, to predict")
     return predicted_intervals(
         plan.spec, one, e["outputs"][best], e["residuals"][plan.template.name], follow,
@@ -264,19 +287,17 @@ def design(
     space, x = plan.space, plan.x
     say = progress or (lambda line: None)
     e = _explore(plan, result, workers, timeout, say)
-    f0, weak, found, fishers, nfev = e["f0"], e["weak"], e["found"], e["fishers"], e["nfev"]
-    s_basis = _basis(found, space.dim)
-    keep = np.linalg.svd(np.eye(space.dim) - s_basis @ s_basis.T)[0][:, : space.dim - len(found)]
-    targets = weak - s_basis @ (s_basis.T @ weak)
-    targets = _basis([c for c in targets.T if np.linalg.norm(c) > 0.5], space.dim)
-    if targets.shape[1] == 0:
-        targets = keep
-    scores = [_score(f0 + f, keep, targets, plan.options.criterion) for f in fishers]
-    best = int(np.argmax(scores))
+    weak, found, nfev = e["weak"], e["found"], e["nfev"]
+    scores, best, keep = _scores(plan, e)
     propose = not (found and weak.shape[1] <= len(found))
-    cov = _cov(f0 + fishers[best], keep) if propose else _cov(f0, keep)
+    cov = _cov(e["f0"] + e["fishers"][best], keep) if propose else _cov(e["f0"], keep)
     after, used = _predict(plan, e, best, workers, timeout, say) if propose else (None, 0)
     nfev += used
+    structural = _structural(space, x, found, cov)
+    left = _left_open(result, after, space.names, plan.study.bounds())
+    if left:  # its own prediction determines nothing more: no proposal, and say so
+        advice = Structural(left, [_terms(space, v) for v in weak.T], [], plan.signals[best].name)
+        structural, propose, after = [*structural, advice], False, None
     if tied(result):
         say("the tied structures with every candidate input")
     separate = discriminate(plan, result, workers, timeout)
@@ -301,13 +322,55 @@ def design(
         study_intervals={n: list(result.intervals.get(n) or [None, None]) for n in space.names},
         after=None if after is None else [after[n] for n in space.names],
         weak=[_terms(space, v) for v in weak.T],
-        structural=_structural(space, x, found, cov),
+        structural=structural,
         nfev=nfev,
         separating=None if separate is None else plan.signals[separate["best"]],
         discrimination=separate,
         levels={n: plan.follow[n] for n in space.names} if propose else {},
         warnings=_changes(result),
     )
+
+
+def _scores(plan: Plan, e: dict[str, Any]) -> tuple[list[float], int, np.ndarray]:
+    """Score every candidate in the directions not found structural; the best one.
+
+    Returns the scores, the best candidate's index and those directions (columns).
+    """
+    dim, f0, weak, found = plan.space.dim, e["f0"], e["weak"], e["found"]
+    s_basis = _basis(found, dim)
+    keep = np.linalg.svd(np.eye(dim) - s_basis @ s_basis.T)[0][:, : dim - len(found)]
+    targets = weak - s_basis @ (s_basis.T @ weak)
+    targets = _basis([c for c in targets.T if np.linalg.norm(c) > 0.5], dim)
+    if targets.shape[1] == 0:
+        targets = keep
+    scores = [_score(f0 + f, keep, targets, plan.options.criterion) for f in e["fishers"]]
+    return scores, int(np.argmax(scores)), keep
+
+
+def _left_open(
+    result: Any,
+    after: Mapping[str, list] | None,
+    names: Sequence[str],
+    bounds: Mapping[str, tuple[float, float]],
+) -> list[str]:
+    """Return the parameters the study left open if the prediction closes none of them.
+
+    Empty where there is no prediction, where the study left none open, or where the
+    proposal closes at least one: a proposal that determines nothing more is none (a DC
+    motor measured by its speed: every parameter open before and after). An end open at
+    a finite bound is the bound (an offset whose answer is its bound 0).
+    """
+    if after is None:
+        return []
+
+    def closed(iv: Any, name: str) -> bool:
+        low, high = bounds.get(name, (-math.inf, math.inf))
+        return None not in (at_bounds(iv, low, high) or [None])
+
+    open_ = [n for n in names if not closed(result.intervals.get(n), n)]
+    if not open_ or any(closed(after.get(n), n) for n in open_):
+        return []
+    return open_
 
 
 def _changes(result: Any) -> list[str]:
