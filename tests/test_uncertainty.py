@@ -118,3 +118,87 @@ def test_a_weak_difference_does_not_spread_onto_a_determined_sum():
     assert total["determined"] and total["std_error"] < 0.1
     assert not difference["determined"]
     assert u.std_error["a"] > 50  # each parameter alone stays as undetermined as before
+
+
+class _FailingAbove:
+    """An evaluator whose simulations fail where ``name`` exceeds ``limit`` (an FMU's
+    assertion just past the answer), as a vendor's range check would."""
+
+    def __init__(self, evaluator, name, limit):
+        self.evaluator, self.spec, self.name, self.limit = evaluator, evaluator.spec, name, limit
+
+    def simulate(self, sets, *args, **kwargs):
+        from tsid_fmu.evaluate.protocol import Simulated
+
+        runs = self.evaluator.simulate(sets, *args, **kwargs)
+        return [
+            [Simulated(sim.experiment, None, f"assertion: {self.name} out of range\nline 2")
+             for sim in row] if p[self.name] > self.limit else row
+            for p, row in zip(sets, runs, strict=True)
+        ]  # fmt: skip
+
+
+def test_a_failed_side_gives_a_one_sided_difference_and_both_say_why(lag_fmu, tmp_path):
+    """Issue 62, item 5: intervals whenever a Jacobian exists. A failed simulation on one
+    side of the answer made every sensitivity None, and the study had no intervals and
+    no word why (a Dymola machine whose assertion sits next to the answer)."""
+    from tsid_fmu.doe.options import LevelingOptions
+    from tsid_fmu.evaluate.factory import make_evaluator
+    from tsid_fmu.search.space import Space
+    from tsid_fmu.study.prepare import prepare
+    from tsid_fmu.uncertainty.sensitivity import sensitivities
+
+    study = lag_study(lag_fmu, tmp_path / "d.csv", lambda t, u: lag_response(t, u, TAU, X0))
+    spec = prepare(study)
+    space = Space(study.first_levels(), study.bounds(), LevelingOptions())
+    x = {"tau": TAU, "x0": X0}
+    with make_evaluator(spec, workers=1, timeout=0) as ev:
+        central = sensitivities(ev, spec, space, x)
+        why: list[str] = []
+        one_sided = sensitivities(_FailingAbove(ev, "tau", TAU), spec, space, x, failures=why)
+        assert why == [] and one_sided is not None
+        (c,), (o,) = central.jacobian, one_sided.jacobian
+        # a forward difference: first-order error, a fraction of a percent of each column
+        error = np.linalg.norm((o - c).reshape(-1, 2), axis=0)
+        assert np.all(error < 0.01 * np.linalg.norm(c.reshape(-1, 2), axis=0))
+        both: list[str] = []
+        assert sensitivities(_FailingAbove(ev, "x0", -10.0), spec, space, x, failures=both) is None
+        assert both == ["the simulation at the answer failed: assertion: x0 out of range | line 2"]
+
+
+def test_a_study_without_intervals_says_why(lag_fmu, tmp_path, monkeypatch):
+    """Every simulation beside the answer failing: no intervals, and a warning naming the
+    parameter and the FMU's reason (the same line in every view: result.warnings)."""
+    import sys
+
+    assess = sys.modules["tsid_fmu.uncertainty.assess"]
+    real = assess.sensitivities
+
+    def failing(ev, spec, space, x, **kwargs):  # both sides of tau fail
+        beside = _FailingAbove(ev, "tau", x["tau"])
+        beside.simulate = lambda sets, *a, real_simulate=beside.simulate, **k: [
+            row if p["tau"] == x["tau"] else real_simulate([{**p, "tau": 1e9}])[0]
+            for p, row in zip(sets, ev.simulate(sets, *a, **k), strict=True)
+        ]
+        return real(beside, spec, space, x, **kwargs)
+
+    monkeypatch.setattr(assess, "sensitivities", failing)
+    study = lag_study(lag_fmu, tmp_path / "d.csv", lambda t, u: lag_response(t, u, TAU, X0))
+    res = identify(study, plots=False, workers=1)
+    assert res.intervals == {}
+    (line,) = [w for w in res.warnings if w.startswith("no intervals")]
+    assert "tau" in line and "assertion: tau out of range" in line, line
+
+
+def test_a_parameter_without_effect_is_not_said_to_be_pushed_onto_its_bound():
+    """Issue 62, item 6: "on its bound ... the data push it there" only where the data
+    do; a parameter whose column is zero has no effect there (Parker's valve)."""
+    from tsid_fmu.uncertainty.bounds import bound_warnings, inert_parameters
+
+    jac = np.column_stack([np.linspace(1.0, 2.0, 50), np.zeros(50), 1e-9 * np.ones(50)])
+    assert inert_parameters(jac, ["a", "b", "c"]) == ["b", "c"]
+    assert inert_parameters(np.zeros((5, 2)), ["a", "b"]) == ["a", "b"]
+    on, x, bounds = {"a": "min", "b": "max"}, {"a": 0.0, "b": 5.0}, {"a": (0, 9), "b": (0, 5)}
+    pushed, still = bound_warnings(on, x, bounds, inert=["b"])
+    assert "the data push it there" in pushed and pushed.startswith("a = 0 sits")
+    assert "no effect on the outputs" in still and "push" not in still

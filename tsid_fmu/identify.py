@@ -45,7 +45,12 @@ from tsid_fmu.study.unitcheck import check_units
 from tsid_fmu.study.units import fmu_units, study_units
 from tsid_fmu.trail.folder import NullStore, Trail
 from tsid_fmu.uncertainty.assess import answer_space, assess, validate
-from tsid_fmu.uncertainty.bounds import bound_warnings, on_bounds, unshown_warnings
+from tsid_fmu.uncertainty.bounds import (
+    bound_warnings,
+    inert_parameters,
+    on_bounds,
+    unshown_warnings,
+)
 from tsid_fmu.uncertainty.fidelity import (
     Fidelity,
     check_fidelity,
@@ -259,7 +264,7 @@ def _finish(
     stopped = [(s.name, s.message, s.status) for s in stages]
     result.warnings = [
         *poor_fit(answer),
-        *bound_warnings(result.extra["on_bound"], x, study.bounds()),
+        *bound_warnings(result.extra["on_bound"], x, study.bounds(), _inert(found, spec)),
         *found.warnings,
         *unshown_warnings(stopped, status, result.intervals),
         *result.warnings,
@@ -278,6 +283,13 @@ def _finish(
     if isinstance(store, Trail):
         _report(result, store, evaluators, plots, found.simulated, callback)
     return result
+
+
+def _inert(found: Any, spec: Any) -> list[str]:
+    """Return the parameters with no effect on the outputs at the answer (none: no Jacobian)."""
+    if found.sensitivities is None:
+        return []
+    return inert_parameters(residual_jacobian(found.sensitivities, spec), found.sensitivities.names)
 
 
 def _with_structure(result: IdentificationResult, structure: StructureResult | None) -> None:

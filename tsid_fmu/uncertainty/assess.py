@@ -138,10 +138,19 @@ def assess(
     # a log coordinate below its smallest first level is degenerate (an offset at 0 has
     # no effect in it): linear there, every derivative and interval below means its value
     space = out.space = space.near(varied)
-    sens = sensitivities(evaluator, spec, space, varied) if math.isfinite(fun) else None
+    why: list[str] = []
+    sens = (
+        sensitivities(evaluator, spec, space, varied, failures=why) if math.isfinite(fun) else None
+    )
     if sens is not None:
         out.uncertainty = uncertainty(sens, space, varied)
         out.sensitivities = sens
+        if out.uncertainty is None:
+            why.append("the outputs do not depend on the parameters at the answer")
+    elif not math.isfinite(fun):
+        why.append("the cost at the answer is not finite")
+    if out.uncertainty is None:  # said, the same way in every view: a warning
+        out.warnings.append(f"no intervals: {'; '.join(why) or 'no sensitivities'}")
     if out.uncertainty is not None and sens is not None and spec.cost == "sse":
         rise = _widen_by_profile(evaluator, spec, space, sens, out.uncertainty, x=varied, cost=fun)
         jac = residual_jacobian(sens, spec)

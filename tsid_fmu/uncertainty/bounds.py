@@ -9,9 +9,14 @@ exit 0 and no word of it).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
-__all__ = ["ON_BOUND", "bound_warnings", "on_bounds", "unshown_warnings"]
+import numpy as np
+
+from tsid_fmu.numerics.rank import UNSEEN
+
+__all__ = ["ON_BOUND", "bound_warnings", "inert_parameters", "on_bounds", "unshown_warnings"]
 
 ON_BOUND = 1e-6
 """A value within this fraction of its first levels' span from a bound is on it."""
@@ -54,18 +59,46 @@ def on_bounds(
 
 
 def bound_warnings(
-    on: Mapping[str, str], x: Mapping[str, float], bounds: Mapping[str, tuple[float, float]]
+    on: Mapping[str, str],
+    x: Mapping[str, float],
+    bounds: Mapping[str, tuple[float, float]],
+    inert: Sequence[str] = (),
 ) -> list[str]:
-    """Return one warning per parameter on a bound, naming the bound and what follows."""
+    """Return one warning per parameter on a bound, naming the bound and what follows.
+
+    ``inert`` are the parameters with no effect on the outputs at the answer
+    (:func:`inert_parameters`): the data do not push those anywhere, and the warning
+    says what holds them there instead (Parker's valve: two such parameters were said
+    to be pushed onto their bounds by the data).
+    """
     out = []
     for name, side in on.items():
         bound = bounds[name][0 if side == "min" else 1]
+        head = f"{name} = {x[name]:.4g} sits on its bound {side} = {bound:g}: "
+        if name in inert:
+            out.append(
+                head + "it has no effect on the outputs there, so the data cannot place it; "
+                "fix it at a known value, or excite what it acts on"
+            )
+            continue
         out.append(
-            f"{name} = {x[name]:.4g} sits on its bound {side} = {bound:g}: the data push it "
-            "there, so its best value may lie beyond (widen the bound if the physics allow) "
-            "and its interval is cut at the bound"
+            head + "the data push it there, so its best value may lie beyond (widen the "
+            "bound if the physics allow) and its interval is cut at the bound"
         )
     return out
+
+
+def inert_parameters(jacobian: np.ndarray, names: Sequence[str]) -> list[str]:
+    """Return the parameters whose column of the residuals' Jacobian is zero to rank.
+
+    A column at most ``sqrt(UNSEEN)`` of the largest (the rank rule every interval
+    uses, :data:`tsid_fmu.numerics.rank.UNSEEN`) is one the outputs do not depend on.
+    """
+    norms = np.linalg.norm(np.where(np.isfinite(jacobian), jacobian, 0.0), axis=0)
+    top = float(norms.max()) if norms.size else 0.0
+    if top <= 0:
+        return list(names)
+    return [n for n, v in zip(names, norms, strict=True) if v <= math.sqrt(UNSEEN) * top]
 
 
 def unshown_warnings(

@@ -60,34 +60,53 @@ def sensitivities(
     x: Mapping[str, float],
     *,
     step: float = STEP,
+    failures: list[str] | None = None,
 ) -> Sensitivities | None:
-    """Compute the output sensitivities at ``x`` (``None`` if a simulation failed).
+    """Compute the output sensitivities at ``x`` (``None`` if they cannot be computed).
 
-    A step that would leave a parameter's bounds is taken one-sided.
+    A step that would leave a parameter's bounds is taken one-sided, and so is one
+    whose simulation on the other side failed (an FMU's assertion just past the
+    answer). They cannot be computed where the simulation at ``x`` fails, or both
+    sides of some parameter do; ``failures`` then receives why, one line per cause.
     """
     s0 = space.to_s(x)
-    sets, halves = [dict(x)], []
+    sets, ends = [dict(x)], []
     for j in range(space.dim):
         up = min(s0[j] + step, max(space.s_upper[j], s0[j]))
         down = max(s0[j] - step, min(space.s_lower[j], s0[j]))
-        halves.append(0.5 * (up - down))
+        ends.append((up, down))
         for value in (up, down):
-            s = s0.copy()
-            s[j] = value
             sets.append({**x, space.names[j]: space.value(j, value)})
     runs = evaluator.simulate(sets)
-    if any(sim.outputs is None for row in runs for sim in row) or min(halves, default=1) <= 0:
+    ok = [all(sim.outputs is not None for sim in row) for row in runs]
+    why = failures if failures is not None else []
+    if not ok[0]:
+        why.append(f"the simulation at the answer failed: {_error(runs[0])}")
         return None
+    pairs = []  # per parameter: the two runs differenced and the distance between them
+    for j, (up, down) in enumerate(ends):
+        i_up, i_down = 1 + 2 * j, 2 + 2 * j
+        hi = (i_up, up) if ok[i_up] else (0, float(s0[j]))
+        lo = (i_down, down) if ok[i_down] else (0, float(s0[j]))
+        if hi[1] - lo[1] <= 0:
+            if ok[i_up] and ok[i_down]:
+                why.append(f"no difference for {space.names[j]}: its bounds leave no step")
+            else:
+                failed = runs[i_down] if ok[i_up] else runs[i_up]
+                why.append(
+                    f"no difference for {space.names[j]}: the simulations beside the "
+                    f"answer failed ({_error(failed)})"
+                )
+            return None
+        pairs.append((hi[0], lo[0], hi[1] - lo[1]))
     base = runs[0]
     residuals, jac = [], []
     for e, exp in enumerate(spec.experiments):
         # the scored samples only, weighted as the evaluator's residuals are
         residuals.append(exp.weighted(base[e].outputs - exp.measured))  # type: ignore[operator]
         cols = [
-            exp.weighted(
-                (runs[1 + 2 * j][e].outputs - runs[2 + 2 * j][e].outputs) / (2 * halves[j])  # type: ignore[operator]
-            )
-            for j in range(space.dim)
+            exp.weighted((runs[a][e].outputs - runs[b][e].outputs) / span)  # type: ignore[operator]
+            for a, b, span in pairs
         ]
         jac.append(np.stack(cols, axis=-1))
     return Sensitivities(
@@ -97,6 +116,12 @@ def sensitivities(
         experiments=[e.name for e in spec.experiments],
         output_names=[list(e.output_names) for e in spec.experiments],
     )
+
+
+def _error(row: list) -> str:
+    """Return the first error of a row of simulations, on one line."""
+    error = next((sim.error for sim in row if sim.outputs is None), None) or "no reason given"
+    return " | ".join(line.strip() for line in str(error).splitlines() if line.strip())[:300]
 
 
 def residual_jacobian(
