@@ -14,6 +14,22 @@ The two ratios differ where the first answer is off along a direction the study 
 open (the MISO example's common scale): a width relative to a value that is off by a
 factor is off by it too.
 
+``--case motor``: a structural symmetry in two directions (issue 65, case B): a DC
+motor measured by its speed only (``benchmarks/problems/motor_speed.py``: five
+parameters, three coefficients), one study per noise seed of its data. Counted: the
+design proposing nothing and calling the five parameters structural in two directions,
+naming ``L Kt^-1 J`` (the leading coefficient), and each combination's interval holding
+its value at the truth. Needs pythonfmu.
+
+``--case drag``: a structure whose parameter vanishes and a nesting at a bound (issue
+65): the vendor Drag FMU's study choosing ``law`` (``benchmarks/problems/
+drag_switch.py``). On data of ``law = 0`` the chosen law leaves ``q`` without a value:
+counted, the design proposing an input from that result, and the study run again with
+it (the proposal's data from SciPy at the truth) choosing ``law = 0`` with ``tau``'s
+interval holding the truth and its width against the predicted one. On data of
+``law = 1`` (``q`` = 0.8): the study choosing ``law = 1``, and the nesting test's degrees
+of freedom (at least 1). Needs pythonfmu.
+
 ``--case miso``: the MISO example's force-only experiment alone (which fixes only the
 ratios of m1, K_s, C_d and C_1, not their scale), designed over the motor force and
 the stage position (``examples/lsea_miso/make_data.py``'s simulator, the stage
@@ -159,6 +175,106 @@ def _case(name: str, work: Path, band: float = 10.0):
     return study, make_miso, md.TRUTH
 
 
+def _motor(seeds: int, workers: int) -> int:
+    """``--case motor``: the design's verdict on a symmetry of two directions, per seed."""
+    import tsid_fmu
+    from tsid_fmu.design import design
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from problems import motor_speed as motor
+
+    work = Path(tempfile.mkdtemp(prefix="tsid-design-motor-"))
+    motor.build(work)
+    started, tally = time.perf_counter(), {"none": 0, "two": 0, "named": 0, "hold": 0}
+    print(f"{'seed':>4} {'study sims':>10} {'design sims':>11}  verdict")
+    for seed in range(seeds):
+        study = motor.write_case(work, seed=1 + seed)
+        res = tsid_fmu.identify(study, work / f"seed{seed}", plots=False, workers=workers)
+        d = design(res, workers=workers)
+        fixed = [f for s in d.structural for f in s.fixed]
+        two = len(d.structural) == 1 and len(d.structural[0].terms) == 2
+        named = any(f.get("coefficients") == {"L": 1.0, "Kt": -1.0, "J": 1.0} for f in fixed)
+        hold = bool(fixed) and all(
+            f["interval"][0] <= motor.value_of(f, motor.TRUTH) <= f["interval"][1] for f in fixed
+        )
+        for key, ok in (("none", d.proposal is None), ("two", two), ("named", named),
+                        ("hold", hold)):  # fmt: skip
+            tally[key] += ok
+        print(f"{seed:>4} {res.nfev:>10} {d.nfev:>11}  {d.verdict[:90]}", flush=True)
+        for f in fixed:
+            print(f"{'':>28}{f['name']} = {f['value']:.5g} {f['interval']} "
+                  f"(truth {motor.value_of(f, motor.TRUTH):.5g})")  # fmt: skip
+    print(f"\nno proposal {tally['none']}/{seeds}; structural in two directions "
+          f"{tally['two']}/{seeds}; J L / Kt named {tally['named']}/{seeds}; every "
+          f"combination's interval holds the truth {tally['hold']}/{seeds}")  # fmt: skip
+    print(f"{time.perf_counter() - started:.0f} s; work folder {work}")
+    return 0
+
+
+def _drag(seeds: int, workers: int) -> int:
+    """``--case drag``: designs from a structure that drops ``q``; the nesting's test."""
+    import tsid_fmu
+    from tsid_fmu.design import design
+    from tsid_fmu.study.definition import fields_of
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from problems import drag_switch as drag
+
+    work = Path(tempfile.mkdtemp(prefix="tsid-design-drag-"))
+    drag.build(work)
+    started = time.perf_counter()
+    tally = {"law0": 0, "proposed": 0, "again": 0, "inside": 0, "law1": 0, "dof": 0}
+    ratios = []
+    print(f"{'seed':>4}  law 0 data: chosen, design, again (tau achieved/predicted)   "
+          "law 1 data: chosen, k of the laws")  # fmt: skip
+    for seed in range(seeds):
+        study_file = drag.write_case(work, 0, 100 + seed)
+        first = tsid_fmu.identify(study_file, work / f"zero{seed}", plots=False,
+                                  workers=workers)  # fmt: skip
+        chosen0 = first.params.get("law") == 0.0 and "q" not in first.params
+        d = design(first, workers=workers)
+        cells = [f"law={first.params.get('law'):g}", d.proposal.name if d.proposal else "none"]
+        if d.proposal is not None:
+            t = d.time
+            u = d.proposal.values[:, 0]
+            y = drag.response(t, u, drag.TRUTHS[0])
+            y = y + np.random.default_rng(1000 + seed).normal(0.0, drag.NOISE, t.size)
+            study = tsid_fmu.Study.from_toml(study_file)
+            base = study.experiments[0]
+            extra = tsid_fmu.Experiment(pd.DataFrame({"time": t, "u": u, "v": y}),
+                                        inputs=dict(base.inputs), outputs=dict(base.outputs),
+                                        noise=dict(base.noise), name="designed")  # fmt: skip
+            two = tsid_fmu.Study(**{**fields_of(study), "experiments": [base, extra],
+                                    "name": "with the design"})  # fmt: skip
+            res = tsid_fmu.identify(two, work / f"again{seed}", plots=False, workers=workers)
+            got, want = res.intervals.get("tau"), d.after[d.names.index("tau")]
+            ratio = _width(got) / _width(want)
+            inside = got is not None and None not in got and got[0] <= 0.4 <= got[1]
+            tally["again"] += res.params.get("law") == 0.0
+            tally["inside"] += bool(inside)
+            ratios.append(ratio)
+            cells.append(f"law={res.params.get('law'):g} {ratio:.2f} {'in' if inside else 'OUT'}")
+        tally["law0"] += chosen0
+        tally["proposed"] += d.proposal is not None
+        rich = drag.write_case(work, 1, 200 + seed)
+        other = tsid_fmu.identify(rich, work / f"one{seed}", plots=False, workers=workers)
+        ks = {r["structure"]: r["k"] for r in other.structures or []}
+        tally["law1"] += other.params.get("law") == 1.0
+        tally["dof"] += len(ks) == 2 and abs(ks.get("law=1", 0) - ks.get("law=0", 0)) >= 1
+        print(f"{seed:>4}  {' / '.join(cells):<58} law={other.params.get('law'):g}, k {ks}",
+              flush=True)  # fmt: skip
+    shown = f"{statistics.median(ratios):.2f}" if ratios else "-"
+    print(
+        f"\nlaw 0 data: law 0 chosen {tally['law0']}/{seeds}; a proposal "
+        f"{tally['proposed']}/{seeds}; with it, law 0 chosen {tally['again']} and tau's "
+        f"interval holding the truth {tally['inside']}; achieved/predicted median {shown}"
+    )
+    print(f"law 1 data: law 1 chosen {tally['law1']}/{seeds}; the laws' k differ by at least "
+          f"1 {tally['dof']}/{seeds}")  # fmt: skip
+    print(f"{time.perf_counter() - started:.0f} s; work folder {work}")
+    return 0
+
+
 def main() -> int:
     import tsid_fmu
     from tsid_fmu.design import design
@@ -166,12 +282,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--case", choices=["siso", "miso"], default="siso")
+    ap.add_argument("--case", choices=["siso", "miso", "motor", "drag"], default="siso")
     ap.add_argument("--miso-band", type=float, default=10.0, help="the stage's band (Hz)")
     ap.add_argument("--levels", choices=["study", "around"], default="around",
                     help="the second study's first levels: the study's own, or around the "
                          "first answer (half to twice)")  # fmt: skip
     args = ap.parse_args()
+    if args.case in ("motor", "drag"):  # pythonfmu FMUs: in worker processes
+        return (_motor if args.case == "motor" else _drag)(args.seeds, max(args.workers, 2))
     work = Path(tempfile.mkdtemp(prefix="tsid-design-"))
     study_file, make, truth = _case(args.case, work, args.miso_band)
     started = time.perf_counter()

@@ -17,6 +17,7 @@ Used by ``benchmarks/design.py --case motor`` and ``tests/test_design_symmetry.p
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import textwrap
@@ -92,6 +93,16 @@ def coefficients(p: dict[str, float]) -> dict[str, float]:
         "(J R + b L) / Kt": (p["J"] * p["R"] + p["b"] * p["L"]) / p["Kt"],
         "(b R + Kt^2) / Kt": (p["b"] * p["R"] + p["Kt"] ** 2) / p["Kt"],
     }
+
+
+def value_of(combo: dict, p: dict[str, float]) -> float:
+    """A combination the design names (its ``form`` and ``coefficients``) at ``p``."""
+    c = combo["coefficients"]
+    if combo["form"] == "product":
+        return math.prod(p[n] ** e for n, e in c.items())
+    if combo["form"] == "sum of products":
+        return sum(math.prod(p[n] ** e for n, e in term.items()) for term in c)
+    return sum(w * p[n] for n, w in c.items())
 
 
 def speed(t: np.ndarray, v: np.ndarray, p: dict[str, float]) -> np.ndarray:

@@ -356,14 +356,17 @@ def fixed_across(
             g[i] = coef * space.width[i]
         se = math.sqrt(u.variance(keep @ g))
         values = [u.values[n] for n in names]
+        coefficients = {space.names[i]: float(coef) for i, coef in a.items()}
         if log and all(x > 0 for x in values):
             level = sum(coef * math.log10(u.values[space.names[i]]) for i, coef in a.items())
             name = " ".join(f"{space.names[i]}{_exponent(coef)}" for i, coef in a.items())
             interval = [10 ** (level - t * se), 10 ** (level + t * se)]
-            out.append({"name": name, "value": 10**level, "interval": _finite(interval)})
+            out.append({"name": name, "value": 10**level, "interval": _finite(interval),
+                        "form": "product", "coefficients": coefficients})  # fmt: skip
         elif not log:
             level = sum(coef * u.values[space.names[i]] for i, coef in a.items())
             name = " ".join(f"{coef:+.3g} {space.names[i]}" for i, coef in a.items())
             interval = [level - t * se, level + t * se]
-            out.append({"name": name, "value": level, "interval": _finite(interval)})
+            out.append({"name": name, "value": level, "interval": _finite(interval),
+                        "form": "sum", "coefficients": coefficients})  # fmt: skip
     return out
