@@ -160,9 +160,10 @@ class _Follow:
         tangent lies off it. The re-fit is the probes' (:mod:`tsid_fmu.uncertainty.probe`):
         at most :data:`~tsid_fmu.uncertainty.probe.REFITS` simulations, stopping once a
         step lowers the rise by less than :data:`~tsid_fmu.uncertainty.probe.GAIN` of
-        :data:`FLAT` (three, as it was, left the motor's second direction at 1.16 noise,
-        falling by a factor of four a step). The re-fit stays outside
-        the span of ``held`` (columns: every weak direction tested with ``v``): in a
+        :data:`FLAT`, or once the rise, falling at the rate of its last step, would not
+        reach :data:`FLAT` in the re-fits left (three, as it was, left the motor's second
+        direction at 1.16 noise, falling by a factor of four a step). The re-fit stays
+        outside the span of ``held`` (columns: every weak direction tested with ``v``): in a
         symmetry of two directions it slid along the other one without end (a DC motor
         measured by its speed, J to 48.5 and then to 1e300).
         """
@@ -178,7 +179,7 @@ class _Follow:
         ]
         step = seen_inverse(jac @ across)
         last = math.inf
-        for _ in range(REFITS):
+        for done in range(1, REFITS + 1):
             found = self.rise(self.space.to_x(s))
             if found is None:
                 return False
@@ -186,6 +187,9 @@ class _Follow:
             if rise <= FLAT:
                 return True
             if last - rise < GAIN * FLAT:  # the re-fit no longer gains: not flat
+                return False
+            # falling as it does, it would not reach FLAT in the re-fits left: not flat
+            if math.isfinite(last) and rise * (rise / last) ** (REFITS - done) > FLAT:
                 return False
             last = rise
             s = self.space.clip(s - across @ (step @ found[1]))
