@@ -6,6 +6,7 @@ The data: ``benchmarks/problems/motor_speed.py`` (SciPy's ``solve_ivp``, never t
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import sys
 from pathlib import Path
@@ -17,8 +18,17 @@ from fmu_factory import pythonfmu_available
 from tsid_fmu import Study, identify
 from tsid_fmu.design import design
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from problems import motor_speed as motor
+
+def _load(path: Path):
+    """Import a benchmark module by its path: with ``benchmarks/`` on ``sys.path``, its
+    ``coverage.py`` hid the coverage package from numba in later tests."""
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+motor = _load(Path(__file__).resolve().parents[1] / "benchmarks" / "problems" / "motor_speed.py")
 
 NAMES = ("R", "L", "Kt", "J", "b")
 
