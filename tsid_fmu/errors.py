@@ -7,6 +7,8 @@ line can print it as one readable line instead of a traceback.
 
 from __future__ import annotations
 
+import unicodedata
+
 __all__ = [
     "ArrayError",
     "BuildError",
@@ -16,6 +18,7 @@ __all__ = [
     "SimulationError",
     "StudyError",
     "TsidError",
+    "one_line",
 ]
 
 
@@ -53,3 +56,19 @@ class ResourceError(TsidError):
     An environment error, not bad input: the command line exits with 4 (a full temporary
     folder while an FMU is extracted names ``TMPDIR``, where that folder can be moved).
     """
+
+
+REASON = 400
+"""Characters of a failed simulation's reason kept in a one-line message (:func:`one_line`)."""
+
+
+def one_line(text: str) -> str:
+    """Return ``text`` as one line: line breaks as `` | ``, control characters dropped.
+
+    What an FMU printed can hold newlines and terminal escapes; a CLI error is one line.
+    Longer than :data:`REASON` characters, it is cut with an ellipsis.
+    """
+    lines = [ln.strip() for ln in str(text).splitlines()]
+    joined = " | ".join(ln for ln in lines if ln)
+    kept = "".join(c for c in joined if not unicodedata.category(c).startswith("C"))
+    return kept if len(kept) <= REASON else kept[: REASON - 3] + "..."

@@ -17,9 +17,7 @@ Used by ``benchmarks/design.py --case drag``.
 
 from __future__ import annotations
 
-import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +26,8 @@ from scipy.integrate import solve_ivp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 from test_structure_vendor import SLAVE, STUDY  # the test's FMU and study
+
+from problems.motor_speed import build_slave
 
 TRUTHS = {0: {"tau": 0.4, "q": 0.0, "law": 0}, 1: {"tau": 0.4, "q": 0.8, "law": 1}}
 """The truth of each law the data are made with."""
@@ -53,14 +53,7 @@ def response(t: np.ndarray, u: np.ndarray, truth: dict[str, float]) -> np.ndarra
 
 def build(folder: Path) -> Path:
     """Build ``Drag.fmu`` into ``folder`` with pythonfmu; return its path."""
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "drag_slave.py").write_text(textwrap.dedent(SLAVE))
-    subprocess.run(
-        [sys.executable, "-m", "pythonfmu", "build", "-f", str(folder / "drag_slave.py"),
-         "-d", str(folder)],
-        check=True, capture_output=True,
-    )  # fmt: skip
-    return folder / "Drag.fmu"
+    return build_slave(folder, SLAVE, "Drag")
 
 
 def write_case(folder: Path, law: int, seed: int) -> Path:

@@ -119,16 +119,21 @@ def speed(t: np.ndarray, v: np.ndarray, p: dict[str, float]) -> np.ndarray:
     return np.array(out)
 
 
-def build(folder: Path) -> Path:
-    """Build ``Motor.fmu`` into ``folder`` with pythonfmu and write ``study.toml``."""
+def build_slave(folder: Path, source: str, stem: str) -> Path:
+    """Build the pythonfmu slave ``source`` (its class named ``stem``) into ``folder``."""
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "motor_slave.py").write_text(textwrap.dedent(SLAVE))
+    script = folder / f"{stem.lower()}_slave.py"
+    script.write_text(textwrap.dedent(source))
     subprocess.run(
-        [sys.executable, "-m", "pythonfmu", "build", "-f", str(folder / "motor_slave.py"),
-         "-d", str(folder)],
+        [sys.executable, "-m", "pythonfmu", "build", "-f", str(script), "-d", str(folder)],
         check=True, capture_output=True,
     )  # fmt: skip
-    return folder / "Motor.fmu"
+    return folder / f"{stem}.fmu"
+
+
+def build(folder: Path) -> Path:
+    """Build ``Motor.fmu`` into ``folder`` with pythonfmu; return its path."""
+    return build_slave(folder, SLAVE, "Motor")
 
 
 def write_case(folder: Path, seed: int = 1) -> Path:

@@ -20,34 +20,17 @@ its first range), so that a determinant or a variance does not depend on units.
 
 from __future__ import annotations
 
-import unicodedata
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from tsid_fmu.errors import SimulationError
+from tsid_fmu.errors import SimulationError, one_line
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.space import Space
 from tsid_fmu.uncertainty.sensitivity import sensitivities
 
 __all__ = ["candidate_fisher", "one_line", "study_fisher"]
-
-
-REASON = 400
-"""Characters of a failed simulation's reason kept in a design's error message."""
-
-
-def one_line(text: str) -> str:
-    """Return ``text`` as one line: line breaks as `` | ``, control characters dropped.
-
-    What an FMU printed can hold newlines and terminal escapes; a CLI error is one line.
-    Longer than :data:`REASON` characters, it is cut with an ellipsis.
-    """
-    lines = [ln.strip() for ln in str(text).splitlines()]
-    joined = " | ".join(ln for ln in lines if ln)
-    kept = "".join(c for c in joined if not unicodedata.category(c).startswith("C"))
-    return kept if len(kept) <= REASON else kept[: REASON - 3] + "..."
 
 
 class _Reasons:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tsid_fmu.errors import one_line
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.numerics.space import Space
@@ -120,8 +121,9 @@ def sensitivities(
 
 def _error(row: list) -> str:
     """Return the first error of a row of simulations, on one line."""
-    error = next((sim.error for sim in row if sim.outputs is None), None) or "no reason given"
-    return " | ".join(line.strip() for line in str(error).splitlines() if line.strip())[:300]
+    return one_line(
+        next((sim.error for sim in row if sim.outputs is None), None) or "no reason given"
+    )
 
 
 def residual_jacobian(
