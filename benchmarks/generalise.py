@@ -43,6 +43,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import sys
 import time
 import zlib
@@ -119,15 +120,20 @@ def hand_study(gp: GenProblem) -> Study:
     )
 
 
-def init_toml(gp: GenProblem, seeds: str) -> Path:
-    """Write the data CSV and run ``tsid init`` on it; return the study file's path."""
+def init_toml(gp: GenProblem, seeds: str) -> tuple[Path, int]:
+    """Write the data CSV and run ``tsid init`` on it.
+
+    Returns the study file's path and the simulations of init's screening, which count
+    as tsid's.
+    """
     folder = CACHE / "generalise" / f"{seeds}-{gp.problem.name}"
     folder.mkdir(parents=True, exist_ok=True)
     csv = folder / "measured.csv"
     gp.init.data.to_csv(csv, index=False, float_format="%.9g")
     toml = folder / "study.toml"
-    init_study(gp.problem.fmu, csv, toml, derived=gp.init.derived or None)
-    return toml
+    text = init_study(gp.problem.fmu, csv, toml, derived=gp.init.derived or None, workers=1)
+    found = re.search(r"^# screened: (\d+) simulations", text, re.M)
+    return toml, int(found.group(1)) if found else 0
 
 
 class Scorer:
@@ -263,11 +269,12 @@ def run_de(scorer: Scorer, seed: int) -> dict:
 
 def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
     """Run tsid and the peers on one variant (``hand`` or ``init``) of a problem."""
+    screened = 0
     if variant == "hand":
         study = hand_study(gp)
         target: Study | str = study
     else:
-        toml = init_toml(gp, seeds)
+        toml, screened = init_toml(gp, seeds)
         study = Study.from_toml(toml)
         target = str(toml)
     t0 = time.perf_counter()
@@ -279,7 +286,8 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
     rows = {
         "tsid": {
             "cost": scorer.cost_x(res.params),
-            "nfev": int(res.nfev),
+            "nfev": int(res.nfev) + screened,
+            "screened": screened,
             "time": tsid_time,
             "status": int(res.status),
             "fun": float(res.fun),

@@ -140,7 +140,7 @@ def run_variant(gp, variant: str, seeds: str) -> dict:
     if variant == "hand":
         study = hand_study(gp)
     else:
-        study = Study.from_toml(init_toml(gp, seeds))
+        study = Study.from_toml(init_toml(gp, seeds)[0])
     t0 = time.perf_counter()
     scorer = Scorer(study, None)
     p = len(scorer.names)

@@ -239,8 +239,23 @@ def _cmd_init(args: argparse.Namespace) -> int:
         raise StudyError(f"-o {target}: is a folder; give the study file to write")
     if target.exists() and not args.force:
         raise StudyError(f"-o {target}: the file exists; give --force to overwrite it")
-    init_study(args.fmu, args.data, args.output, derived=derived)
-    print(f"study written: {args.output}")
+    from tsid_fmu.scaffold_screen import console_progress
+
+    text = init_study(
+        args.fmu,
+        args.data,
+        args.output,
+        derived=derived,
+        screen=not args.no_screen,
+        workers=args.workers,
+        progress=None if args.quiet else console_progress(),
+    )
+    screened = [
+        line[2:]
+        for line in text.splitlines()
+        if line.startswith(("# screened:", "# not screened:"))
+    ]
+    print(f"study written: {args.output}" + (f" ({screened[0]})" if screened else ""))
     print(f"run it: tsid identify {args.output} --out DIR")
     return 0
 
@@ -385,6 +400,14 @@ def _other_parsers(sub: Any) -> None:
         metavar="NAME=EXPRESSION",
         help="a channel computed from the columns, e.g. 'F_o=F_of - F_or' (repeatable)",
     )
+    p.add_argument(
+        "--no-screen",
+        action="store_true",
+        help="free every candidate without screening it (by default 2p+1 simulations at the "
+        "start values hold what the data cannot see, or see only in combination)",
+    )
+    p.add_argument("--workers", type=int, default=None, help="worker processes of the screening")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=_cmd_init)
 
     p = sub.add_parser(

@@ -24,6 +24,10 @@ The study written:
   temperature and temperature coefficient), a signal source's time (a ramp's start time
   and duration, a pulse's period); past :data:`MOST_FREE` free parameters, in the
   order the FMU declares them, the rest are written commented out too;
+- screens what is left at the start values (:mod:`tsid_fmu.scaffold_screen`, ``2 p + 1``
+  simulations) and writes commented out, with the reason, a parameter whose first
+  levels move the outputs by less than the noise can show, or whose effect the free
+  ones reproduce (a product's second factor);
 - uses ``cost = "sse"``, ``weighting = "noise"``, ``replicates = 1`` and the smallest
   orthogonal array that fits.
 
@@ -36,7 +40,7 @@ import math
 import os
 import re
 import shlex
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -218,13 +222,17 @@ def _parameter_lines(
     n: int = 5,
     most: int = MOST_FREE,
     held: Sequence[str] = (),
+    screened: Mapping[str, str] | None = None,
 ) -> tuple[list[str], int]:
     """Return the ``[parameters]`` lines with ``n`` levels each, and how many are free.
 
     ``held`` names inputs that no data column feeds: held at one value over each run,
-    they are identified like parameters. Past ``most`` free parameters the rest are
-    written commented out, with the reason.
+    they are identified like parameters. ``screened`` holds what the screening found
+    the data cannot decide, each with its reason
+    (:func:`~tsid_fmu.scaffold_screen.screen_start`). Past ``most`` free parameters the
+    rest are written commented out, with the reason.
     """
+    screened = screened or {}
     lines, count = [], 0
     seen: set[str] = set()
     for v in variables:
@@ -238,6 +246,9 @@ def _parameter_lines(
                 lines.append(refused)
                 continue
             entry, _, own = _entry(v, n)
+            if v.name in screened:
+                lines.append(f"# {entry}  # {screened[v.name]}: uncomment to identify it")
+                continue
             note = "  # an input without a data column, held at one value over each run"
             lines.append(entry + note + (f"; {own}" if own else ""))
             count += 1
@@ -253,7 +264,7 @@ def _parameter_lines(
             lines.append(refused)
             continue
         entry, bounded, own = _entry(v, n)
-        reason = held_reason(v)
+        reason = held_reason(v) or screened.get(v.name)
         if reason is not None:
             lines.append(
                 f"# {entry}  # {reason}: the FMU's {v.start} is kept; uncomment to identify it"
@@ -387,8 +398,20 @@ def init_study(
     data: str | os.PathLike[str],
     out: str | os.PathLike[str],
     derived: Mapping[str, str] | None = None,
+    *,
+    screen: bool = True,
+    workers: int | None = None,
+    timeout: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> str:
     """Write a commented study file for ``fmu`` and ``data`` to ``out``; return its text.
+
+    With ``screen`` (the default) the candidates are screened at their start values,
+    ``2 p + 1`` simulations (:func:`~tsid_fmu.scaffold_screen.screen_start`): those the
+    data cannot see, or see only in combination with others, are written commented out
+    with the reason. ``workers``, ``timeout`` and ``progress`` are the screening's, as
+    for :func:`tsid_fmu.identify`. Where the screening cannot run, the study is written
+    with every candidate free and says why.
 
     Raises
     ------
@@ -416,37 +439,55 @@ def init_study(
             + "".join(f"\n{comment_text(line.removeprefix('# '))}" for line in hints)
         )
     held = match.missing_inputs
-    params, count = _parameter_lines(variables, held=held)
-    if count == 0:
-        raise StudyError(_nothing_free(fmu, variables))
-    n = 5
-    if count > COMPOSITION["L50"][5]:  # more than a five-level array hosts: three levels
-        n = 3
-        params, count = _parameter_lines(variables, n, held=held)
-    array, _ = select_array([n] * count)
     base = out.resolve().parent
     rel = {p: _as_written(p, base) for p in (fmu, data)}
     lines = _header(rel[fmu], rel[data], match, time, derived or {})
     lines += _window_hint(first, last)
     lines += _initial_hint([v.name for v in variables if initial_state(v)], match.outputs)
     lines += hints
-    lines += _method_lines(array.name, count, n)
-    lines += [
-        "[parameters]",
-        f"# {'five' if n == 5 else 'three'} log-spaced levels over one decade around the "
-        "FMU's start value, within the",
-        "# FMU's min/max; numerical settings (steps, tolerances, thresholds), constants of",
-        "# the medium or the environment and signal sources' times commented out;",
-        "# per_experiment = true in an entry identifies one value per experiment (reported",
-        "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
-        *params,
-    ]
-    # what tsid copies into a comment (descriptions, names, columns) stays in it: a
-    # newline there would start a line of TOML; in a TOML string the escapes mean the same
-    text = "\n".join(comment_text(line) for line in lines) + "\n"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text, encoding="utf-8")
-    return text
+    head = lines
+
+    def write(screened: Mapping[str, str] | None, summary: str) -> str:
+        params, count = _parameter_lines(variables, held=held, screened=screened)
+        if count == 0:
+            raise StudyError(_nothing_free(fmu, variables))
+        n = 5
+        if count > COMPOSITION["L50"][5]:  # more than a five-level array hosts: three levels
+            n = 3
+            params, count = _parameter_lines(variables, n, held=held, screened=screened)
+        array, _ = select_array([n] * count)
+        lines = (
+            head
+            + _method_lines(array.name, count, n)
+            + [
+                "[parameters]",
+                f"# {'five' if n == 5 else 'three'} log-spaced levels over one decade around the "
+                "FMU's start value, within the",
+                "# FMU's min/max; numerical settings (steps, tolerances, thresholds), constants of",
+                "# the medium or the environment and signal sources' times commented out;",
+                "# per_experiment = true in an entry identifies one value per experiment (reported",
+                "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
+                *([f"# {summary}"] if summary else []),
+                *params,
+            ]
+        )
+        # what tsid copies into a comment (descriptions, names, columns) stays in it: a
+        # newline there would start a line of TOML; in a TOML string the escapes mean the same
+        text = "\n".join(comment_text(line) for line in lines) + "\n"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text, encoding="utf-8")
+        return text
+
+    text = write(None, "")
+    if not screen:
+        return text
+    from tsid_fmu.scaffold_screen import screen_start
+
+    found = screen_start(out, workers=workers, timeout=timeout, progress=progress)
+    if not found.failed and len(found.held) == len(found.effect):
+        found.failed = "no candidate moves the outputs above the noise; check the mappings"
+        found.held = {}
+    return write(found.held, found.summary())
 
 
 SAMPLE_ROWS = 1000

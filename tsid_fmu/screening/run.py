@@ -98,7 +98,7 @@ def _console() -> Progress:
     return show
 
 
-def _evaluator(study: Study, runner: dict[str, Any]) -> Evaluator:
+def study_evaluator(study: Study, runner: dict[str, Any]) -> Evaluator:
     """Return the search's evaluator of every parameter on the identification experiments."""
     exps = study.identify_names()
     evaluators = StudyEvaluators(study, runner, None)
@@ -218,7 +218,7 @@ def screen(
     x = design(method, names := list(space.names), n, seed)
     show = _console() if progress is True else (progress or None)
     runner = {"workers": workers, "timeout": timeout, "scheduler": scheduler}
-    ev = evaluator if evaluator is not None else _evaluator(study, runner)
+    ev = evaluator if evaluator is not None else study_evaluator(study, runner)
     try:
         layout = _layout(getattr(ev, "spec", None))
         values, nfev, failed = _score(ev, space, x, layout, show)
