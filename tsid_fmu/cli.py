@@ -343,6 +343,36 @@ def _identify_parser(sub: Any) -> None:
     p.set_defaults(func=_cmd_identify)
 
 
+def _init_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "init",
+        help="write a commented study file from an FMU and a data file",
+        description="Write a study that runs as written: the FMU's inputs and outputs "
+        "matched to the data's columns by name (case-insensitively), every real parameter "
+        "with five log-spaced levels over one decade around its start value.",
+    )
+    p.add_argument("fmu", help="the .fmu file")
+    p.add_argument("data", help="measured data (CSV; a column 'time' or the first column)")
+    p.add_argument("-o", "--output", default="study.toml", help="study file to write")
+    p.add_argument("--force", action="store_true", help="overwrite the study file if it exists")
+    p.add_argument(
+        "--derived",
+        action="append",
+        default=[],
+        metavar="NAME=EXPRESSION",
+        help="a channel computed from the columns, e.g. 'F_o=F_of - F_or' (repeatable)",
+    )
+    p.add_argument(
+        "--no-screen",
+        action="store_true",
+        help="free every candidate without screening it (by default 2p+1 simulations at the "
+        "start values hold what the data cannot see, or see only in combination)",
+    )
+    p.add_argument("--workers", type=int, default=None, help="worker processes of the screening")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=_cmd_init)
+
+
 def _other_parsers(sub: Any) -> None:
     p = sub.add_parser(
         "simulate",
@@ -382,33 +412,7 @@ def _other_parsers(sub: Any) -> None:
     )
     p.set_defaults(func=_cmd_info)
 
-    p = sub.add_parser(
-        "init",
-        help="write a commented study file from an FMU and a data file",
-        description="Write a study that runs as written: the FMU's inputs and outputs "
-        "matched to the data's columns by name (case-insensitively), every real parameter "
-        "with five log-spaced levels over one decade around its start value.",
-    )
-    p.add_argument("fmu", help="the .fmu file")
-    p.add_argument("data", help="measured data (CSV; a column 'time' or the first column)")
-    p.add_argument("-o", "--output", default="study.toml", help="study file to write")
-    p.add_argument("--force", action="store_true", help="overwrite the study file if it exists")
-    p.add_argument(
-        "--derived",
-        action="append",
-        default=[],
-        metavar="NAME=EXPRESSION",
-        help="a channel computed from the columns, e.g. 'F_o=F_of - F_or' (repeatable)",
-    )
-    p.add_argument(
-        "--no-screen",
-        action="store_true",
-        help="free every candidate without screening it (by default 2p+1 simulations at the "
-        "start values hold what the data cannot see, or see only in combination)",
-    )
-    p.add_argument("--workers", type=int, default=None, help="worker processes of the screening")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
-    p.set_defaults(func=_cmd_init)
+    _init_parser(sub)
 
     p = sub.add_parser(
         "build",

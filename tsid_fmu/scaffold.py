@@ -56,6 +56,7 @@ from tsid_fmu.fmu.variables import (
     variable_info,
 )
 from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, held_reason
+from tsid_fmu.scaffold_text import _initial_hint, _method_lines, _window_hint
 from tsid_fmu.study.tomltext import comment_text, toml_key, toml_string
 
 __all__ = ["decade_levels", "init_study"]
@@ -336,61 +337,45 @@ def _header(fmu: Path, data: Path, m: _Match, time: str, derived: Mapping[str, s
     return lines
 
 
-def _window_hint(first: float, last: float) -> list[str]:
-    """Commented keys that score only parts of the record (README, "Time windows")."""
-    start = first + 0.1 * (last - first)
-    return [
-        "# to score only parts of the record (skip a start-up the model does not describe),",
-        "# uncomment; the whole record is still simulated from its start:",
-        f"# windows = [[{start:.6g}, {last:.6g}]]  # seconds; in time order, not overlapping",
-        "# warmup = 0.0            # seconds at each window's start simulated, not scored",
-        "# window_weights = [1.0]  # one weight per window",
-    ]
-
-
-def _initial_hint(states: list[str], outputs: Mapping[str, str]) -> list[str]:
-    """Commented ``initial`` key: states set from the data's first sample (README)."""
-    compared = [s for s in states if s in outputs]
-    value = (
-        ", ".join(f'{s} = "from_data"' for s in compared)
-        if compared
-        else 'STATE = "from_data:COLUMN"'
+def _write(
+    out: Path,
+    head: list[str],
+    fmu: Path,
+    variables: Sequence[VariableInfo],
+    held: Sequence[str],
+    screened: Mapping[str, str] | None,
+    summary: str,
+) -> str:
+    """Write the study: ``head``, then the method and the parameters; return its text."""
+    params, count = _parameter_lines(variables, held=held, screened=screened)
+    if count == 0:
+        raise StudyError(_nothing_free(fmu, variables))
+    n = 5
+    if count > COMPOSITION["L50"][5]:  # more than a five-level array hosts: three levels
+        n = 3
+        params, count = _parameter_lines(variables, n, held=held, screened=screened)
+    array, _ = select_array([n] * count)
+    lines = (
+        head
+        + _method_lines(array.name, count, n)
+        + [
+            "[parameters]",
+            f"# {'five' if n == 5 else 'three'} log-spaced levels over one decade around the "
+            "FMU's start value, within the",
+            "# FMU's min/max; numerical settings (steps, tolerances, thresholds), constants of",
+            "# the medium or the environment and signal sources' times commented out;",
+            "# per_experiment = true in an entry identifies one value per experiment (reported",
+            "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
+            *([f"# {summary}"] if summary else []),
+            *params,
+        ]
     )
-    state = compared[0] if compared else "STATE"
-    return [
-        "# to start a state (or the parameter that sets it, such as x0) at the data's first",
-        '# sample, uncomment ("from_data": the column the state is compared with):',
-        f"# initial = {{ {value} }}",
-        "# or identify its start in each experiment (one value per experiment, beside the",
-        "# shared parameters), with its range given in [parameters]:",
-        f'#   initial = {{ {state} = "identify" }}',
-        f"#   [parameters] {state} = {{ levels = [LOW, MID, HIGH] }}",
-    ]
-
-
-def _method_lines(array: str, count: int, n: int) -> list[str]:
-    """Return the study's ``[method]`` table and the commented ``[design]`` hint."""
-    return [
-        "",
-        "[method]",
-        f'array = "{array}"      # the smallest standard array for {count} '
-        f"{'five' if n == 5 else 'three'}-level factors",
-        'cost = "sse"         # sum of squared errors ...',
-        'weighting = "noise"  # ... each output weighted by 1/noise², noise from the data',
-        "replicates = 1       # no input-noise replicates",
-        "# sampled intervals beside the profile ones, a check that does not linearise:",
-        "# re-fits (about 5 simulations each) to a block bootstrap of the residuals",
-        '# uncertainty = "bootstrap"   # or "monte_carlo": noise from their AR model',
-        "# uncertainty_replicates = 100",
-        "",
-        "# what to measure next: tsid design STUDY --result DIR proposes the input that",
-        "# determines what these data leave open, inside the limits the rig can apply",
-        "# [design]",
-        "# inputs = { INPUT = [-1.0, 1.0] }  # [min, max]; default: the range the data applied",
-        "# band = [0.1, 10.0]                # Hz; default 2 periods a record to 1/20 of the rate",
-        '# kinds = ["steps", "chirp", "multisine", "prbs"]',
-        "",
-    ]
+    # what tsid copies into a comment (descriptions, names, columns) stays in it: a
+    # newline there would start a line of TOML; in a TOML string the escapes mean the same
+    text = "\n".join(comment_text(line) for line in lines) + "\n"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text, encoding="utf-8")
+    return text
 
 
 def init_study(
@@ -447,38 +432,7 @@ def init_study(
     lines += hints
     head = lines
 
-    def write(screened: Mapping[str, str] | None, summary: str) -> str:
-        params, count = _parameter_lines(variables, held=held, screened=screened)
-        if count == 0:
-            raise StudyError(_nothing_free(fmu, variables))
-        n = 5
-        if count > COMPOSITION["L50"][5]:  # more than a five-level array hosts: three levels
-            n = 3
-            params, count = _parameter_lines(variables, n, held=held, screened=screened)
-        array, _ = select_array([n] * count)
-        lines = (
-            head
-            + _method_lines(array.name, count, n)
-            + [
-                "[parameters]",
-                f"# {'five' if n == 5 else 'three'} log-spaced levels over one decade around the "
-                "FMU's start value, within the",
-                "# FMU's min/max; numerical settings (steps, tolerances, thresholds), constants of",
-                "# the medium or the environment and signal sources' times commented out;",
-                "# per_experiment = true in an entry identifies one value per experiment (reported",
-                "# as NAME[EXPERIMENT]), such as each test's initial position or a sensor offset",
-                *([f"# {summary}"] if summary else []),
-                *params,
-            ]
-        )
-        # what tsid copies into a comment (descriptions, names, columns) stays in it: a
-        # newline there would start a line of TOML; in a TOML string the escapes mean the same
-        text = "\n".join(comment_text(line) for line in lines) + "\n"
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text, encoding="utf-8")
-        return text
-
-    text = write(None, "")
+    text = _write(out, head, fmu, variables, held, None, "")
     if not screen:
         return text
     from tsid_fmu.scaffold_screen import screen_start
@@ -487,7 +441,7 @@ def init_study(
     if not found.failed and len(found.held) == len(found.effect):
         found.failed = "no candidate moves the outputs above the noise; check the mappings"
         found.held = {}
-    return write(found.held, found.summary())
+    return _write(out, head, fmu, variables, held, found.held, found.summary())
 
 
 SAMPLE_ROWS = 1000
