@@ -43,7 +43,6 @@ import dataclasses
 import json
 import math
 import os
-import re
 import sys
 import time
 import zlib
@@ -63,7 +62,7 @@ from problems.generalise_report import render
 
 from tsid_fmu import Experiment, Method, Parameter, Study, identify
 from tsid_fmu.evaluate import make_evaluator
-from tsid_fmu.scaffold import init_study
+from tsid_fmu.scaffold import init_and_screen
 from tsid_fmu.study import prepare
 
 #: First seed of each seed set; a set's problems use ``base + k`` with its own stream.
@@ -131,9 +130,10 @@ def init_toml(gp: GenProblem, seeds: str) -> tuple[Path, int]:
     csv = folder / "measured.csv"
     gp.init.data.to_csv(csv, index=False, float_format="%.9g")
     toml = folder / "study.toml"
-    text = init_study(gp.problem.fmu, csv, toml, derived=gp.init.derived or None, workers=1)
-    found = re.search(r"^# screened: (\d+) simulations", text, re.M)
-    return toml, int(found.group(1)) if found else 0
+    _, found = init_and_screen(
+        gp.problem.fmu, csv, toml, derived=gp.init.derived or None, workers=1
+    )
+    return toml, found.nfev if found else 0
 
 
 class Scorer:

@@ -231,17 +231,16 @@ def _all_variables(path: Path) -> str:
 
 
 def _cmd_init(args: argparse.Namespace) -> int:
-    from tsid_fmu.scaffold import init_study
-
     derived = parse_assignments(args.derived, "--derived")
     target = Path(args.output)
     if target.is_dir():
         raise StudyError(f"-o {target}: is a folder; give the study file to write")
     if target.exists() and not args.force:
         raise StudyError(f"-o {target}: the file exists; give --force to overwrite it")
+    from tsid_fmu.scaffold import init_and_screen
     from tsid_fmu.scaffold_screen import console_progress
 
-    text = init_study(
+    _, found = init_and_screen(
         args.fmu,
         args.data,
         args.output,
@@ -250,12 +249,7 @@ def _cmd_init(args: argparse.Namespace) -> int:
         workers=args.workers,
         progress=None if args.quiet else console_progress(),
     )
-    screened = [
-        line[2:]
-        for line in text.splitlines()
-        if line.startswith(("# screened:", "# not screened:"))
-    ]
-    print(f"study written: {args.output}" + (f" ({screened[0]})" if screened else ""))
+    print(f"study written: {args.output}" + (f" ({found.summary()})" if found else ""))
     print(f"run it: tsid identify {args.output} --out DIR")
     return 0
 

@@ -56,10 +56,11 @@ from tsid_fmu.fmu.variables import (
     variable_info,
 )
 from tsid_fmu.scaffold_rules import bounded_levels, decade_levels, derived_hints, held_reason
-from tsid_fmu.scaffold_text import _initial_hint, _method_lines, _window_hint
+from tsid_fmu.scaffold_screen import Screened, screen_start
+from tsid_fmu.scaffold_text import _as_written, _initial_hint, _method_lines, _window_hint
 from tsid_fmu.study.tomltext import comment_text, toml_key, toml_string
 
-__all__ = ["decade_levels", "init_study"]
+__all__ = ["decade_levels", "init_and_screen", "init_study"]
 
 
 def _inline(mapping: Mapping[str, str]) -> str:
@@ -165,20 +166,6 @@ def _nothing_free(fmu: Path, variables: Sequence[VariableInfo]) -> str:
         if states
         else ""
     )
-
-
-def _as_written(path: Path, base: Path) -> Path:
-    """``path`` as a person would write it in a file in ``base``.
-
-    Relative where it lies in ``base``'s tree or one or two folders up (a study beside
-    its data); absolute where the relative path would climb further (``../../../``).
-    """
-    path = path.resolve()
-    try:
-        rel = Path(os.path.relpath(path, base))
-    except ValueError:  # another drive on Windows
-        return path
-    return path if rel.parts[:3] == ("..", "..", "..") else rel
 
 
 def _refused(v: VariableInfo, n: int) -> str | None:
@@ -391,6 +378,29 @@ def init_study(
 ) -> str:
     """Write a commented study file for ``fmu`` and ``data`` to ``out``; return its text.
 
+    As :func:`init_and_screen`, without what the screening found.
+    """
+    return init_and_screen(
+        fmu, data, out, derived, screen=screen, workers=workers, timeout=timeout,
+        progress=progress,
+    )[0]  # fmt: skip
+
+
+def init_and_screen(
+    fmu: str | os.PathLike[str],
+    data: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    derived: Mapping[str, str] | None = None,
+    *,
+    screen: bool = True,
+    workers: int | None = None,
+    timeout: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[str, Screened | None]:
+    """Write a commented study file for ``fmu`` and ``data`` to ``out``.
+
+    Returns the file's text and what the screening found (None with ``screen=False``).
+
     With ``screen`` (the default) the candidates are screened at their start values,
     ``2 p + 1`` simulations (:func:`~tsid_fmu.scaffold_screen.screen_start`): those the
     data cannot see, or see only in combination with others, are written commented out
@@ -430,18 +440,14 @@ def init_study(
     lines += _window_hint(first, last)
     lines += _initial_hint([v.name for v in variables if initial_state(v)], match.outputs)
     lines += hints
-    head = lines
-
-    text = _write(out, head, fmu, variables, held, None, "")
+    text = _write(out, lines, fmu, variables, held, None, "")  # on disk before any run
     if not screen:
-        return text
-    from tsid_fmu.scaffold_screen import screen_start
-
+        return text, None
     found = screen_start(out, workers=workers, timeout=timeout, progress=progress)
     if not found.failed and len(found.held) == len(found.effect):
         found.failed = "no candidate moves the outputs above the noise; check the mappings"
         found.held = {}
-    return _write(out, head, fmu, variables, held, found.held, found.summary())
+    return _write(out, lines, fmu, variables, held, found.held, found.summary()), found
 
 
 SAMPLE_ROWS = 1000

@@ -33,10 +33,11 @@ import numpy as np
 
 from tsid_fmu.errors import TsidError, one_line
 from tsid_fmu.study.definition import Study
+from tsid_fmu.uncertainty.profile import CHI2_95
 
 __all__ = ["SIGNIFICANT", "Screened", "console_progress", "screen_start"]
 
-SIGNIFICANT = 3.841458820694124
+SIGNIFICANT = CHI2_95
 """``chi2_1(0.95)``: the change of the noise-weighted SSE one parameter must make to be
 seen by the data (the profile intervals' threshold)."""
 MEMBERS_NAMED = 3

@@ -1,8 +1,10 @@
-"""The commented blocks of the study ``tsid init`` writes: windows, initial states, method."""
+"""The text of the study ``tsid init`` writes: paths as written, windows, initial states, method."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
+from pathlib import Path
 
 __all__: list[str] = []
 
@@ -62,3 +64,17 @@ def _method_lines(array: str, count: int, n: int) -> list[str]:
         '# kinds = ["steps", "chirp", "multisine", "prbs"]',
         "",
     ]
+
+
+def _as_written(path: Path, base: Path) -> Path:
+    """``path`` as a person would write it in a file in ``base``.
+
+    Relative where it lies in ``base``'s tree or one or two folders up (a study beside
+    its data); absolute where the relative path would climb further (``../../../``).
+    """
+    path = path.resolve()
+    try:
+        rel = Path(os.path.relpath(path, base))
+    except ValueError:  # another drive on Windows
+        return path
+    return path if rel.parts[:3] == ("..", "..", "..") else rel
