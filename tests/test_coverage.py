@@ -282,8 +282,15 @@ def test_the_combinations_of_a_known_case():
         if set(terms) <= {"lg a", "lg b"}:  # relative: 100 ln10 per log10 unit
             norm = np.linalg.norm(v * space.width)
             assert combo["percent"] == pytest.approx(100 * math.log(10) * se * norm, rel=1e-9)
-        else:
-            assert math.isnan(combo["percent"])
+        else:  # a linear member counts by its own relative change, width / |x|
+            names = [space.names[labels.index(h)] for h in terms]
+            if any(x[n] == 0 for n in names):
+                assert math.isnan(combo["percent"])
+                continue
+            rel = [space.local_scale(j, x[n]) / abs(x[n]) if x[n] else 0.0
+                   for j, n in enumerate(space.names)]  # fmt: skip
+            norm = np.linalg.norm(v * np.array(rel))
+            assert combo["percent"] == pytest.approx(100 * se * norm, rel=1e-9)
     assert [set(c["terms"]) for c in u.combinations][-1] == {"c"}
     assert sum(c["determined"] for c in u.combinations) == 3
 

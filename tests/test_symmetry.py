@@ -24,7 +24,7 @@ from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.prepare import serial_evaluator
 from tsid_fmu.uncertainty import probe
-from tsid_fmu.uncertainty.intervals import Uncertainty
+from tsid_fmu.uncertainty.intervals import Uncertainty, _combinations
 from tsid_fmu.uncertainty.probe import (
     FLAT,
     fixed_across,
@@ -169,6 +169,38 @@ def test_the_combinations_across_an_open_direction_are_named_with_intervals():
     assert "only the combinations across it are fixed: C R1 = 200 (" in warning
     assert "; C R2 = 500 (" in warning
     assert u.combinations[0]["fixed"] == fixed
+
+
+def test_a_common_scale_with_a_member_made_linear_is_probed_and_named():
+    """OpenModelica's ``Mass_Damper``, free response: the outputs see d / m and c / m only.
+
+    On some CPUs' BLAS kernels the answer's damping fell below its first levels, so
+    :meth:`Space.near` made it linear. The combination's relative error was then left
+    undefined (only log members counted), it was never probed, stayed "determined", and
+    exit 0 came with open intervals and no warning; its products were not named either.
+    """
+    levels = {"damper.d": [3.162, 31.62], "mass.m": [0.1, 1.0], "spring.c": [1e3, 4e4]}
+    x = {"damper.d": 2.19, "mass.m": 0.365, "spring.c": 3654.0}
+    space = Space(levels, {n: (0.0, math.inf) for n in levels}, LevelingOptions()).near(x)
+    assert [bool(g) for g in space.log] == [False, True, True]  # d below its first levels
+    # the common scale: one decade of each parameter, in the near space's coordinates
+    v = np.array([x["damper.d"] * math.log(10.0), 1.0, 1.0]) / space.width
+    unit = v / np.linalg.norm(v)
+    across = np.linalg.svd(np.eye(3) - np.outer(unit, unit))[0][:, :2]
+    fisher = 1e-2 * np.outer(unit, unit) + 1e8 * across @ across.T  # weak along the scale
+    values, vectors = np.linalg.eigh(fisher)
+    u = Uncertainty(values=dict(x))
+    u.cov = np.linalg.inv(fisher)
+    u.dof = {n: 100.0 for n in levels}
+    (weak,) = [c for c in _combinations(space, values, vectors, u) if c["std_error"] > 1]
+    assert math.isfinite(weak["percent"]) and weak["percent"] >= probe.LOOSE  # probed
+    fixed = fixed_across(space, u, np.asarray(weak["direction"]), list(levels))
+    assert [f["name"] for f in fixed] == ["damper.d mass.m^-1", "damper.d spring.c^-1"]
+    ratios = [x["damper.d"] / x["mass.m"], x["damper.d"] / x["spring.c"]]
+    assert [f["value"] for f in fixed] == pytest.approx(ratios, rel=1e-9)
+    for f, value in zip(fixed, ratios, strict=True):
+        low, high = f["interval"]
+        assert low < value < high and high / low < 1.01
 
 
 @pytest.mark.skipif(not pythonfmu_available(), reason="needs pythonfmu and a shared libpython")

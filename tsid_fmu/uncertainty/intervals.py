@@ -323,6 +323,11 @@ def _combinations(
 ) -> list:
     """Return the Fisher matrix's eigenvectors as combinations, with standard errors.
 
+    A combination's ``percent`` is its relative standard error, over log and linear
+    members alike: with only log members counted, a common scale whose damping was made
+    linear below its first levels (:meth:`.Space.near`) had none, was never probed
+    (:mod:`.probe`) and stayed "determined" while its members' profiles were open.
+
     A combination has an infinite one where the outputs do not depend on it at all
     (:data:`UNSEEN`). Every other eigenvector is orthogonal to those directions, so its
     variance is finite even where it touches a parameter that also has an unseen part:
@@ -332,16 +337,26 @@ def _combinations(
     """
     out = []
     seen = values > UNSEEN * max(float(values.max()), 1e-300)
+    # each coordinate's relative change per search unit, as a parameter's own relative
+    # standard error is read (local_scale / |x|): log10 units, or linear ones (a log
+    # coordinate made linear below its first levels, Space.near, is a relative one too)
+    x = found.values
+    rel = np.array(
+        [
+            space.local_scale(j, x[n]) / abs(x[n]) if x[n] else math.nan
+            for j, n in enumerate(space.names)
+        ]
+    )
     for k in np.argsort(values)[::-1]:
         v = vectors[:, k]
         se = math.sqrt(found.variance(v)) if seen[k] else math.inf
         terms = combination_terms(space, v)
         used = [j for j, c in enumerate(space.u_direction(v)) if abs(c) >= 0.05]
-        # standard error along the unit direction in log10 units, as a relative change
-        scale = float(np.linalg.norm(v * space.width))
+        # relative standard error along the unit direction; undefined where a member is 0
+        scale = float(np.linalg.norm(v * np.nan_to_num(rel)))
         percent = (
-            100 * math.log(10) * se * scale
-            if all(space.log[j] for j in used) and math.isfinite(se)
+            100 * se * scale
+            if math.isfinite(se) and all(math.isfinite(rel[j]) for j in used)
             else math.nan
         )
         out.append(

@@ -331,15 +331,28 @@ def fixed_across(
     products the data fix: one member (the one that moves against the others, where one
     does; else the first) paired with each other one, with exponents that cancel ``v``
     (``C R1``, ``C R2``). For parameters in linear coordinates, the
-    sums. Their standard errors come from the covariance with ``v``'s own variance
-    projected out (along ``v`` it measured the solver's noise, not the data). Members
-    of mixed coordinates are not combined.
+    sums. Members of mixed coordinates (a log parameter made linear below its first
+    levels, :meth:`.Space.near`, beside log ones) are combined as products, at the
+    answer's relative changes: on OpenModelica's ``Mass_Damper`` the common scale of
+    mass, stiffness and a damping made linear was found flat and named nothing fixed.
+    Their standard errors come from the covariance with ``v``'s own variance
+    projected out (along ``v`` it measured the solver's noise, not the data).
     """
     idx = [space.names.index(n) for n in members]
-    if u.cov is None or len(idx) < 2 or len({bool(space.log[j]) for j in idx}) > 1:
+    if u.cov is None or len(idx) < 2:
         return []
-    log = bool(space.log[idx[0]])
-    change = v * space.width  # how each working-domain value moves along v
+    mixed = len({bool(space.log[j]) for j in idx}) > 1
+    # decades of each coordinate per search unit: its width for a log one; for a mixed
+    # member its relative change at the answer, as its own relative error is read
+    per = np.array(space.width, dtype=float)
+    if mixed:
+        values = [float(u.values[space.names[j]]) for j in idx]
+        if not all(x > 0 for x in values):
+            return []
+        for j, x in zip(idx, values, strict=True):
+            per[j] = space.local_scale(j, x) / (x * math.log(10.0))
+    log = mixed or bool(space.log[idx[0]])
+    change = v * per  # how each working-domain value (or its log, for products) moves
     unit = v / max(float(np.linalg.norm(v)), 1e-300)
     keep = np.eye(space.dim) - np.outer(unit, unit)
     t = quantile(max(min(u.dof.values(), default=1.0), 1.0))
@@ -353,7 +366,7 @@ def fixed_across(
         names = [space.names[i] for i in a]
         g = np.zeros(space.dim)
         for i, coef in a.items():
-            g[i] = coef * space.width[i]
+            g[i] = coef * per[i]
         se = math.sqrt(u.variance(keep @ g))
         values = [u.values[n] for n in names]
         coefficients = {space.names[i]: float(coef) for i, coef in a.items()}
