@@ -10,8 +10,9 @@ finite on both sides is "determined"; it passes when it lies within 1 % of the t
 the truth lies inside its interval. It is a measurement, not a test: it exits 0 whatever
 the rows say. ``docs/benchmarks/conformance.md`` holds the table of the last run. A
 study's FMU conformance probe (a broken reset, a non-deterministic FMU; issue 62) is in
-its notes where it found something or could not run; the synthetic quirk FMUs are the
-test suite's (``tests/test_conformance.py``), built with the C compiler, not fetched.
+its notes where it found something or could not run. The last rows are synthetic quirk
+FMUs (``QUIRKS``): the test suite's first-order lag (``tests/fmu_factory.py``) built with
+the C compiler and one quirk each, run the same way.
 
 Run (downloads into ``benchmarks/.cache``, git-ignored; a few minutes on two cores)::
 
@@ -58,7 +59,7 @@ class Case:
     """One FMU: where it comes from, its truth, how its data are made, its hand study."""
 
     name: str
-    source: str  # a wheel (pip requirement) or "pythonfmu" for the FMU built here
+    source: str  # a wheel (pip requirement), "pythonfmu" or "quirk:NAME:FMI" built here
     member: str  # the FMU's path in the wheel
     truth: dict[str, float]  # what the data were made at (others: the FMU's start values)
     data: Callable[[Path, dict[str, float]], Made]
@@ -187,6 +188,31 @@ def lag_data(fmu: Path, p: dict[str, float]) -> Made:
     return pd.DataFrame({"time": t, "u": sines(t, *terms), "y": y}), "DOP853 at 1e-11"
 
 
+def quirk_data(fmu: Path, p: dict[str, float]) -> Made:
+    """A quirk FMU's lag: x' = (u - x)/tau from x0, exact for the input held per sample."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from fmu_factory import lag_response
+
+    t = np.arange(0, 5.0 + 1e-9, 0.01)
+    u = np.where((t % 2.0) < 1.0, 1.0, -0.5) + 0.3 * np.sin(3 * t)
+    y = lag_response(t, u, p["tau"], p["x0"])
+    return pd.DataFrame({"time": t, "u": u, "y": y}), "the lag's exact step response"
+
+
+QUIRK_HAND = (
+    'tau = { levels = [0.05, 0.5, 2.0], min = 0.0, unit = "s" }\n'
+    "x0 = { levels = [-1.0, 0.0, 2.0] }\n"
+)
+QUIRKS = [
+    Case(f"quirk {name} (FMI {fmi})", f"quirk:{name}:{fmi}", "", {"tau": 0.37, "x0": 0.8},
+         quirk_data, ["u"], ["y"], QUIRK_HAND)
+    for name, fmi in (("none", "2.0"), ("STALE_CLOCK", "2.0"), ("STALE_CLOCK", "3.0"),
+                      ("NONDETERMINISTIC", "2.0"), ("LOOSE_TOLERANCE", "2.0"),
+                      ("LOOSE_TOLERANCE", "3.0"))
+]  # fmt: skip
+"""One synthetic FMU per quirk of issue 62 (see ``build_c_fmu``'s ``quirks``): FMI 2.0
+ones Co-Simulation only, as 20-sim's and most vendors' are."""
+
 SPRING = {"k1": 2.0, "k2": 0.6, "k3": 1.5, "m1": 0.6, "m2": 2.0}
 RC = {"R1": 0.1, "R2": 0.25, "C": 2000.0}  # modestpy's parameters.csv
 RC_HAND = """R1 = { levels = [0.02, 0.05, 0.12, 0.3, 0.6], min = 0.001 }
@@ -253,6 +279,7 @@ CASES = [
          'hold = { Ti1 = "linear", Ti2 = "linear" }', RC_COMBOS, gfortran=True),
     Case("PyLag (pythonfmu)", "pythonfmu", "", {"tau": 2.0}, lag_data, ["u"], ["y"],
          "tau = { levels = [0.3, 1, 3, 6], min = 0.01 }\n"),
+    *QUIRKS,
 ]  # fmt: skip
 
 
@@ -324,6 +351,14 @@ def obtain(case: Case, folder: Path) -> Path:
         from fmu_factory import build_pythonfmu
 
         return build_pythonfmu(folder)
+    if case.source.startswith("quirk:"):
+        sys.path.insert(0, str(ROOT / "tests"))
+        from fmu_factory import build_c_fmu
+
+        _, quirk, fmi = case.source.split(":")
+        kind = {"fmi_version": fmi} if fmi == "3.0" else {"interfaces": ("cs",)}
+        quirks = [quirk] if quirk != "none" else []
+        return build_c_fmu(folder, "Quirk" + fmi[0], quirks=quirks, **kind)
     with zipfile.ZipFile(fetch(case.source)) as whl:
         wanted = [case.member]
         if case.gfortran:

@@ -77,11 +77,15 @@ extern int tsid_dep_value(void);
 
 /* quirks (issue 62), each a -D define: STALE_CLOCK: reset keeps the FMU's clock, so a step
    to a time it has passed does nothing, and fmi2SetupExperiment restores the default
-   parameters (20-sim 4.6); NONDETERMINISTIC: y grows by 1e-3 per run of the library */
+   parameters (20-sim 4.6); NONDETERMINISTIC: y grows by 1e-3 per run of the library;
+   LOOSE_TOLERANCE: the CS step integrates explicit Euler on an internal grid of step
+   0.5 sqrt(tol), whatever the communication step, where tol is the tolerance set up (1e-2
+   when none is defined), as a variable-step CS solver whose default tolerance is loose */
 static int tsid_runs = 0;
 
 typedef struct {
     double u, tau, x0, t_fail, t_nan, x, time, clock;
+    double tol, tg, xg;  /* LOOSE_TOLERANCE: the set-up tolerance, the grid's time, state */
     int gain, offset_on;
     void *env;
     const char *name;
@@ -126,7 +130,16 @@ static int model_set(Model *m, unsigned vr, double v) {
 
 static void model_defaults(Model *m) {
     m->u = 0.0; m->tau = 1.0; m->x0 = 0.0; m->t_fail = 1e300; m->t_nan = 1e300;
-    m->gain = 1; m->offset_on = 0; m->x = 0.0; m->time = 0.0;
+    m->gain = 1; m->offset_on = 0; m->x = 0.0; m->time = 0.0; m->tol = 1e-2;
+}
+
+static void model_setup(Model *m, int tolDef, double tol, double start) {
+    m->time = start;
+    if (tolDef) m->tol = tol;
+}
+
+static void model_init(Model *m) {  /* leaving initialization mode */
+    m->x = m->x0; m->tg = m->time; m->xg = m->x0;
 }
 
 /* 0: ok, 1: tau <= 0, 2: time limit */
@@ -137,7 +150,15 @@ static int model_step(Model *m, double t, double h) {
     if (t + h <= m->clock) { m->time = t + h; return 0; }  /* "already there" */
     m->clock = t + h;
 #endif
+#ifdef LOOSE_TOLERANCE
+    {
+        double hi = 0.5 * sqrt(m->tol), end = t + h;
+        while (m->tg + hi <= end) { m->xg += hi * (m->u - m->xg) / m->tau; m->tg += hi; }
+        m->x = m->xg + (end - m->tg) * (m->u - m->xg) / m->tau;
+    }
+#else
     m->x = m->u + (m->x - m->u) * exp(-h / m->tau);
+#endif
     m->time = t + h;
     return 0;
 }
@@ -193,7 +214,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
 void fmi2FreeInstance(fmi2Component c) { free(c); }
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol,
                                fmi2Real start, fmi2Boolean stopDef, fmi2Real stop) {
-    (void)tolDef; (void)tol; (void)stopDef; (void)stop; M->time = start;
+    (void)stopDef; (void)stop; model_setup(M, tolDef, tol, start);
 #ifdef STALE_CLOCK
     M->tau = 1.0; M->x0 = 0.0;
 #endif
@@ -201,7 +222,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) { (void)c; return fmi2OK; }
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     if (M->tau <= 0.0) { LOG(fmi2Error, "tau must be positive"); return fmi2Error; }
-    tsid_runs++; M->x = M->x0; return fmi2OK; }
+    tsid_runs++; model_init(M); return fmi2OK; }
 fmi2Status fmi2Terminate(fmi2Component c) { (void)c; return fmi2OK; }
 fmi2Status fmi2Reset(fmi2Component c) { model_defaults(M); return fmi2OK; }
 
@@ -363,10 +384,10 @@ EXPORT void *fmi3InstantiateCoSimulation(const char *name, const char *token,
 EXPORT void fmi3FreeInstance(void *c) { free(c); }
 EXPORT int fmi3EnterInitializationMode(void *c, bool tolDef, double tol, double start,
                                        bool stopDef, double stop) {
-    (void)tolDef; (void)tol; (void)stopDef; (void)stop; M->time = start; return 0; }
+    (void)stopDef; (void)stop; model_setup(M, tolDef, tol, start); return 0; }
 EXPORT int fmi3ExitInitializationMode(void *c) {
     if (M->tau <= 0.0) { LOG(3, "tau must be positive"); return 3; }
-    tsid_runs++; M->x = M->x0; return 0; }
+    tsid_runs++; model_init(M); return 0; }
 EXPORT int fmi3Terminate(void *c) { (void)c; return 0; }
 EXPORT int fmi3Reset(void *c) { model_defaults(M); return 0; }
 EXPORT int fmi3GetFloat64(void *c, const unsigned vr[], size_t n, double v[], size_t nv) {
@@ -630,7 +651,11 @@ def build_c_fmu(
     ``quirks`` (issue 62): ``"STALE_CLOCK"`` -- reset keeps the FMU's clock, so after
     the first run no step integrates and ``y`` stays at its initial value (and FMI 2's
     ``fmi2SetupExperiment`` restores the default parameters), as 20-sim 4.6's FMUs do;
-    ``"NONDETERMINISTIC"`` -- ``y`` grows by 1e-3 with every run of the loaded library.
+    ``"NONDETERMINISTIC"`` -- ``y`` grows by 1e-3 with every run of the loaded library;
+    ``"LOOSE_TOLERANCE"`` -- Co-Simulation integrates explicit Euler on an internal grid of
+    step ``0.5 sqrt(tol)`` independent of the communication step, ``tol`` the tolerance
+    passed to ``fmi2SetupExperiment`` / ``fmi3EnterInitializationMode`` (1e-2 when none is
+    defined): about 7 % of bias on ``tau`` = 0.37 s at the default, none at 1e-8.
     """
     guid = new_guid()
     if fmi_version == "2.0":

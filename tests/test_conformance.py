@@ -7,11 +7,17 @@ here are the lag of :mod:`fmu_factory` built with ``quirks=``: ``STALE_CLOCK`` (
 FMU, FMI 2.0 and 3.0) and ``NONDETERMINISTIC`` (its output grows with every run). A
 study on the first must end at the optimum (every run on a fresh instance), one on the
 second with exit status 1 and a one-line reason -- never exit 0 with a wrong answer.
+``LOOSE_TOLERANCE`` integrates on an internal grid set by the tolerance passed to it, not
+by the communication step (a variable-step CS solver whose default tolerance is loose):
+a study without ``cs_tolerance`` must adopt a tight one and end at the optimum.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+import pandas as pd
 import pytest
 from fmu_factory import build_c_fmu, lag_data, lag_response
 
@@ -20,6 +26,12 @@ from tsid_fmu.evaluate import conformance
 from tsid_fmu.fmu import FMUSession
 from tsid_fmu.status import MESSAGES, Verdict, study_status
 from tsid_fmu.study.prepare import prepare
+from tsid_fmu.uncertainty.fidelity import (
+    CS_REFERENCE_TOLERANCE,
+    CS_TOLERANCE,
+    check_fidelity,
+    fidelity_warnings,
+)
 
 T = np.arange(0, 2.0 + 1e-9, 0.01)
 U = np.where(T < 1.0, 1.0, -0.5)
@@ -51,6 +63,12 @@ def quirky(tmp_path_factory):
         ),
         ("NONDETERMINISTIC", "3.0"): build_c_fmu(
             d, "Random3", fmi_version="3.0", quirks=["NONDETERMINISTIC"]
+        ),
+        ("LOOSE_TOLERANCE", "2.0"): build_c_fmu(
+            d, "Loose2", interfaces=("cs",), quirks=["LOOSE_TOLERANCE"]
+        ),
+        ("LOOSE_TOLERANCE", "3.0"): build_c_fmu(
+            d, "Loose3", fmi_version="3.0", quirks=["LOOSE_TOLERANCE"]
         ),
         ("", "2.0"): build_c_fmu(d, "Plain2", interfaces=("cs",)),
     }
@@ -183,3 +201,65 @@ def test_fresh_instances_for_model_exchange_too(tmp_path, solver):
         assert s.instantiations == 3
     assert np.array_equal(runs[0], runs[1]) and np.array_equal(runs[0], runs[2])
     np.testing.assert_allclose(runs[0], lag_response(T, U, 0.3), atol=1e-3)  # CVode: 1e-5
+
+
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+def test_a_loose_default_tolerance_biases_tau_and_a_tight_one_does_not(quirky, version):
+    fmu = quirky[("LOOSE_TOLERANCE", version)]
+    exact = lag_response(T, U, 0.37, 0.8)
+    errors = {}
+    for tol in (None, CS_TOLERANCE):
+        for step in (None, 0.0025):  # a smaller communication step changes nothing
+            with FMUSession(
+                fmu, ["u"], ["y"], parameters=["tau", "x0"], step_size=step, cs_tolerance=tol
+            ) as s:
+                y = s.simulate(T, U, {"tau": 0.37, "x0": 0.8})[:, 0]
+            errors[tol, step] = float(np.max(np.abs(y - exact)))
+    assert errors[None, None] == errors[None, 0.0025] > 0.1
+    assert errors[CS_TOLERANCE, None] < 1e-4 and errors[CS_TOLERANCE, 0.0025] < 1e-4
+
+
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+def test_a_study_on_a_loose_tolerance_fmu_adopts_a_tight_one_and_ends_at_the_optimum(
+    quirky, tmp_path, version
+):
+    study = _study(tmp_path, quirky[("LOOSE_TOLERANCE", version)])
+    result = identify(study, tmp_path / "out", plots=False, workers=1, timeout=0)
+    record = result.extra["fidelity"]
+    assert record["cs_tolerance"] == CS_TOLERANCE, record["reason"]
+    assert "its default tolerance, not the physics, limits the answer" in record["reason"]
+    assert record["start"]["matters"] and record["start"]["converges"] is True
+    assert not record["answer"]["matters"], record["answer"]["message"]  # at 1e-8
+    assert result.status == 0, result.message
+    assert result.params["tau"] == pytest.approx(0.37, rel=0.01)
+    assert result.params["x0"] == pytest.approx(0.8, rel=0.02)
+    assert not any("solver fidelity" in w for w in result.warnings), result.warnings
+    saved = (tmp_path / "out" / "result.json").read_text()
+    assert '"cs_tolerance": 1e-08' in saved
+
+
+def test_a_study_that_sets_its_own_cs_tolerance_keeps_it_and_is_told_the_fix(quirky, tmp_path):
+    fmu = quirky[("LOOSE_TOLERANCE", "2.0")]
+    spec = prepare(_study(tmp_path, fmu, cs_tolerance=1e-3))
+    check = check_fidelity(spec, {"tau": 0.37, "x0": 0.8})
+    assert check.used.solver.tolerance == 1e-3  # the study's own reaches the check
+    assert check.reference.tolerance == CS_REFERENCE_TOLERANCE
+    assert check.matters and not check.adopted and check.cs_tolerance == 1e-3
+    assert "cs_tolerance = 1e-08" in check.message and "fix:" in check.message
+    assert fidelity_warnings(check, None) == [check.message]
+    tight = check_fidelity(dataclasses.replace(spec, cs_tolerance=1e-9), {"tau": 0.37, "x0": 0.8})
+    assert not tight.matters and tight.reference.tolerance == pytest.approx(1e-11)  # 100 x
+
+
+def test_tsid_simulate_uses_the_adopted_tolerance(quirky, tmp_path, capsys):
+    from tsid_fmu.cli import main
+
+    study = _study(tmp_path, quirky[("LOOSE_TOLERANCE", "2.0")])
+    identify(study, tmp_path / "out", plots=False, workers=1, timeout=0)
+    toml = study.to_toml(tmp_path / "study.toml")
+    args = ["simulate", str(toml), "--result", str(tmp_path / "out" / "result.json")]
+    assert main([*args, "--csv", str(tmp_path / "sim.csv"), "--plot", str(tmp_path / "s.png")]) == 0
+    sim = pd.read_csv(tmp_path / "sim.csv")
+    data = pd.read_csv(tmp_path / "lag.csv")
+    rms = float(np.sqrt(np.mean((sim["y"] - data["y_meas"]) ** 2)))
+    assert rms < 2 * 0.01 * np.std(data["y_meas"])  # at the noise, not 7 % off

@@ -22,7 +22,13 @@ from tsid_fmu.cli import main
 from tsid_fmu.errors import StudyError
 from tsid_fmu.evaluate.spec import PreparedExperiment
 from tsid_fmu.study.prepare import prepare
-from tsid_fmu.uncertainty.fidelity import THRESHOLD, check_fidelity, study_noise
+from tsid_fmu.uncertainty.fidelity import (
+    CS_REFERENCE_TOLERANCE,
+    CS_TOLERANCE,
+    THRESHOLD,
+    check_fidelity,
+    study_noise,
+)
 from tsid_fmu.uncertainty.solvers import Solver, SolverRuns, compare, output_noise
 
 MU = 1.7
@@ -169,9 +175,14 @@ def test_cs_only_fmu_is_compared_with_a_four_times_smaller_step(vdp):
     check = check_fidelity(spec, {"mu": MU})
     assert check.reference.interface == "cs"
     assert check.reference.step == pytest.approx(0.0025, rel=1e-9)
-    # the study's step, the reference, and a step 4 x smaller still: Euler converges
-    assert check.matters and check.interface == "cs" and check.simulations == 3
-    assert check.converges is True
+    # the study's step, the reference (4 x smaller and a tight tolerance), a step 4 x
+    # smaller still: Euler converges; then each setting alone, the step and the tolerance
+    assert check.matters and check.interface == "cs" and check.simulations == 5
+    assert check.converges is True and check.reference.tolerance == CS_REFERENCE_TOLERANCE
+    step, tight = check.alternatives[1:]
+    assert step.solver == Solver("cs", step=check.reference.step) and step.ratio < 1e-9
+    assert tight.solver.tolerance == CS_TOLERANCE and tight.ratio == check.used.ratio
+    assert check.cs_tolerance is None and not check.adopted  # its Euler has no tolerance
     assert "differs from Co-Simulation at step 0.0025 s" in check.message
     assert "fix: a smaller communication step, step = 0.0025 or less" in check.message
     # a step 4 x smaller than the study's own; Euler's error falls with the step
@@ -279,7 +290,7 @@ def test_an_fmu_that_acts_once_per_step_keeps_the_step_and_says_why(tmp_path):
     assert check.alternatives[0].ratio > 2 * check.used.ratio  # it grows as the step shrinks
     assert "do not converge as the communication step shrinks" in check.message
     assert "the study keeps its step" in check.message
-    assert "and that from Co-Simulation at step 0.00625 s by" in check.message
+    assert "and that from Co-Simulation at step 0.00625 s, tolerance 1e-10 by" in check.message
     result = identify(study, progress=False, plots=False)
     assert result.params["increment"] == pytest.approx(2.0, rel=0.01)
     assert any("do not converge as the communication step shrinks" in w for w in result.warnings)

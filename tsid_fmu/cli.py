@@ -124,15 +124,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from tsid_fmu.report.plots import fit_plot
     from tsid_fmu.study import Study, prepare
     from tsid_fmu.study.units import study_units
-    from tsid_fmu.uncertainty.fidelity import chosen_interface
+    from tsid_fmu.uncertainty.fidelity import chosen_cs_tolerance, chosen_interface
 
     study = Study.from_toml(args.study)
     values: dict[str, float] = {}
     interface = None  # the interface the identification chose (solver fidelity check)
+    cs_tolerance = None  # and the FMU's Co-Simulation tolerance
     if args.result:
         saved = saved_result(Path(args.result))
         values.update(saved["params"])
         interface = chosen_interface(saved.get("extra"))
+        cs_tolerance = chosen_cs_tolerance(saved.get("extra"))
     chosen = {c.name: c for c in study.choices}  # a choice as its label (model=Drag)
     for name, text in parse_assignments(args.set, "--set", last=True).items():
         if name in chosen:
@@ -156,6 +158,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     spec = prepare(study, None, [n for n in names if n in values])
     if interface is not None:
         spec = dataclasses.replace(spec, interface=interface)
+    if cs_tolerance is not None and spec.cs_tolerance is None:
+        spec = dataclasses.replace(spec, cs_tolerance=cs_tolerance)
     with SerialEvaluator(spec) as ev:
         simulated = ev.simulate([values], count=False)[0]
     shown = [

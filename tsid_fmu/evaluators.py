@@ -31,6 +31,7 @@ class StudyEvaluators:
         self.pool: dict[tuple, Evaluator] = {}
         self.specs: dict[tuple, EvaluationSpec] = {}
         self.interface: str | None = None  # chosen by the fidelity check
+        self.cs_tolerance: float | None = None  # adopted by the fidelity check
         self.fresh = False  # a fresh instance for every run (the FMU's reset is broken)
         self.conformance: dict[str, Any] | None = None  # the FMU probe's verdict
         self.children: list[StudyEvaluators] = []  # those of a study's candidate structures
@@ -39,6 +40,15 @@ class StudyEvaluators:
         """Simulate every sub-problem with ``interface`` from now on."""
         self.interface = interface
         self.specs = {k: dataclasses.replace(s, interface=interface) for k, s in self.specs.items()}
+
+    def use_cs_tolerance(self, tolerance: float | None) -> None:
+        """Pass ``tolerance`` to the FMU's own Co-Simulation solver from now on (None: keep)."""
+        if tolerance is None:
+            return
+        self.cs_tolerance = tolerance
+        self.specs = {
+            k: dataclasses.replace(s, cs_tolerance=tolerance) for k, s in self.specs.items()
+        }
 
     def use_fresh(self) -> None:
         """Instantiate afresh for every run from now on (:mod:`tsid_fmu.conformance`)."""
@@ -79,6 +89,7 @@ class StudyEvaluators:
                 start_values=start,
                 experiments=experiments,
                 interface=self.interface or base.interface,
+                cs_tolerance=self.cs_tolerance or base.cs_tolerance,
                 fresh=self.fresh,
             )
         return self.specs[key]

@@ -141,9 +141,11 @@ def _fidelity(
         where=where,
         noise=study_noise(study),
         sensitivities=sens,
+        adopt=where == "start point",  # the answer was found with the old tolerance
         **evaluators.check_limit(evaluators.pool.get(evaluators.key(study, exps))),
     )
     evaluators.use(check.interface)
+    evaluators.use_cs_tolerance(check.cs_tolerance)
     if callback:
         callback("fidelity", {"message": check.message, "check": check})
     return check

@@ -32,7 +32,7 @@ from tsid_fmu.study.designopts import DesignOptions, check_samples
 from tsid_fmu.study.prepare import load_experiment, prepare
 from tsid_fmu.study.schema import Experiment
 from tsid_fmu.study.toml import read_design
-from tsid_fmu.uncertainty.fidelity import chosen_interface
+from tsid_fmu.uncertainty.fidelity import chosen_cs_tolerance, chosen_interface
 
 __all__ = ["Plan", "at_bounds", "candidate_spec", "make_plan", "unused"]
 
@@ -347,9 +347,12 @@ def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     levels = {n: v for n, v in study.first_levels().items() if n not in left}
     spec = prepare(study, parameters=list(levels))  # the unused ones are not set
     fixed = {n: float(result.params[n]) for n in study.choice_names}
-    chosen = chosen_interface(getattr(result, "extra", None))  # as tsid simulate --result
+    extra = getattr(result, "extra", None)  # the solver chosen, as tsid simulate --result
     spec = dataclasses.replace(
-        spec, start_values={**spec.start_values, **fixed}, interface=chosen or spec.interface
+        spec,
+        start_values={**spec.start_values, **fixed},
+        interface=chosen_interface(extra) or spec.interface,
+        cs_tolerance=spec.cs_tolerance or chosen_cs_tolerance(extra),
     )
     searched = Space(levels, study.bounds(), study.method.leveling)
     x = {n: float(result.params[n]) for n in searched.names}

@@ -386,7 +386,11 @@ class Method:
         ``fmi2SetupExperiment`` (``toleranceDefined``) or FMI 3's
         ``fmi3EnterInitializationMode``. Default: none passed, and the FMU's solver
         runs at its exporter's default (Dymola's CS solvers at the tolerance set when the
-        FMU was exported); give e.g. ``1e-8`` to tighten it.
+        FMU was exported), unless the solver-fidelity check at the start point finds that
+        default too loose and ``1e-8`` close enough to its reference (a smaller step at
+        ``1e-10``): the study then passes ``1e-8`` and says so
+        (:func:`~tsid_fmu.uncertainty.fidelity.choose_cs_tolerance`). A value given here
+        is kept; the check then proposes a tighter one where it matters.
     fidelity : bool
         Check the solver's fidelity at the start point and at the answer (a few
         simulations with a reference solver each; see ``interface``). Default true.

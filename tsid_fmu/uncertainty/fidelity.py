@@ -9,8 +9,9 @@ compares the difference with the noise in the data, output by output:
 - an FMU with both interfaces: the reference is its Model Exchange interface at a tight
   tolerance (:data:`REFERENCE_TOLERANCE`);
 - a Co-Simulation-only FMU: the reference is the same FMU at a communication step
-  :data:`FINER` times smaller (this cannot see an FMU-internal fixed step that does not
-  follow the communication step).
+  :data:`FINER` times smaller and its own solver at a tight tolerance
+  (:data:`CS_REFERENCE_TOLERANCE`, passed as ``fmi2SetupExperiment``'s); this cannot see
+  an FMU-internal fixed step that follows neither.
 
 The difference *matters* when its RMS exceeds :data:`THRESHOLD` times an output's noise
 (see the constant for why 0.2) or, at the answer, when it alone moves an estimate by more
@@ -18,7 +19,11 @@ than :data:`BIAS_LIMIT` standard errors (projected on the sensitivities). Then t
 says so in one line with the figures and proposes a fix, after trying the alternatives
 (Model Exchange, a smaller step, a tighter tolerance). With ``interface = "auto"`` the
 study uses Model Exchange when Co-Simulation's difference matters at the start point and
-Model Exchange is closer to the reference (:func:`choose_interface`).
+Model Exchange is closer to the reference (:func:`choose_interface`). A study that
+simulates Co-Simulation with no ``cs_tolerance`` of its own uses :data:`CS_TOLERANCE`
+when the FMU's default tolerance is what makes the difference matter and that tolerance
+removes it (:func:`choose_cs_tolerance`): the FMU's own solver, not the physics, then
+limited the answer, and the check says so.
 
 A Co-Simulation-only FMU whose outputs do not settle as the step shrinks is not blamed
 (:data:`CONVERGES`): a discrete-time FMU, or one that adds a fixed amount at every
@@ -34,16 +39,22 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from tsid_fmu.errors import SimulationError, TsidError
 from tsid_fmu.evaluate.isolated import IsolatedCalls
 from tsid_fmu.evaluate.spec import EvaluationSpec
-from tsid_fmu.numerics.space import Space
-from tsid_fmu.study.definition import Study
+from tsid_fmu.uncertainty.fidelity_record import (
+    THRESHOLD,
+    Fidelity,
+    chosen_cs_tolerance,
+    chosen_interface,
+    fidelity_record,
+    fidelity_warnings,
+    start_point,
+    study_noise,
+)
 from tsid_fmu.uncertainty.sensitivity import Sensitivities
 from tsid_fmu.uncertainty.solvers import (
     Deviation,
@@ -57,26 +68,22 @@ from tsid_fmu.uncertainty.solvers import (
 
 __all__ = [
     "BIAS_LIMIT",
+    "CS_REFERENCE_TOLERANCE",
+    "CS_TOLERANCE",
     "FINER",
     "REFERENCE_TOLERANCE",
     "THRESHOLD",
     "Fidelity",
     "check_fidelity",
+    "choose_cs_tolerance",
     "choose_interface",
+    "chosen_cs_tolerance",
     "chosen_interface",
     "fidelity_record",
     "fidelity_warnings",
     "start_point",
     "study_noise",
 ]
-
-THRESHOLD = 0.2
-"""A solver's RMS difference from the reference above this fraction of an output's
-noise matters: the error is then a visible part of the residuals (it adds 0.2**2 = 4 % to
-the least-squares cost at the true parameters, more above). A smaller error can still
-move a parameter whose sensitivity resembles it, by up to ``ratio * sqrt(n)`` standard
-errors over ``n`` samples; at the answer the check therefore also projects the error on
-the sensitivities (:data:`BIAS_LIMIT`)."""
 
 BIAS_LIMIT = 1.0
 """At the answer, a solver error that alone moves an estimate by more than this many
@@ -90,6 +97,20 @@ times each state's nominal value (often 1) as the absolute tolerance, so a state
 micrometres needs a relative tolerance far below its noise; 1e-12 costs about 30 % more
 time than 1e-10 on the bundled FMUs. A study with a tighter tolerance of its own gets a
 reference 100 times tighter still (down to 1e-14)."""
+
+CS_TOLERANCE = 1e-8
+"""The tolerance a Co-Simulation study adopts for the FMU's own solver where the FMU's
+default is too loose (:func:`choose_cs_tolerance`): the value ``cs_tolerance``'s
+documentation proposes, four or more decades tighter than the defaults exporters ship
+(1e-4 in Dymola and OpenModelica, 1e-6 in FMPy's own setups). Tighter costs the study's
+every simulation time; this is tight enough where the check then passes, and the check
+at the answer tells where it is not."""
+
+CS_REFERENCE_TOLERANCE = 1e-10
+"""The tolerance of the Co-Simulation reference: 100 times tighter than
+:data:`CS_TOLERANCE`, as :data:`REFERENCE_TOLERANCE` is than the Model Exchange default
+(and 100 times tighter than a study's own ``cs_tolerance``, down to 1e-14). An FMU whose
+solver has a fixed step ignores it."""
 
 FINER = 4
 """The Co-Simulation reference of a Co-Simulation-only FMU uses a communication step this
@@ -105,101 +126,17 @@ an FMU that adds a fixed amount per step gives ``FINER`` (4)."""
 NAMES = {"cs": "Co-Simulation", "me": "Model Exchange"}
 
 
-@dataclass
-class Fidelity:
-    """What :func:`check_fidelity` found at one parameter set.
-
-    Attributes
-    ----------
-    where : str
-        ``"start point"`` or ``"answer"``.
-    x : dict
-        The parameter set simulated.
-    requested : str
-        The study's interface (``"auto"``, ``"cs"`` or ``"me"``).
-    interface : str
-        The interface the study uses after the check (``"cs"`` or ``"me"``).
-    reference : Solver or None
-        The reference solution's solver (None: nothing to compare with).
-    used : Deviation or None
-        The study's solver against the reference.
-    alternatives : list of Deviation
-        Other solvers tried because the difference mattered.
-    threshold : float
-        :data:`THRESHOLD`.
-    matters : bool
-        The study's solver differs from the reference by more than the threshold, or
-        its difference moves an estimate by more than :data:`BIAS_LIMIT` standard
-        errors.
-    bias : dict
-        At the answer: how many standard errors the difference moves each estimate
-        (:func:`~tsid_fmu.uncertainty.solvers.solver_bias`); empty at the start point.
-    message : str
-        One line with the figures (and the fix when it matters).
-    simulations : int
-        Simulations the check ran.
-    seconds : float
-        Their wall time.
-    step : float or None
-        The study's step (None: the data's sample interval).
-    converges : bool or None
-        A Co-Simulation-only FMU whose difference mattered: whether its outputs
-        settle as the step shrinks (:data:`CONVERGES`); None when not tested.
-    """
-
-    where: str
-    x: dict[str, float]
-    requested: str
-    interface: str
-    reference: Solver | None = None
-    used: Deviation | None = None
-    alternatives: list[Deviation] = field(default_factory=list)
-    threshold: float = THRESHOLD
-    matters: bool = False
-    bias: dict[str, float] = field(default_factory=dict)
-    message: str = ""
-    simulations: int = 0
-    seconds: float = 0.0
-    step: float | None = None
-    converges: bool | None = None
-
-    @property
-    def checked(self) -> bool:
-        """True when the comparison ran (no simulation failed)."""
-        return self.used is not None
-
-    @property
-    def switched(self) -> bool:
-        """True when ``"auto"`` chose another interface than the first one tried."""
-        return self.used is not None and self.interface != self.used.solver.interface
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return strict-JSON data (for ``result.json``)."""
-        return {
-            "where": self.where,
-            "x": self.x,
-            "requested": self.requested,
-            "interface": self.interface,
-            "step": self.step,
-            "reference": self.reference.label if self.reference else None,
-            "used": self.used.to_dict() if self.used else None,
-            "alternatives": [a.to_dict() for a in self.alternatives],
-            "threshold": self.threshold,
-            "matters": self.matters,
-            "bias": self.bias,
-            "message": self.message,
-            "simulations": self.simulations,
-            "seconds": self.seconds,
-            "converges": self.converges,
-        }
-
-
 def _sample_step(spec: EvaluationSpec) -> float:
     return spec.step_size or min(float(np.min(np.diff(e.time))) for e in spec.experiments)
 
 
 def _tolerance(spec: EvaluationSpec, interface: str) -> float | None:
-    return spec.tolerance if interface == "me" else None
+    return spec.tolerance if interface == "me" else spec.cs_tolerance
+
+
+def _tight(given: float | None, reference: float) -> float:
+    """Return ``reference``, or 100 times tighter than ``given`` (at least 1e-14)."""
+    return max(min(reference, 0.01 * (given or 1.0)), 1e-14)
 
 
 def _plan(
@@ -211,9 +148,19 @@ def _plan(
         first = "cs" if "cs" in available or not available else available[0]
     used = Solver(first, step=spec.step_size, tolerance=_tolerance(spec, first))
     if "me" in available:
-        tight = min(REFERENCE_TOLERANCE, 0.01 * (spec.tolerance or 1.0))
-        return used, Solver("me", tolerance=max(tight, 1e-14))
-    return used, Solver("cs", step=_sample_step(spec) / FINER)
+        return used, Solver("me", tolerance=_tight(spec.tolerance, REFERENCE_TOLERANCE))
+    tight = _tight(spec.cs_tolerance, CS_REFERENCE_TOLERANCE)
+    return used, Solver("cs", step=_sample_step(spec) / FINER, tolerance=tight)
+
+
+def _tighter(spec: EvaluationSpec) -> list[Solver]:
+    """Return the study's Co-Simulation at its step at :data:`CS_TOLERANCE`.
+
+    Nothing where the study's own ``cs_tolerance`` is that tight already.
+    """
+    if spec.cs_tolerance is not None and spec.cs_tolerance <= CS_TOLERANCE:
+        return []
+    return [Solver("cs", step=spec.step_size, tolerance=CS_TOLERANCE)]
 
 
 def _alternatives(
@@ -227,14 +174,14 @@ def _alternatives(
     """Try the other solvers the study could use instead."""
     spec = runs.spec
     others = []
-    if reference.interface == "cs":
-        return []  # the reference itself is the fix: a smaller step
     if used.interface == "cs" and "me" in available:
         others.append(Solver("me", step=spec.step_size, tolerance=spec.tolerance))
     if used.interface == "me" and "cs" in available:
-        others.append(Solver("cs", step=spec.step_size))
-    if used.interface == "cs" and reference.interface == "me":
-        others.append(Solver("cs", step=_sample_step(spec) / FINER))
+        others.append(Solver("cs", step=spec.step_size, tolerance=spec.cs_tolerance))
+    if used.interface == "cs":  # a smaller step alone, a tighter tolerance alone
+        step = reference.step if reference.interface == "cs" else _sample_step(spec) / FINER
+        others.append(Solver("cs", step=step, tolerance=spec.cs_tolerance))
+        others += _tighter(spec)
     return [compare(runs, s, reference, noise, threshold) for s in others]
 
 
@@ -249,13 +196,16 @@ def _figures(dev: Deviation) -> str:
 def _setting(solver: Solver, used: Solver) -> str:
     if solver.interface == "me":
         return 'interface = "me"'
-    return f"step = {solver.step:g}" if solver.step != used.step else 'interface = "cs"'
+    if solver.step != used.step and solver.tolerance == used.tolerance:
+        return f"a smaller communication step, step = {solver.step:g} or less"
+    parts = [f"step = {solver.step:g}"] if solver.step != used.step else []
+    if solver.tolerance is not None and solver.tolerance != used.tolerance:
+        parts.append(f"cs_tolerance = {solver.tolerance:g}")
+    return " with ".join(parts) or 'interface = "cs"'
 
 
 def _fix(used: Solver, alternatives: list[Deviation], reference: Solver, threshold: float) -> str:
     """Name the settings that bring the solver within the threshold (or the closest)."""
-    if reference.interface == "cs":
-        return f"fix: a smaller communication step, step = {reference.step:g} or less in [method]"
     fixes = [f"tolerance = {reference.tolerance:g}"] if used.interface == "me" else []
     ranked = sorted(alternatives, key=lambda d: d.ratio)
     fixes += [
@@ -263,8 +213,12 @@ def _fix(used: Solver, alternatives: list[Deviation], reference: Solver, thresho
         for d in ranked
         if d.ratio <= threshold
     ]
+    if fixes and reference.interface == "cs":
+        return "fix: " + " or ".join(fixes) + " in [method]"
     if fixes:
         return "fix in [method]: " + " or ".join(fixes)
+    if reference.interface == "cs":  # neither alone: both, as the reference has them
+        return f"fix: {_setting(reference, used)} in [method], as the reference"
     if ranked:
         best = ranked[0]
         return (
@@ -284,6 +238,7 @@ def check_fidelity(
     threshold: float = THRESHOLD,
     isolate: bool = False,
     time_limit: float | None = None,
+    adopt: bool = True,
 ) -> Fidelity:
     """Compare the study's solver with a reference at ``x`` and choose the interface.
 
@@ -311,6 +266,9 @@ def check_fidelity(
         leaves the check undone, with the reason, instead of stopping the caller.
     time_limit : float, optional
         With ``isolate``: seconds per simulation (None: no limit).
+    adopt : bool
+        Let the check adopt :data:`CS_TOLERANCE` for a study without ``cs_tolerance``
+        (:func:`choose_cs_tolerance`); False at the answer, which was found already.
 
     Returns
     -------
@@ -327,21 +285,16 @@ def check_fidelity(
     available = available_interfaces(spec)
     used, reference = _plan(spec, spec.interface, available)
     out = Fidelity(where, dict(x), spec.interface, used.interface, threshold=threshold)
-    out.step = spec.step_size
+    out.step, out.cs_tolerance = spec.step_size, spec.cs_tolerance
     sigma = [output_noise(e, (noise or {}).get(e.name)) for e in spec.experiments]
     calls = IsolatedCalls(time_limit, spec.fmu.name) if isolate else None
     runs = SolverRuns(spec, x, calls)
     try:
-        out.used = compare(runs, used, reference, sigma, threshold)
-        out.reference = reference
-        if sensitivities is not None:
-            out.bias = solver_bias(out.used, sensitivities)
-        out.matters = out.used.ratio > threshold or max(out.bias.values(), default=0) > BIAS_LIMIT
-        if out.matters and reference.interface == "cs":
-            _convergence(out, runs, reference, sigma)
-        elif out.matters:
-            out.alternatives = _alternatives(runs, used, reference, available, sigma, threshold)
-        out.message = _message(out, choose_interface(out))
+        _compare(out, runs, (used, reference), available, sigma, sensitivities)
+        chosen = choose_interface(out)
+        if adopt:
+            choose_cs_tolerance(out)
+        out.message = _message(out, chosen)
     except TsidError as exc:
         if not isinstance(exc, SimulationError) and not runs.count:
             raise
@@ -354,6 +307,27 @@ def check_fidelity(
     return out
 
 
+def _compare(
+    out: Fidelity,
+    runs: SolverRuns,
+    solvers: tuple[Solver, Solver],
+    available: tuple[str, ...],
+    sigma: Sequence[np.ndarray],
+    sensitivities: Sensitivities | None,
+) -> None:
+    """Compare the study's solver with the reference; where it matters, the alternatives."""
+    used, reference = solvers
+    out.used = compare(runs, used, reference, sigma, out.threshold)
+    out.reference = reference
+    if sensitivities is not None:
+        out.bias = solver_bias(out.used, sensitivities)
+    out.matters = out.used.ratio > out.threshold or max(out.bias.values(), default=0) > BIAS_LIMIT
+    if out.matters and reference.interface == "cs":
+        _convergence(out, runs, reference, sigma)
+    if out.matters:  # (a Co-Simulation-only FMU: one that converges)
+        out.alternatives += _alternatives(runs, used, reference, available, sigma, out.threshold)
+
+
 def _convergence(
     out: Fidelity, runs: SolverRuns, reference: Solver, sigma: Sequence[np.ndarray]
 ) -> None:
@@ -363,11 +337,39 @@ def _convergence(
     difference that does not fall is the FMU's design, not a solver error.
     """
     assert out.used is not None
-    fine = Solver("cs", step=(reference.step or 0.0) / FINER)
+    fine = Solver("cs", step=(reference.step or 0.0) / FINER, tolerance=reference.tolerance)
     finer = compare(runs, reference, fine, sigma, out.threshold)
     out.alternatives = [finer]
     out.converges = finer.ratio <= CONVERGES * out.used.ratio
     out.matters = out.converges
+
+
+def _candidates(check: Fidelity) -> list[Deviation]:
+    """Return the alternatives tried as fixes (not the convergence test's finer pair)."""
+    return check.alternatives[1:] if check.converges is not None else check.alternatives
+
+
+def choose_cs_tolerance(check: Fidelity) -> float | None:
+    """Return the FMU's Co-Simulation tolerance to use: :data:`CS_TOLERANCE` where it helps.
+
+    Sets ``check.cs_tolerance``. A study that simulates Co-Simulation without a
+    ``cs_tolerance`` of its own adopts :data:`CS_TOLERANCE` where the difference matters
+    and that tolerance alone, at the study's step, brings it within the threshold: the
+    FMU's own solver at its default tolerance limited the answer. A tighter tolerance
+    costs every simulation time, so one that only narrows the difference is proposed, not
+    adopted; a ``cs_tolerance`` the study gives is kept (the check warns with the fix).
+    """
+    used = check.used
+    if check.interface == "cs" and check.matters and used is not None:
+        if used.solver.interface == "cs" and used.solver.tolerance is None:
+            tight = [d for d in _candidates(check) if d.solver == _tightened(used.solver)]
+            if tight and tight[0].ratio <= check.threshold:
+                check.cs_tolerance = CS_TOLERANCE
+    return check.cs_tolerance
+
+
+def _tightened(solver: Solver) -> Solver:
+    return Solver("cs", step=solver.step, tolerance=CS_TOLERANCE)
 
 
 def choose_interface(check: Fidelity) -> str:
@@ -395,7 +397,7 @@ def _message(check: Fidelity, chosen: str) -> str:
     assert used is not None and ref is not None
     head = f"solver fidelity ({check.where}): {used.solver.label}"
     if check.converges is False:
-        finer = Solver("cs", step=(ref.step or 0.0) / FINER)
+        finer = Solver("cs", step=(ref.step or 0.0) / FINER, tolerance=ref.tolerance)
         return (
             f"{head} differs from {ref.label} by {used.ratio:.3g} x the noise, and that from "
             f"{finer.label} by {check.alternatives[0].ratio:.3g} x: the outputs do not converge as "
@@ -418,61 +420,11 @@ def _message(check: Fidelity, chosen: str) -> str:
         return (
             f'{text}; interface = "auto" uses {NAMES[chosen]} instead ({me.ratio:.2g} x the noise)'
         )
-    return f"{text}; {_fix(used.solver, check.alternatives, ref, check.threshold)}"
-
-
-def start_point(study: Study) -> dict[str, float]:
-    """Return the centre of a study's first levels (search coordinates 0).
-
-    With an open choice among FMU files, the point names the study's ``fmu`` among them
-    (the first file where ``fmu`` is none of them): a set simulates only in the variant
-    it names, and the check runs in that one.
-    """
-    space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    x = space.to_x(np.zeros(space.dim))
-    v = study.variants
-    if v is not None and v.name not in study.start_values:  # both already resolved
-        x[v.name] = float(v.paths.index(study.fmu)) if study.fmu in v.paths else v.values[0]
-    return x
-
-
-def study_noise(study: Study) -> dict[str, dict[str, float]]:
-    """Return the known sensor noise of each experiment's outputs (``noise = {...}``)."""
-    return {e.name: dict(e.noise) for e in study.experiments}
-
-
-def fidelity_record(start: Fidelity, answer: Fidelity | None) -> dict[str, Any]:
-    """Return ``result.extra["fidelity"]``: the interface used, why, and both checks."""
-    return {
-        "requested": start.requested,
-        "interface": start.interface,
-        "step": start.step,
-        "threshold": start.threshold,
-        "reason": start.message,
-        "start": start.to_dict(),
-        "answer": answer.to_dict() if answer is not None else None,
-    }
-
-
-def chosen_interface(extra: Mapping[str, Any] | None) -> str | None:
-    """Return the interface a result's fidelity check chose, or ``None`` where none ran.
-
-    ``extra`` is ``result.extra`` (or a saved result's ``"extra"``). Whatever simulates
-    at the answer again (``tsid simulate --result``, ``tsid design``) uses it: OpenModelica's
-    ``Mass_Damper`` simulated by its Co-Simulation (a fixed explicit Euler step) left
-    residuals 330 times the noise where the identification had chosen Model Exchange.
-    """
-    return ((extra or {}).get("fidelity") or {}).get("interface")
-
-
-def fidelity_warnings(start: Fidelity, answer: Fidelity | None) -> list[str]:
-    """Return the warnings of the checks: the answer's, else the start point's.
-
-    A difference that ``"auto"`` removed by switching the interface is no warning (it is
-    recorded); a check that could not run is, and so is an FMU whose outputs depend on
-    the step by design (the data must then be sampled at the FMU's step).
-    """
-    last = answer if answer is not None else start
-    if not last.checked or (last.matters and not last.switched) or last.converges is False:
-        return [last.message]
-    return []
+    if check.adopted:
+        tight = next(d for d in check.alternatives if d.solver == _tightened(used.solver))
+        return (
+            f"{text}: the FMU's own solver at its default tolerance, not the physics, limits "
+            f"the answer; the study passes cs_tolerance = {check.cs_tolerance:g} instead "
+            f"({tight.ratio:.2g} x the noise)"
+        )
+    return f"{text}; {_fix(used.solver, _candidates(check), ref, check.threshold)}"

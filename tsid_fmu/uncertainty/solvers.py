@@ -50,7 +50,9 @@ class Solver:
         Co-Simulation: largest communication step (None: the sample interval). Model
         Exchange: the step hint.
     tolerance : float, optional
-        Model Exchange: relative tolerance (None: the solver's default).
+        Relative tolerance (None: the solver's default): Model Exchange's integrator's,
+        or the Co-Simulation FMU's own solver's (``cs_tolerance``, passed to
+        ``fmi2SetupExperiment`` / ``fmi3EnterInitializationMode``).
     """
 
     interface: str
@@ -62,7 +64,8 @@ class Solver:
         """Describe the solver in words (``Co-Simulation at step 0.01 s``)."""
         if self.interface == "cs":
             step = f"step {self.step:g} s" if self.step else "the data's sample interval"
-            return f"Co-Simulation at {step}"
+            tol = f", tolerance {self.tolerance:g}" if self.tolerance else ""
+            return f"Co-Simulation at {step}{tol}"
         tol = f"tolerance {self.tolerance:g}" if self.tolerance else "its default tolerance"
         return f"Model Exchange at {tol}"
 
@@ -181,7 +184,8 @@ def simulate_solver(
         step_size=solver.step,
         start_values=start,
         hold={} if held else dict(e.hold),
-        tolerance=solver.tolerance,
+        tolerance=solver.tolerance if solver.interface == "me" else None,
+        cs_tolerance=solver.tolerance if solver.interface == "cs" else None,
         capture_output=True,  # as every run of a study: echoed, capped, on record
     ) as session:
         try:
