@@ -158,6 +158,14 @@ def test_the_combinations_across_an_open_direction_are_named_with_intervals():
     for f, value in zip(fixed, (200.0, 500.0), strict=True):
         low, high = f["interval"]
         assert low < value < high and high / low < 1.05  # finite, and narrow
+    # a standard error of hundreds of decades across it (a non-deterministic FMU's
+    # Jacobian): open intervals, where 10 ** (level + t se) raised OverflowError (exit 70)
+    wild = Uncertainty(values=dict(truth), dof=u.dof)
+    wild.cov = 1e4 * np.outer(unit, unit) + 1e6 * across @ across.T
+    assert [f["interval"] for f in fixed_across(space, wild, v, ["C", "R1", "R2"])] == [
+        [None, None],
+        [None, None],
+    ]
     # the warning that opens their intervals carries them
     u.intervals = {n: [0.9 * x, 1.1 * x] for n, x in truth.items()}
     u.std_error = {n: 0.1 * x for n, x in truth.items()}

@@ -314,6 +314,11 @@ def _rounded(a: float) -> float:
     return float(k) if abs(a - k) < 0.02 * max(abs(a), 1.0) and k != 0 else a
 
 
+def _pow10(exponent: float) -> float:
+    """Return ``10 ** exponent``, infinite beyond a float's range (not OverflowError)."""
+    return 10.0**exponent if exponent < 308.0 else math.inf
+
+
 def _finite(interval: list[float]) -> list[float | None]:
     """Return the interval, or ``[None, None]`` (open) where its standard error is infinite."""
     if all(math.isfinite(e) for e in interval):
@@ -373,8 +378,8 @@ def fixed_across(
         if log and all(x > 0 for x in values):
             level = sum(coef * math.log10(u.values[space.names[i]]) for i, coef in a.items())
             name = " ".join(f"{space.names[i]}{_exponent(coef)}" for i, coef in a.items())
-            interval = [10 ** (level - t * se), 10 ** (level + t * se)]
-            out.append({"name": name, "value": 10**level, "interval": _finite(interval),
+            interval = [_pow10(level - t * se), _pow10(level + t * se)]
+            out.append({"name": name, "value": _pow10(level), "interval": _finite(interval),
                         "form": "product", "coefficients": coefficients})  # fmt: skip
         elif not log:
             level = sum(coef * u.values[space.names[i]] for i, coef in a.items())
