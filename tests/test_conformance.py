@@ -236,6 +236,8 @@ def test_a_study_on_a_loose_tolerance_fmu_adopts_a_tight_one_and_ends_at_the_opt
     assert not any("solver fidelity" in w for w in result.warnings), result.warnings
     saved = (tmp_path / "out" / "result.json").read_text()
     assert '"cs_tolerance": 1e-08' in saved
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "- The FMU's own solver at tolerance 1e-08" in report
 
 
 def test_a_study_that_sets_its_own_cs_tolerance_keeps_it_and_is_told_the_fix(quirky, tmp_path):

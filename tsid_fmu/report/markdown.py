@@ -238,6 +238,8 @@ def _fidelity(result: IdentificationResult) -> list[str]:
         f"- Interface: {record['requested']!r} requested, "
         f"**{names.get(record['interface'], record['interface'])}** used",
     ]
+    if record.get("cs_tolerance") is not None and record["interface"] == "cs":
+        lines.append(f"- The FMU's own solver at tolerance {record['cs_tolerance']:g}")
     for key in ("start", "answer"):
         if record.get(key):
             lines.append(f"- {record[key]['message']}")
