@@ -101,10 +101,10 @@ reference 100 times tighter still (down to 1e-14)."""
 CS_TOLERANCE = 1e-8
 """The tolerance a Co-Simulation study adopts for the FMU's own solver where the FMU's
 default is too loose (:func:`choose_cs_tolerance`): the value ``cs_tolerance``'s
-documentation proposes, four or more decades tighter than the defaults exporters ship
-(1e-4 in Dymola and OpenModelica, 1e-6 in FMPy's own setups). Tighter costs the study's
-every simulation time; this is tight enough where the check then passes, and the check
-at the answer tells where it is not."""
+documentation proposes, two to four decades tighter than the 1e-4 to 1e-6 that
+exporters commonly set as an FMU's default. Tighter costs every simulation of the study
+time; this is adopted only where the check then passes, and the check at the answer
+tells where it no longer does. Not tuned on a benchmark."""
 
 CS_REFERENCE_TOLERANCE = 1e-10
 """The tolerance of the Co-Simulation reference: 100 times tighter than
