@@ -160,7 +160,7 @@ def _tighter(spec: EvaluationSpec) -> list[Solver]:
     """
     if spec.cs_tolerance is not None and spec.cs_tolerance <= CS_TOLERANCE:
         return []
-    return [Solver("cs", step=spec.step_size, tolerance=CS_TOLERANCE)]
+    return [_tightened(Solver("cs", step=spec.step_size))]
 
 
 def _alternatives(
@@ -369,6 +369,7 @@ def choose_cs_tolerance(check: Fidelity) -> float | None:
 
 
 def _tightened(solver: Solver) -> Solver:
+    """Return ``solver``'s Co-Simulation at :data:`CS_TOLERANCE` (the one candidate)."""
     return Solver("cs", step=solver.step, tolerance=CS_TOLERANCE)
 
 
