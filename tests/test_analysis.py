@@ -40,6 +40,21 @@ def test_sn_smaller_the_better_simple_numbers():
 def test_sn_smaller_the_better_zero_is_capped():
     sn = sn_smaller_the_better([0.0, 1.0])
     assert sn[0] == SN_CAP and sn[1] == 0.0
+    # an exact fit is never below an inexact row past the cap
+    assert sn_smaller_the_better([0.0, 1e-16]).tolist() == [320.0, 320.0]
+
+
+def test_sn_bad_rows_are_not_floored():
+    """Only exact fits are capped (issue 64, item 4): a bad row keeps its ratio.
+
+    The SISO example's array had five of 25 rows at -300 dB, one of them -318.6: the
+    floor made them equal in the ANOVA.
+    """
+    costs = np.array([10**15.93, 10**15.2, 10**17.0, 1.0])
+    sn = sn_smaller_the_better(costs)
+    np.testing.assert_allclose(sn, [-318.6, -304.0, -340.0, 0.0])
+    assert (np.argsort(sn) == np.argsort(-costs)).all()
+    assert sn_smaller_the_better([1e300, 1.0, np.nan]).tolist() == [-6000.0, 0.0, -6020.0]
     assert np.isfinite(sn).all()
 
 
@@ -67,7 +82,8 @@ def test_sn_bad_shape(bad):
 
 def test_sn_larger_and_nominal():
     np.testing.assert_allclose(sn_larger_the_better([1.0, 10.0, 0.1]), [0.0, 20.0, -20.0])
-    assert sn_larger_the_better([0.0, 1.0])[0] == -SN_CAP
+    # a zero replicate is infinitely bad: placed like a failed row, 20 dB below the rest
+    assert sn_larger_the_better([0.0, 1.0])[0] == -20.0
     y = np.array([[9.0, 11.0], [10.0, 10.0], [8.0, 12.0]])
     sn = sn_nominal_the_best(y)
     assert sn[0] == pytest.approx(10 * np.log10(100 / 2))

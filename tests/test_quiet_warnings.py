@@ -36,12 +36,16 @@ def strict():
 
 
 def test_sn_ratios_of_huge_responses_give_no_warning(strict):
-    assert sn_smaller_the_better([[HUGE, HUGE], [1.0, 1.0]]).tolist() == [-SN_CAP, 0.0]
-    assert sn_larger_the_better([[1 / HUGE, 1 / HUGE], [1.0, 1.0]]).tolist() == [-SN_CAP, 0.0]
+    # in logarithms: -20 log10(1e200), not an overflow clipped to a floor (issue 64)
+    assert sn_smaller_the_better([[HUGE, HUGE], [1.0, 1.0]]).tolist() == [-4000.0, 0.0]
+    assert sn_larger_the_better([[1 / HUGE, 1 / HUGE], [1.0, 1.0]]).tolist() == [-4000.0, 0.0]
     # mean**2 / var was inf / inf = NaN; it does not depend on the scale
     sn = sn_nominal_the_best([[3 * HUGE, 4 * HUGE], [3.0, 4.0]])
     assert np.all(np.isfinite(sn)) and sn[0] == pytest.approx(sn[1])
-    assert sn_nominal_the_best([[HUGE, -HUGE], [1.0, 2.0]])[0] == -SN_CAP  # zero mean
+    # a zero mean is as bad as a failed row: 20 dB below the other
+    zero_mean = sn_nominal_the_best([[HUGE, -HUGE], [1.0, 2.0]])
+    assert zero_mean[0] == pytest.approx(zero_mean[1] - 20.0)
+    assert sn_smaller_the_better([[0.0, 0.0], [1.0, 1.0]])[0] == SN_CAP
 
 
 def test_principal_axes_of_huge_residuals_are_none_without_a_warning(strict):
