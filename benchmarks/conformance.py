@@ -205,10 +205,15 @@ QUIRK_HAND = (
 )
 QUIRKS = [
     Case(f"quirk {name} (FMI {fmi})", f"quirk:{name}:{fmi}", "", {"tau": 0.37, "x0": 0.8},
-         quirk_data, ["u"], ["y"], QUIRK_HAND)
-    for name, fmi in (("none", "2.0"), ("STALE_CLOCK", "2.0"), ("STALE_CLOCK", "3.0"),
-                      ("NONDETERMINISTIC", "2.0"), ("LOOSE_TOLERANCE", "2.0"),
-                      ("LOOSE_TOLERANCE", "3.0"))
+         quirk_data, ["u"], ["y"], QUIRK_HAND + hand)
+    for name, fmi, hand in (
+        ("none", "2.0", ""), ("STALE_CLOCK", "2.0", ""), ("STALE_CLOCK", "3.0", ""),
+        ("NONDETERMINISTIC", "2.0", ""), ("LOOSE_TOLERANCE", "2.0", ""),
+        ("LOOSE_TOLERANCE", "3.0", ""), ("ASSERT_RANGE", "2.0", ""),
+        # a user who frees everything the FMU offers; a time step no one would free by hand
+        ("NO_EFFECT", "2.0", "spare = { levels = [0.5, 1.0, 2.0] }\n"),
+        ("NUMERICAL_SETTING", "2.0", ""),
+    )
 ]  # fmt: skip
 """One synthetic FMU per quirk of issue 62 (see ``build_c_fmu``'s ``quirks``): FMI 2.0
 ones Co-Simulation only, as 20-sim's and most vendors' are."""

@@ -80,12 +80,18 @@ extern int tsid_dep_value(void);
    parameters (20-sim 4.6); NONDETERMINISTIC: y grows by 1e-3 per run of the library;
    LOOSE_TOLERANCE: the CS step integrates explicit Euler on an internal grid of step
    0.5 sqrt(tol), whatever the communication step, where tol is the tolerance set up (1e-2
-   when none is defined), as a variable-step CS solver whose default tolerance is loose */
+   when none is defined), as a variable-step CS solver whose default tolerance is loose;
+   ASSERT_RANGE: a step fails on an assertion where tau > TAU_MAX (as Dymola's "outside
+   scope of model"); NO_EFFECT: a parameter spare that acts on nothing; NUMERICAL_SETTING:
+   the CS step integrates explicit Euler on an internal grid of step timestep, a parameter
+   (as Hopsan's) */
+#define TAU_MAX 1.2
 static int tsid_runs = 0;
 
 typedef struct {
     double u, tau, x0, t_fail, t_nan, x, time, clock;
     double tol, tg, xg;  /* LOOSE_TOLERANCE: the set-up tolerance, the grid's time, state */
+    double spare, timestep;  /* NO_EFFECT, NUMERICAL_SETTING */
     int gain, offset_on;
     void *env;
     const char *name;
@@ -113,6 +119,8 @@ static double model_get(const Model *m, unsigned vr) {
     case 8: return m->x;
     case 9: return (m->u - m->x) / m->tau;
     case 10: return 2.0;
+    case 11: return m->spare;
+    case 12: return m->timestep;
     default: return NAN;
     }
 }
@@ -124,6 +132,8 @@ static int model_set(Model *m, unsigned vr, double v) {
     case 3: m->x0 = v; return 1;
     case 4: m->t_fail = v; return 1;
     case 5: m->t_nan = v; return 1;
+    case 11: m->spare = v; return 1;
+    case 12: m->timestep = v; return 1;
     default: return 0;
     }
 }
@@ -131,6 +141,7 @@ static int model_set(Model *m, unsigned vr, double v) {
 static void model_defaults(Model *m) {
     m->u = 0.0; m->tau = 1.0; m->x0 = 0.0; m->t_fail = 1e300; m->t_nan = 1e300;
     m->gain = 1; m->offset_on = 0; m->x = 0.0; m->time = 0.0; m->tol = 1e-2;
+    m->spare = 1.0; m->timestep = 1e-3;
 }
 
 static void model_setup(Model *m, int tolDef, double tol, double start) {
@@ -142,20 +153,28 @@ static void model_init(Model *m) {  /* leaving initialization mode */
     m->x = m->x0; m->tg = m->time; m->xg = m->x0;
 }
 
-/* 0: ok, 1: tau <= 0, 2: time limit */
+/* explicit Euler on the internal grid of step hi from the grid's last point to end */
+static void euler_to(Model *m, double end, double hi) {
+    while (m->tg + hi <= end) { m->xg += hi * (m->u - m->xg) / m->tau; m->tg += hi; }
+    m->x = m->xg + (end - m->tg) * (m->u - m->xg) / m->tau;
+}
+
+/* 0: ok, 1: tau <= 0, 2: time limit, 3: assertion tau <= TAU_MAX */
 static int model_step(Model *m, double t, double h) {
     if (m->tau <= 0.0) return 1;
     if (t + h > m->t_fail) return 2;
+#ifdef ASSERT_RANGE
+    if (m->tau > TAU_MAX) return 3;
+#endif
 #ifdef STALE_CLOCK
     if (t + h <= m->clock) { m->time = t + h; return 0; }  /* "already there" */
     m->clock = t + h;
 #endif
-#ifdef LOOSE_TOLERANCE
-    {
-        double hi = 0.5 * sqrt(m->tol), end = t + h;
-        while (m->tg + hi <= end) { m->xg += hi * (m->u - m->xg) / m->tau; m->tg += hi; }
-        m->x = m->xg + (end - m->tg) * (m->u - m->xg) / m->tau;
-    }
+#if defined(LOOSE_TOLERANCE)
+    euler_to(m, t + h, 0.5 * sqrt(m->tol));
+#elif defined(NUMERICAL_SETTING)
+    if (m->timestep <= 0.0) return 1;
+    euler_to(m, t + h, m->timestep);
 #else
     m->x = m->u + (m->x - m->u) * exp(-h / m->tau);
 #endif
@@ -311,6 +330,8 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean ns) {
     case 1: LOG(fmi2Error, "tau must be positive, got %g", M->tau); return fmi2Error;
     case 2: LOG(fmi2Error, "time limit t_fail=%g exceeded at t=%g", M->t_fail, t + h);
             return fmi2Error;
+    case 3: LOG(fmi2Error, "assertion: tau = %g outside scope of model (at most %g)",
+                M->tau, TAU_MAX); return fmi2Error;
     default: return fmi2OK;
     }
 }
@@ -408,6 +429,8 @@ EXPORT int fmi3DoStep(void *c, double t, double h, bool ns, bool *event, bool *t
     switch (model_step(M, t, h)) {
     case 1: LOG(3, "tau must be positive, got %g", M->tau); return 3;
     case 2: LOG(3, "time limit t_fail=%g exceeded at t=%g", M->t_fail, t + h); return 3;
+    case 3: LOG(3, "assertion: tau = %g outside scope of model (at most %g)", M->tau, TAU_MAX);
+            return 3;
     default: *last = t + h; return 0;
     }
 }
@@ -416,9 +439,24 @@ EXPORT int fmi3DoStep(void *c, double t, double h, bool ns, bool *event, bool *t
 )
 
 
-def _model_description_fmi2(name: str, guid: str, interfaces: Sequence[str]) -> str:
+QUIRK_VARIABLES = {
+    "NO_EFFECT": [("spare", 11, "Real", "parameter", "fixed", "exact", "1.0", "acts on nothing")],
+    "NUMERICAL_SETTING": [
+        ("timestep", 12, "Real", "parameter", "fixed", "exact", "0.001", "integration time step")
+    ],
+}
+"""The variables a quirk adds after :data:`VARIABLES` (their indices follow its own)."""
+
+
+def _variables(quirks: Sequence[str]) -> list[tuple]:
+    return VARIABLES + [v for q in quirks for v in QUIRK_VARIABLES.get(q, [])]
+
+
+def _model_description_fmi2(
+    name: str, guid: str, interfaces: Sequence[str], quirks: Sequence[str] = ()
+) -> str:
     rows = []
-    for vname, vr, vtype, causality, variability, initial, start, desc in VARIABLES:
+    for vname, vr, vtype, causality, variability, initial, start, desc in _variables(quirks):
         attrs = f'name="{vname}" valueReference="{vr}" causality="{causality}" '
         attrs += f'variability="{variability}" description="{desc}"'
         if initial is not None and causality != "input":
@@ -428,7 +466,7 @@ def _model_description_fmi2(name: str, guid: str, interfaces: Sequence[str]) -> 
             type_attrs += f' start="{start}"'
         if vname == "der_x":
             type_attrs += ' derivative="9"'
-        if vname == "tau":
+        if vname in ("tau", "timestep"):
             type_attrs += ' unit="s"'
         rows.append(
             f"    <ScalarVariable {attrs}>\n      <{vtype}{type_attrs}/>\n    </ScalarVariable>"
@@ -462,13 +500,13 @@ def _model_description_fmi2(name: str, guid: str, interfaces: Sequence[str]) -> 
     )
 
 
-def _model_description_fmi3(name: str, guid: str) -> str:
+def _model_description_fmi3(name: str, guid: str, quirks: Sequence[str] = ()) -> str:
     type3 = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
     rows = [
         '    <Float64 name="time" valueReference="99" causality="independent" '
         'variability="continuous"/>'
     ]
-    for vname, vr, vtype, causality, variability, initial, start, desc in VARIABLES:
+    for vname, vr, vtype, causality, variability, initial, start, desc in _variables(quirks):
         if vname == "der_x":
             continue
         attrs = f'name="{vname}" valueReference="{vr}" causality="{causality}" '
@@ -655,15 +693,21 @@ def build_c_fmu(
     ``"LOOSE_TOLERANCE"`` -- Co-Simulation integrates explicit Euler on an internal grid of
     step ``0.5 sqrt(tol)`` independent of the communication step, ``tol`` the tolerance
     passed to ``fmi2SetupExperiment`` / ``fmi3EnterInitializationMode`` (1e-2 when none is
-    defined): about 7 % of bias on ``tau`` = 0.37 s at the default, none at 1e-8.
+    defined): about 7 % of bias on ``tau`` = 0.37 s at the default, none at 1e-8;
+    ``"ASSERT_RANGE"`` -- a Co-Simulation step fails on an assertion ("tau = ... outside
+    scope of model") where ``tau`` > 1.2, as Dymola's models assert on a temperature;
+    ``"NO_EFFECT"`` -- a parameter ``spare`` (start 1) that acts on nothing;
+    ``"NUMERICAL_SETTING"`` -- Co-Simulation integrates explicit Euler on an internal grid
+    of step ``timestep`` (a parameter, unit s, start 1e-3, "integration time step"),
+    as Hopsan's FMUs expose their time step.
     """
     guid = new_guid()
     if fmi_version == "2.0":
         platform_dir = fmpy.platform
-        source, xml = _C_FMI2, _model_description_fmi2(name, guid, interfaces)
+        source, xml = _C_FMI2, _model_description_fmi2(name, guid, interfaces, quirks)
     elif fmi_version == "3.0":
         platform_dir = fmpy.platform_tuple
-        source, xml = _C_FMI3, _model_description_fmi3(name, guid)
+        source, xml = _C_FMI3, _model_description_fmi3(name, guid, quirks)
     else:
         raise ValueError(f"unsupported FMI version {fmi_version}")
     defines: list[str] = ["-DCHATTY"] if chatty else []

@@ -30,6 +30,7 @@ __all__ = [
     "held_reason",
     "numerical_setting",
     "source_time",
+    "time_step_setting",
 ]
 
 _NAME_WORDS = frozenset(
@@ -114,6 +115,36 @@ def numerical_setting(v: VariableInfo) -> str | None:
     if found is not None:
         return f"its description says {found.group(0)!r}"
     return None
+
+
+_STEP_WORDS = frozenset({"dt", "h", "timestep", "stepsize"})
+"""Words, or two words joined, of a name's last part that, with the unit ``s``, make it an
+integration step (not ``Ts`` or ``sample``: a sampled controller's period is part of its
+behaviour; not ``stepTime``: a step source's)."""
+_STEP_TEXT = re.compile(
+    r"\bstep[ -]?size\b|\btime[ -]?steps?\b|\bintegrat\w* step\b|\binternal step\b",
+    re.IGNORECASE,
+)
+"""Words of a description that, with the unit ``s``, make a parameter an integration step."""
+
+
+def time_step_setting(v: VariableInfo) -> bool:
+    """Return whether ``v`` is the FMU's own integration time step, a parameter in s.
+
+    Hopsan's ``timestep``, a generated FMU's ``fixedStepSize``: a Co-Simulation FMU that
+    integrates on a grid of its own ignores the communication step and the tolerance,
+    so the solver-fidelity check's reference also runs it at a smaller one. A word of
+    the last part of the name (``dt``, ``h``, ``timestep``, ``stepSize``, or ``step``
+    alone) or the description (step size, time step, integration step, internal step),
+    with the unit ``s``.
+    """
+    if v.causality != "parameter" or v.unit != "s":
+        return False
+    words = _words(_leaf(v.name))
+    joined = {a + b for a, b in itertools.pairwise(words)}
+    if words == ["step"] or not _STEP_WORDS.isdisjoint({*words, *joined}):
+        return True
+    return _STEP_TEXT.search(v.description or "") is not None
 
 
 _WORLD_PARTS = frozenset({"medium", "system", "ambient", "environment", "world"})

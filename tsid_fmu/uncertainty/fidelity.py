@@ -10,14 +10,17 @@ compares the difference with the noise in the data, output by output:
   tolerance (:data:`REFERENCE_TOLERANCE`);
 - a Co-Simulation-only FMU: the reference is the same FMU at a communication step
   :data:`FINER` times smaller and its own solver at a tight tolerance
-  (:data:`CS_REFERENCE_TOLERANCE`, passed as ``fmi2SetupExperiment``'s); this cannot see
-  an FMU-internal fixed step that follows neither.
+  (:data:`CS_REFERENCE_TOLERANCE`, passed as ``fmi2SetupExperiment``'s), and each of
+  the FMU's own integration time steps that the study does not identify (a parameter
+  in s such as Hopsan's ``timestep``, :func:`~tsid_fmu.scaffold_rules.time_step_setting`)
+  :data:`FINER` times smaller, since an FMU-internal fixed step follows neither.
 
 The difference *matters* when its RMS exceeds :data:`THRESHOLD` times an output's noise
 (see the constant for why 0.2) or, at the answer, when it alone moves an estimate by more
 than :data:`BIAS_LIMIT` standard errors (projected on the sensitivities). Then the check
 says so in one line with the figures and proposes a fix, after trying the alternatives
-(Model Exchange, a smaller step, a tighter tolerance). With ``interface = "auto"`` the
+(Model Exchange, a smaller step, a tighter tolerance, the FMU's own smaller time
+steps). With ``interface = "auto"`` the
 study uses Model Exchange when Co-Simulation's difference matters at the start point and
 Model Exchange is closer to the reference (:func:`choose_interface`). A study that
 simulates Co-Simulation with no ``cs_tolerance`` of its own uses :data:`CS_TOLERANCE`
@@ -37,6 +40,7 @@ sensor noise, else its estimate from the data.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping, Sequence
 
@@ -45,6 +49,9 @@ import numpy as np
 from tsid_fmu.errors import SimulationError, TsidError
 from tsid_fmu.evaluate.isolated import IsolatedCalls
 from tsid_fmu.evaluate.spec import EvaluationSpec
+from tsid_fmu.fmu.info import read_fmu_description
+from tsid_fmu.fmu.variables import parse_start, variable_info
+from tsid_fmu.scaffold_rules import time_step_setting
 from tsid_fmu.uncertainty.fidelity_record import (
     THRESHOLD,
     Fidelity,
@@ -150,7 +157,31 @@ def _plan(
     if "me" in available:
         return used, Solver("me", tolerance=_tight(spec.tolerance, REFERENCE_TOLERANCE))
     tight = _tight(spec.cs_tolerance, CS_REFERENCE_TOLERANCE)
-    return used, Solver("cs", step=_sample_step(spec) / FINER, tolerance=tight)
+    finer = _sample_step(spec) / FINER
+    return used, Solver("cs", step=finer, tolerance=tight, settings=_own_steps(spec))
+
+
+def _own_steps(spec: EvaluationSpec) -> tuple[tuple[str, float], ...]:
+    """Return the FMU's own integration time steps, :data:`FINER` times smaller.
+
+    Those of its parameters in s that :func:`~tsid_fmu.scaffold_rules.time_step_setting`
+    names, at the study's value (else the FMU's start value), except those the study
+    identifies or sets per experiment.
+    """
+    try:
+        md = read_fmu_description(spec.fmu)
+    except TsidError:  # the check's own simulations will say why
+        return ()
+    skip = set(spec.parameter_names).union(*(e.start_values for e in spec.experiments))
+    found = []
+    for v in md.modelVariables:
+        info = variable_info(v)
+        if info.name in skip or not time_step_setting(info):
+            continue
+        value = spec.start_values.get(info.name, parse_start(info))
+        if value is not None and math.isfinite(value) and value > 0:
+            found.append((info.name, float(value) / FINER))
+    return tuple(found)
 
 
 def _tighter(spec: EvaluationSpec) -> list[Solver]:
@@ -182,6 +213,11 @@ def _alternatives(
         step = reference.step if reference.interface == "cs" else _sample_step(spec) / FINER
         others.append(Solver("cs", step=step, tolerance=spec.cs_tolerance))
         others += _tighter(spec)
+        if reference.settings:  # the FMU's own time steps alone
+            own = reference.settings
+            others.append(
+                Solver("cs", step=spec.step_size, tolerance=spec.cs_tolerance, settings=own)
+            )
     return [compare(runs, s, reference, noise, threshold) for s in others]
 
 
@@ -196,6 +232,9 @@ def _figures(dev: Deviation) -> str:
 def _setting(solver: Solver, used: Solver) -> str:
     if solver.interface == "me":
         return 'interface = "me"'
+    if solver.settings and (solver.step, solver.tolerance) == (used.step, used.tolerance):
+        values = ", ".join(f"{n} = {v:g}" for n, v in solver.settings)
+        return f"the FMU's own time step smaller, start_values = {{ {values} }}"
     if solver.step != used.step and solver.tolerance == used.tolerance:
         return f"a smaller communication step, step = {solver.step:g} or less"
     parts = [f"step = {solver.step:g}"] if solver.step != used.step else []
@@ -206,19 +245,25 @@ def _setting(solver: Solver, used: Solver) -> str:
 
 def _fix(used: Solver, alternatives: list[Deviation], reference: Solver, threshold: float) -> str:
     """Name the settings that bring the solver within the threshold (or the closest)."""
-    fixes = [f"tolerance = {reference.tolerance:g}"] if used.interface == "me" else []
     ranked = sorted(alternatives, key=lambda d: d.ratio)
-    fixes += [
-        f"{_setting(d.solver, used)} ({d.ratio:.2g} x the noise)"
-        for d in ranked
-        if d.ratio <= threshold
-    ]
+    good = [d for d in ranked if d.ratio <= threshold and d.shift <= BIAS_LIMIT]
+    fixes = [f"tolerance = {reference.tolerance:g}"] if used.interface == "me" else []
+    fixes += [f"{_setting(d.solver, used)} ({d.ratio:.2g} x the noise)" for d in good
+              if not d.solver.settings]  # fmt: skip
+    own = [
+        f"{_setting(d.solver, used)} ({d.ratio:.2g} x the noise)" for d in good if d.solver.settings
+    ]  # fmt: skip  (start values, not [method] keys)
     if fixes and reference.interface == "cs":
-        return "fix: " + " or ".join(fixes) + " in [method]"
+        return "fix: " + " or ".join(fixes) + " in [method]" + "".join(f" or {f}" for f in own)
     if fixes:
         return "fix in [method]: " + " or ".join(fixes)
-    if reference.interface == "cs":  # neither alone: both, as the reference has them
-        return f"fix: {_setting(reference, used)} in [method], as the reference"
+    if own:
+        return "fix: " + " or ".join(own)
+    if reference.interface == "cs":  # none alone: all, as the reference has them
+        method = _setting(Solver("cs", reference.step, reference.tolerance), used)
+        values = ", ".join(f"{n} = {v:g}" for n, v in reference.settings)
+        also = f" and start_values = {{ {values} }}" if values else ""
+        return f"fix: {method} in [method]{also}, as the reference"
     if ranked:
         best = ranked[0]
         return (
@@ -325,7 +370,10 @@ def _compare(
     if out.matters and reference.interface == "cs":
         _convergence(out, runs, reference, sigma)
     if out.matters:  # (a Co-Simulation-only FMU: one that converges)
-        out.alternatives += _alternatives(runs, used, reference, available, sigma, out.threshold)
+        tried = _alternatives(runs, used, reference, available, sigma, out.threshold)
+        for d in tried if sensitivities is not None else ():  # a fix must remove the shift too
+            d.shift = max(solver_bias(d, sensitivities).values(), default=0.0)
+        out.alternatives += tried
 
 
 def _convergence(
@@ -337,11 +385,16 @@ def _convergence(
     difference that does not fall is the FMU's design, not a solver error.
     """
     assert out.used is not None
-    fine = Solver("cs", step=(reference.step or 0.0) / FINER, tolerance=reference.tolerance)
-    finer = compare(runs, reference, fine, sigma, out.threshold)
+    finer = compare(runs, reference, _finer(reference), sigma, out.threshold)
     out.alternatives = [finer]
     out.converges = finer.ratio <= CONVERGES * out.used.ratio
     out.matters = out.converges
+
+
+def _finer(solver: Solver) -> Solver:
+    """Return ``solver`` with its step and its FMU's own time steps :data:`FINER` times smaller."""
+    settings = tuple((n, v / FINER) for n, v in solver.settings)
+    return Solver("cs", (solver.step or 0.0) / FINER, solver.tolerance, settings)
 
 
 def _candidates(check: Fidelity) -> list[Deviation]:
@@ -398,7 +451,7 @@ def _message(check: Fidelity, chosen: str) -> str:
     assert used is not None and ref is not None
     head = f"solver fidelity ({check.where}): {used.solver.label}"
     if check.converges is False:
-        finer = Solver("cs", step=(ref.step or 0.0) / FINER, tolerance=ref.tolerance)
+        finer = _finer(ref)
         return (
             f"{head} differs from {ref.label} by {used.ratio:.3g} x the noise, and that from "
             f"{finer.label} by {check.alternatives[0].ratio:.3g} x: the outputs do not converge as "

@@ -53,11 +53,16 @@ class Solver:
         Relative tolerance (None: the solver's default): Model Exchange's integrator's,
         or the Co-Simulation FMU's own solver's (``cs_tolerance``, passed to
         ``fmi2SetupExperiment`` / ``fmi3EnterInitializationMode``).
+    settings : tuple of (str, float), optional
+        FMU parameters of its own numerics set for this solver, over the study's values
+        (the Co-Simulation reference's smaller internal time steps,
+        :func:`~tsid_fmu.scaffold_rules.time_step_setting`).
     """
 
     interface: str
     step: float | None = None
     tolerance: float | None = None
+    settings: tuple[tuple[str, float], ...] = ()
 
     @property
     def label(self) -> str:
@@ -65,7 +70,8 @@ class Solver:
         if self.interface == "cs":
             step = f"step {self.step:g} s" if self.step else "the data's sample interval"
             tol = f", tolerance {self.tolerance:g}" if self.tolerance else ""
-            return f"Co-Simulation at {step}{tol}"
+            own = "".join(f", {n} = {v:g}" for n, v in self.settings)
+            return f"Co-Simulation at {step}{tol}{own}"
         tol = f"tolerance {self.tolerance:g}" if self.tolerance else "its default tolerance"
         return f"Model Exchange at {tol}"
 
@@ -82,11 +88,15 @@ class Deviation:
         ``{experiment: {output: {"rms": ..., "noise": ..., "ratio": rms / noise}}}``.
     differences : list of numpy.ndarray
         ``solver - reference`` per experiment, ``(n, outputs)`` (not serialised).
+    shift : float
+        The largest shift of an estimate the difference alone causes, in standard
+        errors (:func:`solver_bias`), where the sensitivities are known; else 0.
     """
 
     solver: Solver
     outputs: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
     differences: list[np.ndarray] = field(default_factory=list, repr=False)
+    shift: float = 0.0
 
     @property
     def worst(self) -> tuple[str, str, dict[str, float]]:
@@ -107,6 +117,7 @@ class Deviation:
             "interface": s.interface,
             "step": s.step,
             "tolerance": s.tolerance,
+            **({"settings": dict(s.settings)} if s.settings else {}),
             "ratio": self.ratio,
             "outputs": self.outputs,
         }
@@ -168,6 +179,7 @@ def simulate_solver(
     """
     e = spec.experiments[index]
     start, fixed = split_delays({**spec.start_values, **e.start_values})
+    start.update(solver.settings)  # the solver's own numerics, over the study's values
     values, delays = split_delays(spec.experiment_values(index, x))
     fmu, variants = spec.fmu, spec.variants
     if variants is not None:  # the variant the set names, with the values it has
