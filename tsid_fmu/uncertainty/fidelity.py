@@ -247,12 +247,10 @@ def _fix(used: Solver, alternatives: list[Deviation], reference: Solver, thresho
     """Name the settings that bring the solver within the threshold (or the closest)."""
     ranked = sorted(alternatives, key=lambda d: d.ratio)
     good = [d for d in ranked if d.ratio <= threshold and d.shift <= BIAS_LIMIT]
+    named = [(f"{_setting(d.solver, used)} ({d.ratio:.2g} x the noise)", d) for d in good]
     fixes = [f"tolerance = {reference.tolerance:g}"] if used.interface == "me" else []
-    fixes += [f"{_setting(d.solver, used)} ({d.ratio:.2g} x the noise)" for d in good
-              if not d.solver.settings]  # fmt: skip
-    own = [
-        f"{_setting(d.solver, used)} ({d.ratio:.2g} x the noise)" for d in good if d.solver.settings
-    ]  # fmt: skip  (start values, not [method] keys)
+    fixes += [text for text, d in named if not d.solver.settings]  # keys of [method]
+    own = [text for text, d in named if d.solver.settings]  # start values of the FMU
     if fixes and reference.interface == "cs":
         return "fix: " + " or ".join(fixes) + " in [method]" + "".join(f" or {f}" for f in own)
     if fixes:
