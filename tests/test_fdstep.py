@@ -1,4 +1,4 @@
-"""Finite-difference steps chosen from the FMU's own noise (``tsid_fmu.search.local.fdstep``)."""
+"""Finite-difference steps chosen from the FMU's own noise (``tsid_fmu.numerics.fdstep``)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.numerics.fdstep import MAX_STEP, solver_noise, steps_for
 from tsid_fmu.search.local import problem
-from tsid_fmu.search.local.fdstep import MAX_STEP, solver_noise, steps_for
 from tsid_fmu.search.local.refine import refine_stage
 from tsid_fmu.search.space import Space
 from tsid_fmu.study.schema import Method
@@ -103,3 +103,74 @@ def test_the_refinement_finds_the_optimum_of_an_fmu_whose_solver_adds_noise(monk
     monkeypatch.setattr(problem, "steps_for", lambda steps, jac, noise: steps)
     x, cost, status = _refine()
     assert status != 0 and cost > 2 * best_cost
+
+
+def test_forward_jacobian_runs_one_batch_and_steps_back_before_an_upper_bound():
+    """The one forward-difference Jacobian (issue 61): a linear map's columns exactly,
+    in one batch, the step at an upper bound taken backwards."""
+    from tsid_fmu.numerics.fdstep import forward_jacobian
+
+    a = np.array([[1.0, 2.0], [3.0, -1.0], [0.5, 4.0]])
+    batches = []
+
+    def run(points):
+        batches.append(len(points))
+        return [a @ p for p in points]
+
+    z = np.array([0.2, 1.0])
+    steps = np.array([1e-3, 1e-3])
+    jac = forward_jacobian(run, z, a @ z, steps, upper=np.array([1.0, 1.0]))
+    assert batches == [2]
+    assert np.allclose(jac, a, rtol=1e-9)
+    seen = []
+    forward_jacobian(
+        lambda pts: seen.extend(pts) or [a @ p for p in pts],
+        z,
+        a @ z,
+        steps,
+        upper=np.array([1.0, 1.0]),
+    )
+    assert seen[1][1] < 1.0 and seen[0][0] > z[0]  # backwards at the bound, forwards below
+    one = forward_jacobian(run, z, a @ z, steps, which=np.array([1]))
+    assert one.shape == (3, 1) and np.allclose(one[:, 0], a[:, 1])
+
+
+def test_the_noise_is_kept_by_its_evaluator_not_by_a_module_cache():
+    """The FMU's noise was a module-global weak-key cache (issue 61); it is now the
+    evaluator's own ``fd_noise``: measured once per evaluator, never shared."""
+    import weakref
+
+    from tsid_fmu.numerics import fdstep
+
+    assert not any(isinstance(v, weakref.WeakKeyDictionary) for v in vars(fdstep).values())
+    first = CurveEvaluator(_smooth, MEASURED, SCALE)
+    second = CurveEvaluator(_smooth, MEASURED, SCALE)
+    calls = []
+
+    def measure(value):
+        return lambda: calls.append(value) or value
+
+    assert fdstep.known_noise(first) == 0.0
+    assert fdstep.noise_of(first, measure(0.25)) == 0.25
+    assert fdstep.noise_of(first, measure(9.0)) == 0.25  # measured once
+    assert fdstep.known_noise(first) == 0.25 and first.fd_noise.value == 0.25
+    assert fdstep.known_noise(second) == 0.0
+    assert fdstep.noise_of(second, measure(0.5)) == 0.5
+    assert calls == [0.25, 0.5]
+
+
+def test_every_forward_difference_of_the_package_goes_through_the_kernel():
+    """Six hand-written forward differences (issue 61) became calls of
+    ``forward_jacobian``; their idiom, ``(c - r0) / h`` over a batch, is not written
+    again anywhere else."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "tsid_fmu"
+    idiom = re.compile(r"\(c - r0?\) / h")
+    found = [
+        p.relative_to(root).as_posix()
+        for p in root.rglob("*.py")
+        if idiom.search(p.read_text(encoding="utf-8")) and p.name != "fdstep.py"
+    ]
+    assert found == []

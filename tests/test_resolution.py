@@ -24,10 +24,13 @@ class _Quadratic:
         self.gains = gains
 
     def evaluate(self, sets):
-        r = np.concatenate(
-            [np.ones(100), [g * (sets[0][n] - X0[n]) / X0[n] for n, g in self.gains.items()]]
-        )
-        return SimpleNamespace(costs=np.array([[float(r @ r)]]), residuals=[r])
+        rs = [
+            np.concatenate(
+                [np.ones(100), [g * (x[n] - X0[n]) / X0[n] for n, g in self.gains.items()]]
+            )
+            for x in sets
+        ]
+        return SimpleNamespace(costs=np.array([[float(r @ r)] for r in rs]), residuals=rs)
 
 
 def _assessed() -> Uncertainty:

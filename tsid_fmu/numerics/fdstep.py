@@ -26,20 +26,34 @@ The rule used here has two parts:
   norm ``|J_j|`` is ``h = SHARE sqrt(2 n) sigma / |J_j|``, capped at :data:`MAX_STEP`.
   For a smooth FMU (the project's own solver at ``rtol`` 1e-8, an exact discretisation)
   no step changes.
+
+Every forward-difference Jacobian of the package is taken by :func:`forward_jacobian`:
+one batch of runs, a step that would pass an upper bound taken backwards. The noise
+is the evaluator's own (:class:`SolverNoise`, its attribute ``fd_noise``), measured once
+and read by every user: the refinement's Jacobian and gate, and the profiles' checks.
 """
 
 from __future__ import annotations
 
 import math
-import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from tsid_fmu.evaluate.noise import trimmed_rms
 
-__all__ = ["MAX_STEP", "SHARE", "known_noise", "noise_of", "solver_noise", "steps_for"]
+__all__ = [
+    "MAX_STEP",
+    "SHARE",
+    "SolverNoise",
+    "forward_jacobian",
+    "known_noise",
+    "noise_of",
+    "relative_steps",
+    "solver_noise",
+    "steps_for",
+]
 
 SHARE = 100.0
 """A column's difference must be this many times its noise (1 % error)."""
@@ -49,9 +63,6 @@ MAX_STEP = 1e-2
 
 POINTS = 4
 """Simulations of :func:`solver_noise` (beyond the point itself)."""
-
-
-_CACHE: weakref.WeakKeyDictionary[Any, float] = weakref.WeakKeyDictionary()
 
 
 OVERFLOW = 1e150
@@ -108,25 +119,110 @@ def solver_noise(
     return float(np.median(estimates)) * peak  # a float product: inf, not a warning
 
 
+class SolverNoise:
+    """The noise of one evaluator's residuals under parameter changes, measured once.
+
+    The evaluator carries it as its attribute ``fd_noise``, given by :func:`noise_of`
+    the first time its noise is measured: the noise belongs to the FMU, its solver
+    settings and the data, which is what one evaluator scores. ``value`` is ``None``
+    until measured.
+    """
+
+    __slots__ = ("value",)
+
+    def __init__(self) -> None:
+        self.value: float | None = None
+
+    def measured(self, measure: Callable[[], float]) -> float:
+        """Return the noise, calling ``measure`` (:func:`solver_noise`) the first time."""
+        if self.value is None:
+            self.value = float(measure())
+        return self.value
+
+
+ATTRIBUTE = "fd_noise"
+"""The evaluator's attribute that holds its :class:`SolverNoise`."""
+
+
 def noise_of(owner: Any, measure: Callable[[], float]) -> float:
-    """Return ``owner``'s noise from the cache, measuring it once (:func:`solver_noise`)."""
-    try:
-        return _CACHE[owner]
-    except KeyError:
-        pass
-    except TypeError:  # an owner that takes no weak reference: measure each time
-        return measure()
-    value = measure()
-    _CACHE[owner] = value
-    return value
+    """Return ``owner``'s noise, measuring it the first time (:func:`solver_noise`).
+
+    An owner without a :class:`SolverNoise` is given one; one that takes no new
+    attribute is measured each time.
+    """
+    record = getattr(owner, ATTRIBUTE, None)
+    if not isinstance(record, SolverNoise):
+        record = SolverNoise()
+        try:
+            setattr(owner, ATTRIBUTE, record)
+        except (AttributeError, TypeError):
+            return float(measure())
+    return record.measured(measure)
 
 
 def known_noise(owner: Any) -> float:
     """Return the noise measured for ``owner`` so far, or 0 if none was."""
-    try:
-        return _CACHE.get(owner, 0.0)
-    except TypeError:
-        return 0.0
+    record = getattr(owner, ATTRIBUTE, None)
+    value = record.value if isinstance(record, SolverNoise) else None
+    return 0.0 if value is None else value
+
+
+def relative_steps(z: np.ndarray) -> np.ndarray:
+    """Return SciPy's ``"2-point"`` steps at ``z``: ``sqrt(eps) max(1, |z|)``, signed.
+
+    Positive at ``z >= 0``, negative below (as :func:`scipy.optimize.approx_derivative`
+    takes them), each the exactly representable ``(z + h) - z``. For coordinates that
+    are already scaled (the combinations' and the nesting fit's).
+    """
+    z = np.asarray(z, dtype=float)
+    h = np.finfo(float).eps ** 0.5 * np.where(z >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(z))
+    return (z + h) - z
+
+
+def forward_jacobian(
+    run: Callable[[list[np.ndarray]], Sequence[np.ndarray]],
+    z: np.ndarray,
+    r0: np.ndarray,
+    steps: np.ndarray,
+    upper: np.ndarray | None = None,
+    which: np.ndarray | None = None,
+    lower: np.ndarray | None = None,
+) -> np.ndarray:
+    """Return forward differences of the residuals at ``z``: one batch of runs.
+
+    Parameters
+    ----------
+    run : callable
+        Residual vectors of a list of points (one batch of simulations).
+    z : numpy.ndarray
+        The point, whose residuals are ``r0``.
+    r0 : numpy.ndarray
+        The residuals at ``z``.
+    steps : numpy.ndarray
+        The step of every coordinate (its sign taken as given).
+    upper, lower : numpy.ndarray, optional
+        Bounds: a step that would pass one is taken the other way.
+    which : numpy.ndarray, optional
+        The coordinates differenced (all by default), in the order of the columns.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(r0.size, len(which))``, column ``k`` the difference along ``which[k]``.
+    """
+    which = np.arange(z.size) if which is None else np.asarray(which, dtype=int)
+    h = np.asarray(steps, dtype=float)[which]
+    if upper is not None:
+        h = np.where(z[which] + h <= upper[which], h, -h)
+    if lower is not None:
+        h = np.where(z[which] + h >= lower[which], h, -h)
+    points = []
+    for j, hj in zip(which, h, strict=True):
+        t = np.array(z, dtype=float)
+        t[j] += hj
+        points.append(t)
+    cols = run(points)
+    return np.column_stack([(c - r0) / hj for c, hj in zip(cols, h, strict=True)])
 
 
 def steps_for(steps: np.ndarray, jac: np.ndarray, noise: float) -> np.ndarray:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.numerics.fdstep import known_noise, steps_for
+from tsid_fmu.numerics.fdstep import forward_jacobian, known_noise, steps_for
 from tsid_fmu.numerics.space import Space
 from tsid_fmu.uncertainty.intervals import seen_inverse
 
@@ -120,6 +120,18 @@ class ProfileProblem:
         r = ev.residuals[0] if ev.residuals else None
         return float(ev.costs[0, 0]), r
 
+    def residuals(self, points: list[np.ndarray]) -> list[np.ndarray]:
+        """Return the cost residuals at ``points``, one batch; raise if a run fails."""
+        ev = self.evaluator.evaluate([self.space.to_x(s) for s in points])
+        rs = ev.residuals or [None] * len(points)
+        if any(r is None for r in rs) or not np.isfinite(ev.costs[:, 0]).all():
+            raise _Failed
+        return [np.asarray(r, dtype=float) for r in rs]
+
+
+class _Failed(Exception):
+    """A run of a Jacobian's batch failed."""
+
 
 class _Secant:
     """The Jacobian one side's profile re-fits with, corrected by every simulation.
@@ -166,19 +178,14 @@ class _Secant:
         s0, r0 = self.start, self.start_r
         if r0 is None:
             return False
-        cols = []
         # where the FMU's own solver is noisy, steps that beat its noise (one rule with
         # the refinement's Jacobian, :mod:`tsid_fmu.numerics.fdstep`)
         wide = steps_for(np.full(s0.size, CHECK_STEP), self.jac, known_noise(problem.evaluator))
-        for k in range(s0.size):
-            s = s0.copy()
-            h = wide[k] if s[k] + wide[k] <= problem.space.s_upper[k] else -wide[k]
-            s[k] += h
-            cost, r = problem.cost(s)
-            if r is None or not math.isfinite(cost):
-                return False
-            cols.append((np.asarray(r, dtype=float) - r0) / h)
-        self.jac, self._pinv = np.column_stack(cols), None
+        try:
+            jac = forward_jacobian(problem.residuals, s0, r0, wide, problem.space.s_upper)
+        except _Failed:
+            return False
+        self.jac, self._pinv = jac, None
         self.s, self.r = s0.copy(), r0
         return True
 

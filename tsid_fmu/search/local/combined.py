@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.numerics.fdstep import forward_jacobian, relative_steps
+from tsid_fmu.numerics.lsq import trust_region
 from tsid_fmu.search.local.adaptive import answer_stage
 from tsid_fmu.search.local.columns import PARALLEL, UNFINISHED, parallel_pairs
 from tsid_fmu.search.space import Space
@@ -92,10 +94,14 @@ def physical_jacobian(
     ev: Any, x: Mapping[str, float], names: list[str], r0: np.ndarray
 ) -> np.ndarray:
     """Return forward-difference columns per unit of each parameter (one batch of runs)."""
-    steps = [_STEP * max(abs(float(x[n])), 1e-12) for n in names]
-    sets = [{**x, n: float(x[n]) + h} for n, h in zip(names, steps, strict=True)]
-    cols = _residuals(ev, sets, r0.size)
-    return np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
+    z = np.array([float(x[n]) for n in names])
+    steps = _STEP * np.maximum(np.abs(z), 1e-12)
+
+    def run(points: list[np.ndarray]) -> list[np.ndarray]:
+        sets = [{**x, **dict(zip(names, map(float, p), strict=True))} for p in points]
+        return _residuals(ev, sets, r0.size)
+
+    return forward_jacobian(run, z, r0, steps)
 
 
 def matched_ratio(
@@ -147,8 +153,6 @@ def combined_refinement(
     ``limit``, and two for the test), and the stationarity test at the end (None where
     the limit stopped it, or SciPy could not go on).
     """
-    from scipy.optimize import least_squares
-
     names = list(space.names)
     bounds = space.bounds
     paired = {k for i, j, _ in pairs for k in (i, j)}
@@ -178,18 +182,16 @@ def combined_refinement(
     for i, j, a in pairs:
         z0 += [(x0[names[i]] + a * x0[names[j]]) / scale[i], x0[names[j]] / scale[j]]
     runs = _Runs(ev, to_x, limit, np.array(z0, float), x0, start)
-    try:
-        out = least_squares(
-            runs.fun, runs.z0, jac=runs.jac, method="trf", x_scale="jac", ftol=_FTOL,
-            max_nfev=limit,
-        )  # fmt: skip
-        z, r, jac = out.x, np.asarray(out.fun), np.asarray(out.jac)
-    except StopIteration:
+    solved = trust_region(
+        runs.fun, runs.z0, runs.jac, stops=(StopIteration,), x_scale="jac", ftol=_FTOL,
+        max_nfev=limit,
+    )  # fmt: skip
+    if solved.x is None or solved.fun is None or solved.jac is None:
+        # out of runs (StopIteration), or SciPy's trust-region step failed (a Jacobian
+        # it cannot factor: failed runs beside finite ones): the best set so far is the
+        # answer, with no test
         return runs.best[1], float(runs.best[0]), ev.nfev - n0, None
-    except (ValueError, np.linalg.LinAlgError):
-        # SciPy's trust-region step failed (a Jacobian it cannot factor: failed runs
-        # beside finite ones): the best set so far is the answer, with no test
-        return runs.best[1], float(runs.best[0]), ev.nfev - n0, None
+    z, r, jac = solved.x, solved.fun, solved.jac
     inf = [math.inf] * (2 * len(pairs))
     lower = np.array([space.s_lower[k] for k in rest] + [-v for v in inf])
     upper = np.array([space.s_upper[k] for k in rest] + inf)
@@ -250,10 +252,7 @@ class _Runs:
             self.fun(z)
         assert self.last is not None
         r = self.last[1]
-        h = np.finfo(float).eps ** 0.5 * np.where(z >= 0, 1.0, -1.0) * np.maximum(1.0, abs(z))
-        h = (z + h) - z
-        cols = self.run(list(z + np.diag(h)))  # row k: z with coordinate k stepped
-        return np.column_stack([(c - r) / hk for c, hk in zip(cols, h, strict=True)])
+        return forward_jacobian(self.run, z, r, relative_steps(z))
 
 
 def _gate(

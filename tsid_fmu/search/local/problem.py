@@ -20,8 +20,14 @@ from collections.abc import Mapping
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.numerics.fdstep import (
+    forward_jacobian,
+    known_noise,
+    noise_of,
+    solver_noise,
+    steps_for,
+)
 from tsid_fmu.search.local.columns import named_pairs
-from tsid_fmu.search.local.fdstep import known_noise, noise_of, solver_noise, steps_for
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
@@ -38,7 +44,7 @@ __all__ = ["FD_STEP"]
 
 FD_STEP = 1e-5
 """Forward-difference step in search coordinates (1e-5 of a first range's width), where
-the FMU's own noise allows it (:mod:`tsid_fmu.search.local.fdstep` widens it where not).
+the FMU's own noise allows it (:mod:`tsid_fmu.numerics.fdstep` widens it where not).
 
 Small enough for a sharply curved valley (a swinging pendulum's cost over seconds of
 data: 1e-3 gave secants whose steps kept failing), large against the integrators' error
@@ -75,7 +81,7 @@ class _Problem:
         self.linearised: tuple[np.ndarray, float] | None = None
         self.calls = 0
         self.size = 0
-        self.steps = np.full(space.dim, FD_STEP)  # forward-difference steps (:mod:`.fdstep`)
+        self.steps = np.full(space.dim, FD_STEP)  # forward differences' (numerics.fdstep)
         self.spoiled = False  # a column's difference was mostly the FMU's own noise
         self.widen = False  # widen such columns' steps (the second pass of refine_stage)
         self.reuse: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -170,8 +176,9 @@ class _Problem:
 
         :data:`~tsid_fmu.search.verdict.GATE_RTOL` of the cost (or of the noise floor,
         where larger), or, where the FMU's own solver adds noise of ``sigma`` per sample
-        (:mod:`.fdstep`), two standard deviations of the cost's change that noise makes
-        between two points, ``2 * 2 |r| sigma``: a trial lower by less is the noise.
+        (:mod:`tsid_fmu.numerics.fdstep`), two standard deviations of the cost's change
+        that noise makes between two points, ``2 * 2 |r| sigma``: a trial lower by less
+        is the noise.
         """
         noise, r = known_noise(self.evaluator), self.best_r
         own = 4.0 * float(np.linalg.norm(r)) * noise if r is not None and noise > 0 else 0.0
@@ -201,18 +208,17 @@ class _Problem:
 
     def _columns(self, s: np.ndarray, r0: np.ndarray, which: np.ndarray) -> np.ndarray:
         """Forward differences of the columns ``which``, each with its step."""
-        h = self.steps[which]
-        h = np.where(s[which] + h <= self.space.s_upper[which], h, -h)
-        trial = []
-        for j, hj in zip(which, h, strict=True):
-            t = s.copy()
-            t[j] += hj
-            trial.append(self.space.to_x(t))
-        cols = self._residuals(trial)
-        return np.column_stack([(c - r0) / hj for c, hj in zip(cols, h, strict=True)])
+        return forward_jacobian(
+            lambda pts: self._residuals([self.space.to_x(t) for t in pts]),
+            s,
+            r0,
+            self.steps,
+            self.space.s_upper,
+            which,
+        )
 
     def _noise(self, s: np.ndarray, r0: np.ndarray) -> float:
-        """Return the FMU's noise under parameter changes, by ECnoise (:mod:`.fdstep`)."""
+        """Return the FMU's noise under parameter changes (ECnoise, numerics.fdstep)."""
         return solver_noise(
             lambda pts: self._residuals([self.space.to_x(self.space.clip(t)) for t in pts]),
             s,

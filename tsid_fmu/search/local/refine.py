@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.numerics.lsq import Stop, trust_region
 from tsid_fmu.search.local.columns import UNFINISHED, named_pairs
 from tsid_fmu.search.local.problem import (
     _FTOL,
@@ -60,32 +61,30 @@ def _solve(
 
     Why it stopped (``stop``: gtol, ftol or xtol) and its counts go into ``extra``.
     """
-    from scipy.optimize import least_squares
-
-    try:
-        out = least_squares(
-            problem.fun,
-            s0,
-            jac=problem.jac,
-            bounds=(space.s_lower, space.s_upper),
-            method="trf",
-            ftol=_FTOL,
-            xtol=_XTOL,
-            gtol=_GTOL,
-            max_nfev=10_000,
-        )
-        extra["stop"] = {1: "gtol", 2: "ftol", 3: "xtol", 4: "xtol"}.get(int(out.status), "")
-        extra.update(nfev=int(out.nfev), njev=int(out.njev or 0))
-        said = STOPPED.get(extra["stop"], "it stopped")
-        return 0, f"least squares: {said}"
-    except _Converged as stop:
+    solved = trust_region(
+        problem.fun,
+        s0,
+        problem.jac,
+        bounds=(space.s_lower, space.s_upper),
+        stops=(_Converged, _Budget),
+        ftol=_FTOL,
+        xtol=_XTOL,
+        gtol=_GTOL,
+        max_nfev=10_000,
+    )
+    if isinstance(solved.raised, _Converged):
+        stop = solved.raised
         extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
         return 0, f"least squares: {stop.args[0]}; stopped before another Jacobian"
-    except _Budget:
+    if isinstance(solved.raised, _Budget):
         extra["stop"] = "limit"
         return 1, f"simulation limit ({limit}) of the refinement reached"
-    except (ValueError, np.linalg.LinAlgError) as exc:  # the best set so far is kept
-        return 1, f"least squares could not go on ({exc})"
+    if solved.stop is Stop.FAILED:  # the best set so far is kept
+        return 1, f"least squares could not go on ({solved.error})"
+    extra["stop"] = "" if solved.stop is Stop.MAX_NFEV else solved.stop.value
+    extra.update(nfev=solved.nfev, njev=solved.njev)
+    said = STOPPED.get(extra["stop"], "it stopped")
+    return 0, f"least squares: {said}"
 
 
 def _again_wider(
@@ -100,7 +99,7 @@ def _again_wider(
     better), and a second pass wherever a column was spoiled cost 14 % more simulations
     on the generalisation evaluation seeds for no success: so this pass runs only where
     the widened Jacobian at the best point predicts a decrease
-    (:meth:`_Problem.doubtful`); it can only lower the cost (:mod:`.fdstep`).
+    (:meth:`_Problem.doubtful`); it can only lower the cost (:mod:`tsid_fmu.numerics.fdstep`).
     """
     problem.linearised, problem.last = None, None
     s = space.to_s(problem.best[1])

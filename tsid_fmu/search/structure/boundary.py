@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.numerics.fdstep import forward_jacobian
 from tsid_fmu.search.local.combined import _residuals
 from tsid_fmu.search.verdict import bounded_step
 
@@ -83,11 +84,14 @@ def score_step(
         h = RELATIVE_STEP * max(abs(z[k]), 1e-12)
         if n in extra:
             h = max(h, SPAN_STEP * (max(levels[n]) - min(levels[n])))
-        steps.append(h if z[k] + h <= upper[k] else -h)
-    sets = [{**x, n: float(z[k] + steps[k])} for k, n in enumerate(names)]
+        steps.append(h)
+
+    def run(points: list[np.ndarray]) -> list[np.ndarray]:
+        sets = [{**x, **dict(zip(names, map(float, p), strict=True))} for p in points]
+        return _residuals(ev, sets, r0.size)
+
     n0 = ev.nfev
-    cols = _residuals(ev, sets, r0.size)
-    jac = np.column_stack([(c - r0) / h for c, h in zip(cols, steps, strict=True)])
+    jac = forward_jacobian(run, z, r0, np.array(steps), upper)
     if not np.isfinite(jac).all():
         return 0.0, dict(x), ev.nfev - n0
     # the Gauss-Newton step within the bounds, all parameters together (B_s up, F_vm down)

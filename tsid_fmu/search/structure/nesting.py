@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.numerics.fdstep import forward_jacobian, relative_steps
+from tsid_fmu.numerics.lsq import trust_region
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.structure.selection import Candidate
 from tsid_fmu.study.definition import Study
@@ -192,8 +194,6 @@ def _fit_extra(
     approached without end, and measured on the SISO friction laws a fit run to its
     limit cost 40 to 80 runs where the gap was within ``tol`` after a few.
     """
-    from scipy.optimize import least_squares
-
     r_small = small.extra["residuals"]
     space = _space(study)
     bad = np.full(r_small.shape, 1e6)
@@ -205,25 +205,42 @@ def _fit_extra(
             **{n: space.value(j, float(v)) for n, j, v in zip(extra, idx, s, strict=True)},
         }
 
+    def gaps(points: list[np.ndarray]) -> list[np.ndarray]:
+        rs = ev.evaluate([at(s) for s in points]).residuals or [None] * len(points)
+        out = []
+        for s, r in zip(points, rs, strict=True):
+            d = bad if r is None else r - r_small
+            if float(d @ d) <= tol:
+                raise _Reproduced(s)
+            out.append(d)
+        return out
+
+    last: list[tuple[np.ndarray, np.ndarray]] = []
+
     def diff(s: np.ndarray) -> np.ndarray:
-        r = ev.evaluate([at(s)]).residuals
-        d = bad if not r or r[0] is None else r[0] - r_small
-        if float(d @ d) <= tol:
-            raise _Reproduced(s)
-        return d
+        last[:] = [(np.array(s, dtype=float), gaps([s])[0])]
+        return last[0][1]
+
+    def jac(s: np.ndarray) -> np.ndarray:
+        d = last[0][1] if last and np.array_equal(last[0][0], s) else diff(s)
+        return forward_jacobian(gaps, s, d, relative_steps(s), upper=hi, lower=lo)
 
     start = np.array([space.coordinate(j, base[n]) for n, j in zip(extra, idx, strict=True)])
     lo = np.array([space.s_lower[j] for j in idx])
     hi = np.array([space.s_upper[j] for j in idx])
-    try:
-        fit = least_squares(
-            diff, np.clip(start, lo, hi), bounds=(lo, hi), max_nfev=20 * (len(extra) + 1)
-        )
-    except _Reproduced as done:
-        return True, at(np.asarray(done.args[0]))
-    except (ValueError, np.linalg.LinAlgError):  # SciPy could not go on: not reproduced
+    fit = trust_region(
+        diff,
+        np.clip(start, lo, hi),
+        jac,
+        bounds=(lo, hi),
+        stops=(_Reproduced,),
+        max_nfev=20 * (len(extra) + 1),
+    )
+    if isinstance(fit.raised, _Reproduced):
+        return True, at(np.asarray(fit.raised.args[0]))
+    if fit.x is None or fit.fun is None:  # SciPy could not go on: not reproduced
         return False, at(np.clip(start, lo, hi))
-    return 2 * float(fit.cost) <= tol, at(fit.x)
+    return float(fit.fun @ fit.fun) <= tol, at(fit.x)
 
 
 def _gap(ev: Any, x: Mapping[str, float], r_small: np.ndarray) -> float:
