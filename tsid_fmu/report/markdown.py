@@ -23,7 +23,7 @@ from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.story import interval_text, listed_combinations, weak_reason
 from tsid_fmu.study.units import study_units
-from tsid_fmu.uncertainty.assess import NOISE_SOURCES
+from tsid_fmu.uncertainty.assess import NOISE_SOURCES, mismatch_warning, mismatches
 
 __all__ = ["escape", "markdown_report", "markdown_table"]
 
@@ -214,7 +214,7 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
             lines.append(f"- **{escape(name)}**: {said}")
     if result.sampled is not None:
         lines += ["", escape(sampled_note(result.sampled))]
-    mismatch = [w for w in result.warnings if "model or solver mismatch" in w]
+    mismatch = [mismatch_warning(*m) for m in mismatches(result.fit, result.noise)]
     if mismatch:
         lines += ["", "**These intervals assume that the model explains the data; it does not:**"]
         lines += [f"- {w}" for w in mismatch]

@@ -94,24 +94,51 @@ def _noise(
     return noise, source
 
 
-def _fit(spec: EvaluationSpec, sims: list[Simulated], noise: Mapping) -> tuple[dict, list[str]]:
+def mismatches(fit: Mapping, noise: Mapping) -> list[tuple[str, str, float, float]]:
+    """Return the outputs that the model does not explain: RMS above :data:`MISMATCH` x noise.
+
+    Parameters
+    ----------
+    fit : mapping
+        Per experiment, per output, the fit metrics (``rmse``); an experiment whose
+        simulation failed holds ``error`` instead and is left out.
+    noise : mapping
+        Per experiment, per output, the noise's standard deviation.
+
+    Returns
+    -------
+    list of tuple
+        ``(experiment, output, rmse, noise)`` of each such output, in the fit's order.
+    """
+    out = []
+    for exp, outputs in fit.items():
+        for name, metrics in outputs.items():
+            if not isinstance(metrics, Mapping) or "rmse" not in metrics:
+                continue
+            s, rmse = float(noise.get(exp, {}).get(name, 0.0)), float(metrics["rmse"])
+            if s > 0 and rmse > MISMATCH * s:
+                out.append((exp, name, rmse, s))
+    return out
+
+
+def mismatch_warning(exp: str, name: str, rmse: float, s: float) -> str:
+    """Return the warning of one output the model does not explain (:func:`mismatches`)."""
+    return (
+        f"{exp} / {name}: model or solver mismatch: residual RMS {rmse:.3g} is "
+        f"{rmse / s:.1f} times the noise ({s:.3g}; more than "
+        f"{MISMATCH:g} x): the model or its solver does not explain these data, "
+        "and the intervals assume it does"
+    )
+
+
+def _fit(spec: EvaluationSpec, sims: list[Simulated], noise: Mapping) -> dict:
     fit: dict[str, Any] = {}
-    warnings = []
     for e, sim in zip(spec.experiments, sims, strict=True):
         if sim.outputs is None:
             fit[e.name] = {"error": sim.error}
             continue
         fit[e.name] = e.fit_metrics(sim.outputs)  # the scored samples only
-        for name in e.output_names:
-            s, rmse = noise[e.name][name], fit[e.name][name]["rmse"]
-            if s > 0 and rmse > MISMATCH * s:
-                warnings.append(
-                    f"{e.name} / {name}: model or solver mismatch: residual RMS {rmse:.3g} is "
-                    f"{rmse / s:.1f} times the noise ({s:.3g}; more than "
-                    f"{MISMATCH:g} x): the model or its solver does not explain these data, "
-                    "and the intervals assume it does"
-                )
-    return fit, warnings
+    return fit
 
 
 def assess(
@@ -132,7 +159,9 @@ def assess(
     fun = float(evaluator.evaluate([dict(x)]).costs[0, 0])
     sims = evaluator.simulate([dict(x)], count=False)[0]
     noise, source = _noise(spec, stated or {})
-    fit, warnings = _fit(spec, sims, noise)
+    fit = _fit(spec, sims, noise)
+    misfit = mismatches(fit, noise)
+    warnings = [mismatch_warning(*m) for m in misfit]
     out = Assessment(fun, fit, noise, source, sims, warnings=warnings)
     varied = {n: float(x[n]) for n in space.names}
     # a log coordinate below its smallest first level is degenerate (an offset at 0 has
@@ -163,10 +192,9 @@ def assess(
         u = out.uncertainty
         rounded = _rounded(spec, noise)
         coloured = [c for c in u.coloured if c not in rounded]
-        misfit = [w.split(":")[0] for w in warnings if "model or solver mismatch" in w]
         # the constancy test's scores sum to 0 only at a least-squares optimum
         test = u.constancy if spec.cost == "sse" else {}
-        u.discrepancy = judge(test, coloured, misfit, u.inflation)
+        u.discrepancy = judge(test, coloured, [f"{e} / {n}" for e, n, *_ in misfit], u.inflation)
         if not u.discrepancy.holds:
             out.warnings.append(u.discrepancy.warning())
         elif u.coloured:
