@@ -9,12 +9,11 @@ exit 0 and no word of it).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from tsid_fmu.numerics.rank import UNSEEN
+from tsid_fmu.numerics.rank import unseen_columns
 
 __all__ = ["ON_BOUND", "bound_warnings", "inert_parameters", "on_bounds", "unshown_warnings"]
 
@@ -94,11 +93,8 @@ def inert_parameters(jacobian: np.ndarray, names: Sequence[str]) -> list[str]:
     A column at most ``sqrt(UNSEEN)`` of the largest (the rank rule every interval
     uses, :data:`tsid_fmu.numerics.rank.UNSEEN`) is one the outputs do not depend on.
     """
-    norms = np.linalg.norm(np.where(np.isfinite(jacobian), jacobian, 0.0), axis=0)
-    top = float(norms.max()) if norms.size else 0.0
-    if top <= 0:
-        return list(names)
-    return [n for n, v in zip(names, norms, strict=True) if v <= math.sqrt(UNSEEN) * top]
+    unseen = unseen_columns(jacobian)
+    return [n for n, u in zip(names, unseen, strict=True) if u]
 
 
 def unshown_warnings(

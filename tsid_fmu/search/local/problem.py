@@ -27,6 +27,7 @@ from tsid_fmu.numerics.fdstep import (
     solver_noise,
     steps_for,
 )
+from tsid_fmu.numerics.rank import unseen_columns
 from tsid_fmu.search.local.columns import named_pairs
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.verdict import (
@@ -85,6 +86,12 @@ class _Problem:
         self.spoiled = False  # a column's difference was mostly the FMU's own noise
         self.widen = False  # widen such columns' steps (the second pass of refine_stage)
         self.reuse: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        # columns the outputs do not depend on at the first Jacobian (numerics.rank):
+        # held where they are; every Jacobian differences them again, and one seen
+        # frees its parameter (``freed``: the least squares restarts with it)
+        self.held = np.zeros(space.dim, dtype=bool)
+        self.decided = False
+        self.freed: list[str] = []
 
     def _residuals(self, sets: list[dict[str, float]]) -> list[np.ndarray]:
         if self.evaluator.nfev - self.start >= self.limit:
@@ -158,15 +165,28 @@ class _Problem:
             self.jacobian = (s.copy(), r0, jac)
             return jac
         jac = self._columns(s, r0, np.arange(s.size))
+        # a log coordinate on its floor is flat whatever the outputs do: never held
+        # (the floor test decides it, in linear coordinates)
+        floored = self.space.floored(self.space.to_x(s))
+        unseen = unseen_columns(jac) & ~np.isin(self.space.names, floored)
+        if not self.decided:
+            self.decided = True
+            self.held = unseen if not unseen.all() else self.held
+        elif np.any(self.held & ~unseen):
+            self.freed += [
+                n for n, k in zip(self.space.names, self.held & ~unseen, strict=True) if k
+            ]
+            self.held = self.held & unseen
         try:
             noise = noise_of(self.evaluator, lambda: self._noise(s, r0))
         except _Budget:  # no runs left to measure it: this Jacobian as it is
             noise = 0.0
         wider = steps_for(self.steps, jac, noise)
-        redo = np.flatnonzero(wider > 1.5 * self.steps)  # columns the FMU's noise spoils
+        # columns the FMU's noise spoils (a held column is zero, not spoiled)
+        redo = np.flatnonzero((wider > 1.5 * self.steps) & ~self.held)
         self.spoiled = self.spoiled or bool(redo.size)
         if redo.size and self.widen:
-            self.steps = np.where(wider > 1.5 * self.steps, wider, self.steps)
+            self.steps[redo] = wider[redo]
             jac[:, redo] = self._columns(s, r0, redo)
         self.jacobian = (s.copy(), r0, jac)
         return jac

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
-from tsid_fmu.numerics.lsq import Stop, trust_region
+from tsid_fmu.numerics.lsq import Solved, Stop, trust_region
 from tsid_fmu.search.local.columns import UNFINISHED, named_pairs
 from tsid_fmu.search.local.problem import (
     _FTOL,
@@ -60,18 +60,30 @@ def _solve(
     """Run SciPy's trust-region least squares from ``s0``; return status and message.
 
     Why it stopped (``stop``: gtol, ftol or xtol) and its counts go into ``extra``.
+    The first Jacobian, at ``s0``, decides which columns are held
+    (:attr:`_Problem.held`): SciPy then moves only the others. A zero column makes
+    its trust-region subproblem rank-deficient, and the exact Gauss-Newton step is
+    never taken: on a lag with one parameter that acts on nothing
+    (``benchmarks/conformance.py``'s ``NO_EFFECT``), 67 runs against 16 without it.
+    Every Jacobian differences the held columns too, so the last one, which the
+    stationarity test reads, has them all; where one is seen, SciPy starts again from
+    that Jacobian's point with its parameter freed.
     """
-    solved = trust_region(
-        problem.fun,
-        s0,
-        problem.jac,
-        bounds=(space.s_lower, space.s_upper),
-        stops=(_Converged, _Budget),
-        ftol=_FTOL,
-        xtol=_XTOL,
-        gtol=_GTOL,
-        max_nfev=10_000,
-    )
+    try:
+        if not problem.decided:
+            problem.jac(s0)  # SciPy's first, kept with its residuals for SciPy
+            problem.reuse, problem.linearised = problem.jacobian, None
+            problem.known = problem.last
+    except _Budget:
+        extra["stop"] = "limit"
+        return 1, f"simulation limit ({limit}) of the refinement reached"
+    while True:
+        solved = _run_free(problem, s0, space)
+        if not isinstance(solved.raised, _Freed) or problem.jacobian is None:
+            break
+        s0, r0, _ = problem.jacobian  # SciPy starts again here, with this Jacobian
+        problem.reuse, problem.linearised = problem.jacobian, None
+        problem.known = (s0.copy(), r0)
     if isinstance(solved.raised, _Converged):
         stop = solved.raised
         extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
@@ -85,6 +97,41 @@ def _solve(
     extra.update(nfev=solved.nfev, njev=solved.njev)
     said = STOPPED.get(extra["stop"], "it stopped")
     return 0, f"least squares: {said}"
+
+
+class _Freed(Exception):
+    """A held parameter's column was seen: SciPy starts again with it free."""
+
+
+def _run_free(problem: _Problem, s0: np.ndarray, space: Space) -> Solved:
+    """Run SciPy from ``s0`` over the parameters not held (:attr:`_Problem.held`)."""
+    active = np.flatnonzero(~problem.held)
+    held = int(problem.held.sum())
+
+    def embed(z: np.ndarray) -> np.ndarray:
+        s = s0.copy()
+        s[active] = z
+        return s
+
+    def jac(z: np.ndarray) -> np.ndarray:
+        out = problem.jac(embed(z))
+        if int(problem.held.sum()) < held:
+            raise _Freed
+        # C order, as the Jacobian itself: SciPy's factorisations of an F-ordered copy
+        # differ in the last digits, and so would every refinement that holds nothing
+        return out if active.size == out.shape[1] else np.ascontiguousarray(out[:, active])
+
+    return trust_region(
+        lambda z: problem.fun(embed(z)),
+        s0[active],
+        jac,
+        bounds=(space.s_lower[active], space.s_upper[active]),
+        stops=(_Converged, _Budget, _Freed),
+        ftol=_FTOL,
+        xtol=_XTOL,
+        gtol=_GTOL,
+        max_nfev=10_000,
+    )
 
 
 def _again_wider(
@@ -109,6 +156,23 @@ def _again_wider(
     status, again = _solve(problem, s, space, limit, extra)
     extra["first_pass"] = {k: first[k] for k in ("stop", "nfev", "njev") if k in first}
     return status, f"{message}; again with difference steps that beat the FMU's noise: {again}"
+
+
+def _released(problem: _Problem, space: Space, extra: dict[str, Any], message: str) -> str:
+    """Say which parameters the refinement held to the end, and which it freed."""
+    if problem.freed:
+        message += f"; freed {', '.join(problem.freed)} where the outputs began to depend on it"
+    held = _held(problem, space)
+    if held:
+        extra["held"] = held
+        them = "it" if len(held) == 1 else "them"
+        message += f"; held {', '.join(held)}: the outputs do not depend on {them}"
+    return message
+
+
+def _held(problem: _Problem, space: Space) -> list[str]:
+    """Return the names of the parameters the refinement holds (:attr:`_Problem.held`)."""
+    return [space.names[k] for k in np.flatnonzero(problem.held)]
 
 
 def _floor_test(
@@ -263,6 +327,7 @@ def refine_stage(
     status, message = _solve(problem, s0, space, limit, extra)
     if status == 0 and problem.spoiled and problem.doubtful(floor):
         status, message = _again_wider(problem, space, limit, extra, message)
+    message = _released(problem, space, extra, message)
     gate = _tested(space, problem, fixed, floor, method.leveling.tolerance, extra)
     (cost, x), nfev = problem.best, evaluator.nfev - n0
     if status == 0 and not gate.holds:
