@@ -135,3 +135,22 @@ def test_a_process_prints_the_warning_only_without_q(tmp_path, quiet):
     else:
         assert "RuntimeWarning: overflow" in done.stderr
         assert not (out / WARNINGS_LOG).exists()
+
+
+def test_a_combination_with_a_member_at_zero_gives_no_warning(strict):
+    """A member at 1e-320 has an infinite relative scale; ``nan_to_num`` made it 1.8e308
+    and the combination's norm overflowed (a RuntimeWarning on stderr in the structure
+    benchmark's law-1 study). Such a member is left out of the relative error."""
+    from tsid_fmu.doe.options import LevelingOptions
+    from tsid_fmu.numerics.space import Space
+    from tsid_fmu.uncertainty.intervals import uncertainty
+    from tsid_fmu.uncertainty.sensitivity import Sensitivities
+
+    t = np.linspace(0.0, 1.0, 40)
+    jac = np.stack([np.sin(3 * t), np.cos(2 * t)], axis=-1)[:, None, :]
+    sens = Sensitivities(["a", "b"], [0.01 * np.sin(7 * t)[:, None]], [jac], ["e"], [["y"]])
+    space = Space({"a": [0.5, 1.5], "b": [0.0, 1.0]}, {"a": (0, 10), "b": (0, 10)},
+                  LevelingOptions(scale="linear"))  # fmt: skip
+    found = uncertainty(sens, space, {"a": 1.0, "b": 1e-320})
+    assert found is not None and found.combinations
+    assert all(not np.isinf(c["percent"]) for c in found.combinations)

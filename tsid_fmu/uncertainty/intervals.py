@@ -353,7 +353,9 @@ def _combinations(
         terms = combination_terms(space, v)
         used = [j for j, c in enumerate(space.u_direction(v)) if abs(c) >= 0.05]
         # relative standard error along the unit direction; undefined where a member is 0
-        scale = float(np.linalg.norm(v * np.nan_to_num(rel)))
+        # (its rel not finite: left out of the norm, which nan_to_num's 1.8e308 overflowed)
+        with np.errstate(over="ignore"):
+            scale = float(np.linalg.norm(v * np.where(np.isfinite(rel), rel, 0.0)))
         percent = (
             100 * se * scale
             if math.isfinite(se) and all(math.isfinite(rel[j]) for j in used)
