@@ -24,6 +24,7 @@ from tsid_fmu.search import context, verdict
 from tsid_fmu.search.local import adaptive
 from tsid_fmu.search.local import flow as local
 from tsid_fmu.search.local.refine import STOPPED
+from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.pipeline import run_stages
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
@@ -303,7 +304,7 @@ def test_exit_zero_needs_the_stationarity_test_to_hold():
     )
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     refined = stages[-1]
-    assert refined.status == 1 and not refined.extra["stationarity"]["holds"]
+    assert refined.status == 1 and not refined.stationarity.holds
     status, why = adaptive.verdict(stages)
     assert status == 1 and "not shown to be an optimum" in why
 
@@ -324,7 +325,7 @@ def test_refine_none_ends_with_a_check_stage_that_decides_the_verdict():
     study = _study({"a": [1.0, 1.7, 2.6], "k": [0.8, 1.1, 1.7]}, refine="none", max_iterations=1)
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     assert stages[-1].kind == "check" and stages[-1].nfev == 4
-    assert adaptive.verdict(stages)[0] == (0 if stages[-1].extra["stationarity"]["holds"] else 1)
+    assert adaptive.verdict(stages)[0] == (0 if stages[-1].stationarity.holds else 1)
     assert adaptive.verdict(stages)[0] == 1  # one array does not reach the optimum
 
 
@@ -334,8 +335,8 @@ def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatc
     def collapsing(name, *args, **kwargs):
         stage = polish(name, *args, **kwargs)
         if name == "refinement":  # as SciPy says it when the trust region collapses
-            stage.message = f"least squares: {STOPPED['xtol']}"
-            stage.extra["stop"] = "xtol"
+            stage.message = f"least squares: {STOPPED[LocalStop.XTOL]}"
+            stage.stop = LocalStop.XTOL
         return stage
 
     monkeypatch.setattr(context, "polish", collapsing)
@@ -374,15 +375,15 @@ def test_a_crawl_continued_to_an_optimum_in_its_combination_ends_the_search(monk
     def crawling(name, *args, **kwargs):
         stage = polish(name, *args, **kwargs)
         if name == "refinement":  # stopped in a valley, its test failing
-            stage.extra["stop"] = "valley"
-            stage.extra["stationarity"] = {"holds": False, "test": "projected Gauss-Newton"}
+            stage.stop = LocalStop.VALLEY
+            stage.stationarity = verdict.Stationarity(False, verdict.GN_TEST, 1.0, 1.0, "")
             stage.cost *= 1.01
         return stage
 
     def combined(study, evs, stages, progress=None):
         answer = adaptive.answer_stage(stages)
-        test = {"holds": True, "test": "projected Gauss-Newton", "gap": 0.0}
-        extra = {"stationarity": test, "pairs": [["a", "k", 1.0]]}
+        test = verdict.Stationarity(True, verdict.GN_TEST, 0.0, answer.cost / 1.01, "")
+        extra = {"pairs": [["a", "k", 1.0]]}
         lower = StageResult(
             "refinement in the combinations the data fix: a + 1 k",
             "refinement",
@@ -392,6 +393,7 @@ def test_a_crawl_continued_to_an_optimum_in_its_combination_ends_the_search(monk
             "least squares in the combinations; stationary",
             0,
             extra=extra,
+            stationarity=test,
         )
         return lower, 3
 
@@ -410,7 +412,7 @@ def test_the_pipeline_continues_the_arrays_only_to_below_the_refinements_answer(
     def collapsing_high(name, *args, **kwargs):
         stage = polish(name, *args, **kwargs)
         if name == "refinement":  # collapsed, and well above the arrays' best
-            stage.extra["stop"] = "xtol"
+            stage.stop = LocalStop.XTOL
             stage.cost *= 1.5
         return stage
 
@@ -531,4 +533,9 @@ def test_a_stationarity_test_reads_back_typed_and_an_old_trails_as_the_models():
     read = verdict.Stationarity.from_dict(old)
     assert read.decided_by == "model" and not read.by_trial  # the message is not parsed
     assert verdict.Stationarity.from_dict({}) is None
-    assert verdict.stationarity_of(StageResult("r", "refinement", {}, 1.0, 0, "")) is None
+    assert StageResult("r", "refinement", {}, 1.0, 0, "").stationarity is None
+    stage = StageResult("r", "refinement", {}, 1.0, 0, "", stationarity=tried)
+    stage.stop = LocalStop.VALLEY  # the trail's JSON form reads back typed
+    again = StageResult.from_dict(stage.to_dict())
+    assert again.stationarity == tried and again.stop is LocalStop.VALLEY
+    assert "stationarity" not in again.extra and "stop" not in again.extra

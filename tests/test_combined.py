@@ -23,6 +23,7 @@ from tsid_fmu.search.local.combined import (
     physical_jacobian,
     refine_in_combinations,
 )
+from tsid_fmu.search.outcome import LocalStop, Stationarity
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.verdict import LOWER_TRIED
@@ -140,7 +141,7 @@ def test_only_an_answer_whose_test_held_by_a_trial_alone_is_refined_in_combinati
         {"holds": False, "test": "projected Gauss-Newton", "detail": failed},  # no trial
     ):
         stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 5, "",
-                            extra={"stationarity": gate})  # fmt: skip
+                            stationarity=Stationarity.from_dict(gate))  # fmt: skip
         assert refine_in_combinations(_Study(), _Evs(ev), [stage]) == (None, 0)
     assert ev.nfev == 0
 
@@ -153,7 +154,7 @@ def test_an_answer_whose_failed_test_found_a_lower_point_is_refined_in_combinati
     gate = {"holds": False, "test": "projected Gauss-Newton", "detail": detail,
             "decided_by": "trial", "lower": 55.0}  # fmt: skip
     stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 5, "",
-                        extra={"stationarity": gate})  # fmt: skip
+                        stationarity=Stationarity.from_dict(gate))  # fmt: skip
     lower, runs = refine_in_combinations(_Study(), _Evs(ev), [stage])
     assert lower is not None and runs > 0 and lower.cost < 0.3 * stage.cost
     assert abs(lower.x["b"] / 2.5 - 1) < 0.01
@@ -228,7 +229,7 @@ def test_a_study_of_one_structure_is_refined_in_its_combinations_too(monkeypatch
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     gate = {"holds": True, "test": "projected Gauss-Newton, step tried", "detail": ""}
     held = StageResult("refinement", "refinement", dict(START), ev.cost(**START), 9, "",
-                       extra={"stationarity": gate})  # fmt: skip
+                       stationarity=Stationarity.from_dict(gate))  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: held)  # the valley's stop
     ctx, store = _context(ev)
     arrays = StageResult("taguchi", "taguchi", dict(START), held.cost, 50, "")
@@ -247,7 +248,8 @@ def test_an_answer_refined_in_its_combinations_is_not_refined_in_them_again():
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     gate = {"holds": True, "test": "projected Gauss-Newton, step tried", "detail": ""}
     stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 5, "",
-                        extra={"stationarity": gate, "pairs": [["v", "b", 1.0]]})  # fmt: skip
+                        extra={"pairs": [["v", "b", 1.0]]},
+                        stationarity=Stationarity.from_dict(gate))  # fmt: skip
     assert refine_in_combinations(_Study(), _Evs(ev), [stage]) == (None, 0)
     assert ev.nfev == 0
 
@@ -309,7 +311,7 @@ def test_the_refinements_last_jacobian_names_the_pairs_in_the_parameters_units(m
     ((v, b, a),) = stage.extra["parallel"]
     assert (v, b) == ("v", "b") and a == pytest.approx(1.0, rel=1e-2)
     # a test that held without a trial, the refinement ended by its own tolerances: no
-    # pairs kept (none are read); out of runs, they are kept (columns.UNFINISHED)
+    # pairs kept (none are read); out of runs, they are kept (LocalStop.unfinished)
     monkeypatch.setattr(
         refine._Problem,
         "stationarity",
@@ -320,9 +322,10 @@ def test_the_refinements_last_jacobian_names_the_pairs_in_the_parameters_units(m
     stage = refine.refine_stage(
         "r", SPACE, START, ev.cost(**START), ev, Method(refine_max_nfev=400)
     )
-    assert stage.extra["stop"] in ("ftol", "xtol", "gtol") and "parallel" not in stage.extra
+    stopped = (LocalStop.FTOL, LocalStop.XTOL, LocalStop.GTOL)
+    assert stage.stop in stopped and "parallel" not in stage.extra
     stage = refine.refine_stage("r", SPACE, START, ev.cost(**START), ev, Method(refine_max_nfev=20))
-    assert stage.extra["stop"] == "limit" and stage.extra["parallel"][0][:2] == ["v", "b"]
+    assert stage.stop is LocalStop.LIMIT and stage.extra["parallel"][0][:2] == ["v", "b"]
 
 
 def test_the_pairs_a_refinement_kept_spare_the_jacobian_at_its_answer():
@@ -334,12 +337,14 @@ def test_the_pairs_a_refinement_kept_spare_the_jacobian_at_its_answer():
     cost = ev.cost(**START)
     ev.nfev = 0
     none = StageResult("r", "refinement", dict(START), cost, 5, "",
-                       extra={"stationarity": gate, "parallel": []})  # fmt: skip
+                       extra={"parallel": []},
+                       stationarity=Stationarity.from_dict(gate))  # fmt: skip
     assert refine_in_combinations(_Study(), _Evs(ev), [none]) == (None, 0) and ev.nfev == 0
     spent = []
     for parallel in ([["v", "b", 1.0]], None):
-        extra = {"stationarity": gate} | ({"parallel": parallel} if parallel else {})
-        stage = StageResult("r", "refinement", dict(START), cost, 5, "", extra=extra)
+        extra = {"parallel": parallel} if parallel else {}
+        stage = StageResult("r", "refinement", dict(START), cost, 5, "", extra=extra,
+                            stationarity=Stationarity.from_dict(gate))  # fmt: skip
         lower, runs = refine_in_combinations(_Study(), _Evs(ev), [stage])
         assert lower is not None and lower.cost < 0.3 * cost
         spent.append(runs)
@@ -361,7 +366,7 @@ def test_an_unsettled_refinement_is_refined_in_its_combinations_before_the_array
     gate = {"holds": False, "test": "projected Gauss-Newton", "detail": detail,
             "decided_by": "trial", "lower": 55.0}  # fmt: skip
     stopped = StageResult("refinement", "refinement", dict(START), ev.cost(**START), 9, "",
-                          status=1, extra={"stationarity": gate})  # fmt: skip
+                          status=1, stationarity=Stationarity.from_dict(gate))  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: stopped)
     ctx, _ = _context(ev)
     handed = types.SimpleNamespace(extra={"handover": "after iteration 1"})
@@ -372,7 +377,7 @@ def test_an_unsettled_refinement_is_refined_in_its_combinations_before_the_array
 
     stages = local.local_search(ctx, [arrays], True, resume=resume)
     last = stages[-1]
-    assert "pairs" in last.extra and last.extra["stationarity"]["holds"]
+    assert "pairs" in last.extra and last.stationarity.holds
     assert last.cost < 0.3 * stopped.cost
 
 
@@ -413,7 +418,7 @@ def test_a_refinement_crawling_along_parallel_columns_stops_and_the_combination_
         lambda z: ev.residuals({"v": z[0], "b": z[1]}), [51.5, 2.5], xtol=1e-12
     )
     best = 2 * float(optimum.cost)
-    assert stage.extra["stop"] == "valley" and stage.extra["parallel"][0][:2] == ["v", "b"]
+    assert stage.stop is LocalStop.VALLEY and stage.extra["parallel"][0][:2] == ["v", "b"]
     assert stage.cost > 1.2 * best  # stopped far along the valley ...
     assert lower is not None and lower.cost < best * (1 + 1e-6)  # ... where the pair ends it
     assert stage.nfev < 80 and ev.nfev < 100
@@ -421,7 +426,7 @@ def test_a_refinement_crawling_along_parallel_columns_stops_and_the_combination_
     monkeypatch.setattr(problem._Problem, "_parallel", lambda self: False)
     crawled = CurveEvaluator(_weak, measured, 0.001)
     stage, _ = study(crawled)
-    assert stage.extra["stop"] != "valley" and stage.nfev > 300
+    assert stage.stop is not LocalStop.VALLEY and stage.nfev > 300
 
 
 def test_a_refinement_that_crawled_and_its_combination_are_reported_as_one_stage(monkeypatch):
@@ -436,8 +441,9 @@ def test_a_refinement_that_crawled_and_its_combination_are_reported_as_one_stage
     gate = {"holds": True, "test": "projected Gauss-Newton, step tried", "detail": ""}
     crawled = StageResult("refinement", "refinement", dict(START), ev.cost(**START), 9,
                           "least squares: ... a valley the trust region crawls",
-                          extra={"stationarity": gate, "stop": "valley",
-                                 "parallel": [["v", "b", 1.0]]})  # fmt: skip
+                          extra={"parallel": [["v", "b", 1.0]]},
+                          stationarity=Stationarity.from_dict(gate),
+                          stop=LocalStop.VALLEY)  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: crawled)
     ctx, store = _context(ev)
     arrays = StageResult("taguchi", "taguchi", dict(START), crawled.cost, 50, "")
@@ -448,13 +454,14 @@ def test_a_refinement_that_crawled_and_its_combination_are_reported_as_one_stage
     assert store.kept["combinations_continued"] is one  # the trail holds what is reported
     assert one.cost == kept.cost < 0.3 * crawled.cost and one.nfev == 9 + kept.nfev
     assert one.message.startswith(crawled.message + "; then in the combinations the data fix")
-    assert one.extra["stationarity"] == kept.extra["stationarity"] and "pairs" in one.extra
-    assert one.extra["crawled"]["cost"] == crawled.cost and "stop" not in one.extra
+    assert one.stationarity == kept.stationarity and "pairs" in one.extra
+    assert one.extra["crawled"]["cost"] == crawled.cost and one.stop is not LocalStop.VALLEY
+    assert one.extra["crawled"]["stop"] == "valley"
     runs = ev.nfev
     again = local.local_search(ctx, [arrays], True, resume=None)
     assert again[-1].cost == one.cost and again[-1].nfev == one.nfev and ev.nfev == runs
     # a refinement that stopped at its own tolerances is followed, as before
-    crawled.extra.pop("stop")
+    crawled.stop = LocalStop.NONE
     assert len(local.local_search(ctx, [arrays], True, resume=None)) == 3
 
 
@@ -474,7 +481,7 @@ def test_exactly_parallel_columns_are_not_a_valley():
         assert bool(parallel_pairs(np.column_stack([a, b]))) == found, off
 
 
-@pytest.mark.parametrize("stop", ["limit", "valley"])
+@pytest.mark.parametrize("stop", [LocalStop.LIMIT, LocalStop.VALLEY])
 def test_a_refinement_its_own_tests_did_not_end_is_refined_in_combinations(stop):
     """Out of runs (or crawling) in the valley, a refinement's Gauss-Newton test can hold
     on the valley's local slope alone (SISO damped law 2, seed 2: a decrease of 1.75
@@ -484,8 +491,8 @@ def test_a_refinement_its_own_tests_did_not_end_is_refined_in_combinations(stop)
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     gate = {"holds": True, "test": "projected Gauss-Newton", "detail": "at most 0.0001"}
     stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 60, "",
-                        extra={"stationarity": gate, "stop": stop})  # fmt: skip
+                        stationarity=Stationarity.from_dict(gate), stop=stop)  # fmt: skip
     lower, runs = refine_in_combinations(_Study(), _Evs(ev), [stage])
     assert lower is not None and runs > 0 and lower.cost < 0.3 * stage.cost
-    stage.extra["stop"] = "ftol"
+    stage.stop = LocalStop.FTOL
     assert refine_in_combinations(_Study(), _Evs(ev), [stage]) == (None, 0)

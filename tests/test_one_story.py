@@ -24,6 +24,7 @@ from tsid_fmu import IdentificationResult, load
 from tsid_fmu.design.outcome import _span
 from tsid_fmu.report.html import html_report
 from tsid_fmu.report.markdown import markdown_report
+from tsid_fmu.search.outcome import Stationarity
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.status import MAX_MESSAGE, MESSAGES, Verdict, account, study_status
 from tsid_fmu.story import determination, interval_text, listed_combinations, weak_reason
@@ -31,9 +32,12 @@ from tsid_fmu.story import determination, interval_text, listed_combinations, we
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _stage(name: str, message: str, status: int = 0, **extra: object) -> StageResult:
+def _stage(
+    name: str, message: str, status: int = 0, stationarity: dict | None = None
+) -> StageResult:
     kind = "taguchi" if name == "taguchi" else "refinement"
-    return StageResult(name, kind, {"a": 1.0}, 2.0, 10, message, status, extra=dict(extra))
+    test = Stationarity.from_dict(stationarity)
+    return StageResult(name, kind, {"a": 1.0}, 2.0, 10, message, status, stationarity=test)
 
 
 # ------------------------------------------------------------------ the verdict

@@ -11,13 +11,13 @@ from spec_helpers import CurveEvaluator
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.search.local import refine
 from tsid_fmu.search.local.refine import refine_stage
+from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
     LOWER_PROBED,
     LOWER_TRIED,
     MAX_TRIALS,
-    decided_by_trial,
     trial_fractions,
     trial_reaches_gate,
 )
@@ -182,7 +182,7 @@ def test_where_no_fraction_is_lower_the_local_probes_decide():
     gate = problem.stationarity(probe=0.001)
     assert not gate.holds and LOWER_PROBED in gate.detail
     assert problem.best[0] < ev.cost(**x)  # the probe is the answer now
-    assert decided_by_trial(gate.to_dict())  # the combinations' refinement may follow
+    assert gate.by_trial  # the combinations' refinement may follow
     at_optimum, _, _ = _stage()
     problem, _ = _problem_at(dict(at_optimum.x), 1.0)
     assert problem.stationarity(probe=0.001).holds  # the model holds: no probe needed
@@ -229,7 +229,8 @@ def test_a_stop_on_xtol_reads_as_a_sentence_not_a_tuple(monkeypatch):
     monkeypatch.setattr(refine._Problem, "_check_step", shorter)
     result, _, _ = _stage()
     assert "least squares: the last step was shorter than xtol=1e-08; stopped" in result.message
-    assert result.extra["stop"] == "xtol" and "('" not in result.message
+    assert result.stop is LocalStop.XTOL and "('" not in result.message
+    assert result.to_dict()["extra"]["stop"] == "xtol"  # the JSON form
 
 
 def test_a_refinement_out_of_runs_says_so_and_the_search_goes_on_from_it():
@@ -249,12 +250,12 @@ def test_a_refinement_out_of_runs_says_so_and_the_search_goes_on_from_it():
     limited = Method(cost="sse", refine_max_nfev=6)
     short = refine_stage("refinement", space, start, ev.cost(**start), ev, limited)
     assert short.status == 1 and short.message.startswith("simulation limit (6)")
-    assert short.extra["stop"] == "limit"
+    assert short.stop is LocalStop.LIMIT
     assert _collapsed(short) == (
         "the refinement ran out of simulations before its own tests ended it"
     )
     done, _, _ = _stage()
-    assert done.extra["stop"] != "limit" and _collapsed(done) is None
+    assert done.stop is not LocalStop.LIMIT and _collapsed(done) is None
 
 
 def test_an_answer_on_a_log_parameters_floor_is_tested_in_linear_coordinates():
@@ -315,7 +316,7 @@ def test_a_refinement_out_of_runs_still_tries_its_step():
                        Method(cost="sse", refine="least_squares", refine_max_nfev=20),
                        start_residuals=first.residuals[0])  # fmt: skip
     assert out.status == 1 and "simulation limit (20)" in out.message
-    assert decided_by_trial(out.extra["stationarity"])
+    assert out.stationarity is not None and out.stationarity.by_trial
     assert 20 < out.nfev <= 20 + MAX_TRIALS
 
 
@@ -369,12 +370,13 @@ def test_a_floor_test_held_by_its_trials_hands_its_linear_pairs_to_the_combinati
         def get(self, names, experiments, fixed):
             return ev
 
-    found = {"stationarity": test.to_dict(), "parallel": pairs, "stop": "xtol"}
-    stage = StageResult("refinement", "refinement", start, cost, 5, "", extra=found)
+    found = {"parallel": pairs}
+    stage = StageResult("refinement", "refinement", start, cost, 5, "", extra=found,
+                        stationarity=test, stop=LocalStop.XTOL)  # fmt: skip
     lower, _ = refine_in_combinations(Study(), Evs(), [stage])
     assert lower is not None and lower.cost < 0.5 * cost
     assert abs(lower.x["d"] / 0.5 - 1) < 0.1
     # the rule removed (held as the model's test, no pairs): nothing follows
-    plain = {"stationarity": held.to_dict(), "stop": "xtol"}
-    stage = StageResult("refinement", "refinement", start, cost, 5, "", extra=plain)
+    stage = StageResult("refinement", "refinement", start, cost, 5, "",
+                        stationarity=held, stop=LocalStop.XTOL)  # fmt: skip
     assert refine_in_combinations(Study(), Evs(), [stage]) == (None, 0)

@@ -136,7 +136,8 @@ def test_cycle_detector_sees_a_cycle_inside_a_function():
 
 
 def test_the_projected_gauss_newton_test_is_made_in_one_place():
-    """Its trials (``trial_fractions``) and its verdicts (``GN_TRIED``) live in verdict.py."""
+    """Its trials (``trial_fractions``) live in verdict.py, its verdicts' names (``GN_TRIED``)
+    in outcome.py, beside the typed verdict."""
     made = {
         name
         for name, path in MODULES.items()
@@ -151,4 +152,4 @@ def test_the_projected_gauss_newton_test_is_made_in_one_place():
         for name, path in MODULES.items()
         if '"projected Gauss-Newton, step tried"' in path.read_text(encoding="utf-8")
     }
-    assert said == {"tsid_fmu.search.verdict"}
+    assert said == {"tsid_fmu.search.outcome"}

@@ -506,12 +506,13 @@ def test_an_embedding_reaches_a_nesting_value_on_a_bound_that_log_coordinates_ca
 
 
 def test_a_chosen_answer_from_a_warm_start_gets_its_own_study_unless_shown_optimal():
+    from tsid_fmu.search.outcome import Stationarity
     from tsid_fmu.search.stage import StageResult
     from tsid_fmu.search.structure.candidates import needs_own_study
 
     def stage(holds):
-        extra = {"stationarity": {"holds": holds, "test": "gauss-newton", "detail": ""}}
-        return StageResult("refinement", "refinement", {"a": 1.0}, 1.0, 10, "", extra=extra)
+        test = Stationarity(holds, "gauss-newton", 0.0, 1.0, "")
+        return StageResult("refinement", "refinement", {"a": 1.0}, 1.0, 10, "", stationarity=test)
 
     assert needs_own_study(1, {0}, [stage(False)])
     assert not needs_own_study(1, {0}, [stage(True)])
@@ -520,12 +521,13 @@ def test_a_chosen_answer_from_a_warm_start_gets_its_own_study_unless_shown_optim
 
 
 def test_a_poor_fit_gives_the_richest_candidate_without_one_a_study_of_its_own():
+    from tsid_fmu.search.outcome import Stationarity
     from tsid_fmu.search.stage import StageResult
     from tsid_fmu.search.structure.candidates import next_own_study
 
     def stage(holds):
-        extra = {"stationarity": {"holds": holds, "test": "gauss-newton", "detail": ""}}
-        return StageResult("refinement", "refinement", {"a": 1.0}, 1.0, 10, "", extra=extra)
+        test = Stationarity(holds, "gauss-newton", 0.0, 1.0, "")
+        return StageResult("refinement", "refinement", {"a": 1.0}, 1.0, 10, "", stationarity=test)
 
     n = 1000  # the noise floor of 1000 noise-weighted residuals
     law1 = Candidate("1", {"s": 1.0}, {}, 1.6e11, 1.6e11, n, 4, list("abcd"))
@@ -843,6 +845,7 @@ def test_a_refinement_stopped_short_of_its_test_is_refined_once_more(
     """A refinement that stopped at its tolerances (``stop``) but whose stationarity test
     found a lower point (status 1) is refined again from its answer, once; one stopped
     by its simulation limit (no ``stop``), shown stationary, or without a test, is not."""
+    from tsid_fmu.search.outcome import LocalStop, Stationarity
     from tsid_fmu.search.stage import StageResult
     from tsid_fmu.search.structure import optima
 
@@ -851,14 +854,14 @@ def test_a_refinement_stopped_short_of_its_test_is_refined_once_more(
     def polish(name, study, start, ev, progress):
         starts.append(dict(start))
         if len(starts) == 1:
-            extra = {"stationarity": {"holds": holds} if holds is not None else {}}
-            if stop:
-                extra["stop"] = stop
+            test = Stationarity(holds, "gn", 0.0, 5.0, "") if holds is not None else None
             x = {"a": 2.0, "b": 1.2, "c": 0.4}
-            return StageResult(name, "refinement", x, 5.0, 7, "first", status, extra=extra)
+            return StageResult(name, "refinement", x, 5.0, 7, "first", status,
+                               stationarity=test, stop=LocalStop(stop or ""))  # fmt: skip
         x = {"a": 2.0, "b": 1.3, "c": 0.4}
-        extra = {"stationarity": {"holds": True}, "stop": "xtol"}
-        return StageResult(name, "refinement", x, 4.0, 3, "second", 0, extra=extra)
+        test = Stationarity(True, "gn", 0.0, 4.0, "")
+        return StageResult(name, "refinement", x, 4.0, 3, "second", 0,
+                           stationarity=test, stop=LocalStop.XTOL)  # fmt: skip
 
     monkeypatch.setattr(optima, "polish", polish)
     stage = optima.settle("restart", _study(), {"a": 1.0, "b": 1.0, "c": 0.5}, None)

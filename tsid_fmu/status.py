@@ -14,6 +14,7 @@ import enum
 from collections.abc import Sequence
 
 from tsid_fmu.search.local.adaptive import answer_stage
+from tsid_fmu.search.outcome import Stationarity
 from tsid_fmu.search.stage import StageResult
 
 __all__ = ["MAX_MESSAGE", "MESSAGES", "Verdict", "account", "study_status"]
@@ -104,17 +105,15 @@ def account(stages: Sequence[StageResult]) -> list[str]:
             lines.append(f"{s.name}: {'; '.join(fresh)}")
     test = _test(stages)
     if test is not None:
-        holds = bool(test.get("holds"))
-        head = "stationary at the answer" if holds else "not shown to be an optimum"
-        fresh = _once(str(test.get("detail") or ""), said)
+        head = "stationary at the answer" if test.holds else "not shown to be an optimum"
+        fresh = _once(test.detail, said)
         tail = f": {'; '.join(fresh)}" if fresh else ""
-        lines.append(f"verdict: {head} ({test.get('test')}){tail}")
+        lines.append(f"verdict: {head} ({test.test}){tail}")
     return lines
 
 
-def _test(stages: Sequence[StageResult]) -> dict | None:
-    test = answer_stage(stages).extra.get("stationarity") if stages else None
-    return test if isinstance(test, dict) and test else None
+def _test(stages: Sequence[StageResult]) -> Stationarity | None:
+    return answer_stage(stages).stationarity if stages else None
 
 
 def study_status(
@@ -139,7 +138,7 @@ def study_status(
         code, status = Verdict.FMU, 1
         told = [*told, f"FMU: {fmu}"]
     elif test is not None:
-        code = Verdict.STATIONARY if test.get("holds") else Verdict.NOT_SHOWN
+        code = Verdict.STATIONARY if test.holds else Verdict.NOT_SHOWN
         status = 0 if code is Verdict.STATIONARY else 1
     else:
         ran = [s for s in stages if s.kind != "contribution"]

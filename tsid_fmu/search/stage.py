@@ -6,6 +6,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from tsid_fmu.search.outcome import LocalStop, Stationarity
 from tsid_fmu.search.record import IterationRecord, json_float, unjson_float
 
 __all__ = ["KINDS", "StageResult"]
@@ -55,7 +56,14 @@ class StageResult:
     experiments : list of str
         The experiments the stage fitted.
     extra : dict
-        Stage-specific details (the refinement's iterations, a phase's parameters).
+        Stage-specific details for the report and the trail (a refinement's counts, a
+        phase's parameters); no decision of the search reads them.
+    stationarity : Stationarity or None
+        The stationarity test made at the answer (None where none was made); written
+        into ``extra["stationarity"]`` by :meth:`to_dict`.
+    stop : LocalStop
+        Why a refinement stopped (``LocalStop.NONE`` for other stages); written into
+        ``extra["stop"]``.
     """
 
     name: str
@@ -68,6 +76,8 @@ class StageResult:
     records: list[IterationRecord] = field(default_factory=list)
     experiments: list[str] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
+    stationarity: Stationarity | None = None
+    stop: LocalStop = LocalStop.NONE
 
     @property
     def converged(self) -> bool:
@@ -86,14 +96,29 @@ class StageResult:
             "status": self.status,
             "iterations": len(self.records),
             "experiments": list(self.experiments),
-            "extra": self.extra,
+            "extra": self._extra_json(),
         }
+
+    def _extra_json(self) -> dict[str, Any]:
+        """Return ``extra`` with the typed outcomes in their JSON form."""
+        out = dict(self.extra)
+        if self.stationarity is not None:
+            out["stationarity"] = self.stationarity.to_dict()
+        if self.stop is not LocalStop.NONE or self.kind == "refinement":
+            out["stop"] = self.stop.value
+        return out
 
     @classmethod
     def from_dict(
         cls, d: Mapping[str, Any], records: list[IterationRecord] | None = None
     ) -> StageResult:
-        """Re-create a stage written by :meth:`to_dict`, with its records."""
+        """Re-create a stage written by :meth:`to_dict`, with its records.
+
+        An unknown ``stop`` (a trail written by another version) reads as ``NONE``.
+        """
+        extra = dict(d.get("extra", {}))
+        test = Stationarity.from_dict(extra.pop("stationarity", None))
+        stop = str(extra.pop("stop", "") or "")
         return cls(
             name=str(d["name"]),
             kind=str(d["kind"]),
@@ -104,5 +129,7 @@ class StageResult:
             status=int(d.get("status", 0)),
             records=list(records or []),
             experiments=list(d.get("experiments", [])),
-            extra=dict(d.get("extra", {})),
+            extra=extra,
+            stationarity=test,
+            stop=LocalStop(stop) if stop in set(LocalStop) else LocalStop.NONE,
         )

@@ -25,13 +25,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from tsid_fmu.evaluate.cost import noise_level
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.search.outcome import GN_TEST, GN_TRIED, Stationarity
 from tsid_fmu.search.space import Space
 
 __all__ = [
@@ -50,7 +49,6 @@ __all__ = [
     "noise_floor",
     "probe_points",
     "probe_test",
-    "stationarity_of",
 ]
 
 GATE_RTOL = 1e-4
@@ -62,12 +60,6 @@ LOWER_TRIED = "tried, the step lowered the cost by"
 
 LOWER_PROBED = "but a local probe lowered the cost by"
 """How a failed stationarity test says that, its step failing, a local probe was lower."""
-
-GN_TEST = "projected Gauss-Newton"
-"""The name of the projected Gauss-Newton test (:func:`gauss_newton_test`)."""
-
-GN_TRIED = "projected Gauss-Newton, step tried"
-"""Its name where it held by simulating its step (the model does not hold that close)."""
 
 MAX_TRIALS = 12
 """Fractions of a Gauss-Newton step a stationarity test simulates at most (1, 1/2, ...,
@@ -159,109 +151,12 @@ def trial_detail(fractions: list[float], reached: bool, lower: float = 0.0) -> s
     )
 
 
-def decided_by_trial(gate: Mapping[str, Any]) -> bool:
-    """Whether a test (its ``to_dict`` form) was decided by simulating its step.
-
-    :attr:`Stationarity.by_trial` of the test read back.
-    """
-    test = Stationarity.from_dict(gate)
-    return test is not None and test.by_trial
-
-
 POOR_FIT = 20.0
 """An answer whose cost exceeds the noise floor by this factor is a poor fit. On the
 generalisation benchmark's dev seeds the optima of mismatched models sit at up to about
 10 times the floor (strongly coloured noise far more: 311 times at AR(1) 0.86), local
 minima at hundreds to thousands of times: a poor fit sends the search on, but it does
 not change the verdict."""
-
-
-@dataclass
-class Stationarity:
-    """The outcome of a stationarity test at an answer.
-
-    Attributes
-    ----------
-    holds : bool
-        True where the test shows an optimum.
-    test : str
-        ``"projected Gauss-Newton"`` or ``"local probes"``.
-    gap : float
-        The decrease of the cost the test still sees (predicted, or found by a probe).
-    cost : float
-        The cost at the answer.
-    detail : str
-        One sentence for the log and the report.
-    decided_by : {"model", "trial", "probe"}
-        What decided it: the first-order model alone (no simulation), simulated steps
-        along the model's step (the model does not hold this close), or local probes.
-    lower : float
-        How much a simulated step or probe lowered the cost, where that is more than
-        the gate (0 otherwise: a point lower by no more than it refutes nothing): the
-        test then fails with a lower point in hand.
-    """
-
-    holds: bool
-    test: str
-    gap: float
-    cost: float
-    detail: str
-    decided_by: str = "model"
-    lower: float = 0.0
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form kept in a stage's ``extra["stationarity"]``."""
-        return {
-            "holds": self.holds,
-            "test": self.test,
-            "gap": self.gap if math.isfinite(self.gap) else None,
-            "cost": self.cost if math.isfinite(self.cost) else None,
-            "detail": self.detail,
-            "decided_by": self.decided_by,
-            "lower": self.lower,
-        }
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any] | None) -> Stationarity | None:
-        """Read back :meth:`to_dict`'s form (None where no test was made).
-
-        A test written before ``decided_by`` existed reads as decided by the model,
-        with no lower point.
-        """
-        if not data:
-            return None
-
-        def number(key: str) -> float:
-            value = data.get(key)
-            return math.inf if value is None else float(value)
-
-        return cls(
-            holds=bool(data.get("holds", False)),
-            test=str(data.get("test", "")),
-            gap=number("gap"),
-            cost=number("cost"),
-            detail=str(data.get("detail", "")),
-            decided_by=str(data.get("decided_by", "model")),
-            lower=float(data.get("lower") or 0.0),
-        )
-
-    @property
-    def by_trial(self) -> bool:
-        """Whether simulating its step decided it: held by a trial alone, or found lower.
-
-        Held by a trial alone ("step tried": the first-order model does not hold this
-        close to the answer), or failed with its step, simulated, lower: where the
-        refinement in combinations (:mod:`~tsid_fmu.search.local.combined`) runs.
-        """
-        if self.test == GN_TRIED:
-            return True
-        return not self.holds and self.decided_by != "probe" and self.lower > 0
-
-
-def stationarity_of(stage: Any) -> Stationarity | None:
-    """Return the stationarity test a stage made at its answer (None where it made none)."""
-    extra = getattr(stage, "extra", None) or {}
-    return Stationarity.from_dict(extra.get("stationarity"))
 
 
 def _active(

@@ -52,7 +52,6 @@ import numpy as np
 
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.verdict import stationarity_of
 
 __all__ = [
     "AGREE",
@@ -97,7 +96,7 @@ def answer_stage(stages: Sequence[StageResult]) -> StageResult:
 
 def verdict(stages: Sequence[StageResult]) -> tuple[int, str] | None:
     """Return (status, reason) from the answer's stationarity test, if one was made."""
-    test = stationarity_of(answer_stage(stages))
+    test = answer_stage(stages).stationarity
     if test is None:
         return None
     if test.holds:

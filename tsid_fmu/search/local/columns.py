@@ -18,7 +18,7 @@ import numpy as np
 from tsid_fmu.numerics.rank import UNSEEN
 from tsid_fmu.search.space import Space
 
-__all__ = ["EXACT", "PARALLEL", "UNFINISHED", "named_pairs", "parallel_pairs"]
+__all__ = ["EXACT", "PARALLEL", "named_pairs", "parallel_pairs"]
 
 PARALLEL = 1e-2
 """Two Jacobian columns are taken as parallel where ``1 - |cos|`` of their angle is below
@@ -29,17 +29,6 @@ noise: their different steps shift different events; with steps matched to their
 :func:`~tsid_fmu.search.local.combined.combined_refinement`, whose answer is kept only where it
 is lower."""
 
-
-UNFINISHED = ("valley", "limit")
-"""How a refinement stops (its ``extra["stop"]``) when its own tests did not end it: it
-crawled along parallel columns (:mod:`~tsid_fmu.search.local.problem`), or it ran out of
-runs. Where its last Jacobian has parallel columns, the refinement in their combination
-(:mod:`~tsid_fmu.search.local.combined`) follows whatever its stationarity test said:
-that test's linear model sees only the valley's local slope. Measured on the SISO
-plant's damped law 2 (``structure_damping.py``, seed 2): a structure candidate's
-refinement out of runs at 1.0027 times the least-squares cost, whose Gauss-Newton step
-predicted a decrease of 1.75 against a gate of 1.85, held its test and was chosen there;
-another run's arithmetic, predicting 2.12, had failed it and gone on to the optimum."""
 
 EXACT = 2.0 * UNSEEN
 """Two columns closer than this (``1 - |cos|``) are exactly parallel: the smallest

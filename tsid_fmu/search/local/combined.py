@@ -33,14 +33,13 @@ import numpy as np
 from tsid_fmu.numerics.fdstep import forward_jacobian, relative_steps
 from tsid_fmu.numerics.lsq import trust_region
 from tsid_fmu.search.local.adaptive import answer_stage
-from tsid_fmu.search.local.columns import PARALLEL, UNFINISHED, parallel_pairs
+from tsid_fmu.search.local.columns import PARALLEL, parallel_pairs
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure.optima import settle, short
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
     Stationarity,
-    decided_by_trial,
     gauss_newton_test,
 )
 from tsid_fmu.study.definition import Study
@@ -289,13 +288,14 @@ def refine_in_combinations(
 ) -> tuple[StageResult | None, int]:
     """Refine a structure's answer in the combinations the data fix, where that lowers it.
 
-    Only where the refinement did not end by its own tests (:data:`~.columns.UNFINISHED`:
-    it crawled along the valley, or ran out of runs), or where the answer's stationarity
-    test held by a trial alone ("step tried": the
-    first-order model does not hold this close to the answer, as on a cost made rough
-    by events), or failed with its step, simulated, lower (a refinement that stopped at
-    its tolerances in a valley: law-3 dev seed 116, ``B_s`` at 0.82 of 2.5, 1.009 x the
-    least-squares cost), and its Jacobian has parallel columns (:func:`parallel_pairs`,
+    Only where the refinement did not end by its own tests
+    (:attr:`~tsid_fmu.search.outcome.LocalStop.unfinished`: it crawled along the valley,
+    or ran out of runs), or where the answer's stationarity test held by a trial alone
+    ("step tried": the first-order model does not hold this close to the answer, as on
+    a cost made rough by events), or failed with its step, simulated, lower (a
+    refinement that stopped at its tolerances in a valley: law-3 dev seed 116, ``B_s``
+    at 0.82 of 2.5, 1.009 x the least-squares cost), and its Jacobian has parallel
+    columns (:func:`parallel_pairs`,
     each pair's ratio measured again, :func:`matched_ratio`): then
     :func:`combined_refinement` (at most 5 runs per parameter + 1). A lower end whose
     stationarity test holds there is the answer; otherwise a refinement in the usual
@@ -308,8 +308,8 @@ def refine_in_combinations(
     answer = answer_stage(stages)
     if "pairs" in answer.extra:
         return None, 0  # refined in its combinations already (a study of its own)
-    unfinished = answer.extra.get("stop") in UNFINISHED  # not ended by its own tests
-    if not unfinished and not decided_by_trial(answer.extra.get("stationarity") or {}):
+    test = answer.stationarity  # not ended by its own tests, or decided by a trial
+    if not answer.stop.unfinished and not (test is not None and test.by_trial):
         return None, 0
     names = list(study.parameter_names)
     found = answer.extra.get("parallel")  # from the refinement's last Jacobian
@@ -342,8 +342,9 @@ def refine_in_combinations(
     name = f"refinement in the combinations the data fix: {what}"
     if gate is not None and gate.holds:
         message = f"least squares in the combinations; stationary: {gate.detail}"
-        extra = {"stationarity": gate.to_dict(), "start_cost": float(answer.cost)}
+        extra = {"start_cost": float(answer.cost)}
         lower = StageResult(name, "refinement", xb, cost, 0, message, 0, extra=extra)
+        lower.stationarity = gate
     else:  # the test in the usual coordinates decides
         lower = settle(name, short(study), xb, ev, progress)
     lower.nfev = ev.nfev - n0

@@ -14,10 +14,11 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.context import Context, note, polish, refinement
 from tsid_fmu.search.local.adaptive import AGREE, HORIZONS, answer_stage, restart_start
 from tsid_fmu.search.local.combined import refine_in_combinations
+from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
-from tsid_fmu.search.verdict import POOR_FIT, noise_floor, probe_test, stationarity_of
+from tsid_fmu.search.verdict import POOR_FIT, noise_floor, probe_test
 
 __all__ = ["check", "local_search"]
 
@@ -29,7 +30,7 @@ Resume = Callable[[list[IterationRecord], float], StageResult]
 def _unsettled(stages: list[StageResult], floor: float) -> str | None:
     """Why the answer so far needs more search: no stationarity shown, or a poor fit."""
     answer = answer_stage(stages)
-    test = stationarity_of(answer)
+    test = answer.stationarity
     if test is None or not test.holds:
         detail = test.detail if test is not None else "no stationarity test was made"
         return f"the refined answer is not shown to be an optimum ({detail})"
@@ -54,9 +55,9 @@ def _collapsed(refined: StageResult) -> str | None:
     """
     if refined.kind != "refinement":
         return None
-    if refined.extra.get("stop") == "xtol":
+    if refined.stop is LocalStop.XTOL:
         return "the refinement's trust region collapsed (xtol): its local model did not hold"
-    if refined.extra.get("stop") == "limit":
+    if refined.stop is LocalStop.LIMIT:
         return "the refinement ran out of simulations before its own tests ended it"
     return None
 
@@ -155,7 +156,7 @@ def _continued(
 ) -> list[StageResult]:
     """Append ``lower``; or, where it continues a refinement that crawled, merge the two.
 
-    A refinement stopped in a valley along parallel columns (``stop == "valley"``,
+    A refinement stopped in a valley along parallel columns (``stop`` ``VALLEY``,
     :mod:`~tsid_fmu.search.local.problem`) is not finished: the refinement in the
     combination is its continuation, so the two are one stage, with their simulations
     summed, the continuation's answer and test, and the stop in ``extra["crawled"]``.
@@ -167,11 +168,15 @@ def _continued(
     ``--resume``.
     """
     crawled = stages[-1]
-    if crawled is not answer or crawled.extra.get("stop") != "valley" or lower.status == 2:
+    if crawled is not answer or crawled.stop is not LocalStop.VALLEY or lower.status == 2:
         stages.append(lower)
         return stages
     what = lower.name.removeprefix("refinement ")
-    keep = ("stationarity", "stop", "start_cost")
+    kept = {"stop": crawled.stop.value}
+    if crawled.stationarity is not None:
+        kept["stationarity"] = crawled.stationarity.to_dict()
+    if "start_cost" in crawled.extra:
+        kept["start_cost"] = crawled.extra["start_cost"]
     stages[-1] = StageResult(
         name=crawled.name,
         kind=crawled.kind,
@@ -186,9 +191,10 @@ def _continued(
             **{k: v for k, v in lower.extra.items() if k != "start"},
             "start": crawled.extra.get("start", lower.extra.get("start")),
             "start_cost": crawled.extra.get("start_cost", lower.extra.get("start_cost")),
-            "crawled": {k: crawled.extra[k] for k in keep if k in crawled.extra}
-            | {"cost": crawled.cost, "nfev": crawled.nfev, "x": dict(crawled.x)},
+            "crawled": kept | {"cost": crawled.cost, "nfev": crawled.nfev, "x": dict(crawled.x)},
         },
+        stationarity=lower.stationarity,
+        stop=lower.stop,
     )
     ctx.store.write_stage(f"{key}_continued", stages[-1])
     return stages
@@ -230,7 +236,7 @@ def _horizons(ctx: Context, stages: list[StageResult], floor: float, exps: list[
         x = {n: float(stage.x[n]) for n in names}
     last = refinement(ctx, x, exps, "horizon_full", "refinement after the horizons")
     stages.append(last)
-    test = stationarity_of(last)
+    test = last.stationarity
     if test is not None and test.holds and abs(last.cost - before.cost) <= AGREE * before.cost:
         note(ctx, "the horizons reached the same answer: no restart")
         last.extra["agrees"] = before.name
@@ -304,7 +310,8 @@ def check(ctx: Context, last: StageResult) -> StageResult:
         message=test.detail,
         status=0 if test.holds else 1,
         experiments=exps,
-        extra={"start": x, "stationarity": test.to_dict()},
+        extra={"start": x},
+        stationarity=test,
     )
     ctx.store.write_stage("check", result)
     return result

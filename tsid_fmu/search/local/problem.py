@@ -29,6 +29,7 @@ from tsid_fmu.numerics.fdstep import (
 )
 from tsid_fmu.numerics.rank import unseen_columns
 from tsid_fmu.search.local.columns import named_pairs
+from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
@@ -64,7 +65,16 @@ class _Budget(Exception):
 
 
 class _Converged(Exception):
-    """An accepted step met SciPy's ``ftol`` or ``xtol`` test (see the module docstring)."""
+    """An accepted step met SciPy's ``ftol`` or ``xtol`` test (see the module docstring).
+
+    Its arguments: the sentence, and why (:class:`~tsid_fmu.search.outcome.LocalStop`;
+    ``FTOL`` where not given).
+    """
+
+    @property
+    def stop(self) -> LocalStop:
+        """Why it stopped."""
+        return LocalStop(self.args[1]) if len(self.args) > 1 else LocalStop.FTOL
 
 
 class _Problem:
@@ -92,6 +102,7 @@ class _Problem:
         self.held = np.zeros(space.dim, dtype=bool)
         self.decided = False
         self.freed: list[str] = []
+        self.stop = LocalStop.NONE  # why the last least squares stopped (refine._solve)
 
     def _residuals(self, sets: list[dict[str, float]]) -> list[np.ndarray]:
         if self.evaluator.nfev - self.start >= self.limit:
@@ -128,12 +139,12 @@ class _Problem:
         if reduction < _FTOL * cost_old:
             raise _Converged(f"the last step lowered the cost by less than ftol={_FTOL:g}")
         if step < _XTOL * (_XTOL + float(np.linalg.norm(s_old))):
-            raise _Converged(f"the last step was shorter than xtol={_XTOL:g}", "xtol")
+            raise _Converged(f"the last step was shorter than xtol={_XTOL:g}", LocalStop.XTOL)
         if reduction < GATE_RTOL * cost_old and self._parallel():
             raise _Converged(
                 f"the last step lowered the cost by less than {GATE_RTOL:g} of it, along "
                 "parallel columns (a valley the trust region crawls)",
-                "valley",
+                LocalStop.VALLEY,
             )
 
     def _parallel(self) -> bool:

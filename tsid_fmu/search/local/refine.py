@@ -19,7 +19,7 @@ import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.numerics.lsq import Solved, Stop, trust_region
-from tsid_fmu.search.local.columns import UNFINISHED, named_pairs
+from tsid_fmu.search.local.columns import named_pairs
 from tsid_fmu.search.local.problem import (
     _FTOL,
     _GTOL,
@@ -30,6 +30,7 @@ from tsid_fmu.search.local.problem import (
     _Problem,
     _problem_at,
 )
+from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.taguchi.iteration import ProgressCallback
@@ -39,16 +40,15 @@ from tsid_fmu.search.verdict import (
     MAX_TRIALS,
     Stationarity,
     bounded_trials,
-    decided_by_trial,
 )
 from tsid_fmu.study.schema import Method
 
 __all__ = ["FD_STEP", "STOPPED", "refine_stage"]
 
 STOPPED = {
-    "gtol": "the slope of the cost is below its tolerance",
-    "ftol": "the last step lowered the cost by less than its tolerance",
-    "xtol": "the last step moved the parameters by less than their tolerance",
+    LocalStop.GTOL: "the slope of the cost is below its tolerance",
+    LocalStop.FTOL: "the last step lowered the cost by less than its tolerance",
+    LocalStop.XTOL: "the last step moved the parameters by less than their tolerance",
 }
 """Why SciPy's least squares stopped, by its tolerance's name, in a practitioner's words
 (the message is made from the code, never SciPy's own text passed through)."""
@@ -59,7 +59,7 @@ def _solve(
 ) -> tuple[int, str]:
     """Run SciPy's trust-region least squares from ``s0``; return status and message.
 
-    Why it stopped (``stop``: gtol, ftol or xtol) and its counts go into ``extra``.
+    Why it stopped goes into :attr:`_Problem.stop`, SciPy's counts into ``extra``.
     The first Jacobian, at ``s0``, decides which columns are held
     (:attr:`_Problem.held`): SciPy then moves only the others. A zero column makes
     its trust-region subproblem rank-deficient, and the exact Gauss-Newton step is
@@ -75,7 +75,7 @@ def _solve(
             problem.reuse, problem.linearised = problem.jacobian, None
             problem.known = problem.last
     except _Budget:
-        extra["stop"] = "limit"
+        problem.stop = LocalStop.LIMIT
         return 1, f"simulation limit ({limit}) of the refinement reached"
     while True:
         solved = _run_free(problem, s0, space)
@@ -85,17 +85,17 @@ def _solve(
         problem.reuse, problem.linearised = problem.jacobian, None
         problem.known = (s0.copy(), r0)
     if isinstance(solved.raised, _Converged):
-        stop = solved.raised
-        extra["stop"] = stop.args[1] if len(stop.args) > 1 else "ftol"
-        return 0, f"least squares: {stop.args[0]}; stopped before another Jacobian"
+        problem.stop = solved.raised.stop
+        return 0, f"least squares: {solved.raised.args[0]}; stopped before another Jacobian"
     if isinstance(solved.raised, _Budget):
-        extra["stop"] = "limit"
+        problem.stop = LocalStop.LIMIT
         return 1, f"simulation limit ({limit}) of the refinement reached"
     if solved.stop is Stop.FAILED:  # the best set so far is kept
+        problem.stop = LocalStop.NONE
         return 1, f"least squares could not go on ({solved.error})"
-    extra["stop"] = "" if solved.stop is Stop.MAX_NFEV else solved.stop.value
+    problem.stop = LocalStop.NONE if solved.stop is Stop.MAX_NFEV else LocalStop(solved.stop)
     extra.update(nfev=solved.nfev, njev=solved.njev)
-    said = STOPPED.get(extra["stop"], "it stopped")
+    said = STOPPED.get(problem.stop, "it stopped")
     return 0, f"least squares: {said}"
 
 
@@ -152,9 +152,9 @@ def _again_wider(
     s = space.to_s(problem.best[1])
     if problem.best_r is not None:
         problem.known = (s.copy(), problem.best_r)
-    first = dict(extra)
+    first = {"stop": problem.stop.value, **{k: extra[k] for k in ("nfev", "njev") if k in extra}}
     status, again = _solve(problem, s, space, limit, extra)
-    extra["first_pass"] = {k: first[k] for k in ("stop", "nfev", "njev") if k in first}
+    extra["first_pass"] = first
     return status, f"{message}; again with difference steps that beat the FMU's noise: {again}"
 
 
@@ -232,16 +232,16 @@ def _floor_test(
     return Stationarity(False, gate.test, gain, cost, said, "trial", gain), pairs
 
 
-def _keep_pairs(problem: _Problem, space: Space, extra: dict[str, Any]) -> None:
+def _keep_pairs(problem: _Problem, space: Space, gate: Stationarity, extra: dict[str, Any]) -> None:
     """Keep the last Jacobian's parallel pairs where the refinement in combinations reads them.
 
     That is where the test was decided by a trial, or the refinement's own tests did not
-    end it (:data:`~tsid_fmu.search.local.columns.UNFINISHED`): no runs are spent again
+    end it (:attr:`~tsid_fmu.search.outcome.LocalStop.unfinished`): no runs are spent again
     on a Jacobian there.
     """
     if problem.jacobian is None:
         return
-    if decided_by_trial(extra["stationarity"]) or extra.get("stop") in UNFINISHED:
+    if gate.by_trial or problem.stop.unfinished:
         s_lin, _, jac = problem.jacobian
         extra["parallel"] = named_pairs(space, space.to_x(s_lin), jac)
 
@@ -254,7 +254,7 @@ def _tested(
     tolerance: float,
     extra: dict[str, Any],
 ) -> Stationarity:
-    """Run the stationarity test at the answer and keep it in ``extra``.
+    """Run the stationarity test at the answer.
 
     On a log floor the test is made again in linear coordinates (:func:`_floor_test`);
     the parallel pairs the combination step reads are kept with it (:func:`_keep_pairs`).
@@ -263,8 +263,7 @@ def _tested(
     floor_pairs = None
     if gate.holds:
         gate, floor_pairs = _floor_test(space, problem, gate, fixed, floor, extra)
-    extra["stationarity"] = gate.to_dict()
-    _keep_pairs(problem, space, extra)
+    _keep_pairs(problem, space, gate, extra)
     if floor_pairs is not None and gate.by_trial:
         extra["parallel"] = floor_pairs  # where the floored parameter has a slope
     return gate
@@ -344,4 +343,6 @@ def refine_stage(
         message=message,
         status=status,
         extra=extra,
+        stationarity=gate,
+        stop=problem.stop,
     )

@@ -38,11 +38,11 @@ import numpy as np
 
 from tsid_fmu.search.context import polish
 from tsid_fmu.search.local.refine import refine_stage
+from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure.nesting import nesting, slack
 from tsid_fmu.search.structure.selection import Candidate
-from tsid_fmu.search.verdict import stationarity_of
 from tsid_fmu.study.definition import Study
 
 __all__ = [
@@ -218,9 +218,9 @@ def settle(
     passed the test in 10 runs.
     """
     stage = polish(name, study, start, ev, progress)
-    test = stationarity_of(stage)
-    stopped = stage.extra.get("stop")  # by its tolerances; not "limit": out of runs
-    if stage.status != 1 or stopped in (None, "", "limit") or test is None or test.holds:
+    test = stage.stationarity  # stopped by its tolerances; not out of runs
+    stopped = stage.stop in (LocalStop.GTOL, LocalStop.FTOL, LocalStop.XTOL, LocalStop.VALLEY)
+    if stage.status != 1 or not stopped or test is None or test.holds:
         return stage
     x = {n: float(stage.x[n]) for n in study.parameter_names}
     again = polish(name, study, x, ev, progress)
