@@ -25,7 +25,7 @@ constraint: a set outside them scores as a failed simulation.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -89,18 +89,30 @@ def _residuals(ev: Any, sets: list[dict[str, float]], size: int) -> list[np.ndar
     return [r for r, _ in _scored(ev, sets, size)]
 
 
+def named_residuals(
+    ev: Any, x: Mapping[str, float], names: list[str], size: int
+) -> Callable[[list[np.ndarray]], list[np.ndarray]]:
+    """Return the residuals of points in ``names``' own units, the rest of ``x`` held.
+
+    What :func:`~tsid_fmu.numerics.fdstep.forward_jacobian` runs here and at a nesting
+    point (:mod:`~tsid_fmu.search.structure.boundary`): one batch of simulations, a
+    failed run as residuals of ``1e10`` of length ``size``.
+    """
+
+    def run(points: list[np.ndarray]) -> list[np.ndarray]:
+        sets = [{**x, **dict(zip(names, map(float, p), strict=True))} for p in points]
+        return _residuals(ev, sets, size)
+
+    return run
+
+
 def physical_jacobian(
     ev: Any, x: Mapping[str, float], names: list[str], r0: np.ndarray
 ) -> np.ndarray:
     """Return forward-difference columns per unit of each parameter (one batch of runs)."""
     z = np.array([float(x[n]) for n in names])
     steps = _STEP * np.maximum(np.abs(z), 1e-12)
-
-    def run(points: list[np.ndarray]) -> list[np.ndarray]:
-        sets = [{**x, **dict(zip(names, map(float, p), strict=True))} for p in points]
-        return _residuals(ev, sets, r0.size)
-
-    return forward_jacobian(run, z, r0, steps)
+    return forward_jacobian(named_residuals(ev, x, names, r0.size), z, r0, steps)
 
 
 def matched_ratio(

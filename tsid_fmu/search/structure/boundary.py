@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.numerics.fdstep import forward_jacobian
-from tsid_fmu.search.local.combined import _residuals
+from tsid_fmu.search.local.combined import named_residuals
 from tsid_fmu.search.verdict import bounded_step
 
 __all__ = ["RELATIVE_STEP", "SPAN_STEP", "score_step", "significant", "tried"]
@@ -86,11 +86,8 @@ def score_step(
             h = max(h, SPAN_STEP * (max(levels[n]) - min(levels[n])))
         steps.append(h)
 
-    def run(points: list[np.ndarray]) -> list[np.ndarray]:
-        sets = [{**x, **dict(zip(names, map(float, p), strict=True))} for p in points]
-        return _residuals(ev, sets, r0.size)
-
     n0 = ev.nfev
+    run = named_residuals(ev, x, names, r0.size)
     jac = forward_jacobian(run, z, r0, np.array(steps), upper)
     if not np.isfinite(jac).all():
         return 0.0, dict(x), ev.nfev - n0
