@@ -329,7 +329,28 @@ def test_refine_none_ends_with_a_check_stage_that_decides_the_verdict():
     assert adaptive.verdict(stages)[0] == 1  # one array does not reach the optimum
 
 
-def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatch):
+def test_a_refinement_out_of_runs_sends_the_search_back_to_the_arrays(monkeypatch):
+    polish = context.polish
+
+    def out_of_runs(name, *args, **kwargs):
+        stage = polish(name, *args, **kwargs)
+        if name == "refinement":  # its test held, but its budget ended it
+            stage.stop = LocalStop.LIMIT
+        return stage
+
+    monkeypatch.setattr(context, "polish", out_of_runs)
+    study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
+    stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
+    first = stages[0]
+    assert "ran out of simulations" in first.extra["resumed"]
+    assert first.records[-1].extra.get("handover") is None  # it went on past the hand-over
+    monkeypatch.setattr(local, "_collapsed", lambda stage: None)
+    alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
+    assert "resumed" not in alone[0].extra and len(alone[0].records) < len(first.records)
+
+
+def test_a_collapsed_trust_region_whose_test_holds_ends_the_search(monkeypatch):
+    """A stop at xtol is a tolerance like the others: the stationarity test decides."""
     polish = context.polish
 
     def collapsing(name, *args, **kwargs):
@@ -342,12 +363,9 @@ def test_a_collapsed_trust_region_sends_the_search_back_to_the_arrays(monkeypatc
     monkeypatch.setattr(context, "polish", collapsing)
     study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
-    first = stages[0]
-    assert "trust region collapsed" in first.extra["resumed"]
-    assert first.records[-1].extra.get("handover") is None  # it went on past the hand-over
-    monkeypatch.setattr(local, "_collapsed", lambda stage: None)
-    alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
-    assert "resumed" not in alone[0].extra and len(alone[0].records) < len(first.records)
+    assert stages[1].stationarity.holds and "resumed" not in stages[0].extra
+    assert [s.kind for s in stages] == ["taguchi", "refinement"]
+    assert adaptive.verdict(stages)[0] == 0
 
 
 def test_a_continued_stage_hands_back_once_below_the_refinement_and_stalled():
@@ -409,17 +427,17 @@ def test_a_crawl_continued_to_an_optimum_in_its_combination_ends_the_search(monk
 def test_the_pipeline_continues_the_arrays_only_to_below_the_refinements_answer(monkeypatch):
     polish = context.polish
 
-    def collapsing_high(name, *args, **kwargs):
+    def limited_high(name, *args, **kwargs):
         stage = polish(name, *args, **kwargs)
-        if name == "refinement":  # collapsed, and well above the arrays' best
-            stage.stop = LocalStop.XTOL
+        if name == "refinement":  # out of runs, and well above the arrays' best
+            stage.stop = LocalStop.LIMIT
             stage.cost *= 1.5
         return stage
 
-    monkeypatch.setattr(context, "polish", collapsing_high)
+    monkeypatch.setattr(context, "polish", limited_high)
     study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
-    assert "trust region collapsed" in stages[0].extra["resumed"]
+    assert "ran out of simulations" in stages[0].extra["resumed"]
     assert stages[0].message.startswith("handed back to the refinement")
     assert stages[0].cost < stages[1].cost
 

@@ -195,14 +195,18 @@ def test_a_result_built_by_hand_takes_a_plain_dict():
     assert isinstance(res.params, Parameters) and res.cov.shape == (1, 1)
 
 
-def test_a_study_paused_in_the_arrays_it_went_back_to_is_paused(tmp_path):
-    """The arrays hand over after their first iteration; the refinement is not settled,
-    so they go on, and --pause-after stops them. The refinement is then the last stage,
-    but the study is paused (it said "converged", exit status 0)."""
+def test_a_study_paused_in_the_arrays_it_went_back_to_is_paused(tmp_path, monkeypatch):
+    """The arrays hand over after their first iteration; the refinement is not settled
+    (here by decree: every refinement reads as stopped short), so they go on, and
+    --pause-after stops them. The refinement is then the last stage, but the study is
+    paused (it said "converged", exit status 0)."""
+    from tsid_fmu.search.local import flow
+
+    monkeypatch.setattr(flow, "_collapsed", lambda stage: "it stopped short")
     study = lag_study(tmp_path, cost="sse", weighting="noise", replicates=2, seed=7)
     res = identify(study, tmp_path / "out", plots=False, workers=1, pause_after=2)
     kinds = [(s.kind, s.status) for s in res.stages]
-    assert kinds[0] == ("taguchi", 2) and "handover" in res.stages[0].records[0].extra
+    assert kinds[0] == ("taguchi", 2) and res.stages[0].records[0].handover
     assert res.status == PAUSED and not res.success and res.message.startswith("paused")
 
 
