@@ -26,6 +26,7 @@ from tsid_fmu.search.local import flow as local
 from tsid_fmu.search.local.refine import STOPPED
 from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.pipeline import run_stages
+from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.taguchi import stage as taguchi
@@ -147,7 +148,7 @@ def test_a_taguchi_stage_with_a_hand_over_ends_after_its_first_iteration():
     on = taguchi_stage(_stage_run(levels, handover=True), _decay_evaluator())
     off = taguchi_stage(_stage_run(levels), _decay_evaluator())
     assert on.status == 0 and on.message == taguchi.HANDOVER.format(index=1)
-    assert len(on.records) == 1 and "handover" in on.records[-1].extra
+    assert len(on.records) == 1 and on.records[-1].handover
     assert len(off.records) > len(on.records)
 
 
@@ -157,7 +158,11 @@ def test_a_pause_asked_for_at_the_hand_over_comes_before_the_refinement():
     levels = {"a": [1.0, 2.5, 4.0], "k": [0.5, 1.5, 2.5]}
     paused = taguchi_stage(_stage_run(levels, handover=True, pause_after=1), _decay_evaluator())
     assert paused.status == 2 and paused.message.startswith("paused after iteration 1")
-    assert len(paused.records) == 1 and "handover" in paused.records[0].extra
+    assert len(paused.records) == 1 and paused.records[0].handover
+    written = paused.records[0].to_dict()  # the trail's form, read back typed
+    assert written["extra"]["handover"] == paused.records[0].handover
+    read = IterationRecord.from_dict(written)
+    assert read.handover == paused.records[0].handover and "handover" not in read.extra
     ev = _decay_evaluator()
     again = taguchi_stage(_stage_run(levels, handover=True, prior=paused.records), ev)
     assert ev.nfev == 0 and again.status == 0
@@ -343,7 +348,7 @@ def test_a_refinement_out_of_runs_sends_the_search_back_to_the_arrays(monkeypatc
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     first = stages[0]
     assert "ran out of simulations" in first.extra["resumed"]
-    assert first.records[-1].extra.get("handover") is None  # it went on past the hand-over
+    assert not first.records[-1].handover  # it went on past the hand-over
     monkeypatch.setattr(local, "_collapsed", lambda stage: None)
     alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     assert "resumed" not in alone[0].extra and len(alone[0].records) < len(first.records)

@@ -369,7 +369,7 @@ def test_an_unsettled_refinement_is_refined_in_its_combinations_before_the_array
                           status=1, stationarity=Stationarity.from_dict(gate))  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: stopped)
     ctx, _ = _context(ev)
-    handed = types.SimpleNamespace(extra={"handover": "after iteration 1"})
+    handed = types.SimpleNamespace(handover="after iteration 1", extra={})
     arrays = StageResult("taguchi", "taguchi", dict(START), 1e6, 50, "", records=[handed])
 
     def resume(records, cost):

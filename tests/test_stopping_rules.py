@@ -286,14 +286,19 @@ def test_a_stage_that_converges_on_its_last_allowed_iteration_converges():
 # report show as the reason the stage ended).
 
 
-def _recs(costs: list[float], converged: list[bool] | None = None, **extra) -> list:
+def _recs(
+    costs: list[float], converged: list[bool] | None = None, handover="", handback=""
+) -> list:
     converged = converged or [False] * len(costs)
+    last = len(costs) - 1
     return [
         SimpleNamespace(
             index=i + 1,
             best_cost=c,
             decision=SimpleNamespace(converged=v, message=f"converged at {i + 1}"),
-            extra=dict(extra) if i == len(costs) - 1 else {},
+            extra={},
+            handover=handover if i == last else "",
+            handback=handback if i == last else "",
         )
         for i, (c, v) in enumerate(zip(costs, converged, strict=True))
     ]

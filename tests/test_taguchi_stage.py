@@ -156,7 +156,7 @@ def test_a_continued_stage_hands_over_once():
     whole = taguchi_stage(_valley_run(handover=True), ValleyEvaluator())
     k = len(whole.records)
     assert whole.message.startswith("handed over to the refinement")
-    assert "handover" in whole.records[-1].extra
+    assert whole.records[-1].handover
     # paused before the hand-over: the continued stage still hands over
     first = taguchi_stage(_valley_run(handover=True, pause_after=k - 1), ValleyEvaluator())
     rest = taguchi_stage(_valley_run(handover=True, prior=first.records), ValleyEvaluator())
@@ -172,7 +172,7 @@ def test_a_continued_stage_hands_over_once():
         ValleyEvaluator(),
     )
     assert more.status == 1 and len(more.records) == k + 3
-    assert not any("handover" in r.extra for r in more.records[k:])
+    assert not any(r.handover for r in more.records[k:])
 
 
 # -- _decide, _start_cost, _resume_point on records made by hand -------------------------
@@ -189,6 +189,8 @@ def _rec(index, cost, converged=False, deltas=(0.0,), extra=None):
         ),
         extra=dict(extra or {}),
         next_frame=f"frame after {index}",
+        handover="",
+        handback="",
     )
 
 
@@ -208,7 +210,7 @@ def test_the_first_iteration_hands_over():
     frame, pending, ended = _decide(recs, _decide_run(), 0, True, None)
     assert ended == HANDOVER.format(index=1)
     assert ended.startswith("handed over to the refinement after iteration 1")
-    assert recs[0].extra["handover"] == ended and pending is None and frame == "frame after 1"
+    assert recs[0].handover == ended and pending is None and frame == "frame after 1"
 
 
 def test_a_stage_that_may_hand_over_hands_over_rather_than_back():
@@ -217,9 +219,9 @@ def test_a_stage_that_may_hand_over_hands_over_rather_than_back():
     recs = [_rec(1, 0.5 + 2.0**-20, deltas=(1.0,)), _rec(2, 0.5, deltas=(1.0,))]
     run = _decide_run(hand_back_below=1.0)
     assert _decide(recs, run, 0, True, None)[2] == HANDOVER.format(index=2)
-    assert "handback" not in recs[-1].extra
+    assert not recs[-1].handback
     ended = _decide(recs, run, 0, False, None)[2]
-    assert ended.startswith("handed back to the refinement") and recs[-1].extra["handback"]
+    assert ended.startswith("handed back to the refinement") and recs[-1].handback
 
 
 def test_a_continued_stage_starts_from_the_last_records_best():

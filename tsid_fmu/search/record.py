@@ -75,7 +75,14 @@ class IterationRecord:
     next_frame : Frame
         The factors and levels proposed for the next iteration.
     extra : dict
-        Notes: re-runs from the next-best run, a person's choices.
+        Notes for the report and the trail: re-runs from the next-best run, a person's
+        choices.
+    handover : str
+        Why the stage handed over to the refinement after this iteration ("" where it
+        did not); kept in the trail as ``extra["handover"]``.
+    handback : str
+        Why a continued stage handed back to the refinement ("" where it did not);
+        ``extra["handback"]`` in the trail.
     """
 
     index: int
@@ -98,6 +105,8 @@ class IterationRecord:
     nfev_total: int
     next_frame: Frame
     extra: dict[str, Any] = field(default_factory=dict)
+    handover: str = ""
+    handback: str = ""
 
     @property
     def names(self) -> list[str]:
@@ -212,7 +221,11 @@ class IterationRecord:
             "nfev": self.nfev,
             "nfev_total": self.nfev_total,
             "next_frame": self.next_frame.to_dict(),
-            "extra": self.extra,
+            "extra": {
+                **self.extra,
+                **({"handover": self.handover} if self.handover else {}),
+                **({"handback": self.handback} if self.handback else {}),
+            },
         }
 
     @classmethod
@@ -220,6 +233,7 @@ class IterationRecord:
         """Re-create a record written by :meth:`to_dict`."""
         pred = dict(d["prediction"])
         pred["cost"] = unjson_float(pred.get("cost"))
+        extra = dict(d.get("extra", {}))
         return cls(
             index=int(d["index"]),
             stage=str(d["stage"]),
@@ -240,5 +254,7 @@ class IterationRecord:
             nfev=int(d["nfev"]),
             nfev_total=int(d["nfev_total"]),
             next_frame=Frame.from_dict(d["next_frame"]),
-            extra=dict(d.get("extra", {})),
+            extra=extra,
+            handover=str(extra.pop("handover", "") or ""),
+            handback=str(extra.pop("handback", "") or ""),
         )

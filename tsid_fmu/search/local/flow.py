@@ -83,7 +83,7 @@ def local_search(
         # continues one which crawled is merged into it (the count stays the same)
         stages = _in_combinations(ctx, stages, exps, "combinations_first")
         why = _unsettled(stages, floor) or _collapsed(stages[-1])
-    if why and first.kind == "taguchi" and any("handover" in r.extra for r in first.records):
+    if why and first.kind == "taguchi" and any(r.handover for r in first.records):
         note(ctx, f"{why}: the Taguchi stage goes on")
         stages[0] = resume(first.records, stages[-1].cost)
         stages[0].extra["resumed"] = why
@@ -115,7 +115,7 @@ def _handed_over(stages: list[StageResult]) -> dict[str, float]:
     """
     first = stages[0]
     if first.kind == "taguchi":
-        handed = [r for r in first.records if "handover" in r.extra]
+        handed = [r for r in first.records if r.handover]
         if handed and handed[0] is not first.records[-1]:
             return {**first.x, **handed[0].best_x}
     return answer_stage(stages).x

@@ -276,10 +276,10 @@ def _finished(
         return None
     if records[-1].decision.converged:
         return 0, records[-1].decision.message
-    if run.handover and records[-1].extra.get("handover"):
-        return 0, str(records[-1].extra["handover"])
-    if records[-1].extra.get("handback"):
-        return 0, str(records[-1].extra["handback"])
+    if run.handover and records[-1].handover:
+        return 0, records[-1].handover
+    if records[-1].handback:
+        return 0, records[-1].handback
     return None
 
 
@@ -307,7 +307,7 @@ def taguchi_stage(
         n0 = evaluator.nfev
         best, starts = _evaluate_starts(run, evaluator, progress)
         nfev += evaluator.nfev - n0
-    handover = run.handover and not any("handover" in r.extra for r in records)
+    handover = run.handover and not any(r.handover for r in records)
     reruns = sum("rerun_from" in r.extra for r in records)
     status, message, ran = 1, "", 0
     while (stop := _limits(run, len(records) + 1, nfev, ran)) is None:
@@ -331,7 +331,7 @@ def taguchi_stage(
             recorder.iteration(rec)
         if progress:
             progress("iteration done", {"record": rec})
-        if ended is not None and "handover" in rec.extra and _paused(run, ran):
+        if ended is not None and rec.handover and _paused(run, ran):
             # a pause asked for here comes before the refinement; --resume goes on to it
             note = f"paused after iteration {index}, handed over: resume to refine"
             return _result(run, records, best, nfev, 2, note)
@@ -360,11 +360,11 @@ def _decide(
         return rec.next_frame, None, rec.decision.message
     handed = _handover(records) if handover else None
     if handed:
-        rec.extra["handover"] = handed
+        rec.handover = handed
         return rec.next_frame, None, handed
     back = None if handover else _hand_back(records, run)
     if back:
-        rec.extra["handback"] = back
+        rec.handback = back
         return rec.next_frame, None, back
     alt = _decide_rerun(records, run, reruns, progress)
     if alt is None:
