@@ -406,7 +406,6 @@ def test_a_crawl_continued_to_an_optimum_in_its_combination_ends_the_search(monk
     def combined(study, evs, stages, progress=None):
         answer = adaptive.answer_stage(stages)
         test = verdict.Stationarity(True, verdict.GN_TEST, 0.0, answer.cost / 1.01, "")
-        extra = {"pairs": [["a", "k", 1.0]]}
         lower = StageResult(
             "refinement in the combinations the data fix: a + 1 k",
             "refinement",
@@ -415,8 +414,8 @@ def test_a_crawl_continued_to_an_optimum_in_its_combination_ends_the_search(monk
             3,
             "least squares in the combinations; stationary",
             0,
-            extra=extra,
             stationarity=test,
+            pairs=[["a", "k", 1.0]],
         )
         return lower, 3
 
@@ -503,7 +502,7 @@ def test_a_local_minimum_is_left_by_following_the_data_from_its_first_part(monke
     answer = adaptive.answer_stage(stages)
     assert answer is stages[-1] and answer.x["w"] == pytest.approx(3.0, rel=1e-3)
     assert answer.cost < 2 * LONG.size
-    assert "agrees" not in answer.extra and evaluators.restart  # a new answer: no agreement
+    assert not answer.agrees and evaluators.restart  # a new answer: no agreement
     # the horizons' costs, over part of the data, never compete with the full cost
     assert all(s.cost < answer.cost for s in stages[2:5])
     # without the short horizons, the same refinement stays in the local minimum
@@ -525,12 +524,12 @@ def test_a_poor_fit_that_the_horizons_reach_again_needs_no_restart(monkeypatch):
     assert stages[1].cost > 100 * LONG.size  # a poor fit: the horizons run
     assert evaluators.fractions == list(adaptive.HORIZONS)
     last = stages[-1]
-    assert last.extra["agrees"] == "refinement"
+    assert last.agrees == "refinement"
     assert last.cost == pytest.approx(stages[1].cost, rel=adaptive.AGREE)
     assert evaluators.restart is False  # so no restart follows
     monkeypatch.setattr(local, "AGREE", -1.0)  # without the rule: restarts
     again, ev2 = _horizon_run({"w": 2.98, "a": 1.0}, offset)
-    assert ev2.restart is True and "agrees" not in again[-1].extra
+    assert ev2.restart is True and not again[-1].agrees
 
 
 def test_the_poor_fit_warning_says_which_search_found_no_lower_basin():
@@ -559,6 +558,10 @@ def test_a_stationarity_test_reads_back_typed_and_an_old_trails_as_the_models():
     assert StageResult("r", "refinement", {}, 1.0, 0, "").stationarity is None
     stage = StageResult("r", "refinement", {}, 1.0, 0, "", stationarity=tried)
     stage.stop = LocalStop.VALLEY  # the trail's JSON form reads back typed
+    stage.parallel, stage.pairs, stage.agrees = [["a", "k", 2.0]], [], "refinement"
+    written = stage.to_dict()["extra"]
+    assert written["stop"] == "valley" and written["parallel"] == [["a", "k", 2.0]]
     again = StageResult.from_dict(stage.to_dict())
     assert again.stationarity == tried and again.stop is LocalStop.VALLEY
-    assert "stationarity" not in again.extra and "stop" not in again.extra
+    assert (again.parallel, again.pairs, again.agrees) == ([["a", "k", 2.0]], [], "refinement")
+    assert not {"stationarity", "stop", "parallel", "pairs", "agrees"} & set(again.extra)

@@ -235,7 +235,7 @@ def test_a_study_of_one_structure_is_refined_in_its_combinations_too(monkeypatch
     arrays = StageResult("taguchi", "taguchi", dict(START), held.cost, 50, "")
     stages = local.local_search(ctx, [arrays], adaptive, resume=None)
     last = stages[-1]
-    assert "pairs" in last.extra and last.cost < 0.3 * held.cost
+    assert last.pairs is not None and last.cost < 0.3 * held.cost
     assert last.experiments == ["measured"] and store.kept["combinations"] is last
     runs = ev.nfev
     again = local.local_search(ctx, [arrays], adaptive, resume=None)
@@ -248,7 +248,7 @@ def test_an_answer_refined_in_its_combinations_is_not_refined_in_them_again():
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     gate = {"holds": True, "test": "projected Gauss-Newton, step tried", "detail": ""}
     stage = StageResult("r", "refinement", dict(START), ev.cost(**START), 5, "",
-                        extra={"pairs": [["v", "b", 1.0]]},
+                        pairs=[["v", "b", 1.0]],
                         stationarity=Stationarity.from_dict(gate))  # fmt: skip
     assert refine_in_combinations(_Study(), _Evs(ev), [stage]) == (None, 0)
     assert ev.nfev == 0
@@ -308,7 +308,7 @@ def test_the_refinements_last_jacobian_names_the_pairs_in_the_parameters_units(m
     monkeypatch.setattr(refine._Problem, "stationarity", lambda self, floor=0.0, probe=0.0: held)
     ev = CurveEvaluator(_model, MEASURED, 0.001)
     stage = refine.refine_stage("r", SPACE, START, ev.cost(**START), ev, Method(refine_max_nfev=20))
-    ((v, b, a),) = stage.extra["parallel"]
+    ((v, b, a),) = stage.parallel
     assert (v, b) == ("v", "b") and a == pytest.approx(1.0, rel=1e-2)
     # a test that held without a trial, the refinement ended by its own tolerances: no
     # pairs kept (none are read); out of runs, they are kept (LocalStop.unfinished)
@@ -323,9 +323,9 @@ def test_the_refinements_last_jacobian_names_the_pairs_in_the_parameters_units(m
         "r", SPACE, START, ev.cost(**START), ev, Method(refine_max_nfev=400)
     )
     stopped = (LocalStop.FTOL, LocalStop.XTOL, LocalStop.GTOL)
-    assert stage.stop in stopped and "parallel" not in stage.extra
+    assert stage.stop in stopped and stage.parallel is None
     stage = refine.refine_stage("r", SPACE, START, ev.cost(**START), ev, Method(refine_max_nfev=20))
-    assert stage.stop is LocalStop.LIMIT and stage.extra["parallel"][0][:2] == ["v", "b"]
+    assert stage.stop is LocalStop.LIMIT and stage.parallel[0][:2] == ["v", "b"]
 
 
 def test_the_pairs_a_refinement_kept_spare_the_jacobian_at_its_answer():
@@ -337,13 +337,12 @@ def test_the_pairs_a_refinement_kept_spare_the_jacobian_at_its_answer():
     cost = ev.cost(**START)
     ev.nfev = 0
     none = StageResult("r", "refinement", dict(START), cost, 5, "",
-                       extra={"parallel": []},
+                       parallel=[],
                        stationarity=Stationarity.from_dict(gate))  # fmt: skip
     assert refine_in_combinations(_Study(), _Evs(ev), [none]) == (None, 0) and ev.nfev == 0
     spent = []
     for parallel in ([["v", "b", 1.0]], None):
-        extra = {"parallel": parallel} if parallel else {}
-        stage = StageResult("r", "refinement", dict(START), cost, 5, "", extra=extra,
+        stage = StageResult("r", "refinement", dict(START), cost, 5, "", parallel=parallel,
                             stationarity=Stationarity.from_dict(gate))  # fmt: skip
         lower, runs = refine_in_combinations(_Study(), _Evs(ev), [stage])
         assert lower is not None and lower.cost < 0.3 * cost
@@ -377,7 +376,7 @@ def test_an_unsettled_refinement_is_refined_in_its_combinations_before_the_array
 
     stages = local.local_search(ctx, [arrays], True, resume=resume)
     last = stages[-1]
-    assert "pairs" in last.extra and last.stationarity.holds
+    assert last.pairs is not None and last.stationarity.holds
     assert last.cost < 0.3 * stopped.cost
 
 
@@ -418,7 +417,7 @@ def test_a_refinement_crawling_along_parallel_columns_stops_and_the_combination_
         lambda z: ev.residuals({"v": z[0], "b": z[1]}), [51.5, 2.5], xtol=1e-12
     )
     best = 2 * float(optimum.cost)
-    assert stage.stop is LocalStop.VALLEY and stage.extra["parallel"][0][:2] == ["v", "b"]
+    assert stage.stop is LocalStop.VALLEY and stage.parallel[0][:2] == ["v", "b"]
     assert stage.cost > 1.2 * best  # stopped far along the valley ...
     assert lower is not None and lower.cost < best * (1 + 1e-6)  # ... where the pair ends it
     assert stage.nfev < 80 and ev.nfev < 100
@@ -441,7 +440,7 @@ def test_a_refinement_that_crawled_and_its_combination_are_reported_as_one_stage
     gate = {"holds": True, "test": "projected Gauss-Newton, step tried", "detail": ""}
     crawled = StageResult("refinement", "refinement", dict(START), ev.cost(**START), 9,
                           "least squares: ... a valley the trust region crawls",
-                          extra={"parallel": [["v", "b", 1.0]]},
+                          parallel=[["v", "b", 1.0]],
                           stationarity=Stationarity.from_dict(gate),
                           stop=LocalStop.VALLEY)  # fmt: skip
     monkeypatch.setattr(local, "refinement", lambda *a, **k: crawled)
@@ -454,7 +453,7 @@ def test_a_refinement_that_crawled_and_its_combination_are_reported_as_one_stage
     assert store.kept["combinations_continued"] is one  # the trail holds what is reported
     assert one.cost == kept.cost < 0.3 * crawled.cost and one.nfev == 9 + kept.nfev
     assert one.message.startswith(crawled.message + "; then in the combinations the data fix")
-    assert one.stationarity == kept.stationarity and "pairs" in one.extra
+    assert one.stationarity == kept.stationarity and one.pairs is not None
     assert one.extra["crawled"]["cost"] == crawled.cost and one.stop is not LocalStop.VALLEY
     assert one.extra["crawled"]["stop"] == "valley"
     runs = ev.nfev

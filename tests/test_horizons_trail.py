@@ -30,7 +30,7 @@ def test_horizons_are_kept_in_the_trail_and_read_back(tmp_path):
     kinds = [s.kind for s in res.stages]
     assert kinds.count("horizon") == 3, kinds
     last = res.stages[-1]
-    assert last.name == "refinement after the horizons" and last.extra["agrees"]
+    assert last.name == "refinement after the horizons" and last.agrees
     assert not any(s.name.startswith("restart") for s in res.stages)  # agreement: none
     assert any("from their first part reached the same answer" in w for w in res.warnings)
     for folder in ("horizon_01", "horizon_02", "horizon_03", "horizon_full"):

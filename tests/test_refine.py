@@ -370,8 +370,7 @@ def test_a_floor_test_held_by_its_trials_hands_its_linear_pairs_to_the_combinati
         def get(self, names, experiments, fixed):
             return ev
 
-    found = {"parallel": pairs}
-    stage = StageResult("refinement", "refinement", start, cost, 5, "", extra=found,
+    stage = StageResult("refinement", "refinement", start, cost, 5, "", parallel=pairs,
                         stationarity=test, stop=LocalStop.XTOL)  # fmt: skip
     lower, _ = refine_in_combinations(Study(), Evs(), [stage])
     assert lower is not None and lower.cost < 0.5 * cost

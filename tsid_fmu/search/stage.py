@@ -64,6 +64,17 @@ class StageResult:
     stop : LocalStop
         Why a refinement stopped (``LocalStop.NONE`` for other stages); written into
         ``extra["stop"]``.
+    parallel : list or None
+        A refinement's last Jacobian's parallel pairs, ``[name_i, name_j, ratio]`` each,
+        kept where the refinement in combinations reads them
+        (:mod:`~tsid_fmu.search.local.combined`); None where none were kept.
+        ``extra["parallel"]``.
+    pairs : list or None
+        The combinations this stage refined in, in the same form; None for a stage that
+        did not. ``extra["pairs"]``.
+    agrees : str
+        The stage whose answer this one (the refinement after the horizons) reached
+        again ("" where none). ``extra["agrees"]``.
     """
 
     name: str
@@ -78,6 +89,9 @@ class StageResult:
     extra: dict[str, Any] = field(default_factory=dict)
     stationarity: Stationarity | None = None
     stop: LocalStop = LocalStop.NONE
+    parallel: list[list] | None = None
+    pairs: list[list] | None = None
+    agrees: str = ""
 
     @property
     def converged(self) -> bool:
@@ -106,6 +120,11 @@ class StageResult:
             out["stationarity"] = self.stationarity.to_dict()
         if self.stop is not LocalStop.NONE or self.kind == "refinement":
             out["stop"] = self.stop.value
+        for key in ("parallel", "pairs"):
+            if getattr(self, key) is not None:
+                out[key] = [list(p) for p in getattr(self, key)]
+        if self.agrees:
+            out["agrees"] = self.agrees
         return out
 
     @classmethod
@@ -119,6 +138,7 @@ class StageResult:
         extra = dict(d.get("extra", {}))
         test = Stationarity.from_dict(extra.pop("stationarity", None))
         stop = str(extra.pop("stop", "") or "")
+        parallel, pairs = extra.pop("parallel", None), extra.pop("pairs", None)
         return cls(
             name=str(d["name"]),
             kind=str(d["kind"]),
@@ -132,4 +152,7 @@ class StageResult:
             extra=extra,
             stationarity=test,
             stop=LocalStop(stop) if stop in set(LocalStop) else LocalStop.NONE,
+            parallel=[list(p) for p in parallel] if parallel is not None else None,
+            pairs=[list(p) for p in pairs] if pairs is not None else None,
+            agrees=str(extra.pop("agrees", "") or ""),
         )

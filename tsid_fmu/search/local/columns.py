@@ -70,7 +70,7 @@ def named_pairs(space: Space, x: Mapping[str, float], jac: np.ndarray) -> list[l
 
     Each as ``[name_i, name_j, a]``, with ``a`` the ratio of the columns per unit of the
     parameters themselves (the search coordinates' local scales at ``x`` divided out):
-    the JSON form kept in a refinement's ``extra["parallel"]``.
+    the form a refinement keeps as its ``parallel`` (:class:`~tsid_fmu.search.stage.StageResult`).
     """
     scales = np.array([space.local_scale(k, float(x[n])) for k, n in enumerate(space.names)])
     physical = np.asarray(jac, float) / np.where(scales > 0, scales, 1.0)

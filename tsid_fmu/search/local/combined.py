@@ -312,19 +312,19 @@ def refine_in_combinations(
     :func:`combined_refinement` (at most 5 runs per parameter + 1). A lower end whose
     stationarity test holds there is the answer; otherwise a refinement in the usual
     coordinates from it gives the verdict (:func:`~tsid_fmu.search.structure.optima.settle`).
-    The Jacobian is the refinement's last (its ``extra["parallel"]``, no run), or ``p``
+    The Jacobian is the refinement's last (its ``parallel``, no run), or ``p``
     runs at the answer where a stage has none (one read back from an older trail).
     Returns that stage, or None, and the simulations spent here (the stage's ``nfev``
     counts them all).
     """
     answer = answer_stage(stages)
-    if "pairs" in answer.extra:
+    if answer.pairs is not None:
         return None, 0  # refined in its combinations already (a study of its own)
     test = answer.stationarity  # not ended by its own tests, or decided by a trial
     if not answer.stop.unfinished and not (test is not None and test.by_trial):
         return None, 0
     names = list(study.parameter_names)
-    found = answer.extra.get("parallel")  # from the refinement's last Jacobian
+    found = answer.parallel  # from the refinement's last Jacobian
     if found is not None:
         found = [(names.index(a), names.index(b), r) for a, b, r in found if {a, b} <= {*names}]
         if not found:
@@ -360,5 +360,5 @@ def refine_in_combinations(
     else:  # the test in the usual coordinates decides
         lower = settle(name, short(study), xb, ev, progress)
     lower.nfev = ev.nfev - n0
-    lower.extra["pairs"] = [[names[i], names[j], a] for i, j, a in pairs]
+    lower.pairs = [[names[i], names[j], a] for i, j, a in pairs]
     return lower, lower.nfev

@@ -96,7 +96,7 @@ def local_search(
     answer = answer_stage(_in_combinations(ctx, stages, exps))
     if floor > 0 and answer.cost > POOR_FIT * floor:
         ratio = answer.cost / floor
-        agreed = any(s.extra.get("agrees") for s in stages)
+        agreed = any(s.agrees for s in stages)
         answer.extra["poor_fit"] = {
             "floor": floor,
             "ratio": ratio,
@@ -194,6 +194,8 @@ def _continued(
         },
         stationarity=lower.stationarity,
         stop=lower.stop,
+        parallel=lower.parallel,
+        pairs=lower.pairs,
     )
     ctx.store.write_stage(f"{key}_continued", stages[-1])
     return stages
@@ -238,7 +240,7 @@ def _horizons(ctx: Context, stages: list[StageResult], floor: float, exps: list[
     test = last.stationarity
     if test is not None and test.holds and abs(last.cost - before.cost) <= AGREE * before.cost:
         note(ctx, "the horizons reached the same answer: no restart")
-        last.extra["agrees"] = before.name
+        last.agrees = before.name
         return False
     return True
 

@@ -232,18 +232,17 @@ def _floor_test(
     return Stationarity(False, gate.test, gain, cost, said, "trial", gain), pairs
 
 
-def _keep_pairs(problem: _Problem, space: Space, gate: Stationarity, extra: dict[str, Any]) -> None:
-    """Keep the last Jacobian's parallel pairs where the refinement in combinations reads them.
+def _keep_pairs(problem: _Problem, space: Space, gate: Stationarity) -> list[list] | None:
+    """Return the last Jacobian's parallel pairs where the refinement in combinations reads them.
 
     That is where the test was decided by a trial, or the refinement's own tests did not
     end it (:attr:`~tsid_fmu.search.outcome.LocalStop.unfinished`): no runs are spent again
     on a Jacobian there.
     """
-    if problem.jacobian is None:
-        return
-    if gate.by_trial or problem.stop.unfinished:
-        s_lin, _, jac = problem.jacobian
-        extra["parallel"] = named_pairs(space, space.to_x(s_lin), jac)
+    if problem.jacobian is None or not (gate.by_trial or problem.stop.unfinished):
+        return None
+    s_lin, _, jac = problem.jacobian
+    return named_pairs(space, space.to_x(s_lin), jac)
 
 
 def _tested(
@@ -253,8 +252,8 @@ def _tested(
     floor: float,
     tolerance: float,
     extra: dict[str, Any],
-) -> Stationarity:
-    """Run the stationarity test at the answer.
+) -> tuple[Stationarity, list[list] | None]:
+    """Run the stationarity test at the answer; return it and the parallel pairs kept.
 
     On a log floor the test is made again in linear coordinates (:func:`_floor_test`);
     the parallel pairs the combination step reads are kept with it (:func:`_keep_pairs`).
@@ -263,10 +262,9 @@ def _tested(
     floor_pairs = None
     if gate.holds:
         gate, floor_pairs = _floor_test(space, problem, gate, fixed, floor, extra)
-    _keep_pairs(problem, space, gate, extra)
     if floor_pairs is not None and gate.by_trial:
-        extra["parallel"] = floor_pairs  # where the floored parameter has a slope
-    return gate
+        return gate, floor_pairs  # where the floored parameter has a slope
+    return gate, _keep_pairs(problem, space, gate)
 
 
 def refine_stage(
@@ -327,7 +325,7 @@ def refine_stage(
     if status == 0 and problem.spoiled and problem.doubtful(floor):
         status, message = _again_wider(problem, space, limit, extra, message)
     message = _released(problem, space, extra, message)
-    gate = _tested(space, problem, fixed, floor, method.leveling.tolerance, extra)
+    gate, parallel = _tested(space, problem, fixed, floor, method.leveling.tolerance, extra)
     (cost, x), nfev = problem.best, evaluator.nfev - n0
     if status == 0 and not gate.holds:
         status = 1
@@ -345,4 +343,5 @@ def refine_stage(
         extra=extra,
         stationarity=gate,
         stop=problem.stop,
+        parallel=parallel,
     )
