@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.evaluate.noise import trimmed_rms
+from tsid_fmu.numerics.tuning import MAX_STEP, OVERFLOW, POINTS, SHARE
 
 __all__ = [
     "MAX_STEP",
@@ -54,20 +55,6 @@ __all__ = [
     "solver_noise",
     "steps_for",
 ]
-
-SHARE = 100.0
-"""A column's difference must be this many times its noise (1 % error)."""
-
-MAX_STEP = 1e-2
-"""Largest forward-difference step, in search coordinates (1 % of a first range)."""
-
-POINTS = 4
-"""Simulations of :func:`solver_noise` (beyond the point itself)."""
-
-
-OVERFLOW = 1e150
-"""Residuals above this are scaled before their differences are squared (their squares
-would overflow past about 1e154)."""
 
 
 def solver_noise(

@@ -6,12 +6,9 @@ import math
 
 import numpy as np
 
-__all__ = ["UNSEEN", "unseen_columns"]
+from tsid_fmu.numerics.tuning import UNSEEN
 
-UNSEEN = 1e-14
-"""Share of the largest eigenvalue of ``J^T J`` below which a direction is unseen: a
-singular value of the Jacobian at most ``sqrt(UNSEEN)`` = 1e-7 of the largest is one
-the outputs do not depend on (:func:`tsid_fmu.uncertainty.intervals.seen_inverse`)."""
+__all__ = ["UNSEEN", "unseen_columns"]
 
 
 def unseen_columns(jacobian: np.ndarray) -> np.ndarray:

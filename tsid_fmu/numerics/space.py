@@ -19,16 +19,9 @@ import numpy as np
 
 from tsid_fmu.doe.leveling import use_log_scale
 from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.numerics.tuning import FLOOR_BAND
 
 __all__ = ["FLOOR_BAND", "Space"]
-
-FLOOR_BAND = 0.5
-"""Decades above a log parameter's floor that :meth:`Space.floored` still counts as on it.
-
-Half a decade: a value there is at most 0.3 % of the smallest first level, and one a
-decade above the floor (two below the smallest level) is a value of its own, not the
-floor.
-"""
 
 
 class Space:

@@ -30,6 +30,7 @@ import numpy as np
 
 from tsid_fmu.evaluate.cost import noise_level
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.numerics.tuning import GATE_RTOL, MAX_TRIALS, POOR_FIT
 from tsid_fmu.search.outcome import GN_TEST, GN_TRIED, Stationarity
 from tsid_fmu.search.space import Space
 
@@ -51,19 +52,12 @@ __all__ = [
     "probe_test",
 ]
 
-GATE_RTOL = 1e-4
-"""Largest decrease of the cost, relative to itself, that the local model may still
-predict at an answer called stationary."""
 
 LOWER_TRIED = "tried, the step lowered the cost by"
 """How a failed stationarity test says that its step, simulated, found a lower point."""
 
 LOWER_PROBED = "but a local probe lowered the cost by"
 """How a failed stationarity test says that, its step failing, a local probe was lower."""
-
-MAX_TRIALS = 12
-"""Fractions of a Gauss-Newton step a stationarity test simulates at most (1, 1/2, ...,
-1/2**11)."""
 
 
 def trial_fractions(jac: np.ndarray, r: np.ndarray, step: np.ndarray, gate: float) -> list[float]:
@@ -149,14 +143,6 @@ def trial_detail(fractions: list[float], reached: bool, lower: float = 0.0) -> s
         f"tried, {tried}, but the model still predicts more than the gate there: not "
         "shown to be an optimum"
     )
-
-
-POOR_FIT = 20.0
-"""An answer whose cost exceeds the noise floor by this factor is a poor fit. On the
-generalisation benchmark's dev seeds the optima of mismatched models sit at up to about
-10 times the floor (strongly coloured noise far more: 311 times at AR(1) 0.86), local
-minima at hundreds to thousands of times: a poor fit sends the search on, but it does
-not change the verdict."""
 
 
 def _active(

@@ -16,6 +16,7 @@ from tsid_fmu.evaluate.noise import quantum
 from tsid_fmu.evaluate.protocol import Evaluator, Simulated
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.numerics.space import Space
+from tsid_fmu.numerics.tuning import MISMATCH
 from tsid_fmu.study.prepare import data_noise
 from tsid_fmu.uncertainty.discrepancy import judge
 from tsid_fmu.uncertainty.intervals import Uncertainty, quantile, scale_groups, uncertainty
@@ -43,11 +44,6 @@ def answer_space(
     them linear where they are degenerate at the answer (:meth:`Space.near`).
     """
     return Space(levels, bounds, dataclasses.replace(leveling, scale="log"))
-
-
-MISMATCH = 1.5
-"""Residual RMS above this many times an output's noise estimate is reported as model
-(or solver) mismatch."""
 
 
 @dataclass

@@ -14,15 +14,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from tsid_fmu.numerics.rank import unseen_columns
+from tsid_fmu.numerics.tuning import ON_BOUND, TOWARD_ZERO
 
 __all__ = ["ON_BOUND", "bound_warnings", "inert_parameters", "on_bounds", "unshown_warnings"]
-
-ON_BOUND = 1e-6
-"""A value within this fraction of its first levels' span from a bound is on it."""
-TOWARD_ZERO = 1e-2
-"""A positive value below this fraction of its smallest first level, with ``min = 0``, is
-on that bound: the search moves positive parameters in log10, where 0 lies at minus
-infinity, so a value the data push to 0 stops some decades short of it."""
 
 
 def on_bounds(

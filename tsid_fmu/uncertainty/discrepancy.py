@@ -44,20 +44,12 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from tsid_fmu.numerics.tuning import DISCREPANCY_ALPHA as ALPHA
+from tsid_fmu.numerics.tuning import RANK as _RANK
+from tsid_fmu.numerics.tuning import SEGMENTS
 from tsid_fmu.uncertainty.longrun import long_run_covariance
 
 __all__ = ["ALPHA", "SEGMENTS", "Discrepancy", "constancy", "judge"]
-
-ALPHA = 0.001
-"""Significance level of the constancy test: one false alarm in a thousand studies of
-a correct model."""
-
-SEGMENTS = 2
-"""Segments each experiment's record is cut into for the constancy test."""
-
-_RANK = 1e-9
-"""Eigenvalues of the scores' covariance below this share of the largest are dropped
-(directions the data do not see, where the Jacobian holds only the FMU's noise)."""
 
 
 @dataclass

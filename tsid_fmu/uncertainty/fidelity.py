@@ -51,6 +51,14 @@ from tsid_fmu.evaluate.isolated import IsolatedCalls
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.fmu.info import read_fmu_description
 from tsid_fmu.fmu.variables import parse_start, variable_info
+from tsid_fmu.numerics.tuning import (
+    BIAS_LIMIT,
+    CONVERGES,
+    CS_REFERENCE_TOLERANCE,
+    CS_TOLERANCE,
+    FINER,
+    REFERENCE_TOLERANCE,
+)
 from tsid_fmu.scaffold_rules import time_step_setting
 from tsid_fmu.uncertainty.fidelity_record import (
     THRESHOLD,
@@ -92,43 +100,6 @@ __all__ = [
     "study_noise",
 ]
 
-BIAS_LIMIT = 1.0
-"""At the answer, a solver error that alone moves an estimate by more than this many
-standard errors matters too (the 95 % intervals would no longer cover the truth 95 % of
-the time)."""
-
-REFERENCE_TOLERANCE = 1e-12
-"""Relative tolerance of the Model Exchange reference, 100 times tighter than a study's
-default (:class:`~tsid_fmu.study.schema.Method` ``tolerance``). FMPy's CVode takes this
-times each state's nominal value (often 1) as the absolute tolerance, so a state of
-micrometres needs a relative tolerance far below its noise; 1e-12 costs about 30 % more
-time than 1e-10 on the bundled FMUs. A study with a tighter tolerance of its own gets a
-reference 100 times tighter still (down to 1e-14)."""
-
-CS_TOLERANCE = 1e-8
-"""The tolerance a Co-Simulation study adopts for the FMU's own solver where the FMU's
-default is too loose (:func:`choose_cs_tolerance`): the value ``cs_tolerance``'s
-documentation proposes, two to four decades tighter than the 1e-4 to 1e-6 that
-exporters commonly set as an FMU's default. Tighter costs every simulation of the study
-time; this is adopted only where the check then passes, and the check at the answer
-tells where it no longer does. Not tuned on a benchmark."""
-
-CS_REFERENCE_TOLERANCE = 1e-10
-"""The tolerance of the Co-Simulation reference: 100 times tighter than
-:data:`CS_TOLERANCE`, as :data:`REFERENCE_TOLERANCE` is than the Model Exchange default
-(and 100 times tighter than a study's own ``cs_tolerance``, down to 1e-14). An FMU whose
-solver has a fixed step ignores it."""
-
-FINER = 4
-"""The Co-Simulation reference of a Co-Simulation-only FMU uses a communication step this
-many times smaller than the study's."""
-
-CONVERGES = 0.5
-"""A Co-Simulation-only FMU converges as its step shrinks when the difference between
-the steps ``h / FINER`` and ``h / FINER**2`` is at most this fraction of the difference
-between ``h`` and ``h / FINER`` (worst output, in noise units). A consistent method of
-order ``p`` gives ``FINER**-p`` (0.25 for explicit Euler), once in its asymptotic range;
-an FMU that adds a fixed amount per step gives ``FINER`` (4)."""
 
 NAMES = {"cs": "Co-Simulation", "me": "Model Exchange"}
 

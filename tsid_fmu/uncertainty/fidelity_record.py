@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.numerics.space import Space
+from tsid_fmu.numerics.tuning import THRESHOLD
 from tsid_fmu.study.definition import Study
 from tsid_fmu.uncertainty.solvers import Deviation, Solver
 
@@ -28,14 +29,6 @@ __all__ = [
     "start_point",
     "study_noise",
 ]
-
-THRESHOLD = 0.2
-"""A solver's RMS difference from the reference above this fraction of an output's
-noise matters: the error is then a visible part of the residuals (it adds 0.2**2 = 4 % to
-the least-squares cost at the true parameters, more above). A smaller error can still
-move a parameter whose sensitivity resembles it, by up to ``ratio * sqrt(n)`` standard
-errors over ``n`` samples; at the answer the check therefore also projects the error on
-the sensitivities (:data:`~tsid_fmu.uncertainty.fidelity.BIAS_LIMIT`)."""
 
 
 @dataclass

@@ -32,6 +32,7 @@ from scipy import stats
 
 from tsid_fmu.numerics.rank import UNSEEN
 from tsid_fmu.numerics.space import Space
+from tsid_fmu.numerics.tuning import LEVEL, RATIO_GAIN, UNDETERMINED, Z95
 from tsid_fmu.uncertainty.discrepancy import Discrepancy, constancy
 from tsid_fmu.uncertainty.longrun import long_run_covariance
 from tsid_fmu.uncertainty.residuals import ljung_box
@@ -48,17 +49,6 @@ __all__ = [
     "seen_inverse",
     "uncertainty",
 ]
-
-LEVEL = 0.95
-"""Confidence level of the intervals."""
-
-Z95 = 1.959963984540054
-"""Two-sided 95 % quantile of the standard normal distribution: :func:`quantile` for
-many degrees of freedom."""
-
-UNDETERMINED = 0.5
-"""A combination whose standard error exceeds this many search units (half of a first
-range) is *not determined* by the data."""
 
 
 def seen_inverse(a: np.ndarray) -> np.ndarray:
@@ -411,11 +401,6 @@ def uncertainty(sens: Sensitivities, space: Space, x: Mapping[str, float]) -> Un
     inv = np.divide(1.0, values, out=np.zeros_like(values), where=keep)
     out.constancy = constancy(series, (vectors * inv) @ vectors.T)
     return out
-
-
-RATIO_GAIN = 4.0
-"""A ratio of two parameters counts as determined when its relative standard error is
-more than this many times smaller than each parameter's own (exactly this many: not)."""
 
 
 def scale_groups(u: Uncertainty, space: Space) -> list[dict[str, Any]]:

@@ -32,10 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-__all__ = ["ArNoise", "LongRun", "fit_ar", "long_run_covariance", "max_order"]
+from tsid_fmu.numerics.tuning import LONGRUN_STEP as STEP
 
-STEP = 1e-6
-"""Finite-difference step of the AR coefficients in the delta method."""
+__all__ = ["ArNoise", "LongRun", "fit_ar", "long_run_covariance", "max_order"]
 
 
 @dataclass(frozen=True)

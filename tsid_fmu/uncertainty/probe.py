@@ -34,6 +34,7 @@ from tsid_fmu.errors import TsidError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.serial import SerialEvaluator
 from tsid_fmu.numerics.space import Space
+from tsid_fmu.numerics.tuning import CHORD_COSINE, FLAT, GAIN, LOOSE, MEMBER, NEAR, REFITS, SPAN
 from tsid_fmu.uncertainty.intervals import (
     Uncertainty,
     combination_terms,
@@ -53,32 +54,6 @@ __all__ = [
     "structural",
 ]
 
-LOOSE = 2.0
-"""Relative standard error (%) from which a combination is probed. JModelica's
-``Simple2R1C_ic``, away from its optimum, gave its exact null direction (C against R1
-and R2) 7 %: the FMU solver's noise in the central differences. The profile, not this
-threshold, decides; a lower threshold only probes more (at most ``2 * REFITS + 1`` runs
-each)."""
-SPAN = 2.0
-"""How many 95 % half-widths along the combination each probe goes."""
-FLAT = 0.25
-"""The largest profile rise, as a fraction of the 95 % threshold, of a direction found
-not determined (a quadratic profile rises by ``SPAN**2`` = 4 thresholds there)."""
-REFITS = 10
-"""Most simulations per side: the point along the combination, then Gauss-Newton
-re-fits. OpenModelica's ``Mass_Damper`` from ``tsid init`` (mass, stiffness and damping
-scaled together, the spring's offsets following the force over stiffness) rose 5.1
-after 3, 0.03 after 4 and 0 after 5; at most 3 called its exact symmetry determined."""
-CHORD_COSINE = 0.9
-"""The chord between a flat combination's two probes replaces its direction only within
-about 25 degrees of it (a cosine of this or more): the solver's noise tilts a direction
-by a few degrees; a chord further off comes from a probe clipped at a bound."""
-GAIN = 0.01
-"""A re-fit stops once a step lowers the cost by less than this share of the 95 %
-threshold (as a profile's re-fit does, :data:`tsid_fmu.uncertainty.profile.CHORD_STEPS`)."""
-MEMBER = 0.3
-"""A parameter whose share of the combination's unit direction reaches this is in it."""
-
 
 def _loose(c: Mapping) -> bool:
     se, percent = c.get("std_error", math.inf), c.get("percent", math.nan)
@@ -89,10 +64,6 @@ def _loose(c: Mapping) -> bool:
         and math.isfinite(percent)
         and percent >= LOOSE
     )
-
-
-NEAR = 1e-3
-"""Offset, in search units, of the point that gives the cost's level near the answer."""
 
 
 def _level(evaluator: Evaluator, space: Space, s0: np.ndarray, v: np.ndarray, cost: float) -> float:

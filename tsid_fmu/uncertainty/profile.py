@@ -36,47 +36,20 @@ import numpy as np
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.numerics.fdstep import forward_jacobian, known_noise, steps_for
 from tsid_fmu.numerics.space import Space
+from tsid_fmu.numerics.tuning import (
+    BISECTIONS,
+    CHECK_STEP,
+    CHECKS,
+    CHI2_95,
+    CHORD_STEPS,
+    MAX_DOUBLINGS,
+    MIN_STEP,
+    RESOLUTION,
+    SECANT_MIN,
+)
 from tsid_fmu.uncertainty.intervals import seen_inverse
 
 __all__ = ["CHI2_95", "RESOLUTION", "ProfileProblem", "profile_intervals"]
-
-CHI2_95 = 3.841458820694124
-"""95 % quantile of the chi-square distribution with one degree of freedom."""
-
-CHORD_STEPS = 6
-"""Most Gauss-Newton chord steps of the re-fit at each profile point; the re-fit stops
-earlier once a step lowers the cost by less than 1 % of the threshold."""
-
-MAX_DOUBLINGS = 10
-"""Steps out from the answer, each twice the last, before an end is called open."""
-
-MIN_STEP = 1e-3
-"""Smallest first step, in search coordinates (0.1 % of a first range): a profile that
-starts below what the simulations resolve would only measure their numerical noise."""
-
-BISECTIONS = 3
-"""Bisections of the bracket around an interval end."""
-
-SECANT_MIN = 1e-3
-"""Shortest step, in search coordinates, whose secant corrects a profile's Jacobian.
-Over much shorter ones the residuals' change is rounding and solver noise: with none,
-the chord's last, tiny steps wrecked the Jacobian of exact linear problems (four tests
-of tests/test_interval_edges.py and test_coverage.py failed). On the SISO rig 1e-9 gave
-the same ends as 1e-3."""
-
-CHECKS = 3
-"""Most checks of one side's outer bracket ends by a re-linearised re-fit."""
-
-CHECK_STEP = 1e-6
-"""Forward-difference step of a re-linearisation, in search coordinates. Short, to see
-the smooth part of the residuals between events: on the SISO rig (dev seed 103, F_vm at
-51.17) a check with steps of 2e-3 or 1e-4 found rises of 3.0 and 2.0 times the threshold
-where one with 1e-6 found 0.35 times, and a full re-fit 0.26 times."""
-
-RESOLUTION = MIN_STEP / 2**BISECTIONS
-"""Shortest distance to an interval end the profile can tell, in search coordinates:
-an end closer than the first step and every bisection of it is only known to lie
-within this of the answer."""
 
 
 @dataclass

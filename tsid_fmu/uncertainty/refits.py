@@ -33,18 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from tsid_fmu.numerics.space import Space
+from tsid_fmu.numerics.tuning import INNER as _INNER
+from tsid_fmu.numerics.tuning import MAX_STEPS, TOL
 
 __all__ = ["MAX_STEPS", "TOL", "Replicate", "SharedModel", "refit", "tolerance"]
 
-MAX_STEPS = 8
-"""Most re-fit steps (simulations) per replicate."""
-
-TOL = 1e-2
-"""A replicate stops when a step lowers its cost by less than this many residual
-variances (about ``sqrt(TOL)`` = 0.1 standard errors of a parameter)."""
-
-_INNER = 6
-"""Gauss-Newton iterations on the model per step."""
 
 Simulate = Callable[[list[np.ndarray]], list[np.ndarray | None]]
 Progress = Callable[[int, int, int], None]

@@ -14,13 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tsid_fmu.numerics.tuning import LAGS
+from tsid_fmu.numerics.tuning import RESIDUALS_ALPHA as ALPHA
+
 __all__ = ["Whiteness", "ljung_box"]
-
-LAGS = 20
-"""Lags of the Ljung-Box test."""
-
-ALPHA = 0.01
-"""Significance level below which residuals are called coloured."""
 
 
 @dataclass(frozen=True)

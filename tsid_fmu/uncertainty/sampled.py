@@ -39,6 +39,7 @@ import numpy as np
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.numerics.space import Space
+from tsid_fmu.numerics.tuning import COLLAPSED, DEFAULT_REPLICATES, MIN_CONVERGED
 from tsid_fmu.uncertainty.intervals import LEVEL, json_safe
 from tsid_fmu.uncertainty.longrun import ArNoise, long_run_covariance
 from tsid_fmu.uncertainty.refits import MAX_STEPS, Replicate, SharedModel, refit, tolerance
@@ -58,14 +59,6 @@ __all__ = [
 SAMPLED = ("bootstrap", "monte_carlo")
 """The sampled kinds of ``[method] uncertainty``."""
 
-MIN_CONVERGED = 0.8
-"""Share of the re-fits that must converge for the sampled intervals to be given."""
-
-COLLAPSED = 1e-9
-"""Relative width below which a sampled interval has collapsed onto one value."""
-
-DEFAULT_REPLICATES = 100
-"""Replicates (re-fits) when the study does not give ``uncertainty_replicates``."""
 
 Notify = Callable[[str, dict[str, Any]], None]
 

@@ -18,14 +18,9 @@ from tsid_fmu.errors import one_line
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.numerics.space import Space
+from tsid_fmu.numerics.tuning import SENSITIVITY_STEP as STEP
 
 __all__ = ["STEP", "Sensitivities", "residual_jacobian", "sensitivities"]
-
-STEP = 2e-3
-"""Half-step of the central differences in search coordinates: 0.2 % of each parameter's
-first range (in decades for log parameters). Large enough to average over the small
-discontinuities of models with dry friction or events, small enough that the
-truncation error, of order ``STEP**2``, does not matter for a standard error."""
 
 
 @dataclass

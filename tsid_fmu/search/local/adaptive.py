@@ -50,6 +50,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from tsid_fmu.numerics.tuning import AGREE, RESTART_SEPARATION
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 
@@ -63,17 +64,11 @@ __all__ = [
     "verdict",
 ]
 
-RESTART_SEPARATION = 0.15
-"""A restart's start lies at least this far (in first ranges, along some parameter) from
-every start and answer of the refinements before it."""
 
 HORIZONS = (1 / 8, 1 / 4, 1 / 2)
 """Fractions of each experiment's samples the refinement follows a minimum over, in turn,
 before it refines on all of them (a stage of kind ``"horizon"`` each)."""
 
-AGREE = 1e-4
-"""Relative cost difference within which the refinement after the horizons reaches "the
-same answer" as the search before them; it then needs no restart."""
 
 _ANSWERS = ("taguchi", "refinement", "check")
 

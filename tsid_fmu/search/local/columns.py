@@ -15,31 +15,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from tsid_fmu.numerics.rank import UNSEEN
+from tsid_fmu.numerics.tuning import EXACT, PARALLEL
 from tsid_fmu.search.space import Space
 
 __all__ = ["EXACT", "PARALLEL", "named_pairs", "parallel_pairs"]
-
-PARALLEL = 1e-2
-"""Two Jacobian columns are taken as parallel where ``1 - |cos|`` of their angle is below
-this. Measured on the SISO plant at law 3's answers (dev seeds 101 to 103), with relative
-forward-difference steps: viscous friction and spring damping 1.7e-4 to 1.0e-3 (event
-noise: their different steps shift different events; with steps matched to their sum,
-4e-9 to 6e-8), every other pair 0.03 or more. A pair taken wrongly costs the runs of
-:func:`~tsid_fmu.search.local.combined.combined_refinement`, whose answer is kept only where it
-is lower."""
-
-
-EXACT = 2.0 * UNSEEN
-"""Two columns closer than this (``1 - |cos|``) are exactly parallel: the smallest
-eigenvalue of their Gram matrix is then at most
-:data:`~tsid_fmu.numerics.rank.UNSEEN` of the largest, so the direction along the
-pair is one the outputs do not see at all, with no slope to follow (OpenModelica's
-``Mass_Damper``: its three offsets and the force act only through their sum, ``1 - |cos|``
-of 0 to 4e-16). The covariance reports it open; a refinement along it only wanders
-(measured there: the force moved from 1 N to -8839 N for a gain of 4e-6 of the cost, 90
-runs, and left an offset by its logarithmic floor, where the profiles then closed the
-common scale of mass, damping and stiffness around a point away from the truth)."""
 
 
 def parallel_pairs(jac: np.ndarray, tol: float = PARALLEL) -> list[tuple[int, int, float]]:

@@ -32,6 +32,10 @@ import numpy as np
 
 from tsid_fmu.numerics.fdstep import forward_jacobian, relative_steps
 from tsid_fmu.numerics.lsq import trust_region
+from tsid_fmu.numerics.tuning import COMBINED_FTOL as _FTOL
+from tsid_fmu.numerics.tuning import COMBINED_STEP as _STEP
+from tsid_fmu.numerics.tuning import FAILED as _FAILED
+from tsid_fmu.numerics.tuning import MATCHED as _MATCHED
 from tsid_fmu.search.local.adaptive import answer_stage
 from tsid_fmu.search.local.columns import PARALLEL, parallel_pairs
 from tsid_fmu.search.space import Space
@@ -52,22 +56,6 @@ __all__ = [
     "physical_jacobian",
     "refine_in_combinations",
 ]
-
-_STEP = 1e-6
-"""Relative forward-difference step of :func:`physical_jacobian` (the columns of the
-SISO pair stayed parallel for steps from 1e-6 to 1e-2)."""
-
-_FAILED = 1e10
-
-_MATCHED = 1e-4
-"""A round of :func:`matched_ratio` that moves the ratio by less than this fraction of
-itself is its last."""
-
-_FTOL = 1e-4
-"""SciPy's ``ftol`` for :func:`combined_refinement`: it stops where a step lowers the cost
-by less than this fraction (SciPy's default, 1e-8, spent the budget of 80 runs on the
-SISO pair for the last 0.01 %: dev seeds 101 and 102 were within 0.1 % of their end after
-32 to 48 runs)."""
 
 
 def _scored(ev: Any, sets: list[dict[str, float]], size: int) -> list[tuple[np.ndarray, float]]:

@@ -28,6 +28,10 @@ from tsid_fmu.numerics.fdstep import (
     steps_for,
 )
 from tsid_fmu.numerics.rank import unseen_columns
+from tsid_fmu.numerics.tuning import FAILED as _FAILED
+from tsid_fmu.numerics.tuning import FD_STEP
+from tsid_fmu.numerics.tuning import PROBLEM_FTOL as _FTOL
+from tsid_fmu.numerics.tuning import XTOL as _XTOL
 from tsid_fmu.search.local.columns import named_pairs
 from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.space import Space
@@ -43,21 +47,6 @@ from tsid_fmu.search.verdict import (
 )
 
 __all__ = ["FD_STEP"]
-
-FD_STEP = 1e-5
-"""Forward-difference step in search coordinates (1e-5 of a first range's width), where
-the FMU's own noise allows it (:mod:`tsid_fmu.numerics.fdstep` widens it where not).
-
-Small enough for a sharply curved valley (a swinging pendulum's cost over seconds of
-data: 1e-3 gave secants whose steps kept failing), large against the integrators' error
-(the own Model Exchange solver's rtol is 1e-8)."""
-
-_FAILED = 1e10
-"""Residual value given to every sample of a failed simulation (its cost is then huge)."""
-
-
-_FTOL = _XTOL = _GTOL = 1e-8
-"""SciPy's termination tolerances, as :func:`scipy.optimize.least_squares` names them."""
 
 
 class _Budget(Exception):

@@ -19,12 +19,9 @@ import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.numerics.lsq import Solved, Stop, trust_region
+from tsid_fmu.numerics.tuning import FD_STEP, GTOL, PROBLEM_FTOL, XTOL
 from tsid_fmu.search.local.columns import named_pairs
 from tsid_fmu.search.local.problem import (
-    _FTOL,
-    _GTOL,
-    _XTOL,
-    FD_STEP,
     _Budget,
     _Converged,
     _Problem,
@@ -127,9 +124,9 @@ def _run_free(problem: _Problem, s0: np.ndarray, space: Space) -> Solved:
         jac,
         bounds=(space.s_lower[active], space.s_upper[active]),
         stops=(_Converged, _Budget, _Freed),
-        ftol=_FTOL,
-        xtol=_XTOL,
-        gtol=_GTOL,
+        ftol=PROBLEM_FTOL,
+        xtol=XTOL,
+        gtol=GTOL,
         max_nfev=10_000,
     )
 

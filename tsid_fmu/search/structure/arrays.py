@@ -32,6 +32,8 @@ from tsid_fmu.doe.arrays import select_array
 from tsid_fmu.doe.leveling import FactorDecision, LevelingDecision
 from tsid_fmu.errors import ArrayError, StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
+from tsid_fmu.numerics.tuning import ARRAYS_ALPHA as ALPHA
+from tsid_fmu.numerics.tuning import MAX_ITERATIONS
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
@@ -49,21 +51,6 @@ __all__ = [
     "settled",
     "structure_stage",
 ]
-
-ALPHA = 0.05
-"""Significance level of the ANOVA F test that a discrete factor's effect must pass."""
-
-MAX_ITERATIONS = 3
-"""Most iterations of the mixed arrays (fewer where the study's limit is lower).
-
-The arrays screen structure and parameters together; they do not take a structure to
-its optimum. Far from the fit a discrete factor's levels' means measure how each
-structure tolerates the Real parameters' wrong levels, not which structure fits
-(measured on the SISO friction laws: the law was fixed at 1e7 to 2e8 times the optimum's
-cost, the wrong one on two of three data sets, after 8 to 10 iterations of 27 runs;
-``docs/dev/structure-diagnosis.md``). Every candidate is refined to its own optimum after
-them (:mod:`tsid_fmu.search.structure.compare`), so iterations beyond the first few only cost
-simulations."""
 
 
 @dataclass

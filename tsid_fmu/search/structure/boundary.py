@@ -31,16 +31,11 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.numerics.fdstep import forward_jacobian
+from tsid_fmu.numerics.tuning import RELATIVE_STEP, SPAN_STEP
 from tsid_fmu.search.local.combined import named_residuals
 from tsid_fmu.search.verdict import bounded_step
 
 __all__ = ["RELATIVE_STEP", "SPAN_STEP", "score_step", "significant", "tried"]
-
-RELATIVE_STEP = 1e-6
-"""Forward-difference step of a shared parameter, relative to its value."""
-SPAN_STEP = 1e-4
-"""Forward-difference step of an extra parameter, as a fraction of its first levels' range
-(its value at the nesting point may be 0 or 1e-4: a step relative to it measures nothing)."""
 
 
 def score_step(

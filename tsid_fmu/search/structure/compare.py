@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.numerics.tuning import MAX_ALL, MAX_CANDIDATES
 from tsid_fmu.search.context import Context
 from tsid_fmu.search.local.combined import refine_in_combinations
 from tsid_fmu.search.phases.stage import Evaluators
@@ -69,13 +70,6 @@ from tsid_fmu.search.verdict import noise_floor
 from tsid_fmu.study.definition import Study
 
 __all__ = ["MAX_CANDIDATES", "StructureResult", "run_structure"]
-
-MAX_CANDIDATES = 8
-"""Most candidate structures refined at the end."""
-
-MAX_ALL = 6
-"""Where the discrete factors' combinations are at most this many, every one of them is a
-candidate (a fixed factor's other levels too, not only its runner-up)."""
 
 
 @dataclass

@@ -23,6 +23,7 @@ import numpy as np
 
 from tsid_fmu.numerics.fdstep import forward_jacobian, relative_steps
 from tsid_fmu.numerics.lsq import trust_region
+from tsid_fmu.numerics.tuning import FAR_BETTER, NESTING_POINT, REPRODUCE
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.structure.selection import Candidate
 from tsid_fmu.study.definition import Study
@@ -38,22 +39,6 @@ __all__ = [
     "nesting",
     "slack",
 ]
-
-REPRODUCE = 0.01
-"""A richer structure nests a simpler one where its extra parameters reproduce the
-simpler one's fitted outputs to within this fraction of one noise variance in total."""
-
-NESTING_POINT = 0.01
-"""A richer answer's extra parameters within this fraction of their first levels' range of
-the values that make it a simpler structure are at the nesting point."""
-
-FAR_BETTER = 0.5
-"""A richer answer whose chi-square is below this fraction of a simpler one's is not at a
-nesting point of that answer: there the richer structure is the simpler one, and fits
-no better than the simpler one's optimum beyond what the model's non-smoothness gives
-(measured on the SISO friction laws: a Stribeck answer at the Coulomb + viscous nesting
-point, 0.2 % below). For such a pair an embedding of the simpler answer found earlier
-shows the nesting, with no fit at the richer answer."""
 
 
 def _space(study: Study) -> Space:

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from tsid_fmu.numerics.tuning import ACTIVE_STEP, MAX_ROUNDS, PATH_STEPS, WARM_NFEV
 from tsid_fmu.search.context import polish
 from tsid_fmu.search.local.refine import refine_stage
 from tsid_fmu.search.outcome import LocalStop
@@ -57,26 +58,6 @@ __all__ = [
     "update",
     "warm_start",
 ]
-
-ACTIVE_STEP = 0.01
-"""Step (in search coordinates: a fraction of the first levels' range) by which each Real
-parameter is moved to see whether it changes the outputs in a structure."""
-
-PATH_STEPS = 4
-"""Steps of :func:`follow` from a richer answer to the simpler structure it nests."""
-
-MAX_ROUNDS = 3
-"""Most rounds of :func:`consistent` (each round re-checks the pairs that changed)."""
-
-
-WARM_NFEV = 10
-"""Simulations per (Real parameter + 1) of a refinement from warm starts and of a restart
-(the study's own limit where lower). A candidate chosen from a warm start that stopped
-short of an optimum gets a study of its own
-(:func:`~tsid_fmu.search.structure.candidates.needs_own_study`); measured on the SISO friction
-laws, warm refinements and restarts that ran to the default limit (30 per parameter +
-1) spent 200 to 750 simulations per structure, most of them on structures the
-comparison then rejected by 1e5 in BIC."""
 
 
 def short(study: Study) -> Study:

@@ -33,6 +33,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from tsid_fmu.numerics.tuning import BIC_CLOSE, LRT_ALPHA
+
 __all__ = [
     "BIC_CLOSE",
     "LRT_ALPHA",
@@ -41,12 +43,6 @@ __all__ = [
     "information",
     "likelihood_ratio",
 ]
-
-LRT_ALPHA = 0.05
-"""A richer nested structure wins only where the likelihood-ratio test gives p below this."""
-
-BIC_CLOSE = 2.0
-"""BIC difference below which two structures (costs within noise) are indistinguishable."""
 
 
 def information(chi2: float, n: int, k: int) -> tuple[float, float]:

@@ -18,20 +18,11 @@ import numpy as np
 from tsid_fmu.doe.leveling import LevelingDecision, relevel
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.doe.rules import FactorState, decide_factor
+from tsid_fmu.numerics.tuning import GROWTH, MAX_HALF_WIDTH, POSITIVE_MARGIN, ROTATED_LEVELS
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.taguchi.frame import Factor, Frame
 
 __all__ = ["MAX_HALF_WIDTH", "next_frame"]
-
-ROTATED_LEVELS = 3
-"""Levels of rotated factors unless ``n_levels`` says otherwise: along principal axes the
-surface is close to quadratic, and three levels (an L18 for five factors, an L9 for up
-to four) give each factor's parabola for fewer runs than five levels (the MISO paper
-identifies with three-level L9 arrays throughout)."""
-
-MAX_HALF_WIDTH = 0.5
-"""Largest half-width of a rotated factor, in search coordinates (the first levels of
-every parameter span one unit)."""
 
 
 def _rotated_decisions(
@@ -153,15 +144,6 @@ def _rotated_frame(
         else "rotated factors kept from the previous iteration"
     )
     return Frame(centre=np.zeros(space.dim), factors=factors, note=note, anchor=dict(centre_x))
-
-
-GROWTH = 1.5
-"""Most a rotated factor's half-width may exceed the extent of the decided box along
-it: the curvature shapes the levels, the papers' cases still set their size."""
-
-POSITIVE_MARGIN = 0.75
-"""A rotated factor's levels may move a parameter searched in log10 by at most this
-fraction of its value (so it stays positive, as its log10 coordinate guarantees)."""
 
 
 def _positive_limit(

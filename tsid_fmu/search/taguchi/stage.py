@@ -20,6 +20,7 @@ import numpy as np
 from tsid_fmu.errors import SimulationError, StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.timelimit import timed_out
+from tsid_fmu.numerics.tuning import RERUN_AFTER
 from tsid_fmu.search.record import IterationRecord, json_float
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
@@ -30,8 +31,6 @@ from tsid_fmu.study.schema import Method
 
 __all__ = ["HANDOVER", "RERUN_AFTER", "Recorder", "TaguchiRun", "taguchi_stage"]
 
-RERUN_AFTER = 2
-"""Iterations without a lower cost after which the next-best run is re-conducted."""
 
 HANDOVER = (
     "handed over to the refinement after iteration {index}: its array spans the first "
