@@ -5,11 +5,12 @@ model CascadedTanks
   //
   //   q1       = k_of*max(x1 - x1max, 0)        overflow of the upper tank
   //   q2       = k_of*max(x2 - x2max, 0)        overflow of the lower tank
-  //   der(x1)  = -k1*sqrt(max(x1, 0)) + k4*u - q1
-  //   der(x2)  =  k2*sqrt(max(x1, 0)) - k3*sqrt(max(x2, 0)) + k5*q1 - q2
+  //   der(x1)  = -k1*max(x1, 0)^a1 + k4*u - q1
+  //   der(x2)  =  k2*max(x1, 0)^a1 - k3*max(x2, 0)^a3 + k5*q1 - q2
   //   y        = min(x2 + c, y_max)             the sensor clips at y_max
   //
-  // Torricelli's law gives the outflows through the openings (sqrt of the level); a
+  // Torricelli's law gives the outflows through the openings (the level to the power
+  // 0.5; the exponents a1, a3 default to it and may be identified); a
   // level above its tank's rim flows over at the rate k_of (a stiff, if-free
   // approximation of the hard limit x <= xmax), and the share k5 of the upper tank's
   // overflow falls into the lower tank. The initial levels are the parameters x1_0 and
@@ -21,6 +22,8 @@ model CascadedTanks
   parameter Real k2 = 0.05 "Inflow coefficient of the lower tank from the upper one [V^0.5/s]";
   parameter Real k3 = 0.05 "Outflow coefficient of the lower tank [V^0.5/s]";
   parameter Real k4(unit = "1/s") = 0.04 "Pump gain (level rate per volt)";
+  parameter Real a1 = 0.5 "Outflow exponent of the upper tank (Torricelli: 0.5)";
+  parameter Real a3 = 0.5 "Outflow exponent of the lower tank (Torricelli: 0.5)";
   parameter Real k5 = 0.5 "Share of the upper tank's overflow that falls into the lower tank";
   parameter Real k_of(unit = "1/s") = 0.5 "Rate at which a level above its rim flows over";
   parameter Real x1max(unit = "V") = 10 "Level at which the upper tank overflows";
@@ -38,8 +41,8 @@ model CascadedTanks
 equation
   q1 = k_of * max(x1 - x1max, 0);
   q2 = k_of * max(x2 - x2max, 0);
-  der(x1) = -k1 * sqrt(max(x1, 0)) + k4 * u - q1;
-  der(x2) = k2 * sqrt(max(x1, 0)) - k3 * sqrt(max(x2, 0)) + k5 * q1 - q2;
+  der(x1) = -k1 * max(x1, 0)^a1 + k4 * u - q1;
+  der(x2) = k2 * max(x1, 0)^a1 - k3 * max(x2, 0)^a3 + k5 * q1 - q2;
   y = min(x2 + c, y_max);
   annotation (
     experiment(StartTime = 0, StopTime = 4092, Interval = 4),
@@ -53,11 +56,12 @@ measured as the sensor voltage <code>y</code>. States: the levels <code>x1</code
 <pre>
 q1      = k_of*max(x1 - x1max, 0)
 q2      = k_of*max(x2 - x2max, 0)
-der(x1) = -k1*sqrt(max(x1, 0)) + k4*u - q1
-der(x2) =  k2*sqrt(max(x1, 0)) - k3*sqrt(max(x2, 0)) + k5*q1 - q2
+der(x1) = -k1*max(x1, 0)^a1 + k4*u - q1
+der(x2) =  k2*max(x1, 0)^a1 - k3*max(x2, 0)^a3 + k5*q1 - q2
 y       = min(x2 + c, y_max)
 </pre>
-<p>The outflows follow Torricelli's law. A level above its tank's rim
+<p>The outflows follow Torricelli's law: the exponents <code>a1</code> (upper tank)
+and <code>a3</code> (lower tank) default to its 0.5. A level above its tank's rim
 (<code>x1max</code>, <code>x2max</code>) flows over at the rate <code>k_of</code>, and
 the share <code>k5</code> of the upper tank's overflow falls into the lower tank; the
 sensor clips at <code>y_max</code> (10 V in the measurements). The initial levels are
