@@ -5,7 +5,7 @@ model CascadedTanks
   //
   //   q1       = k_of*max(x1 - x1max, 0)        overflow of the upper tank
   //   q2       = k_of*max(x2 - x2max, 0)        overflow of the lower tank
-  //   der(x1)  = -k1*max(x1, 0)^a1 + k4*u - q1
+  //   der(x1)  = -k1*max(x1, 0)^a1 + k4*max(u - u0, 0) - q1
   //   der(x2)  =  k2*max(x1, 0)^a1 - k3*max(x2, 0)^a3 + k5*q1 - q2
   //   y        = min(x2 + c, y_max)             the sensor clips at y_max
   //
@@ -22,6 +22,7 @@ model CascadedTanks
   parameter Real k2 = 0.05 "Inflow coefficient of the lower tank from the upper one [V^0.5/s]";
   parameter Real k3 = 0.05 "Outflow coefficient of the lower tank [V^0.5/s]";
   parameter Real k4(unit = "1/s") = 0.04 "Pump gain (level rate per volt)";
+  parameter Real u0(unit = "V") = 0 "Dead zone of the pump: no flow below u0";
   parameter Real a1 = 0.5 "Outflow exponent of the upper tank (Torricelli: 0.5)";
   parameter Real a3 = 0.5 "Outflow exponent of the lower tank (Torricelli: 0.5)";
   parameter Real k5 = 0.5 "Share of the upper tank's overflow that falls into the lower tank";
@@ -41,7 +42,7 @@ model CascadedTanks
 equation
   q1 = k_of * max(x1 - x1max, 0);
   q2 = k_of * max(x2 - x2max, 0);
-  der(x1) = -k1 * max(x1, 0)^a1 + k4 * u - q1;
+  der(x1) = -k1 * max(x1, 0)^a1 + k4 * max(u - u0, 0) - q1;
   der(x2) = k2 * max(x1, 0)^a1 - k3 * max(x2, 0)^a3 + k5 * q1 - q2;
   y = min(x2 + c, y_max);
   annotation (
@@ -56,11 +57,12 @@ measured as the sensor voltage <code>y</code>. States: the levels <code>x1</code
 <pre>
 q1      = k_of*max(x1 - x1max, 0)
 q2      = k_of*max(x2 - x2max, 0)
-der(x1) = -k1*max(x1, 0)^a1 + k4*u - q1
+der(x1) = -k1*max(x1, 0)^a1 + k4*max(u - u0, 0) - q1
 der(x2) =  k2*max(x1, 0)^a1 - k3*max(x2, 0)^a3 + k5*q1 - q2
 y       = min(x2 + c, y_max)
 </pre>
-<p>The outflows follow Torricelli's law: the exponents <code>a1</code> (upper tank)
+<p>The pump delivers nothing below the voltage <code>u0</code> (0 by default). The
+outflows follow Torricelli's law: the exponents <code>a1</code> (upper tank)
 and <code>a3</code> (lower tank) default to its 0.5. A level above its tank's rim
 (<code>x1max</code>, <code>x2max</code>) flows over at the rate <code>k_of</code>, and
 the share <code>k5</code> of the upper tank's overflow falls into the lower tank; the
