@@ -53,8 +53,8 @@ def _collapsed(refined: StageResult) -> str | None:
     (:func:`_unsettled`): that test simulates the Gauss-Newton step where the model does
     not hold (:func:`~tsid_fmu.search.verdict.gauss_newton_test`), so a collapse on a
     rough cost that stops short of the optimum fails it. Sending every collapse back to
-    the arrays cost the SISO rig family and the generalisation dev seeds simulations and
-    gained no success there (``docs/benchmarks/generalisation.md``).
+    the arrays cost the generalisation seeds simulations and gained no success, and on
+    the SISO rig family it changed no run (``docs/benchmarks/generalisation.md``).
     """
     if refined.kind == "refinement" and refined.stop is LocalStop.LIMIT:
         return "the refinement ran out of simulations before its own tests ended it"
