@@ -38,7 +38,9 @@ def make_study(lag, **kw):
 @pytest.mark.slow
 def test_identifies_lag_parameters_and_writes_the_trail(lag, tmp_path):
     out = tmp_path / "out"
-    res = identify(make_study(lag), out, plots=True)
+    # the arrays alone, so that the trail has iterations to show: with the refinement the
+    # study ends after one array (its answer shown stationary), and draws no trajectory
+    res = identify(make_study(lag, refine="none"), out, plots=True)
     assert res.success and res.status == 0, res.message
     assert res.params["tau"] == pytest.approx(TAU, rel=0.01)
     assert res.params["x0"] == pytest.approx(X0, rel=0.05)
@@ -84,20 +86,22 @@ def test_failed_rows_are_reported_and_do_not_stop_the_study(lag, tmp_path):
 
 @pytest.mark.slow
 def test_pause_edit_resume_matches_uninterrupted(lag, tmp_path):
-    full = identify(make_study(lag), tmp_path / "full", plots=False)
+    # the arrays alone (11 iterations here): with the refinement the study ends after one
+    arrays = dict(refine="none")
+    full = identify(make_study(lag, **arrays), tmp_path / "full", plots=False)
     out = tmp_path / "paused"
-    part = identify(make_study(lag), out, pause_after=2, plots=False)
-    assert part.status == 3 and part.nit == 2
+    part = identify(make_study(lag, **arrays), out, pause_after=2, plots=False)
+    assert full.nit > 3 and part.status == 3 and part.nit == 2
     # the same folder without --resume is refused, so nothing is overwritten
     with pytest.raises(StudyError, match="--resume"):
-        identify(make_study(lag), out, plots=False)
+        identify(make_study(lag, **arrays), out, plots=False)
     # an iteration interrupted half-way (no record.json) is redone
     (out / "iteration_03").mkdir()
     (out / "iteration_03" / "runs.csv").write_text("partial")
-    resumed = identify(make_study(lag), out, resume=True, plots=False)
+    resumed = identify(make_study(lag, **arrays), out, resume=True, plots=False)
     assert resumed.params == full.params and resumed.nit == full.nit and resumed.nfev == full.nfev
     # plots (one fit simulation per iteration) do not count as simulations used
-    drawn = identify(make_study(lag), tmp_path / "drawn", plots=True)
+    drawn = identify(make_study(lag, **arrays), tmp_path / "drawn", plots=True)
     assert drawn.nfev == full.nfev
 
 
