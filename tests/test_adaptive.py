@@ -9,6 +9,7 @@ status 0 only where a stationarity test holds. Each test fails when its rule is 
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from types import SimpleNamespace
 
@@ -120,7 +121,7 @@ def test_the_start_point_is_scored_first_and_the_answer_is_never_worse():
     without = taguchi_stage(_stage_run(levels, max_iterations=1), _decay_evaluator())
     assert with_start.cost == pytest.approx(ev.cost(**TRUTH), rel=1e-12)
     assert with_start.records[0].best_source == "given"
-    assert with_start.records[0].extra["starts"][0]["source"] == "given"
+    assert with_start.records[0].starts[0]["source"] == "given"
     assert ev.asked[0] == TRUTH  # scored before the first array
     assert without.cost > 100 * with_start.cost  # what the rule protects against
     assert with_start.nfev == without.nfev + 1
@@ -210,7 +211,7 @@ def test_an_optimum_beyond_the_first_ranges_is_reached_and_a_bound_is_respected(
     answer = adaptive.answer_stage(bounded)
     assert answer.x["a"] == pytest.approx(1.0)  # held at its bound, and
     assert adaptive.verdict(bounded)[0] == 0  # stationary there (the projected test)
-    assert answer.extra["poor_fit"]["ratio"] > verdict.POOR_FIT  # and named a poor fit
+    assert answer.poor_fit["ratio"] > verdict.POOR_FIT  # and named a poor fit
 
 
 # -- local minima: back to the arrays, then restarts ----------------------------------------
@@ -347,7 +348,7 @@ def test_a_refinement_out_of_runs_sends_the_search_back_to_the_arrays(monkeypatc
     study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     first = stages[0]
-    assert "ran out of simulations" in first.extra["resumed"]
+    assert "ran out of simulations" in first.resumed
     assert not first.records[-1].handover  # it went on past the hand-over
     monkeypatch.setattr(local, "_collapsed", lambda stage: None)
     alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
@@ -424,7 +425,7 @@ def test_a_crawl_continued_to_an_optimum_in_its_combination_ends_the_search(monk
     study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
     assert "resumed" not in stages[0].extra  # the arrays did not go on
-    assert stages[1].extra["crawled"]["nfev"] > 0  # the combination continued the crawl
+    assert stages[1].crawled["nfev"] > 0  # the combination continued the crawl
     assert adaptive.verdict(stages)[0] == 0
 
 
@@ -441,7 +442,7 @@ def test_the_pipeline_continues_the_arrays_only_to_below_the_refinements_answer(
     monkeypatch.setattr(context, "polish", limited_high)
     study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
-    assert "ran out of simulations" in stages[0].extra["resumed"]
+    assert "ran out of simulations" in stages[0].resumed
     assert stages[0].message.startswith("handed back to the refinement")
     assert stages[0].cost < stages[1].cost
 
@@ -498,7 +499,7 @@ def test_a_local_minimum_is_left_by_following_the_data_from_its_first_part(monke
     assert [s.kind for s in stages[2:]] == ["horizon"] * 3 + ["refinement"]
     assert evaluators.fractions == list(adaptive.HORIZONS)
     assert [s.extra["fraction"] for s in stages[2:5]] == list(adaptive.HORIZONS)
-    assert stages[2].extra["start"] == pytest.approx({"w": 2.4, "a": 1.0})  # the arrays' best
+    assert stages[2].start == pytest.approx({"w": 2.4, "a": 1.0})  # the arrays' best
     answer = adaptive.answer_stage(stages)
     assert answer is stages[-1] and answer.x["w"] == pytest.approx(3.0, rel=1e-3)
     assert answer.cost < 2 * LONG.size
@@ -537,9 +538,9 @@ def test_the_poor_fit_warning_says_which_search_found_no_lower_basin():
 
     stage = StageResult("refinement", "refinement", {"w": 3.0}, 1e6, 10, "")
     assert _poor_fit(stage) == []
-    stage.extra["poor_fit"] = {"floor": 800.0, "ratio": 1250.0, "restarts": 2}
+    stage.poor_fit = {"floor": 800.0, "ratio": 1250.0, "restarts": 2}
     assert "1.25e+03 times the noise floor, and 2 restart(s)" in _poor_fit(stage)[0]
-    stage.extra["poor_fit"].update(restarts=0, horizons_agree=True)
+    stage.poor_fit.update(restarts=0, horizons_agree=True)
     assert "from their first part reached the same answer" in _poor_fit(stage)[0]
 
 
@@ -565,3 +566,26 @@ def test_a_stationarity_test_reads_back_typed_and_an_old_trails_as_the_models():
     assert again.stationarity == tried and again.stop is LocalStop.VALLEY
     assert (again.parallel, again.pairs, again.agrees) == ([["a", "k", 2.0]], [], "refinement")
     assert not {"stationarity", "stop", "parallel", "pairs", "agrees"} & set(again.extra)
+
+
+def test_a_stages_typed_outcomes_read_back_from_its_json_alone():
+    """Each typed attribute a decision reads goes into ``extra`` under its name only in
+    :meth:`StageResult.to_dict`, and reads back typed; unset ones are not written."""
+    from tsid_fmu.study.schema import Phase
+
+    bare = StageResult("c", "check", {"w": 1.0}, 2.0, 3, "done")
+    assert bare.to_dict()["extra"] == {}
+    stage = StageResult("c", "contribution", {"w": 1.0}, 2.0, 3, "done", extra={"note": 1})
+    stage.start, stage.start_cost, stage.start_from = {"w": 0.5}, 7.0, "the arrays"
+    stage.resumed, stage.crawled = "ran out", {"cost": 9.0, "nfev": 4}
+    stage.poor_fit = {"floor": 1.0, "ratio": 300.0, "restarts": 1, "horizons_agree": False}
+    stage.phases = [Phase(["a", "b"], ["e1"], "phase 1")]
+    written = stage.to_dict()["extra"]
+    assert written["start"] == {"w": 0.5} and written["phases"][0]["parameters"] == ["a", "b"]
+    again = StageResult.from_dict(json.loads(json.dumps(stage.to_dict())))
+    for attr in ("start", "start_cost", "start_from", "resumed", "crawled", "poor_fit"):
+        assert getattr(again, attr) == getattr(stage, attr), attr
+    assert again.phases == stage.phases and isinstance(again.phases[0], Phase)
+    assert again.extra == {"note": 1}  # only what no decision reads stays in extra
+    stage.start_cost = 0.0  # a zero is a value, not "unset"
+    assert StageResult.from_dict(stage.to_dict()).start_cost == 0.0

@@ -454,8 +454,8 @@ def test_a_refinement_that_crawled_and_its_combination_are_reported_as_one_stage
     assert one.cost == kept.cost < 0.3 * crawled.cost and one.nfev == 9 + kept.nfev
     assert one.message.startswith(crawled.message + "; then in the combinations the data fix")
     assert one.stationarity == kept.stationarity and one.pairs is not None
-    assert one.extra["crawled"]["cost"] == crawled.cost and one.stop is not LocalStop.VALLEY
-    assert one.extra["crawled"]["stop"] == "valley"
+    assert one.crawled["cost"] == crawled.cost and one.stop is not LocalStop.VALLEY
+    assert one.crawled["stop"] == "valley"
     runs = ev.nfev
     again = local.local_search(ctx, [arrays], True, resume=None)
     assert again[-1].cost == one.cost and again[-1].nfev == one.nfev and ev.nfev == runs

@@ -166,10 +166,10 @@ def test_next_best_rerun_is_taken_and_lowers_the_cost(tmp_path, selection):
     study = synthetic_study(tmp_path, selection=selection, max_iterations=6)
     res = identify(study, evaluator=FakeEvaluator(two_basins), plots=False)
     costs = [r.best_cost for r in res.iterations]
-    reruns = [r for r in res.iterations if "rerun" in r.extra]
+    reruns = [r for r in res.iterations if r.rerun]
     assert reruns, "no re-run was taken"
     first = reruns[0]
-    assert "did not lower the cost" in first.extra["rerun"] and "next best" in first.extra["rerun"]
+    assert "did not lower the cost" in first.rerun and "next best" in first.rerun
     before = costs[first.index - 2]
     assert before == pytest.approx(0.5)  # stuck in the trap
     assert first.best_cost < before and res.fun == pytest.approx(0.1, abs=1e-6)
@@ -193,7 +193,7 @@ def test_a_person_can_pick_the_run_to_continue_from(tmp_path):
         study, out, resume=True, continue_from_run=pick, evaluator=FakeEvaluator(two_basins),
         plots=False,
     )  # fmt: skip
-    assert "chosen" in res.iterations[1].extra["rerun"]
+    assert "chosen" in res.iterations[1].rerun
     assert res.iterations[1].levels["a"][1] == 2  # centred on run (2, 2)
     assert res.fun < 0.5
 
@@ -206,7 +206,7 @@ def test_resume_right_after_a_rerun_decision_continues_the_same_way(tmp_path):
         return synthetic_study(tmp_path, selection="best_run", max_iterations=6)
 
     full = identify(study(), evaluator=FakeEvaluator(two_basins), plots=False)
-    first_rerun = next(r.index for r in full.iterations if "rerun" in r.extra)
+    first_rerun = next(r.index for r in full.iterations if r.rerun)
     out = tmp_path / "paused"
     identify(
         study(), out, evaluator=FakeEvaluator(two_basins), pause_after=first_rerun - 1,
@@ -217,7 +217,7 @@ def test_resume_right_after_a_rerun_decision_continues_the_same_way(tmp_path):
     resumed = identify(study(), out, resume=True, evaluator=FakeEvaluator(two_basins), plots=False)
     assert [r.best_cost for r in resumed.iterations] == [r.best_cost for r in full.iterations]
     assert resumed.params == full.params
-    assert "rerun" in resumed.iterations[first_rerun - 1].extra
+    assert resumed.iterations[first_rerun - 1].rerun
 
 
 def test_noise_weighting_divides_each_output_by_its_noise(lag, tmp_path):

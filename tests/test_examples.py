@@ -105,7 +105,7 @@ def test_siso_example_identifies_the_parameters(tmp_path):
     # docs/explanation/procedure.md, step 5)
     assert [s.kind for s in res.stages] == ["taguchi", "refinement"]
     assert [p[:2] for p in res.stages[1].pairs] == [["F_vm", "B_s"]]
-    assert res.stages[1].extra["crawled"]["cost"] > res.fun
+    assert res.stages[1].crawled["cost"] > res.fun
     assert siso_misses(res.params, res.intervals) == []
     assert res.nfev <= 200  # 149 measured; the arrays to their end: 437
     assert res.fit["measured"]["F_o"]["fit_percent"] > 97

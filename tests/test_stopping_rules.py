@@ -364,15 +364,16 @@ def test_a_continued_stage_that_had_ended_reads_back_as_ended():
 # -- the re-run from the next-best run (search/taguchi.py ``_next_best``) ------------------
 
 
-def _flat_records(costs, converged=(), extra=None, spans=0.2):
-    """Records whose runs cost ``10 * index + run`` (run 0 best), spans of ``spans``."""
+def _flat_records(costs, converged=(), kept=None, spans=0.2):
+    """Records whose runs cost ``10 * index + run`` (run 0 best), spans of ``spans``;
+    ``kept`` gives an iteration's ``rerun`` and ``rerun_from``."""
     frame = SimpleNamespace(spans=lambda space: {"p": spans, "q": 0.01})
     return [
         SimpleNamespace(
             index=i + 1,
             best_cost=c,
             decision=SimpleNamespace(converged=i in converged),
-            extra=dict((extra or {}).get(i, {})),
+            **{"rerun": "", "rerun_from": None, **(kept or {}).get(i, {})},
             next_frame=frame,
             measured_costs=np.array([10.0 * (i + 1) + k for k in (0, 3, 1, np.inf, 2)]),
         )
@@ -396,11 +397,11 @@ def test_the_next_best_run_is_taken_after_rerun_after_iterations_without_a_gain(
 
 
 def test_a_rerun_gets_its_own_iterations_and_is_not_repeated():
-    assert _next_best(_flat_records([3.0] * 3, extra={1: {"rerun": "x"}}), RERUN) is None
-    assert _next_best(_flat_records([3.0] * 3, extra={0: {"rerun": "x"}}), RERUN) is not None
-    tried = _flat_records([3.0] * 3, extra={1: {"rerun_from": [1, 2]}})
+    assert _next_best(_flat_records([3.0] * 3, kept={1: {"rerun": "x"}}), RERUN) is None
+    assert _next_best(_flat_records([3.0] * 3, kept={0: {"rerun": "x"}}), RERUN) is not None
+    tried = _flat_records([3.0] * 3, kept={1: {"rerun_from": [1, 2]}})
     assert _next_best(tried, RERUN)[1] == 4  # then run 4 (the failed run 3 is skipped)
-    both = _flat_records([3.0] * 3, extra={1: {"rerun_from": [1, 2]}, 0: {"rerun_from": [1, 4]}})
+    both = _flat_records([3.0] * 3, kept={1: {"rerun_from": [1, 2]}, 0: {"rerun_from": [1, 4]}})
     assert _next_best(both, RERUN)[1] == 1
 
 

@@ -240,10 +240,10 @@ def test_the_answer_has_the_parameters_of_the_chosen_structure_only():
     rich = _identify(_data(a=2.0, b=1.3, c=0.3, on=1))
     assert [p.name for p in _of_structure(_study(), rich)] == ["a", "b", "c"]
     pick = rich.candidates[rich.chosen]
-    assert "c" in pick.extra["free"]  # free where the arrays saw it
+    assert "c" in pick.free  # free where the arrays saw it
     pick.active.remove("c")  # as on a bound that log coordinates cannot leave
     assert [p.name for p in _of_structure(_study(), rich)] == ["a", "b", "c"]
-    pick.extra["free"].remove("c")
+    pick.free.remove("c")
     assert [p.name for p in _of_structure(_study(), rich)] == ["a", "b"]
     simple.paused = True  # a paused search keeps them all, to go on from
     assert [p.name for p in _of_structure(_study(), simple)] == ["a", "b", "c"]
@@ -277,7 +277,7 @@ def test_among_tied_structures_the_one_with_fewer_parameters_is_reported_and_sai
     n = 100
     small = Candidate("friction=0", {"s": 0.0}, {}, 1.0, 100.0, n, 2, ["x", "y"])
     rich = Candidate("friction=1", {"s": 1.0}, {}, 1.0, 100.0 - 1e-8, n, 2, ["x", "y"])
-    small.extra["free"], rich.extra["free"] = ["x", "y"], ["x", "y", "Tc"]
+    small.free, rich.free = ["x", "y"], ["x", "y", "Tc"]
     assert rich.parameters == ["x", "y", "Tc"] and small.parameters == ["x", "y"]
     for order in ([small, rich], [rich, small]):
         chosen, tied = decide(order)
@@ -287,7 +287,7 @@ def test_among_tied_structures_the_one_with_fewer_parameters_is_reported_and_sai
         assert small.chosen and not rich.chosen
     # as simple in both counts: the lowest BIC, and the reason says that instead
     twin = Candidate("friction=2", {"s": 2.0}, {}, 1.0, 100.0 - 1e-8, n, 2, ["x", "w"])
-    twin.extra["free"] = ["x", "w"]
+    twin.free = ["x", "w"]
     chosen, _ = decide([small, twin])
     assert chosen == 1 and twin.why.endswith("the lowest BIC is reported")
 
@@ -472,7 +472,7 @@ def test_the_simplest_structure_gets_the_own_study_and_the_richer_its_answer_emb
         return made[-1]
 
     found = run_structure(Context(_study(), make(_study()), NullStore(), None, Control()), make)
-    first, later = sorted(found.candidates, key=lambda c: c.extra["folder"])
+    first, later = sorted(found.candidates, key=lambda c: c.folder)
     assert first.label == "on=0" and "the simplest (2 free parameters)" in first.origin
     assert later.label == "on=1" and "the simplest" not in later.origin
     (summary,) = [s for s in found.stages if s.kind == "candidate"]
@@ -595,7 +595,7 @@ def test_an_embedding_fit_stops_at_the_first_point_that_reproduces_the_simpler_f
     base = {**big.x, "a": small.x["a"], "b": small.x["b"]}
     ok, point = _fit_extra(ev, study, small, base, ["c"], tol)
     gap = np.sum(((_model(point["a"], point["b"], point["c"], 1) - measured) / SIGMA
-                  - small.extra["residuals"]) ** 2)  # fmt: skip
+                  - small.residuals) ** 2)  # fmt: skip
     assert ok and 0 < point["c"] < 1e-3 and gap <= tol
     assert ev.nfev <= 25  # run on to its end, the fit takes 36 runs here (limit 40)
 

@@ -11,6 +11,7 @@ its records. These tests kill the mutants docs/dev/mutation-survivors.md listed 
 from __future__ import annotations
 
 import copy
+import json
 import math
 from types import SimpleNamespace
 
@@ -23,6 +24,7 @@ from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.errors import SimulationError
 from tsid_fmu.evaluate.protocol import Evaluation
 from tsid_fmu.evaluate.timelimit import EXCEEDED
+from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.taguchi import stage as taguchi
 from tsid_fmu.search.taguchi.frame import Frame
@@ -86,12 +88,12 @@ def test_a_stage_re_runs_from_the_next_best_run_at_most_max_reruns_times():
     # the best set never changes after iteration 1's centre run, and keeps its source
     assert {r.best_cost for r in recs} == {1.0}
     assert all(r.best_source == "iteration 1, run 5" for r in recs)
-    decided = [r.index for r in recs if "next" in r.extra]
+    decided = [r.index for r in recs if r.next_rerun is not None]
     assert decided == [3, 6]  # two (max_reruns) re-runs, then no more
     assert Method().max_reruns == 2
     notes = []
     for i in decided:
-        nxt = recs[i - 1].extra["next"]
+        nxt = recs[i - 1].to_dict()["extra"]["next"]  # as the trail keeps it
         assert set(nxt) == {"frame", "note", "from"}
         src, run = nxt["from"]
         assert src == i - RERUN_AFTER  # the iteration that made the choice
@@ -102,10 +104,17 @@ def test_a_stage_re_runs_from_the_next_best_run_at_most_max_reruns_times():
         # the next iteration runs on that frame and says why
         after = recs[i]
         assert after.frame.to_dict() == nxt["frame"]
-        assert after.extra["rerun"] == nxt["note"] and after.extra["rerun_from"] == [src, run]
+        assert after.rerun == nxt["note"] and after.rerun_from == [src, run]
         notes.append(nxt["note"])
     assert [d["message"] for k, d in events if k == "rerun"] == notes
-    assert sum("rerun" in r.extra for r in recs) == 2
+    assert sum(bool(r.rerun) for r in recs) == 2
+    # the trail keeps them in extra and reads them back typed
+    for rec in recs:
+        back = IterationRecord.from_dict(json.loads(json.dumps(rec.to_dict())))
+        assert (back.rerun, back.rerun_from) == (rec.rerun, rec.rerun_from)
+        assert (back.next_rerun is None) == (rec.next_rerun is None) and back.extra == rec.extra
+        if rec.next_rerun is not None:
+            assert back.next_rerun.to_dict() == rec.next_rerun.to_dict()
     # each iteration's rows reached the progress callback with the stage's name
     rows = [d for k, d in events if k == "row"]
     assert [(d["iteration"], d["done"], d["total"]) for d in rows] == [
@@ -121,9 +130,11 @@ def test_a_stage_paused_after_a_rerun_continues_the_rerun_count():
     count on from the last one."""
     whole, _ = _run_bowl(_bowl_run(nfev_before=7))
     first, _ = _run_bowl(_bowl_run(nfev_before=7, pause_after=4))
-    assert first.status == 2 and [r.index for r in first.records if "rerun" in r.extra] == [4]
+    assert first.status == 2 and [r.index for r in first.records if r.rerun] == [4]
     rest, _ = _run_bowl(_bowl_run(nfev_before=7, prior=first.records))
-    assert [r.extra for r in rest.records] == [r.extra for r in whole.records]
+    assert [r.to_dict()["extra"] for r in rest.records] == [
+        r.to_dict()["extra"] for r in whole.records
+    ]
     assert [r.nfev_total for r in rest.records] == [r.nfev_total for r in whole.records]
     assert rest.nfev == whole.nfev == whole.records[-1].nfev_total - 7
     assert rest.message == whole.message
@@ -149,7 +160,7 @@ def test_a_converged_stage_with_levels_edited_by_a_person_runs_on():
     )
     more = taguchi_stage(edited, ValleyEvaluator())
     assert len(more.records) == n + 1
-    assert more.records[-1].extra["rerun"] == "levels edited by a person"
+    assert more.records[-1].rerun == "levels edited by a person"
 
 
 def test_a_continued_stage_hands_over_once():
@@ -191,6 +202,9 @@ def _rec(index, cost, converged=False, deltas=(0.0,), extra=None):
         next_frame=f"frame after {index}",
         handover="",
         handback="",
+        rerun="",
+        rerun_from=None,
+        next_rerun=None,
     )
 
 
@@ -233,6 +247,7 @@ def test_a_continued_stage_starts_from_the_last_records_best():
             best_source=f"iteration {i}",
             next_frame=f"frame {i}",
             extra={},
+            next_rerun=None,
         )
         for i in (1, 2, 3)
     ]
@@ -301,6 +316,8 @@ def test_runs_tied_in_cost_are_re_conducted_in_run_order():
             best_cost=1.0,
             decision=SimpleNamespace(converged=False),
             extra={},
+            rerun="",
+            rerun_from=None,
             next_frame=frame,
             measured_costs=costs,
         )
@@ -312,7 +329,7 @@ def test_runs_tied_in_cost_are_re_conducted_in_run_order():
         src, i = _next_best(recs, run)
         assert src is recs[0]
         picked.append(i)
-        recs[k].extra["rerun_from"] = [1, i]  # a run re-conducted from is not taken again
+        recs[k].rerun_from = [1, i]  # a run re-conducted from is not taken again
     assert picked == [0, 1, 2]
 
 
@@ -323,6 +340,8 @@ def test_the_rerun_note_gives_the_last_iterations_cost(monkeypatch):
             best_cost=c,
             decision=SimpleNamespace(converged=False),
             extra={},
+            rerun="",
+            rerun_from=None,
             next_frame=SimpleNamespace(spans=lambda space: {"p": 0.2}),
             measured_costs=np.array([c, c + 1.0, c + 2.0]),
         )

@@ -14,6 +14,7 @@ from scipy.optimize import least_squares
 from spec_helpers import CurveEvaluator
 
 from tsid_fmu.doe.options import LevelingOptions
+from tsid_fmu.search.record import Rerun
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.taguchi.frame import Frame
 from tsid_fmu.search.taguchi.stage import TaguchiRun, taguchi_stage
@@ -121,11 +122,12 @@ def test_a_stage_reports_its_start_points_and_each_iteration_in_order():
     assert kept == stage.records  # each record once, in order
     centre = ev.cost(p=2.0, q=0.8)
     assert events[0] == ("start", {"stage": "valley", "cost": centre, "source": "centre"})
-    assert stage.records[0].extra["starts"] == [
+    assert stage.records[0].starts == [
         {"x": {"p": 2.0, "q": 0.8}, "cost": centre, "source": "centre"},
         {"x": {"p": 9.0, "q": 9.0}, "cost": ev.cost(p=9.0, q=9.0), "source": "far"},
     ]
-    assert all("starts" not in r.extra for r in stage.records[1:])
+    assert all(not r.starts for r in stage.records[1:])
+    assert all("starts" not in r.to_dict()["extra"] for r in stage.records[1:])
     begun = [d for k, d in events if k == "iteration"]
     done = [d["record"] for k, d in events if k == "iteration done"]
     assert [d["iteration"] for d in begun] == list(range(1, len(stage.records) + 1))
@@ -175,27 +177,28 @@ def test_a_stage_paused_before_its_first_iteration_has_no_answer():
 
 
 def test_a_stage_continued_after_a_pending_rerun_or_edited_levels_starts_from_them():
-    """The trail keeps a decided re-run in the last record (``extra["next"]``) and a
-    person may edit the next levels (``override``): a continued stage runs its next
-    iteration on those levels and says so in the record."""
+    """The trail keeps a decided re-run in the last record (``next_rerun``; ``extra["next"]``
+    in its JSON) and a person may edit the next levels (``override``): a continued stage
+    runs its next iteration on those levels and says so in the record."""
     done = taguchi_stage(_valley_run(max_iterations=3), ValleyEvaluator())
     prior = copy.deepcopy(done.records)
     for r in prior:
         r.decision.converged = False
     chosen = prior[0].frame
-    prior[-1].extra["next"] = {"frame": chosen.to_dict(), "note": "re-run note", "from": [1, 2]}
+    prior[-1].next_rerun = Rerun(chosen, "re-run note", [1, 2])
     nfev = prior[-1].nfev_total
     run = _valley_run(prior=prior, nfev_before=nfev, max_iterations=4)
     rec = taguchi_stage(run, ValleyEvaluator()).records[-1]
     assert rec.index == 4 and rec.frame.level_values(run.space) == chosen.level_values(run.space)
-    assert rec.extra["rerun"] == "re-run note" and rec.extra["rerun_from"] == [1, 2]
+    assert rec.rerun == "re-run note" and rec.rerun_from == [1, 2]
     # levels edited by a person replace the decided ones, without a re-run origin
     prior = copy.deepcopy(done.records)
     for r in prior:
         r.decision.converged = False
     edited = _valley_run(prior=prior, nfev_before=nfev, max_iterations=4, override=chosen)
     rec = taguchi_stage(edited, ValleyEvaluator()).records[-1]
-    assert rec.extra["rerun"] == "levels edited by a person" and "rerun_from" not in rec.extra
+    assert rec.rerun == "levels edited by a person" and rec.rerun_from is None
+    assert "rerun_from" not in rec.to_dict()["extra"]
     assert rec.frame.level_values(run.space) == chosen.level_values(run.space)
     # the best so far is carried into the continued stage: never worse than before
     assert rec.best_cost <= prior[-1].best_cost

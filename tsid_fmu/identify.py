@@ -358,7 +358,7 @@ def _of_structure(study: Study, found: StructureResult) -> list:
     if found.paused or not found.candidates:
         return list(study.parameters)
     pick = found.candidates[found.chosen]
-    active = set(pick.active) | set(pick.extra.get("free", ()))
+    active = set(pick.active) | set(pick.free)
     return [p for p in study.parameters if p.name in active] or list(study.parameters)
 
 

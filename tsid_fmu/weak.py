@@ -22,7 +22,7 @@ determined by the data."""
 
 def poor_fit(answer: Any) -> list[str]:
     """Return the warning for an answer still far above the noise after the restarts."""
-    poor = answer.extra.get("poor_fit")
+    poor = answer.poor_fit
     if not poor:
         return []
     if poor.get("horizons_agree"):

@@ -120,12 +120,12 @@ def refinement(
     study = ctx.study
     start = {n: float(start[n]) for n in study.parameter_names}
     done = ctx.store.stage(key)
-    if done is not None and done.extra.get("start") == start:
+    if done is not None and done.start == start:
         return done
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
     result = polish(name, study, start, evaluator, ctx.progress)
     result.experiments = list(exps)
-    result.extra["start"] = start
+    result.start = start
     ctx.store.write_stage(key, result)
     return result
 

@@ -146,7 +146,7 @@ def _phases(ctx: Context, stages: list[StageResult]) -> list[Phase]:
         plan = plan_phases(study, ctx.evaluators)
         ctx.store.write_stage("contribution", plan)
     stages.append(plan)
-    return [Phase(**p) for p in plan.extra["phases"]]
+    return [Phase(**dataclasses.asdict(p)) for p in plan.phases or []]
 
 
 def _phase_stage(

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -18,7 +19,15 @@ from tsid_fmu.search.taguchi.frame import Frame
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["IterationRecord", "json_float", "unjson_float"]
+__all__ = [
+    "IterationRecord",
+    "Kept",
+    "Rerun",
+    "json_float",
+    "kept_json",
+    "kept_values",
+    "unjson_float",
+]
 
 
 def json_float(x: float) -> float | None:
@@ -29,6 +38,92 @@ def json_float(x: float) -> float | None:
 def unjson_float(x: float | None) -> float:
     """Inverse of :func:`json_float` (``None`` reads back as ``inf``)."""
     return math.inf if x is None else float(x)
+
+
+def _same(v: Any) -> Any:
+    return v
+
+
+@dataclass(frozen=True)
+class Kept:
+    """How a typed attribute of a record or stage is kept in its JSON ``extra``.
+
+    The search reads the attribute; only :func:`kept_json` and :func:`kept_values` (the
+    trail's boundary) read or write the key.
+    """
+
+    attr: str
+    key: str
+    encode: Callable[[Any], Any] = _same
+    decode: Callable[[Any], Any] = _same
+
+
+def _unset(obj: Any, attr: str) -> bool:
+    """Whether a kept attribute holds its default (it is then not written).
+
+    An empty list where the default is None is kept: it says "none", not "not made".
+    """
+    f = next(f for f in dataclasses.fields(obj) if f.name == attr)
+    default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+    v = getattr(obj, attr)
+    return v is None if default is None else bool(v == default)
+
+
+def kept_json(obj: Any, kept: Sequence[Kept], extra: Mapping[str, Any]) -> dict[str, Any]:
+    """Return ``extra`` with each set attribute of ``kept`` in its JSON form."""
+    out = dict(extra)
+    for k in kept:
+        if not _unset(obj, k.attr):
+            out[k.key] = k.encode(getattr(obj, k.attr))
+    return out
+
+
+def kept_values(extra: dict[str, Any], kept: Sequence[Kept]) -> dict[str, Any]:
+    """Pop the keys of ``kept`` from ``extra``; return the attributes they hold."""
+    return {k.attr: k.decode(extra.pop(k.key)) for k in kept if extra.get(k.key) is not None}
+
+
+@dataclass
+class Rerun:
+    """The re-run an iteration sends its stage to: from a next-best run (MISO paper).
+
+    Attributes
+    ----------
+    frame : Frame
+        The levels of the re-run, centred on that run.
+    note : str
+        Why, in words (the next iteration's ``rerun``).
+    origin : list of int
+        ``[iteration, run]`` of the run it starts from.
+    """
+
+    frame: Frame
+    note: str
+    origin: list[int]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form (``extra["next"]`` in the trail)."""
+        return {"frame": self.frame.to_dict(), "note": self.note, "from": list(self.origin)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Rerun:
+        """Inverse of :meth:`to_dict`."""
+        return cls(Frame.from_dict(d["frame"]), str(d["note"]), [int(i) for i in d["from"]])
+
+
+def _starts(starts: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    return [dict(s) for s in starts]
+
+
+_KEPT = (
+    Kept("handover", "handover", str, str),
+    Kept("handback", "handback", str, str),
+    Kept("rerun", "rerun", str, str),
+    Kept("rerun_from", "rerun_from", list, lambda v: [int(i) for i in v]),
+    Kept("starts", "starts", _starts, _starts),
+    Kept("next_rerun", "next", Rerun.to_dict, Rerun.from_dict),
+)
+"""The record's typed attributes kept in its JSON ``extra``."""
 
 
 @dataclass
@@ -75,14 +170,27 @@ class IterationRecord:
     next_frame : Frame
         The factors and levels proposed for the next iteration.
     extra : dict
-        Notes for the report and the trail: re-runs from the next-best run, a person's
-        choices.
+        Notes for the report and the trail (the arrays' description, a structure's
+        discrete tables); no decision of the search reads them.
     handover : str
         Why the stage handed over to the refinement after this iteration ("" where it
-        did not); kept in the trail as ``extra["handover"]``.
+        did not).
     handback : str
-        Why a continued stage handed back to the refinement ("" where it did not);
-        ``extra["handback"]`` in the trail.
+        Why a continued stage handed back to the refinement ("" where it did not).
+    rerun : str
+        Why this iteration re-runs from elsewhere ("" where it goes on from the last).
+    rerun_from : list of int or None
+        ``[iteration, run]`` of the next-best run it re-runs from (None where it does
+        not: an edit by a person, or no re-run).
+    starts : list of dict
+        The start points the stage scored before its first iteration: ``{"x", "cost",
+        "source"}`` each (empty after the first iteration).
+    next_rerun : Rerun or None
+        The re-run it sends the stage to next (None where the stage goes on from its
+        ``next_frame``).
+
+    The typed attributes are kept in ``extra`` in the trail under their own names
+    (``next_rerun`` as ``"next"``), by :meth:`to_dict` and :meth:`from_dict` alone.
     """
 
     index: int
@@ -107,6 +215,10 @@ class IterationRecord:
     extra: dict[str, Any] = field(default_factory=dict)
     handover: str = ""
     handback: str = ""
+    rerun: str = ""
+    rerun_from: list[int] | None = None
+    starts: list[dict[str, Any]] = field(default_factory=list)
+    next_rerun: Rerun | None = None
 
     @property
     def names(self) -> list[str]:
@@ -221,11 +333,7 @@ class IterationRecord:
             "nfev": self.nfev,
             "nfev_total": self.nfev_total,
             "next_frame": self.next_frame.to_dict(),
-            "extra": {
-                **self.extra,
-                **({"handover": self.handover} if self.handover else {}),
-                **({"handback": self.handback} if self.handback else {}),
-            },
+            "extra": kept_json(self, _KEPT, self.extra),
         }
 
     @classmethod
@@ -254,7 +362,6 @@ class IterationRecord:
             nfev=int(d["nfev"]),
             nfev_total=int(d["nfev_total"]),
             next_frame=Frame.from_dict(d["next_frame"]),
+            **kept_values(extra, _KEPT),
             extra=extra,
-            handover=str(extra.pop("handover", "") or ""),
-            handback=str(extra.pop("handback", "") or ""),
         )

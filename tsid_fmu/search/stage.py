@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from tsid_fmu.search.outcome import LocalStop, Stationarity
-from tsid_fmu.search.record import IterationRecord, json_float, unjson_float
+from tsid_fmu.search.record import (
+    IterationRecord,
+    Kept,
+    json_float,
+    kept_json,
+    kept_values,
+    unjson_float,
+)
+from tsid_fmu.study.schema import Phase
 
 __all__ = ["KINDS", "StageResult"]
 
@@ -59,22 +68,42 @@ class StageResult:
         Stage-specific details for the report and the trail (a refinement's counts, a
         phase's parameters); no decision of the search reads them.
     stationarity : Stationarity or None
-        The stationarity test made at the answer (None where none was made); written
-        into ``extra["stationarity"]`` by :meth:`to_dict`.
+        The stationarity test made at the answer (None where none was made).
     stop : LocalStop
-        Why a refinement stopped (``LocalStop.NONE`` for other stages); written into
-        ``extra["stop"]``.
+        Why a refinement stopped (``LocalStop.NONE`` for other stages).
     parallel : list or None
         A refinement's last Jacobian's parallel pairs, ``[name_i, name_j, ratio]`` each,
         kept where the refinement in combinations reads them
         (:mod:`~tsid_fmu.search.local.combined`); None where none were kept.
-        ``extra["parallel"]``.
     pairs : list or None
         The combinations this stage refined in, in the same form; None for a stage that
-        did not. ``extra["pairs"]``.
+        did not.
     agrees : str
         The stage whose answer this one (the refinement after the horizons) reached
-        again ("" where none). ``extra["agrees"]``.
+        again ("" where none).
+    start : dict or None
+        Where a local stage started (a finished one from the same start is read back
+        on ``--resume``); None where not recorded.
+    start_cost : float or None
+        The cost there.
+    start_from : str
+        Where that start came from, in words ("" where not said).
+    resumed : str
+        Why a handed-over Taguchi stage was continued ("" where it was not).
+    crawled : dict or None
+        A refinement that stopped in a valley and was continued in the combinations: the
+        first part's stop, test, cost, simulations and answer (JSON form).
+    poor_fit : dict or None
+        An answer still far above the noise floor after the search: ``{"floor",
+        "ratio", "restarts", "horizons_agree"}`` (the warning of
+        :func:`tsid_fmu.weak.poor_fit`).
+    phases : list of Phase or None
+        The phases a ``contribution`` stage planned (MISO paper), in order.
+    held : list of str
+        The parameters a refinement held to its end: the outputs do not depend on them.
+
+    The typed attributes are kept in ``extra`` under their own names in ``result.json``
+    and the trail, by :meth:`to_dict` and :meth:`from_dict` alone.
     """
 
     name: str
@@ -92,6 +121,14 @@ class StageResult:
     parallel: list[list] | None = None
     pairs: list[list] | None = None
     agrees: str = ""
+    start: dict[str, float] | None = None
+    start_cost: float | None = None
+    start_from: str = ""
+    resumed: str = ""
+    crawled: dict[str, Any] | None = None
+    poor_fit: dict[str, Any] | None = None
+    phases: list[Phase] | None = None
+    held: list[str] = field(default_factory=list)
 
     @property
     def converged(self) -> bool:
@@ -115,16 +152,9 @@ class StageResult:
 
     def _extra_json(self) -> dict[str, Any]:
         """Return ``extra`` with the typed outcomes in their JSON form."""
-        out = dict(self.extra)
-        if self.stationarity is not None:
-            out["stationarity"] = self.stationarity.to_dict()
-        if self.stop is not LocalStop.NONE or self.kind == "refinement":
-            out["stop"] = self.stop.value
-        for key in ("parallel", "pairs"):
-            if getattr(self, key) is not None:
-                out[key] = [list(p) for p in getattr(self, key)]
-        if self.agrees:
-            out["agrees"] = self.agrees
+        out = kept_json(self, _KEPT, self.extra)
+        if self.kind == "refinement":
+            out["stop"] = self.stop.value  # a refinement always says why it stopped
         return out
 
     @classmethod
@@ -136,9 +166,6 @@ class StageResult:
         An unknown ``stop`` (a trail written by another version) reads as ``NONE``.
         """
         extra = dict(d.get("extra", {}))
-        test = Stationarity.from_dict(extra.pop("stationarity", None))
-        stop = str(extra.pop("stop", "") or "")
-        parallel, pairs = extra.pop("parallel", None), extra.pop("pairs", None)
         return cls(
             name=str(d["name"]),
             kind=str(d["kind"]),
@@ -149,10 +176,52 @@ class StageResult:
             status=int(d.get("status", 0)),
             records=list(records or []),
             experiments=list(d.get("experiments", [])),
+            **kept_values(extra, _KEPT),
             extra=extra,
-            stationarity=test,
-            stop=LocalStop(stop) if stop in set(LocalStop) else LocalStop.NONE,
-            parallel=[list(p) for p in parallel] if parallel is not None else None,
-            pairs=[list(p) for p in pairs] if pairs is not None else None,
-            agrees=str(extra.pop("agrees", "") or ""),
         )
+
+
+_STOPS = frozenset(LocalStop)
+
+
+def _stop(v: Any) -> LocalStop:
+    """Read a ``stop`` back; one another version wrote reads as ``NONE``."""
+    return LocalStop(v) if v in _STOPS else LocalStop.NONE
+
+
+def _pairs(v: list) -> list[list]:
+    return [list(p) for p in v]
+
+
+def _point(v: Mapping[str, float]) -> dict[str, float]:
+    return {str(k): float(x) for k, x in v.items()}
+
+
+def _cost(v: float | None) -> float | None:
+    return json_float(v) if v is not None else None
+
+
+def _phases_json(v: list[Phase]) -> list[dict[str, Any]]:
+    return [dataclasses.asdict(p) for p in v]
+
+
+def _phases(v: list[Mapping[str, Any]]) -> list[Phase]:
+    return [Phase(**p) for p in v]
+
+
+_KEPT = (
+    Kept("stationarity", "stationarity", Stationarity.to_dict, Stationarity.from_dict),
+    Kept("stop", "stop", lambda s: s.value, _stop),
+    Kept("parallel", "parallel", _pairs, _pairs),
+    Kept("pairs", "pairs", _pairs, _pairs),
+    Kept("agrees", "agrees", str, str),
+    Kept("start", "start", _point, _point),
+    Kept("start_cost", "start_cost", _cost, float),
+    Kept("start_from", "start_from", str, str),
+    Kept("resumed", "resumed", str, str),
+    Kept("crawled", "crawled", dict, dict),
+    Kept("poor_fit", "poor_fit", dict, dict),
+    Kept("phases", "phases", _phases_json, _phases),
+    Kept("held", "held", list, list),
+)
+"""The stage's typed attributes kept in its JSON ``extra``."""

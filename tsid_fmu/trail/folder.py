@@ -203,11 +203,7 @@ class Trail:
         if not path.exists():
             return None
         frame = read_next_levels(path, space)
-        proposed = (
-            Frame.from_dict(record.extra["next"]["frame"])
-            if "next" in record.extra
-            else record.next_frame
-        )
+        proposed = record.next_rerun.frame if record.next_rerun else record.next_frame
         same = frame.to_dict()["factors"] == proposed.to_dict()["factors"] and (
             frame.axis_aligned
             or (list(frame.centre) == list(proposed.centre) and frame.anchor == proposed.anchor)
@@ -242,9 +238,9 @@ class Trail:
         atomic_write(d / "response_means.csv", record.response_means.to_pandas().to_csv())
         atomic_write(d / "anova.csv", record.anova.to_pandas().to_csv())
         write_json(d / "decision.json", record.decision.to_dict())
-        nxt = record.extra.get("next")
-        frame = Frame.from_dict(nxt["frame"]) if nxt else record.next_frame
-        note = nxt["note"] if nxt else record.decision.message
+        nxt = record.next_rerun
+        frame = nxt.frame if nxt else record.next_frame
+        note = nxt.note if nxt else record.decision.message
         atomic_write(d / "next_levels.toml", write_next_levels(d, record, space, frame, note))
         if self.on_iteration is not None:
             self.on_iteration(d, record, space)

@@ -109,7 +109,7 @@ def _points(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float]
             costs = rec.measured_costs
             for row, cost in zip(rec.sets, costs, strict=True):
                 out.append((float(cost), dict(zip(rec.parameters, map(float, row), strict=True))))
-            for start in rec.extra.get("starts", []):
+            for start in rec.starts:
                 if start.get("cost") is not None:
                     out.append((float(start["cost"]), dict(start["x"])))
     return [(c, x) for c, x in out if math.isfinite(c)]
@@ -118,7 +118,7 @@ def _points(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float]
 def start_sets(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float], str]]:
     """Return the start points the first Taguchi stage scored: (cost, set, source)."""
     first = next((s for s in stages if s.kind == "taguchi" and s.records), None)
-    starts = first.records[0].extra.get("starts", []) if first is not None else []
+    starts = first.records[0].starts if first is not None else []
     out = [(float(s["cost"]), dict(s["x"]), str(s["source"])) for s in starts if s.get("cost")]
     return sorted((p for p in out if math.isfinite(p[0])), key=lambda p: p[0])
 

@@ -342,9 +342,8 @@ def refine_in_combinations(
     name = f"refinement in the combinations the data fix: {what}"
     if gate is not None and gate.holds:
         message = f"least squares in the combinations; stationary: {gate.detail}"
-        extra = {"start_cost": float(answer.cost)}
-        lower = StageResult(name, "refinement", xb, cost, 0, message, 0, extra=extra)
-        lower.stationarity = gate
+        lower = StageResult(name, "refinement", xb, cost, 0, message, 0, stationarity=gate)
+        lower.start_cost = float(answer.cost)
     else:  # the test in the usual coordinates decides
         lower = settle(name, short(study), xb, ev, progress)
     lower.nfev = ev.nfev - n0

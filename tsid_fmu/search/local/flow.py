@@ -86,7 +86,7 @@ def local_search(
     if why and first.kind == "taguchi" and any(r.handover for r in first.records):
         note(ctx, f"{why}: the Taguchi stage goes on")
         stages[0] = resume(first.records, stages[-1].cost)
-        stages[0].extra["resumed"] = why
+        stages[0].resumed = why
         if stages[0].status == 2:
             return stages
         if stages[0].cost < stages[-1].cost:
@@ -97,7 +97,7 @@ def local_search(
     if floor > 0 and answer.cost > POOR_FIT * floor:
         ratio = answer.cost / floor
         agreed = any(s.agrees for s in stages)
-        answer.extra["poor_fit"] = {
+        answer.poor_fit = {
             "floor": floor,
             "ratio": ratio,
             "restarts": restarts,
@@ -138,13 +138,13 @@ def _in_combinations(
     answer = answer_stage(stages)
     start = {n: float(answer.x[n]) for n in ctx.study.parameter_names}
     done = ctx.store.stage(key)
-    if done is not None and done.extra.get("start") == start:
+    if done is not None and done.start == start:
         return _continued(ctx, stages, answer, done, key)
     lower, _ = refine_in_combinations(ctx.study, ctx.evaluators, stages, ctx.progress)
     if lower is None:
         return stages
     lower.experiments = list(exps)
-    lower.extra["start"] = start
+    lower.start = start
     if lower.status != 2:  # a paused one is run again on --resume
         ctx.store.write_stage(key, lower)
     return _continued(ctx, stages, answer, lower, key)
@@ -158,7 +158,7 @@ def _continued(
     A refinement stopped in a valley along parallel columns (``stop`` ``VALLEY``,
     :mod:`~tsid_fmu.search.local.problem`) is not finished: the refinement in the
     combination is its continuation, so the two are one stage, with their simulations
-    summed, the continuation's answer and test, and the stop in ``extra["crawled"]``.
+    summed, the continuation's answer and test, and the first part in ``crawled``.
     Where the trust region stops along the valley depends on the last digits of its
     arithmetic (another BLAS kernel: 18605 against 18622 on the SISO example, 94
     against 102 runs), so a stage ending there would report a figure that the data
@@ -174,8 +174,8 @@ def _continued(
     kept = {"stop": crawled.stop.value}
     if crawled.stationarity is not None:
         kept["stationarity"] = crawled.stationarity.to_dict()
-    if "start_cost" in crawled.extra:
-        kept["start_cost"] = crawled.extra["start_cost"]
+    if crawled.start_cost is not None:
+        kept["start_cost"] = crawled.start_cost
     stages[-1] = StageResult(
         name=crawled.name,
         kind=crawled.kind,
@@ -186,16 +186,14 @@ def _continued(
         status=lower.status,
         records=crawled.records,
         experiments=list(lower.experiments or crawled.experiments),
-        extra={
-            **{k: v for k, v in lower.extra.items() if k != "start"},
-            "start": crawled.extra.get("start", lower.extra.get("start")),
-            "start_cost": crawled.extra.get("start_cost", lower.extra.get("start_cost")),
-            "crawled": kept | {"cost": crawled.cost, "nfev": crawled.nfev, "x": dict(crawled.x)},
-        },
+        extra=dict(lower.extra),
         stationarity=lower.stationarity,
         stop=lower.stop,
         parallel=lower.parallel,
         pairs=lower.pairs,
+        start=crawled.start if crawled.start is not None else lower.start,
+        start_cost=crawled.start_cost if crawled.start_cost is not None else lower.start_cost,
+        crawled=kept | {"cost": crawled.cost, "nfev": crawled.nfev, "x": dict(crawled.x)},
     )
     ctx.store.write_stage(f"{key}_continued", stages[-1])
     return stages
@@ -251,14 +249,15 @@ def _horizon_stage(
     """Refine on a shortened record (a finished one from the same start is read back)."""
     start = {n: float(start[n]) for n in ctx.study.parameter_names}
     done = ctx.store.stage(key)
-    if done is not None and done.extra.get("start") == start:
+    if done is not None and done.start == start:
         return done
     share = f"{100 * fraction:.3g} %"
     name = f"refinement on the first {share} of the data"
     result = polish(name, ctx.study, start, evaluator, ctx.progress)
     result.kind = "horizon"
     result.message = f"cost over the first {share} of each experiment's samples; {result.message}"
-    result.extra.update(start=start, fraction=fraction)
+    result.start = start
+    result.extra["fraction"] = fraction
     ctx.store.write_stage(key, result)
     return result
 
@@ -267,7 +266,7 @@ def _restarts(ctx: Context, stages: list[StageResult], floor: float, exps: list[
     """Refine from the start points, then from the next-best runs, while unsettled.
 
     At most ``max_reruns`` restarts; returns how many ran. An answer still a poor fit
-    after the search is recorded (``extra["poor_fit"]``): the warnings then say that
+    after the search is recorded (``poor_fit``): the warnings then say that
     the search found no better basin.
     """
     study = ctx.study
@@ -277,7 +276,7 @@ def _restarts(ctx: Context, stages: list[StageResult], floor: float, exps: list[
         why = _unsettled(stages, floor)
         if why is None:
             break
-        explored = [s.extra["start"] for s in stages if "start" in s.extra]
+        explored = [s.start for s in stages if s.start is not None]
         explored += [s.x for s in stages if s.kind == "refinement"]
         found = restart_start(stages, space, explored, starts_first=True)
         if found is None:
@@ -295,7 +294,7 @@ def check(ctx: Context, last: StageResult) -> StageResult:
     exps = study.identify_names()
     done = ctx.store.stage("check")
     x = {n: float(last.x[n]) for n in study.parameter_names}
-    if done is not None and done.extra.get("start") == x:
+    if done is not None and done.start == x:
         return done
     evaluator = ctx.evaluators.get(study.parameter_names, exps, {})
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
@@ -311,8 +310,8 @@ def check(ctx: Context, last: StageResult) -> StageResult:
         message=test.detail,
         status=0 if test.holds else 1,
         experiments=exps,
-        extra={"start": x},
         stationarity=test,
+        start=x,
     )
     ctx.store.write_stage("check", result)
     return result

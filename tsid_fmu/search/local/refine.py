@@ -155,16 +155,18 @@ def _again_wider(
     return status, f"{message}; again with difference steps that beat the FMU's noise: {again}"
 
 
-def _released(problem: _Problem, space: Space, extra: dict[str, Any], message: str) -> str:
-    """Say which parameters the refinement held to the end, and which it freed."""
+def _released(problem: _Problem, space: Space, message: str) -> tuple[str, list[str]]:
+    """Say which parameters the refinement held to the end, and which it freed.
+
+    Returns the message and the names held.
+    """
     if problem.freed:
         message += f"; freed {', '.join(problem.freed)} where the outputs began to depend on it"
     held = _held(problem, space)
     if held:
-        extra["held"] = held
         them = "it" if len(held) == 1 else "them"
         message += f"; held {', '.join(held)}: the outputs do not depend on {them}"
-    return message
+    return message, held
 
 
 def _held(problem: _Problem, space: Space) -> list[str]:
@@ -313,15 +315,12 @@ def refine_stage(
     n0 = evaluator.nfev
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
-    extra: dict[str, Any] = {
-        "method": "scipy.optimize.least_squares(method='trf')",
-        "start_cost": float(start_cost),
-    }
+    extra: dict[str, Any] = {"method": "scipy.optimize.least_squares(method='trf')"}
     problem, s0 = _problem_at(space, start, start_cost, evaluator, limit, fixed, start_residuals)
     status, message = _solve(problem, s0, space, limit, extra)
     if status == 0 and problem.spoiled and problem.doubtful(floor):
         status, message = _again_wider(problem, space, limit, extra, message)
-    message = _released(problem, space, extra, message)
+    message, held = _released(problem, space, message)
     gate, parallel = _tested(space, problem, fixed, floor, method.leveling.tolerance, extra)
     (cost, x), nfev = problem.best, evaluator.nfev - n0
     if status == 0 and not gate.holds:
@@ -341,4 +340,6 @@ def refine_stage(
         stationarity=gate,
         stop=problem.stop,
         parallel=parallel,
+        start_cost=float(start_cost),
+        held=held,
     )

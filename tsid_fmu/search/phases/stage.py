@@ -81,9 +81,9 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
     Returns
     -------
     StageResult
-        A ``contribution`` stage; ``extra`` holds ``phases`` (list of dicts),
-        ``input`` (the input contribution table), ``percent`` and ``groups`` per
-        experiment.
+        A ``contribution`` stage with its ``phases``; ``extra`` holds, for the report,
+        ``input`` (the input contribution table), ``percent``, ``runs`` and ``groups``
+        per experiment.
     """
     opts = study.contribution
     ident = study.identify_names()
@@ -124,7 +124,6 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
         remaining = [n for n in remaining if n not in mine]
     for i, ph in enumerate(phases):
         ph.name = f"phase {i + 1}"
-    extra["phases"] = [dataclasses.asdict(p) for p in phases]
     what = "; ".join(
         f"{p.name}: {', '.join(p.parameters)} on {', '.join(p.experiments)}" for p in phases
     )
@@ -137,6 +136,7 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
         message=f"{len(phases)} phases planned ({what})",
         experiments=ident,
         extra=extra,
+        phases=phases,
     )
 
 

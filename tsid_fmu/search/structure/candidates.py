@@ -289,7 +289,7 @@ def identify_candidate(
     found = measure_in(ctx.study, evs, {n: float(answer.x[n]) for n in names})
     cand = Candidate(label="", values=dict(values), x={}, cost=math.inf, chi2=math.inf, n=0,
                      k=0, active=[], nfev=sum(s.nfev for s in stages), origin=origin,
-                     extra={"folder": f"structure_{i + 1:02d}", "tried": tried})  # fmt: skip
+                     folder=f"structure_{i + 1:02d}", tried=tried)  # fmt: skip
     update(cand, found)
     return cand, stages
 

@@ -38,8 +38,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from tsid_fmu.numerics.tuning import MAX_ALL, MAX_CANDIDATES
 from tsid_fmu.search.context import Context
 from tsid_fmu.search.local.combined import refine_in_combinations
@@ -226,7 +224,7 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
         )
         cand.nfev += n_probe + n_embed
         cand.label = _label(factors, values)
-        cand.extra["free"] = list(active)  # free at the arrays' best point, off any bound
+        cand.free = list(active)  # free at the arrays' best point, off any bound
         cands.append(cand)
         all_stages.append(stages)
         studies.append(sub)
@@ -236,16 +234,16 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
 
     def restart(i: int, start: dict[str, float], why: str) -> bool:
         cand, names = cands[i], studies[i].parameter_names
-        if start in cand.extra.get("tried", []):
+        if start in cand.tried:
             return False  # refined from there already (the nesting unchanged since)
         ev = evs[i].get(names, studies[i].identify_names(), {})
         n_restart = sum(1 for s in all_stages[i] if s.name.startswith("restart")) + 1
         stage = settle(f"restart {n_restart}: {why}", short(studies[i]), start, ev, ctx.progress)
-        cand.extra.setdefault("tried", []).append(dict(start))
+        cand.tried.append(dict(start))
         cand.nfev += stage.nfev
         if not stage.cost < cand.cost:
             return False
-        ctx.store.write_stage(f"{cand.extra['folder']}/restart_{n_restart:02d}", stage)
+        ctx.store.write_stage(f"{cand.folder}/restart_{n_restart:02d}", stage)
         all_stages[i].append(stage)
         update(cand, measure_in(ctx.study, evs[i], stage.x))
         cand.origin += f"; restarted {why}"
@@ -295,13 +293,13 @@ def _leave(
     for s, r in sorted(degenerate - left):
         left.add((s, r))
         big, small, sub = cands[r], cands[s], studies[r]
-        if not np.size(big.extra.get("residuals", [])) or not math.isfinite(big.cost):
+        if big.residuals is None or not big.residuals.size or not math.isfinite(big.cost):
             continue  # a failed answer: nothing to test from
         names = sub.parameter_names
         extra = [n for n in big.active if n not in small.active]
         ev = evs[r].get(names, sub.identify_names(), {})
         gap, point, runs = score_step(
-            ev, names, big.x, big.extra["residuals"], extra, sub.first_levels(), sub.bounds()
+            ev, names, big.x, big.residuals, extra, sub.first_levels(), sub.bounds()
         )
         big.nfev += runs
         if not significant(gap, big.chi2, big.n):
@@ -320,7 +318,7 @@ def _combinations(ctx: Context, i: int, found: tuple) -> None:
     lower, runs = refine_in_combinations(studies[i], evs[i], all_stages[i], ctx.progress)
     cands[i].nfev += runs
     if lower is not None:
-        ctx.store.write_stage(f"{cands[i].extra['folder']}/combinations", lower)
+        ctx.store.write_stage(f"{cands[i].folder}/combinations", lower)
         all_stages[i].append(lower)
         update(cands[i], measure_in(ctx.study, evs[i], lower.x))
         cands[i].origin += "; refined in the combinations the data fix"

@@ -76,7 +76,7 @@ def _reproduce(
         moved = dict(base)
         near = _near_bounds(study, base, extra)
         if near:
-            rest, gap = _at_bounds(ev, study, moved, near, small.extra["residuals"])
+            rest, gap = _at_bounds(ev, study, moved, near, small.residuals)
             if gap <= tol:
                 return True, moved
             free = [n for n in extra if n not in near or n in rest]
@@ -88,7 +88,7 @@ def _reproduce(
     bounds = study.bounds()
     low = {**base, **{n: float(bounds[n][0]) for n in extra}}
     finite = all(math.isfinite(low[n]) for n in extra)
-    if finite and _gap(ev, low, small.extra["residuals"]) <= tol:
+    if finite and _gap(ev, low, small.residuals) <= tol:
         return True, low
     moved = dict(base)
     rest, gap = _at_values(ev, study, small, moved, extra)
@@ -137,7 +137,7 @@ def _at_values(
     """
     units = study_units(study)  # the FMU's model description, read once
     values = {n: _nesting_values(study, small, n, units) for n in extra}
-    return _move(ev, base, values, small.extra["residuals"])
+    return _move(ev, base, values, small.residuals)
 
 
 def _near_bounds(study: Study, x: Mapping[str, float], names: list[str]) -> list[str]:
@@ -179,7 +179,7 @@ def _fit_extra(
     approached without end, and measured on the SISO friction laws a fit run to its
     limit cost 40 to 80 runs where the gap was within ``tol`` after a few.
     """
-    r_small = small.extra["residuals"]
+    r_small = small.residuals
     space = _space(study)
     bad = np.full(r_small.shape, 1e6)
     idx = [space.names.index(n) for n in extra]

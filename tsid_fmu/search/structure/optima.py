@@ -153,7 +153,7 @@ def update(cand: Candidate, measured: Mapping[str, Any]) -> None:
     """Put a measurement into a candidate (its simulations are added, not replaced)."""
     for key in ("x", "cost", "chi2", "n", "k", "active", "validation"):
         setattr(cand, key, measured[key])
-    cand.extra["residuals"] = measured["residuals"]
+    cand.residuals = measured["residuals"]
     cand.nfev += measured["nfev"]
 
 
@@ -181,7 +181,7 @@ def warm_start(
     start, source = pts[min(finite, key=lambda i: costs[i]) if finite else 0]
     stage = settle(f"refinement from {source}", study, start, ev, progress)
     stage.nfev = ev.nfev - n0
-    stage.extra["start_from"] = source
+    stage.start_from = source
     return stage, start, source
 
 
@@ -207,7 +207,7 @@ def settle(
     again = polish(name, study, x, ev, progress)
     again.nfev += stage.nfev
     again.message = f"refined twice (the first stopped short of its test): {again.message}"
-    again.extra["start_cost"] = stage.extra.get("start_cost")
+    again.start_cost = stage.start_cost
     return again
 
 

@@ -33,6 +33,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from tsid_fmu.numerics.tuning import BIC_CLOSE, LRT_ALPHA
 
 __all__ = [
@@ -88,6 +90,17 @@ class Candidate:
         Why it is a candidate (the arrays' choice, a runner-up, an open combination).
     validation : float or None
         Its cost on the validation experiments, where the study has some.
+    aic, bic, lrt_p, lrt_against, chosen, why
+        Filled by :func:`decide`.
+    free : list of str
+        The Real parameters free at the arrays' best point, off any bound.
+    folder : str
+        Its folder in the trail (``structure_NN``).
+    tried : list of dict
+        The start points it was refined from (a restart from one of them is not run
+        again).
+    residuals : numpy.ndarray or None
+        Its noise-weighted residuals at ``x`` (None until measured).
     """
 
     label: str
@@ -107,7 +120,10 @@ class Candidate:
     lrt_against: str = ""
     chosen: bool = False
     why: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
+    free: list[str] = field(default_factory=list)
+    folder: str = ""
+    tried: list[dict[str, float]] = field(default_factory=list)
+    residuals: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def parameters(self) -> list[str]:
@@ -118,7 +134,7 @@ class Candidate:
         logarithmic coordinates, 2e-16) changes nothing there, yet the structure has it.
         Nesting is judged on these (:mod:`~tsid_fmu.search.structure.nesting`).
         """
-        free = list(self.extra.get("free", ()))
+        free = list(self.free)
         return free + [n for n in self.active if n not in free]
 
     def row(self) -> dict[str, Any]:

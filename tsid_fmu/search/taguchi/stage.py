@@ -21,7 +21,7 @@ from tsid_fmu.errors import SimulationError, StudyError
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.timelimit import timed_out
 from tsid_fmu.numerics.tuning import RERUN_AFTER
-from tsid_fmu.search.record import IterationRecord, json_float
+from tsid_fmu.search.record import IterationRecord, Rerun, json_float
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.taguchi.frame import Frame
@@ -100,12 +100,12 @@ def _next_best(
     last, src = records[-1], records[-1 - RERUN_AFTER]
     if last.best_cost < src.best_cost or last.decision.converged:
         return None
-    if any("rerun" in r.extra for r in records[-RERUN_AFTER:]):
+    if any(r.rerun for r in records[-RERUN_AFTER:]):
         return None  # give a re-run its own iterations before judging it
     wide = 10 * run.method.leveling.tolerance
     if all(v <= wide for v in last.next_frame.spans(run.space).values()):
         return None  # near convergence a flat iteration is expected, not a wrong turn
-    tried = {tuple(r.extra["rerun_from"]) for r in records if "rerun_from" in r.extra}
+    tried = {tuple(r.rerun_from) for r in records if r.rerun_from is not None}
     costs = src.measured_costs
     for i in [int(i) for i in np.argsort(costs, kind="stable")][1:]:
         if np.isfinite(costs[i]) and (src.index, i) not in tried:
@@ -256,9 +256,9 @@ def _resume_point(
         frame = run.override or last.next_frame
         if run.override is not None:
             pending = (run.override_note or "levels edited by a person", None)
-        elif "next" in last.extra:
-            frame = Frame.from_dict(last.extra["next"]["frame"])
-            pending = (last.extra["next"]["note"], last.extra["next"]["from"])
+        elif last.next_rerun is not None:
+            frame = last.next_rerun.frame
+            pending = (last.next_rerun.note, last.next_rerun.origin)
     best = (
         Best(records[-1].best_x, records[-1].best_cost, records[-1].best_source)
         if records
@@ -307,7 +307,7 @@ def taguchi_stage(
         best, starts = _evaluate_starts(run, evaluator, progress)
         nfev += evaluator.nfev - n0
     handover = run.handover and not any(r.handover for r in records)
-    reruns = sum("rerun_from" in r.extra for r in records)
+    reruns = sum(r.rerun_from is not None for r in records)
     status, message, ran = 1, "", 0
     while (stop := _limits(run, len(records) + 1, nfev, ran)) is None:
         index = len(records) + 1
@@ -317,11 +317,11 @@ def taguchi_stage(
             index, run.name, frame, run.space, evaluator, run.method, best, nfev, progress
         )
         if pending is not None:
-            rec.extra["rerun"] = pending[0]
+            rec.rerun = pending[0]
             if pending[1] is not None:
-                rec.extra["rerun_from"] = list(pending[1])
+                rec.rerun_from = list(pending[1])
         if index == 1 and starts:
-            rec.extra["starts"] = starts
+            rec.starts = starts
         records.append(rec)
         best, nfev, ran = Best(rec.best_x, rec.best_cost, rec.best_source), rec.nfev_total, ran + 1
         frame, pending, ended = _decide(records, run, reruns, handover, progress)
@@ -369,7 +369,7 @@ def _decide(
     if alt is None:
         return rec.next_frame, None, None
     frame, note, origin = alt
-    rec.extra["next"] = {"frame": frame.to_dict(), "note": note, "from": origin}
+    rec.next_rerun = Rerun(frame, note, list(origin))
     return frame, (note, origin), None
 
 
