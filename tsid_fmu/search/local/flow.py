@@ -171,11 +171,8 @@ def _continued(
         stages.append(lower)
         return stages
     what = lower.name.removeprefix("refinement ")
-    kept = {"stop": crawled.stop.value}
-    if crawled.stationarity is not None:
-        kept["stationarity"] = crawled.stationarity.to_dict()
-    if crawled.start_cost is not None:
-        kept["start_cost"] = crawled.start_cost
+    part = crawled.to_dict()  # the first part as the trail keeps it
+    kept = {k: v for k, v in part["extra"].items() if k in ("stop", "stationarity", "start_cost")}
     stages[-1] = StageResult(
         name=crawled.name,
         kind=crawled.kind,
@@ -193,7 +190,7 @@ def _continued(
         pairs=lower.pairs,
         start=crawled.start if crawled.start is not None else lower.start,
         start_cost=crawled.start_cost if crawled.start_cost is not None else lower.start_cost,
-        crawled=kept | {"cost": crawled.cost, "nfev": crawled.nfev, "x": dict(crawled.x)},
+        crawled=kept | {k: part[k] for k in ("cost", "nfev", "x")},
     )
     ctx.store.write_stage(f"{key}_continued", stages[-1])
     return stages
