@@ -293,6 +293,12 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
             "fun": float(res.fun),
             "coverage": coverage(res, gp.problem.truth),
             "where": where(res),
+            # the path through the search: each stage's name, kind, simulations, cost and,
+            # for a Taguchi stage that went on after the refinement, why
+            "path": [
+                [s.name, s.kind, int(s.nfev), float(s.cost), getattr(s, "resumed", "")]
+                for s in res.stages
+            ],
             "rounds": res.extra.get("rounds"),
         },
         "LS-c": run_least_squares(scorer, np.zeros(len(scorer.names))),
