@@ -352,7 +352,7 @@ def test_a_refinement_out_of_runs_sends_the_search_back_to_the_arrays(monkeypatc
     assert not first.records[-1].handover  # it went on past the hand-over
     monkeypatch.setattr(local, "_collapsed", lambda stage: None)
     alone = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
-    assert "resumed" not in alone[0].extra and len(alone[0].records) < len(first.records)
+    assert not alone[0].resumed and len(alone[0].records) < len(first.records)
 
 
 def test_a_collapsed_trust_region_whose_test_holds_ends_the_search(monkeypatch):
@@ -369,7 +369,7 @@ def test_a_collapsed_trust_region_whose_test_holds_ends_the_search(monkeypatch):
     monkeypatch.setattr(context, "polish", collapsing)
     study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
-    assert stages[1].stationarity.holds and "resumed" not in stages[0].extra
+    assert stages[1].stationarity.holds and not stages[0].resumed
     assert [s.kind for s in stages] == ["taguchi", "refinement"]
     assert adaptive.verdict(stages)[0] == 0
 
@@ -424,7 +424,7 @@ def test_a_crawl_continued_to_an_optimum_in_its_combination_ends_the_search(monk
     monkeypatch.setattr(local, "refine_in_combinations", combined)
     study = _study({"a": [0.5, 1.5, 4.0], "k": [0.3, 1.0, 3.0]})
     stages = run_stages(study, Evaluators(_decay_evaluator()), NullStore())
-    assert "resumed" not in stages[0].extra  # the arrays did not go on
+    assert not stages[0].resumed  # the arrays did not go on
     assert stages[1].crawled["nfev"] > 0  # the combination continued the crawl
     assert adaptive.verdict(stages)[0] == 0
 
