@@ -571,6 +571,7 @@ def test_a_stationarity_test_reads_back_typed_and_an_old_trails_as_the_models():
 def test_a_stages_typed_outcomes_read_back_from_its_json_alone():
     """Each typed attribute a decision reads goes into ``extra`` under its name only in
     :meth:`StageResult.to_dict`, and reads back typed; unset ones are not written."""
+    from tsid_fmu.search.phases.contribution import Contribution
     from tsid_fmu.study.schema import Phase
 
     bare = StageResult("c", "check", {"w": 1.0}, 2.0, 3, "done")
@@ -589,3 +590,9 @@ def test_a_stages_typed_outcomes_read_back_from_its_json_alone():
     assert again.extra == {"note": 1}  # only what no decision reads stays in extra
     stage.start_cost = 0.0  # a zero is a value, not "unset"
     assert StageResult.from_dict(stage.to_dict()).start_cost == 0.0
+    # a contribution stage's tables are kept as four keys of extra of their own
+    stage.contribution = Contribution(None, {"e1": {"a": 90.0}}, {"e1": []}, {"e1": [["a"]]})
+    written = stage.to_dict()["extra"]
+    assert written["percent"] == {"e1": {"a": 90.0}} and written["groups"] == {"e1": [["a"]]}
+    again = StageResult.from_dict(json.loads(json.dumps(stage.to_dict())))
+    assert again.contribution == stage.contribution and again.extra == {"note": 1}

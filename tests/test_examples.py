@@ -122,13 +122,13 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     plan = res.stages[0]
     assert plan.kind == "contribution"
     # Step i: the force input produces the larger output, so its subsystem comes first
-    assert plan.extra["input"]["experiments"][0] == "force only"
+    assert plan.contribution.input["experiments"][0] == "force only"
     # Step ii: m1 and K_s are in the first group; m2 and C_2 do not act with the stage
     # locked, so they are left for the motion experiment
-    first = plan.extra["groups"]["force only"][0]
+    first = plan.contribution.groups["force only"][0]
     assert {"m1", "K_s"} <= set(first)
-    assert plan.extra["percent"]["force only"]["m2"] == 0
-    assert plan.extra["percent"]["force only"]["C_2"] == 0
+    assert plan.contribution.percent["force only"]["m2"] == 0
+    assert plan.contribution.percent["force only"]["C_2"] == 0
     phases = [s for s in res.stages if s.kind == "phase"]
     assert phases[0].experiments == ["force only"]
     assert any(s.experiments == ["motion only"] for s in phases)

@@ -182,7 +182,7 @@ def _contribution(result: IdentificationResult) -> str:
     for st in result.stages:
         if st.kind != "contribution":
             continue
-        percent = st.extra.get("percent", {})
+        percent = st.contribution.percent if st.contribution is not None else {}
         if percent:
             names = list(dict.fromkeys(n for v in percent.values() for n in v))
             rows = [[n, *[percent[e].get(n, math.nan) for e in percent]] for n in names]

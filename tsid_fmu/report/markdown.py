@@ -249,7 +249,7 @@ def _fidelity(result: IdentificationResult) -> list[str]:
 def _contribution(result: IdentificationResult) -> list[str]:
     lines = []
     for st in result.stages:
-        percent = st.extra.get("percent", {}) if st.kind == "contribution" else {}
+        percent = st.contribution.percent if st.contribution is not None else {}
         for exp, values in percent.items():
             if not lines:
                 lines = [

@@ -203,7 +203,8 @@ def input_contribution(stage: Any) -> list[list[Any]]:
     One row per experiment: its name, the inputs acting in it, and its output's RMS and
     range (NaN where not measured); no rows for any other stage.
     """
-    inputs = (stage.extra.get("input") or {}) if stage.kind == "contribution" else {}
+    found = getattr(stage, "contribution", None)
+    inputs = (found.input or {}) if found is not None else {}
     return [
         [
             e,

@@ -49,13 +49,21 @@ class Kept:
     """How a typed attribute of a record or stage is kept in its JSON ``extra``.
 
     The search reads the attribute; only :func:`kept_json` and :func:`kept_values` (the
-    trail's boundary) read or write the key.
+    trail's boundary) read or write the key. With ``spread``, the attribute's JSON form
+    is a dict whose items are kept as keys of ``extra`` of their own (``key`` names them,
+    comma-separated), and ``decode`` reads those of them present.
     """
 
     attr: str
     key: str
     encode: Callable[[Any], Any] = _same
     decode: Callable[[Any], Any] = _same
+    spread: bool = False
+
+    @property
+    def keys(self) -> list[str]:
+        """The keys of ``extra`` it is kept under."""
+        return self.key.split(",") if self.spread else [self.key]
 
 
 def _unset(obj: Any, attr: str) -> bool:
@@ -73,14 +81,23 @@ def kept_json(obj: Any, kept: Sequence[Kept], extra: Mapping[str, Any]) -> dict[
     """Return ``extra`` with each set attribute of ``kept`` in its JSON form."""
     out = dict(extra)
     for k in kept:
-        if not _unset(obj, k.attr):
-            out[k.key] = k.encode(getattr(obj, k.attr))
+        if _unset(obj, k.attr):
+            continue
+        v = k.encode(getattr(obj, k.attr))
+        out.update(v if k.spread else {k.key: v})
     return out
 
 
 def kept_values(extra: dict[str, Any], kept: Sequence[Kept]) -> dict[str, Any]:
     """Pop the keys of ``kept`` from ``extra``; return the attributes they hold."""
-    return {k.attr: k.decode(extra.pop(k.key)) for k in kept if extra.get(k.key) is not None}
+    out = {}
+    for k in kept:
+        held = {key: extra.pop(key) for key in k.keys if key in extra}
+        if k.spread and held:
+            out[k.attr] = k.decode(held)
+        elif held.get(k.key) is not None:
+            out[k.attr] = k.decode(held[k.key])
+    return out
 
 
 @dataclass

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tsid_fmu.search.outcome import LocalStop, Stationarity
+from tsid_fmu.search.phases.contribution import Contribution
 from tsid_fmu.search.record import (
     IterationRecord,
     Kept,
@@ -101,6 +102,9 @@ class StageResult:
         The phases a ``contribution`` stage planned (MISO paper), in order.
     held : list of str
         The parameters a refinement held to its end: the outputs do not depend on them.
+    contribution : Contribution or None
+        A ``contribution`` stage's tables (kept as ``extra``'s ``input``, ``percent``,
+        ``runs`` and ``groups``).
 
     The typed attributes are kept in ``extra`` under their own names in ``result.json``
     and the trail, by :meth:`to_dict` and :meth:`from_dict` alone.
@@ -129,6 +133,7 @@ class StageResult:
     poor_fit: dict[str, Any] | None = None
     phases: list[Phase] | None = None
     held: list[str] = field(default_factory=list)
+    contribution: Contribution | None = None
 
     @property
     def converged(self) -> bool:
@@ -223,5 +228,12 @@ _KEPT = (
     Kept("poor_fit", "poor_fit", dict, dict),
     Kept("phases", "phases", _phases_json, _phases),
     Kept("held", "held", list, list),
+    Kept(
+        "contribution",
+        "input,percent,runs,groups",
+        Contribution.to_dict,
+        Contribution.from_dict,
+        spread=True,
+    ),
 )
 """The stage's typed attributes kept in its JSON ``extra``."""

@@ -25,6 +25,7 @@ import numpy as np
 from tsid_fmu.errors import StudyError
 
 __all__ = [
+    "Contribution",
     "InputContribution",
     "ParameterContribution",
     "group_parameters",
@@ -32,6 +33,40 @@ __all__ = [
     "oat_values",
     "parameter_contribution",
 ]
+
+
+@dataclass
+class Contribution:
+    """What a ``contribution`` stage found, for the report (the phases are its plan).
+
+    Attributes
+    ----------
+    input : dict or None
+        The input contribution (Step i) as :class:`InputContribution`'s fields; None
+        with one experiment.
+    percent : dict
+        Per experiment, each parameter's % of error variation (Step ii, eq. 7).
+    runs : dict
+        Per experiment, the one-at-a-time runs behind it.
+    groups : dict
+        Per experiment, the groups of parameters it fixed, most influential first.
+    """
+
+    input: dict[str, Any] | None = None
+    percent: dict[str, dict[str, float]] = field(default_factory=dict)
+    runs: dict[str, Any] = field(default_factory=dict)
+    groups: dict[str, list[list[str]]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form: the four tables, kept as keys of the stage's extra."""
+        return {"input": self.input, "percent": self.percent, "runs": self.runs,
+                "groups": self.groups}  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Contribution:
+        """Inverse of :meth:`to_dict` (tables missing read as empty)."""
+        return cls(d.get("input"), dict(d.get("percent") or {}), dict(d.get("runs") or {}),
+                   dict(d.get("groups") or {}))  # fmt: skip
 
 
 @dataclass

@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.evaluate.spec import EvaluationSpec
 from tsid_fmu.search.phases.contribution import (
+    Contribution,
     group_parameters,
     input_contribution,
     oat_values,
@@ -81,21 +82,20 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
     Returns
     -------
     StageResult
-        A ``contribution`` stage with its ``phases``; ``extra`` holds, for the report,
-        ``input`` (the input contribution table), ``percent``, ``runs`` and ``groups``
-        per experiment.
+        A ``contribution`` stage with its ``phases`` and, for the report, its
+        ``contribution`` tables.
     """
     opts = study.contribution
     ident = study.identify_names()
     centre = centre_values(study)
-    extra: dict[str, Any] = {"input": None, "percent": {}, "groups": {}, "runs": {}}
+    found = Contribution()
     order, nfev = list(ident), 0
     if len(ident) > 1:
         spec = evaluators.spec(study.parameter_names, ident, centre)
         inc = input_contribution(
             {e.name: e.scored(e.measured) for e in spec.experiments}, _active_inputs(spec)
         )
-        extra["input"] = dataclasses.asdict(inc)
+        found.input = dataclasses.asdict(inc)
         order = inc.experiments
     remaining, phases = list(study.parameter_names), []
     for k, exp in enumerate(order):
@@ -112,14 +112,14 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
         result = evaluators.get(remaining, [exp], fixed).evaluate(sets)
         nfev += result.nfev
         pc = parameter_contribution(values, {m: centre[m] for m in remaining}, result.costs[:, 0])
-        extra["percent"][exp] = dict(pc.percent)
-        extra["runs"][exp] = pc.runs
+        found.percent[exp] = dict(pc.percent)
+        found.runs[exp] = pc.runs
         last = k == len(order) - 1
         mine = {n: p for n, p in pc.percent.items() if last or p >= opts.min_percent}
         if not mine:
             continue
         groups = group_parameters(mine, ratio=opts.group_ratio)
-        extra["groups"][exp] = groups
+        found.groups[exp] = groups
         phases += [Phase(parameters=g, experiments=[exp]) for g in groups]
         remaining = [n for n in remaining if n not in mine]
     for i, ph in enumerate(phases):
@@ -135,8 +135,8 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
         nfev=nfev,
         message=f"{len(phases)} phases planned ({what})",
         experiments=ident,
-        extra=extra,
         phases=phases,
+        contribution=found,
     )
 
 
