@@ -498,7 +498,7 @@ def test_a_local_minimum_is_left_by_following_the_data_from_its_first_part(monke
     assert stages[1].cost > 100 * LONG.size  # the refinement alone: a local minimum
     assert [s.kind for s in stages[2:]] == ["horizon"] * 3 + ["refinement"]
     assert evaluators.fractions == list(adaptive.HORIZONS)
-    assert [s.extra["fraction"] for s in stages[2:5]] == list(adaptive.HORIZONS)
+    assert [s.fraction for s in stages[2:5]] == list(adaptive.HORIZONS)
     assert stages[2].start == pytest.approx({"w": 2.4, "a": 1.0})  # the arrays' best
     answer = adaptive.answer_stage(stages)
     assert answer is stages[-1] and answer.x["w"] == pytest.approx(3.0, rel=1e-3)

@@ -11,7 +11,7 @@ from spec_helpers import CurveEvaluator
 from tsid_fmu.doe.options import LevelingOptions
 from tsid_fmu.search.local import refine
 from tsid_fmu.search.local.refine import refine_stage
-from tsid_fmu.search.outcome import LocalStop
+from tsid_fmu.search.outcome import LocalStop, SolverNotes
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
@@ -288,7 +288,7 @@ def test_an_answer_on_a_log_parameters_floor_is_tested_in_linear_coordinates():
                             start_residuals=first.residuals[0])  # fmt: skip
 
     stuck = refined({"a": 2.5, "d": 0.0})  # the simpler structure's answer: a carries a + d
-    assert stuck.extra["off_the_floor"]["parameters"] == ["d"]
+    assert stuck.solver.off_the_floor["parameters"] == ["d"]
     assert stuck.status == 1 and "on the floor" in stuck.message, stuck.message
     assert not space.floored(stuck.x)
     again = refined(stuck.x)
@@ -347,9 +347,10 @@ def test_a_floor_test_held_by_its_trials_hands_its_linear_pairs_to_the_combinati
     cost = float(first.costs[0, 0])
     problem, _ = _problem_at(space, start, cost, ev, 100, None, first.residuals[0])
     held = Stationarity(True, GN_TEST, 0.0, cost, "no decrease predicted")
-    extra: dict = {}
+    notes = SolverNotes()
     # a gate of 1e-4 of a noise floor of 1e4: the differences' own steps are no lower
-    test, pairs = refine._floor_test(space, problem, held, None, 1e4, extra)
+    test, pairs = refine._floor_test(space, problem, held, None, 1e4, notes)
+    assert notes.off_the_floor["parameters"] == ["d"]
     assert test.holds and test.decided_by == "trial" and test.by_trial
     assert [p[:2] for p in pairs] == [["a", "d"]] and abs(pairs[0][2] - 1) < 0.05
 

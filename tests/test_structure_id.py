@@ -220,7 +220,7 @@ def test_data_without_offset_choose_the_simpler_structure_by_the_likelihood_rati
     assert simple.lrt_p >= 0.05 and simple.chosen
     assert "do not support" in simple.why or "stay where they make it on=0" in simple.why
     assert simple.lrt_against == "on=1"
-    assert found.extra["nested"] == [["on=0", "on=1"]]
+    assert found.nested == [["on=0", "on=1"]]
 
 
 def test_data_with_an_offset_choose_the_richer_structure():
@@ -305,7 +305,7 @@ def test_data_of_the_simpler_structure_that_push_the_extra_term_to_its_bound_cho
     assert rich.x["c"] < 1e-9 and simple.k == 2 and rich.k == 3
     assert "c" not in rich.active
     assert found.values == {"on": 0.0} and simple.chosen and not rich.chosen
-    assert found.extra["nested"] == [["on=0", "on=1"]]
+    assert found.nested == [["on=0", "on=1"]]
     assert "nested in on=1, whose extra parameter(s) c stay where they make it on=0" in (simple.why)
     assert "stay where they make it on=0" in rich.why
 

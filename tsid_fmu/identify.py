@@ -100,7 +100,7 @@ def _annotate(folder: Path, record: IterationRecord, space: Space) -> None:
         f.name: record.frame.describe(space, f) for f in record.frame.factors if f.values is None
     }
     if describe:
-        record.extra["describe"] = describe
+        record.describe = describe
 
 
 def _compare_ungrouped(

@@ -211,7 +211,7 @@ def _structure(result: IdentificationResult) -> str:
     ]
     rows = []
     for rec in result.iterations:
-        for name, t in (rec.extra.get("discrete") or {}).items():
+        for name, t in (rec.discrete or {}).items():
             for level, label in enumerate(t["labels"]):
                 rows.append([rec.index, name, label, t["sn"][level], t["cost"][level],
                              t["f"], t["p"], "yes" if t["significant"] else "no",

@@ -28,7 +28,7 @@ ANOVA_NOTE = (
 
 def _levels(rec: IterationRecord, units: Mapping[str, str]) -> str:
     n = max(rec.n_levels)
-    describe = rec.extra.get("describe", {})
+    describe = rec.describe or {}
     rows = []
     for f in rec.frame.factors:
         if f.values is not None:

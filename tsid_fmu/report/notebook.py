@@ -228,7 +228,7 @@ def plot_main_effects(result: Any, iteration: Any = -1) -> Any:
     else:
         rec = iteration
     units = study_units(result.study)
-    return MainEffects(cost_name(result.study)).draw(rec, rec.extra.get("describe"), units)
+    return MainEffects(cost_name(result.study)).draw(rec, rec.describe, units)
 
 
 def plot_parameters(result: Any) -> Any:

@@ -95,7 +95,7 @@ def _iterations(
     for folder, rec in items:
         name = f"{folder}/main_effects.svg"
         if not writer.cached(name):
-            svg = main_effects_svg(rec, rec.extra.get("describe"), units, cost)
+            svg = main_effects_svg(rec, rec.describe, units, cost)
             writer.put(name, svg.encode())
     writer.figures.lap("main effects (SVG)", t0)
     if spec is None or simulate is None:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-__all__ = ["GN_TEST", "GN_TRIED", "LocalStop", "Stationarity"]
+__all__ = ["GN_TEST", "GN_TRIED", "LocalStop", "SolverNotes", "Stationarity"]
 
 GN_TEST = "projected Gauss-Newton"
 """The name of the projected Gauss-Newton test
@@ -137,3 +137,43 @@ class LocalStop(StrEnum):
         predicting 2.12, had failed it and gone on to the optimum.
         """
         return self in (LocalStop.VALLEY, LocalStop.LIMIT)
+
+
+@dataclass
+class SolverNotes:
+    """What the least-squares solver of a refinement reported, for the report.
+
+    Attributes
+    ----------
+    method : str
+        The solver, e.g. ``"scipy.optimize.least_squares(method='trf')"``.
+    nfev, njev : int or None
+        SciPy's own counts of residual and Jacobian evaluations (the simulations are
+        the stage's ``nfev``).
+    first_pass : dict or None
+        Where a second pass with wider difference steps ran: the first pass's stop and
+        counts.
+    off_the_floor : dict or None
+        Where the answer sat on a log floor: the parameters, and the cost the test in
+        linear coordinates reached.
+    """
+
+    method: str = ""
+    nfev: int | None = None
+    njev: int | None = None
+    first_pass: dict[str, Any] | None = None
+    off_the_floor: dict[str, Any] | None = None
+
+    KEYS = "method,nfev,njev,first_pass,off_the_floor"
+    """The keys of a stage's JSON ``extra`` they are kept under."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form: the notes that were made."""
+        out = {"method": self.method, "nfev": self.nfev, "njev": self.njev,
+               "first_pass": self.first_pass, "off_the_floor": self.off_the_floor}  # fmt: skip
+        return {k: v for k, v in out.items() if v not in (None, "")}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SolverNotes:
+        """Inverse of :meth:`to_dict`."""
+        return cls(**{k: d[k] for k in cls.KEYS.split(",") if k in d})

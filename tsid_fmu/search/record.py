@@ -139,6 +139,9 @@ _KEPT = (
     Kept("rerun_from", "rerun_from", list, lambda v: [int(i) for i in v]),
     Kept("starts", "starts", _starts, _starts),
     Kept("next_rerun", "next", Rerun.to_dict, Rerun.from_dict),
+    Kept("describe", "describe", dict, dict),
+    Kept("discrete", "discrete", dict, dict),
+    Kept("structure", "structure", list, list),
 )
 """The record's typed attributes kept in its JSON ``extra``."""
 
@@ -187,8 +190,8 @@ class IterationRecord:
     next_frame : Frame
         The factors and levels proposed for the next iteration.
     extra : dict
-        Notes for the report and the trail (the arrays' description, a structure's
-        discrete tables); no decision of the search reads them.
+        Notes a caller adds for the report and the trail; nothing of tsid-fmu's own
+        (its notes are the typed attributes below).
     handover : str
         Why the stage handed over to the refinement after this iteration ("" where it
         did not).
@@ -205,6 +208,14 @@ class IterationRecord:
     next_rerun : Rerun or None
         The re-run it sends the stage to next (None where the stage goes on from its
         ``next_frame``).
+    describe : dict or None
+        What each rotated factor moves, in words (``+0.71 lg F_vm -0.70 lg B_s``), for
+        the report's plots; None where no factor is rotated.
+    discrete : dict or None
+        In structure identification, each open discrete factor's response table and
+        labels (the report's table).
+    structure : list of dict or None
+        In structure identification, the discrete factors as they stood after it.
 
     The typed attributes are kept in ``extra`` in the trail under their own names
     (``next_rerun`` as ``"next"``), by :meth:`to_dict` and :meth:`from_dict` alone.
@@ -236,6 +247,9 @@ class IterationRecord:
     rerun_from: list[int] | None = None
     starts: list[dict[str, Any]] = field(default_factory=list)
     next_rerun: Rerun | None = None
+    describe: dict[str, str] | None = None
+    discrete: dict[str, Any] | None = None
+    structure: list[dict[str, Any]] | None = None
 
     @property
     def names(self) -> list[str]:

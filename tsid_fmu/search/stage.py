@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from tsid_fmu.search.outcome import LocalStop, Stationarity
+from tsid_fmu.search.outcome import LocalStop, SolverNotes, Stationarity
 from tsid_fmu.search.phases.contribution import Contribution
 from tsid_fmu.search.record import (
     IterationRecord,
@@ -105,6 +105,11 @@ class StageResult:
     contribution : Contribution or None
         A ``contribution`` stage's tables (kept as ``extra``'s ``input``, ``percent``,
         ``runs`` and ``groups``).
+    solver : SolverNotes or None
+        What a refinement's solver reported (kept as ``extra``'s ``method``, ``nfev``,
+        ``njev``, ``first_pass`` and ``off_the_floor``).
+    fraction : float or None
+        The share of each experiment's samples a ``horizon`` stage fitted.
 
     The typed attributes are kept in ``extra`` under their own names in ``result.json``
     and the trail, by :meth:`to_dict` and :meth:`from_dict` alone.
@@ -134,6 +139,8 @@ class StageResult:
     phases: list[Phase] | None = None
     held: list[str] = field(default_factory=list)
     contribution: Contribution | None = None
+    solver: SolverNotes | None = None
+    fraction: float | None = None
 
     @property
     def converged(self) -> bool:
@@ -235,5 +242,7 @@ _KEPT = (
         Contribution.from_dict,
         spread=True,
     ),
+    Kept("solver", SolverNotes.KEYS, SolverNotes.to_dict, SolverNotes.from_dict, spread=True),
+    Kept("fraction", "fraction", float, float),
 )
 """The stage's typed attributes kept in its JSON ``extra``."""

@@ -191,6 +191,8 @@ def _continued(
         start=crawled.start if crawled.start is not None else lower.start,
         start_cost=crawled.start_cost if crawled.start_cost is not None else lower.start_cost,
         crawled=kept | {k: part[k] for k in ("cost", "nfev", "x")},
+        held=list(lower.held),
+        solver=lower.solver,
     )
     ctx.store.write_stage(f"{key}_continued", stages[-1])
     return stages
@@ -254,7 +256,7 @@ def _horizon_stage(
     result.kind = "horizon"
     result.message = f"cost over the first {share} of each experiment's samples; {result.message}"
     result.start = start
-    result.extra["fraction"] = fraction
+    result.fraction = fraction
     ctx.store.write_stage(key, result)
     return result
 

@@ -13,7 +13,6 @@ it evaluated, so it never ends worse than it started.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -27,7 +26,7 @@ from tsid_fmu.search.local.problem import (
     _Problem,
     _problem_at,
 )
-from tsid_fmu.search.outcome import LocalStop
+from tsid_fmu.search.outcome import LocalStop, SolverNotes
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.taguchi.iteration import ProgressCallback
@@ -52,11 +51,11 @@ STOPPED = {
 
 
 def _solve(
-    problem: _Problem, s0: np.ndarray, space: Space, limit: int, extra: dict[str, Any]
+    problem: _Problem, s0: np.ndarray, space: Space, limit: int, notes: SolverNotes
 ) -> tuple[int, str]:
     """Run SciPy's trust-region least squares from ``s0``; return status and message.
 
-    Why it stopped goes into :attr:`_Problem.stop`, SciPy's counts into ``extra``.
+    Why it stopped goes into :attr:`_Problem.stop`, SciPy's counts into ``notes``.
     The first Jacobian, at ``s0``, decides which columns are held
     (:attr:`_Problem.held`): SciPy then moves only the others. A zero column makes
     its trust-region subproblem rank-deficient, and the exact Gauss-Newton step is
@@ -91,7 +90,7 @@ def _solve(
         problem.stop = LocalStop.NONE
         return 1, f"least squares could not go on ({solved.error})"
     problem.stop = LocalStop.NONE if solved.stop is Stop.MAX_NFEV else LocalStop(solved.stop)
-    extra.update(nfev=solved.nfev, njev=solved.njev)
+    notes.nfev, notes.njev = solved.nfev, solved.njev
     said = STOPPED.get(problem.stop, "it stopped")
     return 0, f"least squares: {said}"
 
@@ -132,7 +131,7 @@ def _run_free(problem: _Problem, s0: np.ndarray, space: Space) -> Solved:
 
 
 def _again_wider(
-    problem: _Problem, space: Space, limit: int, extra: dict[str, Any], message: str
+    problem: _Problem, space: Space, limit: int, notes: SolverNotes, message: str
 ) -> tuple[int, str]:
     """Run the least squares again from the best point, with steps that beat the noise.
 
@@ -149,9 +148,10 @@ def _again_wider(
     s = space.to_s(problem.best[1])
     if problem.best_r is not None:
         problem.known = (s.copy(), problem.best_r)
-    first = {"stop": problem.stop.value, **{k: extra[k] for k in ("nfev", "njev") if k in extra}}
-    status, again = _solve(problem, s, space, limit, extra)
-    extra["first_pass"] = first
+    counts = {"nfev": notes.nfev, "njev": notes.njev}
+    first = {"stop": problem.stop.value, **{k: v for k, v in counts.items() if v is not None}}
+    status, again = _solve(problem, s, space, limit, notes)
+    notes.first_pass = first
     return status, f"{message}; again with difference steps that beat the FMU's noise: {again}"
 
 
@@ -180,7 +180,7 @@ def _floor_test(
     gate: Stationarity,
     fixed: Mapping[str, float] | None,
     floor: float,
-    extra: dict[str, Any],
+    notes: SolverNotes,
 ) -> tuple[Stationarity, list[list] | None]:
     """Test the answer again in linear coordinates where it is on a log floor.
 
@@ -219,7 +219,7 @@ def _floor_test(
     except (_Budget, _Converged):
         pass
     gain = cost - trial.best[0]
-    extra["off_the_floor"] = {"parameters": floored, "cost": float(trial.best[0])}
+    notes.off_the_floor = {"parameters": floored, "cost": float(trial.best[0])}
     where = f"{', '.join(floored)} on the floor of its logarithmic coordinate"
     if gain <= problem.gate(cost, floor):
         said = f"{gate.detail}; {where}: a step in linear coordinates is no lower"
@@ -250,7 +250,7 @@ def _tested(
     fixed: Mapping[str, float] | None,
     floor: float,
     tolerance: float,
-    extra: dict[str, Any],
+    notes: SolverNotes,
 ) -> tuple[Stationarity, list[list] | None]:
     """Run the stationarity test at the answer; return it and the parallel pairs kept.
 
@@ -260,7 +260,7 @@ def _tested(
     gate = problem.stationarity(floor, tolerance)
     floor_pairs = None
     if gate.holds:
-        gate, floor_pairs = _floor_test(space, problem, gate, fixed, floor, extra)
+        gate, floor_pairs = _floor_test(space, problem, gate, fixed, floor, notes)
     if floor_pairs is not None and gate.by_trial:
         return gate, floor_pairs  # where the floored parameter has a slope
     return gate, _keep_pairs(problem, space, gate)
@@ -315,13 +315,13 @@ def refine_stage(
     n0 = evaluator.nfev
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
-    extra: dict[str, Any] = {"method": "scipy.optimize.least_squares(method='trf')"}
+    notes = SolverNotes(method="scipy.optimize.least_squares(method='trf')")
     problem, s0 = _problem_at(space, start, start_cost, evaluator, limit, fixed, start_residuals)
-    status, message = _solve(problem, s0, space, limit, extra)
+    status, message = _solve(problem, s0, space, limit, notes)
     if status == 0 and problem.spoiled and problem.doubtful(floor):
-        status, message = _again_wider(problem, space, limit, extra, message)
+        status, message = _again_wider(problem, space, limit, notes, message)
     message, held = _released(problem, space, message)
-    gate, parallel = _tested(space, problem, fixed, floor, method.leveling.tolerance, extra)
+    gate, parallel = _tested(space, problem, fixed, floor, method.leveling.tolerance, notes)
     (cost, x), nfev = problem.best, evaluator.nfev - n0
     if status == 0 and not gate.holds:
         status = 1
@@ -336,10 +336,10 @@ def refine_stage(
         nfev=nfev,
         message=message,
         status=status,
-        extra=extra,
         stationarity=gate,
         stop=problem.stop,
         parallel=parallel,
         start_cost=float(start_cost),
         held=held,
+        solver=notes,
     )

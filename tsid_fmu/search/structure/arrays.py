@@ -297,7 +297,7 @@ def _one(
     record.centre_source = centre.source
     record.nfev = evaluator.nfev - start
     record.nfev_total = nfev + record.nfev
-    record.extra["discrete"] = {f.name: {**tables[f.name], "labels": f.labels} for f in open_}
+    record.discrete = {f.name: {**tables[f.name], "labels": f.labels} for f in open_}
     record.next_frame = following
     return record, following, new_best, points
 
@@ -353,7 +353,7 @@ def structure_stage(
         points += seen
         nfev = rec.nfev_total
         why = _stop(records, run, nfev)
-        rec.extra["structure"] = [f.to_dict() for f in run.factors]
+        rec.structure = [f.to_dict() for f in run.factors]
         if recorder is not None:
             recorder.iteration(rec)
         if progress:

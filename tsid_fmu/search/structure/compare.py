@@ -35,7 +35,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from tsid_fmu.numerics.tuning import MAX_ALL, MAX_CANDIDATES
@@ -72,7 +72,11 @@ __all__ = ["MAX_CANDIDATES", "StructureResult", "run_structure"]
 
 @dataclass
 class StructureResult:
-    """What structure identification decided, and the stages it ran."""
+    """What structure identification decided, and the stages it ran.
+
+    ``nested`` lists the pairs ``[simpler, richer]`` of candidate labels where the
+    richer structure reproduces the simpler one (None until the comparison ran).
+    """
 
     stages: list[StageResult]
     study: Study
@@ -82,7 +86,7 @@ class StructureResult:
     factors: list[DiscreteFactor]
     evaluators: Any = None
     paused: bool = False
-    extra: dict[str, Any] = field(default_factory=dict)
+    nested: list[list[str]] | None = None
 
     @property
     def values(self) -> dict[str, float]:
@@ -106,7 +110,7 @@ class StructureResult:
             "why": pick.why,
             "indistinguishable": [self.candidates[j].label for j in self.tied],
             "factors": [f.to_dict() for f in self.factors],
-            **self.extra,
+            **({"nested": self.nested} if self.nested is not None else {}),
         }
 
 
@@ -362,7 +366,7 @@ def _result(
     ctx.store.write_stage("structure_comparison", stages[-1])
     stages += all_stages[chosen]
     result = StructureResult(stages, studies[chosen], chosen, tied, cands, factors, evs[chosen])
-    result.extra["nested"] = sorted([cands[s].label, cands[r].label] for s, r in nested)
+    result.nested = sorted([cands[s].label, cands[r].label] for s, r in nested)
     for j, ev in enumerate(evs):
         if j != chosen:
             ev.close()
