@@ -163,17 +163,3 @@ class SolverNotes:
     njev: int | None = None
     first_pass: dict[str, Any] | None = None
     off_the_floor: dict[str, Any] | None = None
-
-    KEYS = "method,nfev,njev,first_pass,off_the_floor"
-    """The keys of a stage's JSON ``extra`` they are kept under."""
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form: the notes that were made."""
-        out = {"method": self.method, "nfev": self.nfev, "njev": self.njev,
-               "first_pass": self.first_pass, "off_the_floor": self.off_the_floor}  # fmt: skip
-        return {k: v for k, v in out.items() if v not in (None, "")}
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> SolverNotes:
-        """Inverse of :meth:`to_dict`."""
-        return cls(**{k: d[k] for k in cls.KEYS.split(",") if k in d})

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ __all__ = [
     "json_float",
     "kept_json",
     "kept_values",
+    "spread",
     "unjson_float",
 ]
 
@@ -49,21 +51,41 @@ class Kept:
     """How a typed attribute of a record or stage is kept in its JSON ``extra``.
 
     The search reads the attribute; only :func:`kept_json` and :func:`kept_values` (the
-    trail's boundary) read or write the key. With ``spread``, the attribute's JSON form
-    is a dict whose items are kept as keys of ``extra`` of their own (``key`` names them,
-    comma-separated), and ``decode`` reads those of them present.
+    trail's boundary) read or write the key. With ``spread`` (the keys), the attribute's
+    JSON form is a dict whose items are kept as keys of ``extra`` of their own, and
+    ``decode`` reads those of them present (:func:`spread`).
     """
 
     attr: str
     key: str
     encode: Callable[[Any], Any] = _same
     decode: Callable[[Any], Any] = _same
-    spread: bool = False
+    spread: tuple[str, ...] = ()
 
     @property
-    def keys(self) -> list[str]:
+    def keys(self) -> tuple[str, ...]:
         """The keys of ``extra`` it is kept under."""
-        return self.key.split(",") if self.spread else [self.key]
+        return self.spread or (self.key,)
+
+
+def spread(attr: str, cls: type) -> Kept:
+    """Keep a dataclass attribute's fields as keys of ``extra`` (those that are None left out)."""
+
+    def encode(v: Any) -> dict[str, Any]:
+        return {k: x for k, x in dataclasses.asdict(v).items() if x is not None}
+
+    names = tuple(f.name for f in dataclasses.fields(cls))
+    return Kept(attr, "", encode, lambda d: cls(**d), spread=names)
+
+
+@functools.cache
+def _defaults(cls: type) -> dict[str, Any]:
+    """Each field's default of a dataclass (a default factory called once)."""
+    return {
+        f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        for f in dataclasses.fields(cls)
+        if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
+    }
 
 
 def _unset(obj: Any, attr: str) -> bool:
@@ -71,9 +93,7 @@ def _unset(obj: Any, attr: str) -> bool:
 
     An empty list where the default is None is kept: it says "none", not "not made".
     """
-    f = next(f for f in dataclasses.fields(obj) if f.name == attr)
-    default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
-    v = getattr(obj, attr)
+    default, v = _defaults(type(obj))[attr], getattr(obj, attr)
     return v is None if default is None else bool(v == default)
 
 
@@ -95,7 +115,7 @@ def kept_values(extra: dict[str, Any], kept: Sequence[Kept]) -> dict[str, Any]:
         held = {key: extra.pop(key) for key in k.keys if key in extra}
         if k.spread and held:
             out[k.attr] = k.decode(held)
-        elif held.get(k.key) is not None:
+        elif not k.spread and held.get(k.key) is not None:
             out[k.attr] = k.decode(held[k.key])
     return out
 

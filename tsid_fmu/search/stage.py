@@ -15,6 +15,7 @@ from tsid_fmu.search.record import (
     json_float,
     kept_json,
     kept_values,
+    spread,
     unjson_float,
 )
 from tsid_fmu.study.schema import Phase
@@ -235,14 +236,8 @@ _KEPT = (
     Kept("poor_fit", "poor_fit", dict, dict),
     Kept("phases", "phases", _phases_json, _phases),
     Kept("held", "held", list, list),
-    Kept(
-        "contribution",
-        "input,percent,runs,groups",
-        Contribution.to_dict,
-        Contribution.from_dict,
-        spread=True,
-    ),
-    Kept("solver", SolverNotes.KEYS, SolverNotes.to_dict, SolverNotes.from_dict, spread=True),
+    spread("contribution", Contribution),
+    spread("solver", SolverNotes),
     Kept("fraction", "fraction", float, float),
 )
 """The stage's typed attributes kept in its JSON ``extra``."""

@@ -57,17 +57,6 @@ class Contribution:
     runs: dict[str, Any] = field(default_factory=dict)
     groups: dict[str, list[list[str]]] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form: the four tables, kept as keys of the stage's extra."""
-        return {"input": self.input, "percent": self.percent, "runs": self.runs,
-                "groups": self.groups}  # fmt: skip
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> Contribution:
-        """Inverse of :meth:`to_dict` (tables missing read as empty)."""
-        return cls(d.get("input"), dict(d.get("percent") or {}), dict(d.get("runs") or {}),
-                   dict(d.get("groups") or {}))  # fmt: skip
-
 
 @dataclass
 class InputContribution:

@@ -151,9 +151,8 @@ def measure(
 
 def update(cand: Candidate, measured: Mapping[str, Any]) -> None:
     """Put a measurement into a candidate (its simulations are added, not replaced)."""
-    for key in ("x", "cost", "chi2", "n", "k", "active", "validation"):
+    for key in ("x", "cost", "chi2", "n", "k", "active", "validation", "residuals"):
         setattr(cand, key, measured[key])
-    cand.residuals = measured["residuals"]
     cand.nfev += measured["nfev"]
 
 
