@@ -512,6 +512,28 @@ def test_a_local_minimum_is_left_by_following_the_data_from_its_first_part(monke
     assert adaptive.answer_stage(alone).cost > 100 * LONG.size
 
 
+def test_a_horizon_is_a_waypoint_that_ends_once_a_step_gains_little(monkeypatch):
+    stages, _ = _horizon_run({"w": 2.4, "a": 1.0})
+    horizons, last = stages[2:5], stages[-1]
+    assert LocalStop.WAYPOINT in [s.stop for s in horizons]
+    assert "enough for a waypoint" in horizons[1].message
+    assert last.stop is not LocalStop.WAYPOINT  # the full data: the usual tolerances
+    # without the rule every horizon converges to SciPy's tolerances: more runs, and
+    # the refinement on the full data ends at the same answer
+    full = context.polish
+
+    def exact(*args, waypoint=False, **kwargs):
+        return full(*args, **kwargs)
+
+    monkeypatch.setattr(local, "polish", exact)
+    exact_stages, _ = _horizon_run({"w": 2.4, "a": 1.0})
+    assert LocalStop.WAYPOINT not in [s.stop for s in exact_stages]
+    spent = sum(s.nfev for s in stages[2:])
+    assert sum(s.nfev for s in exact_stages[2:]) > spent
+    assert exact_stages[-1].x["w"] == pytest.approx(last.x["w"], rel=1e-6)
+    assert exact_stages[-1].cost == pytest.approx(last.cost, rel=1e-6)
+
+
 def test_a_settled_answer_runs_no_horizon():
     stages, evaluators = _horizon_run({"w": 2.98, "a": 1.0})  # the truth's own valley
     assert [s.kind for s in stages] == ["taguchi", "refinement"]

@@ -91,8 +91,13 @@ def polish(
     start: Mapping[str, float],
     evaluator: Evaluator,
     progress: ProgressCallback | None,
+    waypoint: bool = False,
 ) -> StageResult:
-    """Run the refinement from ``start`` (its cost and residuals come from the memo)."""
+    """Run the refinement from ``start`` (its cost and residuals come from the memo).
+
+    ``waypoint``: a horizon's, which needs only the basin
+    (:attr:`~tsid_fmu.search.outcome.LocalStop.WAYPOINT`).
+    """
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
     floor = noise_floor(evaluator, study.method.weighting == "noise")
     scored = evaluator.evaluate([dict(start)])
@@ -106,6 +111,7 @@ def polish(
         progress=progress,
         start_residuals=scored.residuals[0] if scored.residuals else None,
         floor=floor,
+        waypoint=waypoint,
     )
 
 

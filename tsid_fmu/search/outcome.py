@@ -111,8 +111,10 @@ class LocalStop(StrEnum):
 
     ``GTOL``, ``FTOL``, ``XTOL``: a tolerance of the least-squares driver, SciPy's or
     the refinement's own on an accepted step; ``VALLEY``: it crawled along parallel
-    Jacobian columns; ``LIMIT``: it ran out of simulations; ``NONE``: none of these
-    (SciPy's own evaluation limit, a failed solve, or a stage that is no refinement).
+    Jacobian columns; ``WAYPOINT``: a horizon (a waypoint of the continuation, not an
+    answer) ended at the first step that gained less than the stationarity gate's share
+    of the cost; ``LIMIT``: it ran out of simulations; ``NONE``: none of these (SciPy's
+    own evaluation limit, a failed solve, or a stage that is no refinement).
     """
 
     NONE = ""
@@ -120,6 +122,7 @@ class LocalStop(StrEnum):
     FTOL = "ftol"
     XTOL = "xtol"
     VALLEY = "valley"
+    WAYPOINT = "waypoint"
     LIMIT = "limit"
 
     @property

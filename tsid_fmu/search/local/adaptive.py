@@ -24,8 +24,9 @@ sequence of stages:
    the first :data:`HORIZONS` fractions of each experiment's samples in turn, from the
    arrays' best set, then on all of them (a model that swings or rings has few valleys
    in its cost over a short record, where the simulation cannot drift whole periods
-   from the data); where that route ends at the same stationary answer, a poor fit is
-   the model's or the noise's and no restart follows;
+   from the data; each horizon is a waypoint, ended at the first step that gains less
+   than the stationarity gate's share of its cost); where that route ends at the same
+   stationary answer, a poor fit is the model's or the noise's and no restart follows;
 5. while that still holds, the refinement restarts, up to ``max_reruns`` times: from the
    start points first (where a local method alone would start), then from the next-best
    run of the arrays that lies away from every start and answer so far (the MISO

@@ -205,7 +205,11 @@ def _horizons(ctx: Context, stages: list[StageResult], floor: float, exps: list[
     samples in turn, each from the last one's answer, starting at the arrays' best set;
     then on the full data. Over a short horizon the simulated and measured signals
     cannot drift a whole period apart, so a lightly damped or swinging model's cost has
-    few valleys there: the classic continuation for oscillators.
+    few valleys there: the classic continuation for oscillators. A horizon is a waypoint,
+    not an answer: it needs only the basin, so it ends at the first step that gains less
+    than the stationarity gate's share of its cost
+    (:attr:`~tsid_fmu.search.outcome.LocalStop.WAYPOINT`, the inexact inner solves of a
+    continuation); the refinement on the full data converges to the usual tolerances.
 
     Returns whether restarts may still help: False when the answer was settled, or when
     the horizons, a second route, ended at the same stationary answer (within
@@ -252,7 +256,7 @@ def _horizon_stage(
         return done
     share = f"{100 * fraction:.3g} %"
     name = f"refinement on the first {share} of the data"
-    result = polish(name, ctx.study, start, evaluator, ctx.progress)
+    result = polish(name, ctx.study, start, evaluator, ctx.progress, waypoint=True)
     result.kind = "horizon"
     result.message = f"cost over the first {share} of each experiment's samples; {result.message}"
     result.start = start

@@ -69,8 +69,16 @@ class _Converged(Exception):
 class _Problem:
     """Residuals and Jacobians of the cost in search coordinates, counting simulations."""
 
-    def __init__(self, space: Space, evaluator: Evaluator, limit: int, fixed: Mapping[str, float]):
+    def __init__(
+        self,
+        space: Space,
+        evaluator: Evaluator,
+        limit: int,
+        fixed: Mapping[str, float],
+        waypoint: bool = False,
+    ):
         self.space, self.evaluator, self.limit = space, evaluator, limit
+        self.waypoint = waypoint  # a horizon: ends where a step gains < GATE_RTOL of it
         self.fixed = dict(fixed)
         self.start = evaluator.nfev
         self.best: tuple[float, dict[str, float]] = (math.inf, {})
@@ -129,6 +137,12 @@ class _Problem:
             raise _Converged(f"the last step lowered the cost by less than ftol={_FTOL:g}")
         if step < _XTOL * (_XTOL + float(np.linalg.norm(s_old))):
             raise _Converged(f"the last step was shorter than xtol={_XTOL:g}", LocalStop.XTOL)
+        if reduction < GATE_RTOL * cost_old and self.waypoint:
+            raise _Converged(
+                f"the last step lowered the cost by less than {GATE_RTOL:g} of it, "
+                "enough for a waypoint",
+                LocalStop.WAYPOINT,
+            )
         if reduction < GATE_RTOL * cost_old and self._parallel():
             raise _Converged(
                 f"the last step lowered the cost by less than {GATE_RTOL:g} of it, along "
@@ -319,13 +333,14 @@ def _problem_at(
     limit: int,
     fixed: Mapping[str, float] | None,
     start_residuals: np.ndarray | None,
+    waypoint: bool = False,
 ) -> tuple[_Problem, np.ndarray]:
     """Return the least-squares problem at ``start`` and its start point, just inside bounds.
 
     The start's residuals, where the caller has them, are kept, so that it is not
-    simulated again.
+    simulated again. ``waypoint``: see :attr:`~tsid_fmu.search.outcome.LocalStop.WAYPOINT`.
     """
-    problem = _Problem(space, evaluator, limit, fixed or {})
+    problem = _Problem(space, evaluator, limit, fixed or {}, waypoint)
     problem.best = (float(start_cost), {n: float(start[n]) for n in space.names})
     width = space.s_upper - space.s_lower
     s_start = space.to_s(start)

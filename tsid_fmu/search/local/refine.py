@@ -277,6 +277,7 @@ def refine_stage(
     progress: ProgressCallback | None = None,
     start_residuals: np.ndarray | None = None,
     floor: float = 0.0,
+    waypoint: bool = False,
 ) -> StageResult:
     """Polish ``start`` by trust-region least squares on the same cost (``sse``).
 
@@ -306,6 +307,10 @@ def refine_stage(
         stationarity test measures the predicted decrease against it where the cost is
         below it (an overestimated noise), so that it does not ask for decimals the data
         do not carry.
+    waypoint : bool
+        A waypoint of a continuation (a horizon), not an answer: it ends at the first
+        step that gains less than :data:`~tsid_fmu.search.verdict.GATE_RTOL` of the
+        cost (:attr:`~tsid_fmu.search.outcome.LocalStop.WAYPOINT`).
 
     Returns
     -------
@@ -316,7 +321,9 @@ def refine_stage(
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
     notes = SolverNotes(method="scipy.optimize.least_squares(method='trf')")
-    problem, s0 = _problem_at(space, start, start_cost, evaluator, limit, fixed, start_residuals)
+    problem, s0 = _problem_at(
+        space, start, start_cost, evaluator, limit, fixed, start_residuals, waypoint
+    )
     status, message = _solve(problem, s0, space, limit, notes)
     if status == 0 and problem.spoiled and problem.doubtful(floor):
         status, message = _again_wider(problem, space, limit, notes, message)
