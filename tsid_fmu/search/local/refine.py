@@ -287,10 +287,8 @@ def refine_stage(
         Stage name.
     space : Space
         Search coordinates and bounds of the varied parameters.
-    start : mapping
-        Starting parameter set (the previous stage's answer, varied parameters).
-    start_cost : float
-        Its cost; the stage's answer is never worse.
+    start, start_cost : mapping, float
+        Starting parameter set (varied parameters) and its cost; the answer is never worse.
     evaluator : Evaluator
         Scores parameter sets (its residuals are the least-squares residuals).
     method : Method
@@ -308,9 +306,7 @@ def refine_stage(
         below it (an overestimated noise), so that it does not ask for decimals the data
         do not carry.
     waypoint : bool
-        A waypoint of a continuation (a horizon), not an answer: it ends at the first
-        step that gains less than :data:`~tsid_fmu.search.verdict.GATE_RTOL` of the
-        cost (:attr:`~tsid_fmu.search.outcome.LocalStop.WAYPOINT`).
+        A horizon's: :attr:`~tsid_fmu.search.outcome.LocalStop.WAYPOINT`.
 
     Returns
     -------
@@ -321,9 +317,8 @@ def refine_stage(
     if progress:
         progress("refinement", {"stage": name, "cost": start_cost})
     notes = SolverNotes(method="scipy.optimize.least_squares(method='trf')")
-    problem, s0 = _problem_at(
-        space, start, start_cost, evaluator, limit, fixed, start_residuals, waypoint
-    )
+    at = (start, start_cost, evaluator, limit, fixed, start_residuals, waypoint)
+    problem, s0 = _problem_at(space, *at)
     status, message = _solve(problem, s0, space, limit, notes)
     if status == 0 and problem.spoiled and problem.doubtful(floor):
         status, message = _again_wider(problem, space, limit, notes, message)

@@ -21,10 +21,16 @@
    parameters (then it nests it, and the likelihood-ratio test applies); candidates
    not at their optimum by that nesting are restarted
    (:func:`~tsid_fmu.search.structure.optima.consistent`).
-5. :func:`tsid_fmu.search.structure.selection.decide` chooses. A choice whose answer came from a
+5. :func:`tsid_fmu.search.structure.selection.decide` chooses. Every structure one
+   factor's level away from the choice that is no candidate yet is refined from the
+   choice's answer, and the comparison is made again, until the choice has no such
+   neighbour (:meth:`~tsid_fmu.search.structure.pool.Pool.neighbours`: a local search
+   over the structures, for choices of more combinations than the arrays' candidates).
+   A choice whose answer came from a
    warm start and is not shown to be an optimum gets a study of its own, or, where the
-   choice is a poor fit, the richest candidate without one
-   (:func:`~tsid_fmu.search.structure.candidates.next_own_study`); the comparison is made again.
+   choice is a poor fit, the richest candidate without one, until such a study lowers
+   no answer (:func:`~tsid_fmu.search.structure.candidates.next_own_study`); the
+   comparison is made again.
 6. The chosen answer, where its stationarity test held by a trial alone (a cost made
    rough by events) and two of its parameters act through their combination, is
    refined in that combination (:mod:`tsid_fmu.search.local.combined`), and kept where lower.
@@ -49,20 +55,16 @@ from tsid_fmu.search.structure.arrays import DiscreteFactor, StructureRun, struc
 from tsid_fmu.search.structure.boundary import score_step, significant, tried
 from tsid_fmu.search.structure.candidates import (
     best_point,
-    embedded_answers,
-    identify_candidate,
     measure_in,
     next_own_study,
     own_again,
-    own_study,
     probe,
-    short,
     simplest_first,
     stationary,
-    warm_starts,
 )
-from tsid_fmu.search.structure.nesting import at_nesting_point, known
-from tsid_fmu.search.structure.optima import consistent, settle, update
+from tsid_fmu.search.structure.nesting import at_nesting_point
+from tsid_fmu.search.structure.optima import consistent, update
+from tsid_fmu.search.structure.pool import Pool
 from tsid_fmu.search.structure.selection import Candidate, decide
 from tsid_fmu.search.verdict import noise_floor
 from tsid_fmu.study.definition import Study
@@ -129,10 +131,6 @@ def discrete_factors(study: Study) -> list[DiscreteFactor]:
         pairs = sorted(zip(c.values, c.labels, strict=True))
         out.append(DiscreteFactor(c.name, [v for v, _ in pairs], [lb for _, lb in pairs]))
     return out
-
-
-def _label(factors: list[DiscreteFactor], values: Mapping[str, float]) -> str:
-    return ", ".join(f"{f.name}={f.labels[f.values.index(values[f.name])]}" for f in factors)
 
 
 def _candidates(
@@ -204,76 +202,47 @@ def run_structure(ctx: Context, make: Callable[[Study], Evaluators]) -> Structur
     found = _candidates(factors, outcome.points)
     probed = [probe(ctx.study, outcome.points, outcome.levels, v, make) for v, _ in found]
     order = simplest_first([len(p[3]) for p in probed])
-    cands, all_stages, studies, evs, owns = [], [], [], [], []
-    started: set[tuple[int, int]] = set()  # (simpler, richer): refined from its embedding
-    cache: dict = {}  # the nesting checks, and the embeddings found before refining
-    for i, j in enumerate(order):
-        (values, origin), (sub, ev, best, active, n_probe) = found[j], probed[j]
-        if ctx.progress:
-            label = _label(factors, values)
-            ctx.progress("stage", {"name": f"structure {i + 1}", "message": f"structure {label}"})
-        own = (own_study(ctx.study, values, active, best), make)
-        owns.append(own)
-        if i == 0:
-            origin += f"; the simplest ({len(active)} free parameters): a study of its own"
-        embedded, n_embed = [], 0
-        if cands:
-            embedded, n_embed = embedded_answers(ctx.study, cands, active, best, ev)
-            for s, point, _ in embedded:
-                started.add((s, i))
-                known(cache, s, i, cands[s], point)
-        warm = warm_starts(ctx.study, cands, best, embedded) if cands else None
-        cand, stages = identify_candidate(
-            ctx, i, values, origin, own if i == 0 else None, sub, ev, warm
-        )
-        cand.nfev += n_probe + n_embed
-        cand.label = _label(factors, values)
-        cand.free = list(active)  # free at the arrays' best point, off any bound
-        cands.append(cand)
-        all_stages.append(stages)
-        studies.append(sub)
-        evs.append(ev)
-        if stages[-1].status == 2:
-            return StructureResult([outcome.stage, *stages], sub, i, [], cands, factors, ev, True)
+    pool = Pool(ctx, make, factors)
+    cands, all_stages, studies, evs = pool.found()
 
-    def restart(i: int, start: dict[str, float], why: str) -> bool:
-        cand, names = cands[i], studies[i].parameter_names
-        if start in cand.tried:
-            return False  # refined from there already (the nesting unchanged since)
-        ev = evs[i].get(names, studies[i].identify_names(), {})
-        n_restart = sum(1 for s in all_stages[i] if s.name.startswith("restart")) + 1
-        stage = settle(f"restart {n_restart}: {why}", short(studies[i]), start, ev, ctx.progress)
-        cand.tried.append(dict(start))
-        cand.nfev += stage.nfev
-        if not stage.cost < cand.cost:
-            return False
-        ctx.store.write_stage(f"{cand.folder}/restart_{n_restart:02d}", stage)
-        all_stages[i].append(stage)
-        update(cand, measure_in(ctx.study, evs[i], stage.x))
-        cand.origin += f"; restarted {why}"
-        return True
+    def paused(i: int) -> StructureResult:
+        return StructureResult([outcome.stage, *all_stages[i]], studies[i], i, [], cands,
+                               factors, evs[i], True)  # fmt: skip
 
+    for j in order:
+        if pool.add(*found[j], probed[j]):
+            return paused(len(cands) - 1)
     owned, left = {0}, set()  # left: the (simpler, richer) pairs whose point was tested
+    rescue = True  # own studies for a poor fit go on while they lower an answer
     while True:
         settled = owned | {i for i, st in enumerate(all_stages) if stationary(st)}
-        nested = consistent(
-            cands, studies, evs, restart, started=started, settled=settled, cache=cache
-        )
-        started |= set(nested)
+        nested = consistent(cands, studies, evs, pool.restart, started=pool.started,
+                            settled=settled, cache=pool.cache)  # fmt: skip
+        pool.started |= set(nested)
         degenerate = {(s, r) for (s, r), e in nested.items()
                       if at_nesting_point(ctx.study, cands[s], cands[r], e)}  # fmt: skip
-        if _leave(ctx, (cands, studies, evs), degenerate, left, restart):
+        if _leave(ctx, (cands, studies, evs), degenerate, left, pool.restart):
             continue  # a richer answer moved off its nesting point: compare again
         chosen, tied = decide(cands, set(nested), degenerate)
+        steps = pool.neighbours(chosen)
+        for values, why in steps:  # one level away from the choice: refined, compared
+            at = {**{n: cands[chosen].x[n] for n in ctx.study.parameter_names}, **values}
+            if pool.add(values, why, probe(ctx.study, [(0.0, at)], outcome.levels, values, make)):
+                return paused(len(cands) - 1)
+        if steps:
+            continue
         floor = _floor(ctx.study, evs[chosen])
-        target = next_own_study(chosen, owned, all_stages, cands, floor)
+        target = next_own_study(chosen, owned, all_stages, cands, floor, rescue)
         if target is None:
             break
         owned.add(target)
-        if own_again(ctx, target, cands[target], owns[target], evs[target], all_stages):
-            return StructureResult([outcome.stage, *all_stages[target]], studies[target],
-                                   target, [], cands, factors, evs[target], True)  # fmt: skip
-    return _result(ctx, outcome, factors, (cands, all_stages, studies, evs), chosen, tied, nested)
+        before, for_fit = cands[target].cost, target != chosen
+        if own_again(ctx, target, cands[target], pool.owns[target], evs[target], all_stages):
+            return paused(target)
+        got = cands[target]
+        if for_fit and not significant(before - got.cost, got.chi2, got.n):
+            rescue = False  # the warm starts were not stuck: no more own studies for it
+    return _result(ctx, outcome, factors, pool.found(), chosen, tied, nested)
 
 
 def _floor(study: Study, evs: Evaluators) -> float:
