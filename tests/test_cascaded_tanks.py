@@ -97,3 +97,7 @@ def test_the_structure_is_chosen_on_est_by_tsid_itself(tmp_path, capsys):
     val = re.search(r"^validation val: RMSE y (\S+) V, NRMSE \S+, fit \S+ %; cost", printed, re.M)
     assert fit and float(fit[1]) <= 0.165, printed  # the example's 0.162
     assert val and float(val[1]) <= 0.343, printed
+    # every structure is a poor fit here (model error): own studies for it stop once one
+    # changes nothing (measured 13195 simulations; an own study for each: 30217)
+    ran = re.search(r"^converged: the answer is stationary \((\d+) simulations\)", printed, re.M)
+    assert ran and int(ran[1]) <= 16000, printed
