@@ -154,7 +154,8 @@ def next_own_study(
     1). The caller clears ``rescue`` once such a study lowers no answer by more than
     BIC's charge for one parameter: the warm starts were not stuck, and the poor fit is
     the model's (real data: the Cascaded Tanks' every structure is 96 times the floor
-    or more, and an own study for each of 15 candidates cost 22000 simulations).
+    or more, and an own study for each of 15 candidates made the study 30217
+    simulations where it takes 13195 with the rule, for the same choice).
     """
     if needs_own_study(chosen, owned, stages[chosen]):
         return chosen
