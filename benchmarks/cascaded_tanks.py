@@ -12,6 +12,11 @@ does):
   (``numpy.random.default_rng(--seed)``); the answer is the start with the lowest Est
   cost (chosen on Est, never on Val), and its simulations are those of every start.
 
+- ``DFO-LS-multistart`` (with ``--dfols``; the optional peer ``pip install dfo-ls``,
+  GPL-3.0, never a dependency): ``dfols.solve`` from the same starts, the same scaled
+  bounds, ``maxfun = 100 (p + 1)`` (as ``benchmarks/local_engines.py``); the best by
+  Est cost.
+
 For each: simulations, Est RMSE and Val RMSE in V (Val simulated in free run from the
 identified initial levels ``x1_0``, ``x2_0``: the protocol's stricter reading, all 1024
 samples scored). Run::
@@ -78,24 +83,43 @@ def rmse(study: Study, interface: str | None, x: dict[str, float], role: str) ->
     return float(first["fit"]["y"]["rmse"]) if "fit" in first else math.nan
 
 
-def multistart(scorer: Scorer, starts: int, seed: int) -> tuple[dict[str, float], list[dict]]:
-    """``least_squares`` from ``starts`` uniform points in the first levels; the best by cost."""
+def _least_squares(scorer: Scorer, s0: np.ndarray, k: int) -> np.ndarray:
     from scipy.optimize import least_squares
 
+    lo, hi = scorer.lower, scorer.upper
+    return least_squares(scorer.residuals, s0, bounds=(lo, hi), method="trf", x_scale="jac").x
+
+
+def _dfols(scorer: Scorer, s0: np.ndarray, k: int) -> np.ndarray:
+    import dfols
+
+    lo, hi = scorer.lower, scorer.upper
+    np.random.seed(k)  # noqa: NPY002 (DFO-LS draws its directions from the global stream)
+    soln = dfols.solve(scorer.residuals, s0, bounds=(lo, hi), maxfun=100 * (len(s0) + 1),
+                       do_logging=False, print_progress=False)  # fmt: skip
+    if soln.x is None:
+        raise RuntimeError(f"DFO-LS returned no point: {soln.msg}")
+    return np.asarray(soln.x)
+
+
+def multistart(
+    scorer: Scorer, starts: int, seed: int, solve=_least_squares
+) -> tuple[dict[str, float], list[dict]]:
+    """``solve`` from ``starts`` uniform points in the first levels; the best by cost."""
     rng = np.random.default_rng(seed)
     lo, hi = scorer.lower, scorer.upper
     runs, best, best_x = [], math.inf, None
     for k in range(starts):
         s0 = np.clip(rng.uniform(-0.5, 0.5, len(scorer.names)), lo + 1e-9, hi - 1e-9)
         n0, t0 = scorer.nfev, time.perf_counter()
-        out = least_squares(scorer.residuals, s0, bounds=(lo, hi), method="trf", x_scale="jac")
-        cost = scorer.cost(out.x)
+        x = solve(scorer, s0, k)
+        cost = scorer.cost(x)
         runs.append({"start": k, "cost": cost, "nfev": scorer.nfev - n0,
                      "time": time.perf_counter() - t0})  # fmt: skip
         print(f"  start {k + 1}/{starts}: cost {cost:.6g}, {runs[-1]['nfev']} simulations",
               file=sys.stderr)  # fmt: skip
         if cost < best:
-            best, best_x = cost, scorer.to_x(out.x)
+            best, best_x = cost, scorer.to_x(x)
     assert best_x is not None
     return best_x, runs
 
@@ -106,7 +130,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--starts", type=int, default=25, help="least-squares starts (25)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the starts (0)")
     ap.add_argument("--json", type=Path, help="write the figures here")
+    ap.add_argument("--dfols", action="store_true", help="DFO-LS from the same starts too")
     args = ap.parse_args(argv)
+    if args.dfols:
+        try:
+            import dfols  # noqa: F401
+        except ImportError:
+            print("--dfols needs DFO-LS, an optional benchmark-only peer (GPL-3.0): "
+                  "pip install dfo-ls", file=sys.stderr)  # fmt: skip
+            return 2
     study = Study.from_toml(STUDY)
     t0 = time.perf_counter()
     res = identify(STUDY, plots=False)
@@ -122,26 +154,31 @@ def main(argv: list[str] | None = None) -> int:
             "time": tsid_time,
         }
     }
-    scorer = Scorer(study, interface)
-    t0 = time.perf_counter()
-    x, runs = multistart(scorer, args.starts, args.seed)
-    rows["LS-multistart"] = {
-        "nfev": sum(r["nfev"] for r in runs),
-        "est": rmse(study, interface, x, "identify"),
-        "val": rmse(study, interface, x, "validate"),
-        "cost": min(r["cost"] for r in runs),
-        "starts": args.starts,
-        "runs": runs,
-        "time": time.perf_counter() - t0,
-        "params": x,
+    peers = {
+        "LS-multistart": _least_squares,
+        **({"DFO-LS-multistart": _dfols} if args.dfols else {}),
     }
+    for name, solve in peers.items():
+        scorer = Scorer(study, interface)
+        t0 = time.perf_counter()
+        x, runs = multistart(scorer, args.starts, args.seed, solve)
+        rows[name] = {
+            "nfev": sum(r["nfev"] for r in runs),
+            "est": rmse(study, interface, x, "identify"),
+            "val": rmse(study, interface, x, "validate"),
+            "cost": min(r["cost"] for r in runs),
+            "starts": args.starts,
+            "runs": runs,
+            "time": time.perf_counter() - t0,
+            "params": x,
+        }
     commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip()  # fmt: skip
     print(f"commit {commit}, {time.strftime('%Y-%m-%d', time.gmtime())}, interface {interface}\n")
     print("| method | simulations | Est cost (SSE / noise²) | Est RMSE [V] | Val RMSE [V] |")
     print("|---|---|---|---|---|")
     for name, r in rows.items():
-        label = f"{name} ({args.starts} starts)" if name == "LS-multistart" else name
+        label = f"{name} ({args.starts} starts)" if name != "tsid" else name
         print(f"| {label} | {r['nfev']} | {r['cost']:.6g} | {r['est']:.3f} | {r['val']:.3f} |")
     if args.json:
         args.json.write_text(json.dumps({"commit": commit, "interface": interface,
