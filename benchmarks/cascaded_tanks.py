@@ -91,12 +91,9 @@ def _least_squares(scorer: Scorer, s0: np.ndarray, k: int) -> np.ndarray:
 
 
 def _dfols(scorer: Scorer, s0: np.ndarray, k: int) -> np.ndarray:
-    import dfols
+    from local_engines import solve_dfols
 
-    lo, hi = scorer.lower, scorer.upper
-    np.random.seed(k)  # noqa: NPY002 (DFO-LS draws its directions from the global stream)
-    soln = dfols.solve(scorer.residuals, s0, bounds=(lo, hi), maxfun=100 * (len(s0) + 1),
-                       do_logging=False, print_progress=False)  # fmt: skip
+    soln, _ = solve_dfols(scorer, s0, noisy=False, seed=k)
     if soln.x is None:
         raise RuntimeError(f"DFO-LS returned no point: {soln.msg}")
     return np.asarray(soln.x)

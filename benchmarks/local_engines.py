@@ -45,6 +45,7 @@ import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -85,8 +86,13 @@ def _need_dfols() -> None:
         sys.exit(2)
 
 
-def run_dfols(scorer: Scorer, start: np.ndarray, noisy: bool, seed: int) -> dict:
-    """``dfols.solve`` from ``start`` within the scorer's bounds: cost and simulations."""
+def solve_dfols(scorer: Scorer, start: np.ndarray, noisy: bool, seed: int) -> tuple[Any, list]:
+    """``dfols.solve`` from ``start`` within the scorer's bounds: its solution, its warnings.
+
+    ``maxfun = 100 (p + 1)``; ``seed`` seeds NumPy's global stream, from which DFO-LS
+    draws its initial (and restart) directions. Also the peer of
+    ``benchmarks/cascaded_tanks.py --dfols``.
+    """
     import dfols
 
     p = len(start)
@@ -94,8 +100,6 @@ def run_dfols(scorer: Scorer, start: np.ndarray, noisy: bool, seed: int) -> dict
     hi = np.clip(scorer.upper, -BIG, BIG)
     # as run_least_squares: the start strictly inside the bounds
     s0 = np.clip(start, np.maximum(lo, -1e6) + 1e-9, np.minimum(hi, 1e6) - 1e-9)
-    n0 = scorer.nfev
-    # DFO-LS draws random initial (and restart) directions from NumPy's global stream
     np.random.seed(seed)  # noqa: NPY002 (dfols uses the legacy global stream)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -108,6 +112,13 @@ def run_dfols(scorer: Scorer, start: np.ndarray, noisy: bool, seed: int) -> dict
             do_logging=False,
             print_progress=False,
         )
+    return soln, caught
+
+
+def run_dfols(scorer: Scorer, start: np.ndarray, noisy: bool, seed: int) -> dict:
+    """``dfols.solve`` from ``start`` within the scorer's bounds: cost and simulations."""
+    n0 = scorer.nfev
+    soln, caught = solve_dfols(scorer, start, noisy, seed)
     out = {"flag": int(soln.flag), "msg": str(soln.msg)}
     if soln.x is None:
         raise RuntimeError(f"DFO-LS returned no point: {soln.msg}")
