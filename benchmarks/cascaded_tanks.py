@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     res = identify(STUDY, plots=False)
     tsid_time = time.perf_counter() - t0
-    interface = (res.extra.get("fidelity") or {}).get("interface")
+    interface = (res.fidelity or {}).get("interface")
     rows = {
         "tsid": {
             "nfev": int(res.nfev),

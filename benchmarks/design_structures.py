@@ -72,7 +72,7 @@ def main() -> int:
     t = sample_times()
     stuck = _experiment(_rig(t, AMPLITUDE * np.sin(2 * np.pi * t), 1), "stuck")
     first = identify(_study([stuck]), work / "first", plots=False, workers=args.workers)
-    info = first.extra.get("structure") or {}
+    info = first.structure or {}
     print(f"first study: chose {info.get('chosen')}, indistinguishable "
           f"{info.get('indistinguishable')} ({first.nfev} simulations)")  # fmt: skip
     d = design(first, DesignOptions(inputs={"F_m": [-300.0, 300.0]}), workers=args.workers)
@@ -92,7 +92,7 @@ def main() -> int:
         second = _experiment(_rig(d.time, d.separating.values[:, 0], 2000 + seed), "designed")
         res = identify(_study([stuck, second]), work / f"seed{seed}", plots=False,
                        workers=args.workers)  # fmt: skip
-        pick = (res.extra.get("structure") or {}).get("chosen")
+        pick = (res.structure or {}).get("chosen")
         chosen.append(pick)
         print(f"seed {seed}: chose {pick} ({res.nfev} simulations)", flush=True)
     right = sum(c == f"friction={TRUE_LAW}" for c in chosen)

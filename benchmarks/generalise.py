@@ -280,7 +280,7 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
     t0 = time.perf_counter()
     res = identify(target, workers=1, plots=False)
     tsid_time = time.perf_counter() - t0
-    interface = (res.extra.get("fidelity") or {}).get("interface")
+    interface = (res.fidelity or {}).get("interface")
     scorer = Scorer(study, interface)
     truth = {**gp.problem.start_values, **gp.problem.truth}
     rows = {
@@ -299,7 +299,7 @@ def run_variant(gp: GenProblem, variant: str, seeds: str, de: bool) -> dict:
                 [s.name, s.kind, int(s.nfev), float(s.cost), getattr(s, "resumed", "")]
                 for s in res.stages
             ],
-            "rounds": res.extra.get("rounds"),
+            "rounds": res.rounds,
         },
         "LS-c": run_least_squares(scorer, np.zeros(len(scorer.names))),
         "LS-t": run_least_squares(scorer, scorer.to_s(truth)),

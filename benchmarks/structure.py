@@ -156,7 +156,7 @@ def structure_route(law: int, seed: int, workers: int = 1) -> dict:
     t0 = time.perf_counter()
     st = study(law, seed)
     out = identify(st, workers=workers, plots=False)
-    s = out.extra["structure"]
+    s = out.structure
     chosen = int(s["values"]["friction"])
     tied = bool(s.get("indistinguishable"))
     x = {k: float(v) for k, v in out.params.items() if k != "friction"}

@@ -88,7 +88,7 @@ def structure_route(on: int, seed: int, joint: bool) -> dict:
     """The structure study on one data set, with the reference at its choice."""
     t0 = time.perf_counter()
     out = identify(study(on, seed, joint=joint), workers=1, plots=False)
-    s = out.extra["structure"]
+    s = out.structure
     chosen = int(s["values"]["damping"])
     law = int(s["values"].get("friction", 2))
     x = {k: float(v) for k, v in out.params.items() if k not in ("damping", "friction")}

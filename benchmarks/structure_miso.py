@@ -119,7 +119,7 @@ def structure_route(masses: int, seed: int, folder: Path | None = None) -> dict:
     """
     t0 = time.perf_counter()
     out = identify(study(masses, seed), folder, workers=1, plots=False)
-    s = out.extra["structure"]
+    s = out.structure
     chosen = int(s["values"]["model"]) + 1
     x = {k: float(v) for k, v in out.params.items() if k != "model"}
     right = chosen == masses

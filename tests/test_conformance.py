@@ -127,7 +127,7 @@ def test_the_probe_finds_a_nondeterministic_fmu(quirky, tmp_path, version):
 def test_a_study_on_the_stale_clock_fmu_ends_at_the_optimum(quirky, tmp_path, version):
     study = _study(tmp_path, quirky[("STALE_CLOCK", version)])
     result = identify(study, tmp_path / "out", plots=False, workers=1, timeout=0)
-    record = result.extra["conformance"]
+    record = result.conformance
     assert record["fresh"] and not record["reset"]
     assert result.status == 0, result.message
     assert result.params["tau"] == pytest.approx(0.37, rel=0.02)
@@ -225,7 +225,7 @@ def test_a_study_on_a_loose_tolerance_fmu_adopts_a_tight_one_and_ends_at_the_opt
 ):
     study = _study(tmp_path, quirky[("LOOSE_TOLERANCE", version)])
     result = identify(study, tmp_path / "out", plots=False, workers=1, timeout=0)
-    record = result.extra["fidelity"]
+    record = result.fidelity
     assert record["cs_tolerance"] == CS_TOLERANCE, record["reason"]
     assert "its default tolerance, not the physics, limits the answer" in record["reason"]
     assert record["start"]["matters"] and record["start"]["converges"] is True

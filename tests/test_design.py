@@ -290,7 +290,7 @@ def test_structures_the_data_cannot_tell_apart_get_the_input_that_separates_them
         uncertainty=None,
         noise={},
         structures=rows,
-        extra={"structure": {"chosen": "gain=1", "indistinguishable": ["gain=2"]}},
+        structure={"chosen": "gain=1", "indistinguishable": ["gain=2"]},
     )
     d = design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=1))
     found = d.discrimination
@@ -304,7 +304,7 @@ def test_structures_the_data_cannot_tell_apart_get_the_input_that_separates_them
     assert frame.u.abs().max() <= 1.0 and frame.u.abs().max() > 0.5
     assert "Structures the study cannot tell apart" in d.markdown()
     # a study whose structures were told apart gets no such proposal
-    result.extra = {"structure": {"chosen": "gain=1", "indistinguishable": []}}
+    result.structure = {"chosen": "gain=1", "indistinguishable": []}
     assert design(result, DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=1)).separating is None
 
 
@@ -424,7 +424,7 @@ def test_the_design_simulates_through_the_interface_the_identification_chose(tmp
     result = _lag(tmp_path)
     options = DesignOptions(inputs={"u": [-1.0, 1.0]}, bands=2)
     for chosen in ("me", "cs"):
-        result.extra["fidelity"] = {"interface": chosen}
-        assert chosen_interface(result.extra) == chosen
+        result.fidelity = {"interface": chosen}
+        assert chosen_interface(result.fidelity) == chosen
         assert make_plan(result, options).spec.interface == chosen
     assert chosen_interface({}) is None and chosen_interface(None) is None

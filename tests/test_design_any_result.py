@@ -63,7 +63,7 @@ def test_a_result_that_chose_no_structure_still_needs_every_parameter(linear):
     another study's result (finding 5 of issue 66)."""
     import dataclasses
 
-    other = dataclasses.replace(linear, extra={})
+    other = dataclasses.replace(linear, structure=None)
     with pytest.raises(StudyError, match="it has no q"):
         design(other, workers=2)
 

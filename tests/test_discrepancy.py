@@ -89,7 +89,7 @@ def test_the_parameter_table_says_in_each_interval_when_it_does_not_hold(verdict
         study=None,
         params={"k": 2.0, "c": 1.0},
         names=["k", "c"],
-        extra={},
+        structure=None,
         intervals={"k": [1.9, 2.1], "c": [None, None]},
         uncertainty=u,
         weak={},

@@ -111,7 +111,7 @@ def test_siso_example_identifies_the_parameters(tmp_path):
     assert res.fit["measured"]["F_o"]["fit_percent"] > 97
     assert (tmp_path / "out" / "report.md").is_file()
     # the FMU's Co-Simulation matches an accurate solution: no solver warning (issue 16)
-    assert res.extra["fidelity"]["interface"] == "cs"
+    assert res.fidelity["interface"] == "cs"
     assert not any(w.startswith("solver fidelity") for w in res.warnings), res.warnings
 
 
@@ -142,11 +142,11 @@ def test_miso_example_contribution_phases_and_validation(tmp_path):
     assert "## Stages" in report and "contribution" in report
     assert "Input contribution" in report and "Superposition check" in report
     # the same study without grouping, side by side (cost and simulations)
-    comp = res.extra["comparison"]
+    comp = res.comparison
     assert comp["phased"]["nfev"] > 0 and comp["ungrouped"]["nfev"] > 0
     assert np.isfinite(comp["phased"]["cost"]) and np.isfinite(comp["ungrouped"]["cost"])
     assert "Why grouping: the same study without it" in report
-    assert res.extra["fidelity"]["interface"] == "cs"
+    assert res.fidelity["interface"] == "cs"
     assert not any(w.startswith("solver fidelity") for w in res.warnings), res.warnings
     _miso_matches_the_tutorial(res)
 
@@ -205,7 +205,7 @@ def _miso_matches_the_tutorial(res) -> None:
     stages = {s.kind: s.nfev for s in res.stages if s.kind in ("contribution", "refinement")}
     for kind in ("contribution", "refinement"):
         assert abs(stages[kind] / claims[kind] - 1) <= 0.10, (kind, stages)
-    comp = res.extra["comparison"]
+    comp = res.comparison
     assert abs(comp["ungrouped"]["nfev"] / claims["ungrouped"] - 1) <= 0.10, comp
     assert comp["ungrouped"]["cost"] == pytest.approx(comp["phased"]["cost"], rel=1e-4)
 

@@ -82,7 +82,7 @@ def test_cs_study_warns_of_solver_error_and_names_the_fix(vdp, tmp_path):
     assert "differs from Model Exchange at tolerance 1e-12 by" in first
     assert 'fix in [method]: interface = "me"' in first
     assert "it alone moves mu by" in first
-    record = res.extra["fidelity"]
+    record = res.fidelity
     assert record["requested"] == "cs" and record["interface"] == "cs"
     assert record["start"]["matters"] and record["answer"]["matters"]
     assert record["answer"]["used"]["ratio"] > 10  # RMS 24 x the noise on x1
@@ -109,7 +109,7 @@ def test_cs_study_warns_of_solver_error_and_names_the_fix(vdp, tmp_path):
 def test_auto_switches_to_model_exchange_and_finds_mu(vdp, tmp_path):
     out = tmp_path / "out"
     res = identify(vdp_study(vdp), out, plots=False)  # interface "auto" by default
-    record = res.extra["fidelity"]
+    record = res.fidelity
     assert record["requested"] == "auto" and record["interface"] == "me"
     assert 'interface = "auto" uses Model Exchange instead' in record["start"]["message"]
     assert record["answer"]["used"]["interface"] == "me"
@@ -130,7 +130,7 @@ def test_fidelity_false_skips_both_checks_and_says_so(vdp, tmp_path):
     study = vdp_study(vdp, fidelity=False)  # interface "auto": Co-Simulation, unchecked
     res = identify(study, plots=False, progress=lambda event, info: events.append(event))
     assert "fidelity" not in events
-    assert res.extra["fidelity"] == {"checked": False, "reason": "[method] fidelity = false"}
+    assert res.fidelity == {"checked": False, "reason": "[method] fidelity = false"}
     assert not any("solver fidelity" in w for w in res.warnings)
     assert res.params["mu"] == pytest.approx(1.6288, rel=2e-3)  # the Euler-biased answer
     again = Study.from_toml(study.to_toml(tmp_path / "study.toml"))

@@ -40,7 +40,7 @@ def test_an_answer_pushed_onto_min_0_is_said(tmp_path):
     )
     res = identify(study, tmp_path / "out", plots=False, workers=1, timeout=0)
     assert res.params["x0"] < 1e-3  # the search moves x0 in log10: it stops short of 0
-    assert res.extra["on_bound"] == {"x0": "min"}
+    assert res.on_bound == {"x0": "min"}
     said = [w for w in res.warnings if w.startswith("x0 = ") and "sits on its bound min = 0" in w]
     assert said, res.warnings
     assert said[0] in (tmp_path / "out" / "report.md").read_text(encoding="utf-8")

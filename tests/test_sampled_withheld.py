@@ -52,7 +52,7 @@ def test_the_table_and_the_note_say_withheld_and_why():
         study=None,
         params={"K": 2.5, "B": 0.0},
         names=["K", "B"],
-        extra={},
+        structure=None,
         intervals={"K": [0.79, 6.8], "B": [None, None]},
         uncertainty=None,
         weak={},

@@ -178,7 +178,7 @@ def test_the_cli_chooses_among_fmu_files(tmp_path):
     from tsid_fmu import load
 
     back = load(out)  # the folder read back, its study with the choice among the files
-    assert back.params["model"] == 1.0 and back.extra["structure"]["chosen"] == "model=Drag"
+    assert back.params["model"] == 1.0 and back.structure["chosen"] == "model=Drag"
     again = subprocess.run(
         [sys.executable, "-m", "tsid_fmu", "simulate", str(tmp_path / "study.toml"),
          "--result", str(out), "--plot", str(tmp_path / "fit.png")],

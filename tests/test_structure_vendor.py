@@ -135,7 +135,7 @@ def test_the_cli_chooses_the_integer_switch_of_a_vendor_fmu(tmp_path):
 
     back = load(out)  # result.json read back with its structures
     assert back.params["law"] == 1.0 and back.structures == structure["table"]
-    assert back.extra["structure"]["chosen"] == "law=1" and not back.warnings
+    assert back.structure["chosen"] == "law=1" and not back.warnings
     again = subprocess.run(
         [sys.executable, "-m", "tsid_fmu", "simulate", str(tmp_path / "study.toml"),
          "--result", str(out), "--plot", str(tmp_path / "fit.png")],

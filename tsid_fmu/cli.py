@@ -133,8 +133,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if args.result:
         saved = saved_result(Path(args.result))
         values.update(saved["params"])
-        interface = chosen_interface(saved.get("extra"))
-        cs_tolerance = chosen_cs_tolerance(saved.get("extra"))
+        kept = (saved.get("extra") or {}).get("fidelity")  # result.json's form
+        interface = chosen_interface(kept)
+        cs_tolerance = chosen_cs_tolerance(kept)
     chosen = {c.name: c for c in study.choices}  # a choice as its label (model=Drag)
     for name, text in parse_assignments(args.set, "--set", last=True).items():
         if name in chosen:

@@ -6,8 +6,8 @@ child process under the study's time limit where the study isolates its checks, 
 an FMU that crashes or hangs only leaves the probe undone). An FMU whose reset is broken
 is then simulated on a fresh instance for every run; one that does not reproduce its
 runs ends the study with exit status 1 (:data:`~tsid_fmu.status.Verdict.FMU`).
-:func:`record_conformance` writes the verdict to ``result.extra["conformance"]`` and
-the warnings.
+:func:`record_conformance` writes the verdict to the result's ``conformance`` and the
+warnings.
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ def _probe(study: Study, evaluators: StudyEvaluators, spec: Any, exps: list[str]
 
 
 def record_conformance(result: Any, record: dict[str, Any] | None) -> None:
-    """Put the verdict into ``result.extra["conformance"]`` and its warnings first."""
+    """Put the verdict into ``result.conformance`` and its warnings first."""
     if record is not None:
-        result.extra["conformance"] = record
+        result.conformance = record
         result.warnings[:0] = warnings(record)

@@ -154,12 +154,12 @@ def _fidelity(
 def _record(
     result: IdentificationResult, start: Fidelity | None, answer: Fidelity | None
 ) -> IdentificationResult:
-    """Put the fidelity checks into the result: ``extra["fidelity"]``, first warnings."""
+    """Put the fidelity checks into ``result.fidelity``, and their warnings first."""
     if start is not None:
-        result.extra["fidelity"] = fidelity_record(start, answer)
+        result.fidelity = fidelity_record(start, answer)
         result.warnings[:0] = fidelity_warnings(start, answer)
     elif result.study is not None and not result.study.method.fidelity:
-        result.extra["fidelity"] = {"checked": False, "reason": "[method] fidelity = false"}
+        result.fidelity = {"checked": False, "reason": "[method] fidelity = false"}
     return result
 
 
@@ -235,7 +235,7 @@ def _finish(
     record_conformance(result, evaluators.conformance)
     rounds = {str(w): evaluators.rounds(w) for w in (1, 4, 16)}
     if None not in rounds.values():  # the wall time on 1, 4, 16 workers, in simulations
-        result.extra["rounds"] = rounds
+        result.rounds = rounds
     result.contribution = {
         n: [float(r.anova.contribution[n]) for r in result.iterations if n in r.names]
         for n in study.parameter_names
@@ -262,11 +262,11 @@ def _finish(
         result.jac = jac[:, [found.sensitivities.names.index(n) for n in result.names]]
     result.intervals = dict(found.uncertainty.intervals) if found.uncertainty else {}
     result.sampled = for_study(study.method, ev, (spec, space, x), found, callback)
-    result.extra["on_bound"] = on_bounds(x, study.bounds(), study.first_levels())
+    result.on_bound = on_bounds(x, study.bounds(), study.first_levels())
     stopped = [(s.name, s.message, s.status) for s in stages]
     result.warnings = [
         *poor_fit(answer),
-        *bound_warnings(result.extra["on_bound"], x, study.bounds(), _inert(found, spec)),
+        *bound_warnings(result.on_bound, x, study.bounds(), _inert(found, spec)),
         *found.warnings,
         *unshown_warnings(stopped, status, result.intervals),
         *result.warnings,
@@ -276,7 +276,7 @@ def _finish(
     _record(result, start, checked)
     result.weak = weak_parameters(result)
     if study.contribution.enabled and study.contribution.compare_ungrouped:
-        result.extra["comparison"] = _compare_ungrouped(study, evaluators, store, result)
+        result.comparison = _compare_ungrouped(study, evaluators, store, result)
     checks = [e.name for e in study.experiments if e.role == "validate"]
     if checks:
         vspec = evaluators.spec(study.parameter_names, checks, {})
@@ -304,7 +304,7 @@ def _with_structure(result: IdentificationResult, structure: StructureResult | N
     if structure is not None:
         result.params.update(structure.values)
         result.structures = structure.table()
-        result.extra["structure"] = structure.summary()
+        result.structure = structure.summary()
         if structure.tied:
             result.warnings.insert(0, f"structure: {structure.summary()['why']}")
         if result.jac is not None and result.jac.shape[1] < len(result.params):

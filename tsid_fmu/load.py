@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 
 from tsid_fmu.errors import StudyError
-from tsid_fmu.result import IdentificationResult
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.result import EXTRA_KEYS, IdentificationResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.toml import study_from_document
 from tsid_fmu.trail.files import read_json
@@ -80,11 +80,11 @@ def _stage_dirs(out: Path, summaries: list[Mapping[str, Any]]) -> list[Path]:
     for s in summaries:
         kind = s.get("kind")
         folder = (s.get("extra") or {}).get("folder")
-        if kind == "phase":
+        if kind == StageKind.PHASE:
             phases += 1
         if isinstance(folder, str) and _inside(folder):  # written by the trail
             dirs.append(out / folder if folder else out)
-        elif kind == "phase":
+        elif kind == StageKind.PHASE:
             dirs.append(out / f"phase_{phases:02d}")
         elif kind in ("contribution", "refinement"):
             dirs.append(out / str(kind))
@@ -136,6 +136,13 @@ def _read(out: Path) -> tuple[dict[str, Any], list[str]]:
         return data, [_OLD]
     advice = "run the study again, or restore the file from a copy"
     return unseal(data, path, "result", advice), []
+
+
+def _kept(extra: Any) -> dict[str, Any]:
+    """Return the attributes ``result.json`` keeps under ``"extra"`` (:data:`EXTRA_KEYS`)."""
+    if not isinstance(extra, Mapping):
+        raise TypeError(f"'extra' is {type(extra).__name__}, not an object")
+    return {k: dict(extra[k]) for k in EXTRA_KEYS if extra.get(k) is not None}
 
 
 def _jacobian(out: Path, entry: Any) -> np.ndarray | None:
@@ -270,7 +277,8 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
             validation=dict(data.get("validation") or {}),
             weak=dict(data.get("weak") or {}),
             warnings=[*map(str, data.get("warnings") or []), *warnings, *more],
-            extra=dict(data.get("extra") or {}),
+            **_kept(data.get("extra") or {}),
+            comparison=data.get("comparison"),
             study=attached,
             out_dir=out,
             structures=[dict(r) for r in data.get("structures") or []],
@@ -278,8 +286,6 @@ def load(out_dir: str | Path, study: Study | str | Path | None = None) -> Identi
         )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise StudyError(f"{out / 'result.json'}: damaged result ({exc!r})") from None
-    if data.get("comparison") is not None:
-        result.extra["comparison"] = data["comparison"]
     result.describe_parameters()
     result.contribution = {
         n: [float(r.anova.contribution[n]) for r in result.iterations if n in r.names]

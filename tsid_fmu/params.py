@@ -117,7 +117,7 @@ def describe(result: Any) -> Parameters:
     units = study_units(study) if study is not None else {}
     bounds = study.bounds() if study is not None else {}
     u = result.uncertainty
-    chosen = (result.extra.get("structure") or {}).get("values") or {}
+    chosen = (result.structure or {}).get("values") or {}
     out = Parameters()
     for name, value in result.params.items():
         low, high = bounds.get(name, (-math.inf, math.inf))

@@ -23,7 +23,7 @@ from tsid_fmu.errors import TsidError
 from tsid_fmu.params import Parameters, describe
 from tsid_fmu.result_mapping import ResultMapping, unshadowed
 from tsid_fmu.search.record import IterationRecord
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.study.definition import Study
 from tsid_fmu.trail.files import strict
 from tsid_fmu.uncertainty.intervals import Uncertainty
@@ -32,7 +32,7 @@ from tsid_fmu.uncertainty.sampled import Sampled
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["PAUSED", "RUNS_NOTE", "STATUS", "IdentificationResult", "register_views"]
+__all__ = ["EXTRA_KEYS", "PAUSED", "RUNS_NOTE", "STATUS", "IdentificationResult", "register_views"]
 
 PAUSED = 3
 """:attr:`IdentificationResult.status` of a study paused for review (``--pause-after``)."""
@@ -50,8 +50,12 @@ RUNS_NOTE = (
 
 _VIEWS: dict[str, Callable[..., Any]] = {}
 
-_WRITTEN = ("fidelity", "structure", "conformance")
-"""Keys of :attr:`IdentificationResult.extra` written to ``result.json``."""
+EXTRA_KEYS = ("fidelity", "structure", "conformance")
+"""Attributes of :class:`IdentificationResult` kept under ``result.json``'s ``"extra"``.
+
+The one place the JSON's ``extra`` is written (:meth:`IdentificationResult.to_dict`) and
+read (:func:`tsid_fmu.load.load`); everything else reads the attributes.
+"""
 
 
 def register_views(**views: Callable[..., Any]) -> None:
@@ -142,13 +146,23 @@ class IdentificationResult(ResultMapping):
         Parameters the data determine poorly, with the reason.
     warnings : list of str
         Things a person should know (mismatch, limits, failed runs).
-    extra : dict
-        Stage-specific analyses (contribution tables, the ungrouped comparison), and
-        ``"fidelity"``: the interface used and the solver checks at the start point
-        and the answer (:func:`tsid_fmu.uncertainty.fidelity.fidelity_record`); only
-        this one is written to ``result.json``; and, in structure identification,
-        ``"structure"``: the chosen structure (``chosen``, ``choices`` by factor, ``why``,
-        those ``indistinguishable`` from it), also written there.
+    structure : dict or None
+        Structure identification: the chosen structure (``chosen``, ``values``,
+        ``choices`` by factor, ``why``, those ``indistinguishable`` from it), as
+        :meth:`~tsid_fmu.search.structure.compare.StructureResult.summary` gives it;
+        ``None`` for a study without choices.
+    fidelity : dict or None
+        The interface used and the solver checks at the start point and the answer
+        (:func:`tsid_fmu.uncertainty.fidelity.fidelity_record`).
+    conformance : dict or None
+        The FMU's conformance probe: whether a reset instance reproduces a fresh one,
+        and two identical runs agree (:mod:`tsid_fmu.conformance`).
+    comparison : dict or None
+        The grouped study beside the ungrouped one (``compare_ungrouped``).
+    on_bound : dict
+        ``{name: "min" or "max"}`` for each parameter of the answer on a bound.
+    rounds : dict or None
+        The wall time of the study on 1, 4 and 16 workers, in rounds of simulations.
     structures : list of dict
         Structure identification: one row per candidate structure refined to its own
         optimum (structure, cost, k, AIC, BIC, LRT p, validation cost, chosen, why);
@@ -190,7 +204,12 @@ class IdentificationResult(ResultMapping):
     contribution: dict[str, list[float]] = field(default_factory=dict)
     weak: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
-    extra: dict[str, Any] = field(default_factory=dict)
+    structure: dict[str, Any] | None = None
+    fidelity: dict[str, Any] | None = None
+    conformance: dict[str, Any] | None = None
+    comparison: dict[str, Any] | None = None
+    on_bound: dict[str, str] = field(default_factory=dict)
+    rounds: dict[str, int] | None = None
     study: Study | None = None
     out_dir: Path | None = None
     structures: list[dict[str, Any]] = field(default_factory=list)
@@ -243,7 +262,7 @@ class IdentificationResult(ResultMapping):
         Always ``(len(x), len(x))``.
         """
         u, size = self.uncertainty, len(self.params)
-        chosen = (self.extra.get("structure") or {}).get("values") or {}
+        chosen = (self.structure or {}).get("values") or {}
         names = [n for n in self.names if n not in chosen]  # discrete choices: no variance
         out = np.full((size, size), np.nan)
         if u is None or any(n not in u.std_error for n in names):
@@ -296,7 +315,7 @@ class IdentificationResult(ResultMapping):
         known: dict[str, float] = {}
         for stage in self.stages:
             sets += [{**known, **rec.best_x} for rec in stage.records]
-            if stage.kind != "contribution":
+            if stage.kind != StageKind.CONTRIBUTION:
                 known.update(stage.x)
         values = sets[int(k) - 1 if k > 0 else int(k)]
         return {n: float(values[n]) for n in self.params if n in values}
@@ -390,8 +409,8 @@ class IdentificationResult(ResultMapping):
                 "validation": self.validation,
                 "weak": self.weak,
                 "warnings": self.warnings,
-                "comparison": self.extra.get("comparison"),
-                "extra": {k: self.extra[k] for k in _WRITTEN if k in self.extra},
+                "comparison": self.comparison,
+                "extra": {k: getattr(self, k) for k in EXTRA_KEYS if getattr(self, k) is not None},
                 **({"structures": self.structures} if self.structures else {}),
             }
         )

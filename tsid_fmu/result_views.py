@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+from tsid_fmu.search.stage import StageKind
 from tsid_fmu.story import determination
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import strict
@@ -101,11 +102,7 @@ def summary(result: Any) -> dict[str, Any]:
                 for name, v in result.validation.items()
             },
             **_structure_summary(result),
-            **(
-                {"conformance": result.extra["conformance"]}
-                if "conformance" in result.extra
-                else {}
-            ),
+            **({"conformance": result.conformance} if result.conformance is not None else {}),
         }
     )
 
@@ -133,7 +130,7 @@ def _has(result: Any, name: str) -> bool:
 
 def _structure_summary(result: Any) -> dict[str, Any]:
     """Return the ``structure`` entry of :meth:`summary` (structure identification only)."""
-    found = result.extra.get("structure")
+    found = result.structure
     if not found:
         return {}
     keys = ("chosen", "choices", "why", "indistinguishable")
@@ -167,7 +164,7 @@ def stages_frame(result: Any) -> pd.DataFrame:
 
     rows, before = [], math.inf
     for s in result.stages:
-        partial = s.kind == "horizon"  # its cost is over part of the data
+        partial = s.kind == StageKind.HORIZON  # its cost is over part of the data
         gain = (before - s.cost) / before if math.isfinite(before) and before else math.nan
         gain = math.nan if partial else gain
         rows.append(
@@ -180,7 +177,7 @@ def stages_frame(result: Any) -> pd.DataFrame:
                 "message": s.message,
             }
         )
-        before = s.cost if s.kind not in ("contribution", "horizon") else before
+        before = s.cost if s.kind not in (StageKind.CONTRIBUTION, StageKind.HORIZON) else before
     return pd.DataFrame(rows).set_index("stage") if rows else pd.DataFrame()
 
 

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 from tsid_fmu.search.local.adaptive import answer_stage
 from tsid_fmu.search.outcome import Stationarity
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 
 __all__ = ["MAX_MESSAGE", "MESSAGES", "Verdict", "account", "study_status"]
 
@@ -98,7 +98,7 @@ def account(stages: Sequence[StageResult]) -> list[str]:
     said: list[str] = []
     lines = []
     for s in stages:
-        if s.kind == "contribution":
+        if s.kind == StageKind.CONTRIBUTION:
             continue
         fresh = _once(s.message, said)
         if fresh:
@@ -141,7 +141,7 @@ def study_status(
         code = Verdict.STATIONARY if test.holds else Verdict.NOT_SHOWN
         status = 0 if code is Verdict.STATIONARY else 1
     else:
-        ran = [s for s in stages if s.kind != "contribution"]
+        ran = [s for s in stages if s.kind != StageKind.CONTRIBUTION]
         stopped = [s for s in ran if s.status != 0]
         code = Verdict.LIMIT if stopped else Verdict.LEVELS
         status = 1 if stopped else 0

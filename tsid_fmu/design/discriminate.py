@@ -27,7 +27,7 @@ __all__ = ["discriminate", "tied"]
 
 def tied(result: Any) -> list[dict[str, Any]]:
     """Return the rows of the chosen structure and those indistinguishable from it."""
-    info = (getattr(result, "extra", None) or {}).get("structure") or {}
+    info = getattr(result, "structure", None) or {}
     names = [info.get("chosen"), *info.get("indistinguishable", [])]
     rows = [r for r in getattr(result, "structures", None) or [] if r.get("structure") in names]
     return rows if len(rows) > 1 and all("x" in r and "values" in r for r in rows) else []

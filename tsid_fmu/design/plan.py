@@ -78,7 +78,7 @@ def unused(result: Any, study: Study) -> list[str]:
     as the answer does. Only a result that chose a structure has such parameters; a
     parameter missing from any other result is another study's (:func:`_same_parameters`).
     """
-    structure = (getattr(result, "extra", None) or {}).get("structure")
+    structure = getattr(result, "structure", None)
     params = getattr(result, "params", None)
     if not study.choice_names or not isinstance(structure, Mapping):
         return []
@@ -347,12 +347,12 @@ def make_plan(result: Any, options: DesignOptions | None) -> Plan:
     levels = {n: v for n, v in study.first_levels().items() if n not in left}
     spec = prepare(study, parameters=list(levels))  # the unused ones are not set
     fixed = {n: float(result.params[n]) for n in study.choice_names}
-    extra = getattr(result, "extra", None)  # the solver chosen, as tsid simulate --result
+    fidelity = getattr(result, "fidelity", None)  # the solver chosen, as tsid simulate --result
     spec = dataclasses.replace(
         spec,
         start_values={**spec.start_values, **fixed},
-        interface=chosen_interface(extra) or spec.interface,
-        cs_tolerance=spec.cs_tolerance or chosen_cs_tolerance(extra),
+        interface=chosen_interface(fidelity) or spec.interface,
+        cs_tolerance=spec.cs_tolerance or chosen_cs_tolerance(fidelity),
     )
     searched = Space(levels, study.bounds(), study.method.leveling)
     x = {n: float(result.params[n]) for n in searched.names}

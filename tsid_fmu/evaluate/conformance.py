@@ -19,7 +19,7 @@ one parameter set (the study's start point) on the evaluators' own code path
 
 The verdict is kept in memory per process, by the FMU file's SHA-256 and the interface
 (:func:`cached`, :func:`remember`); the study writes it to ``result.json``
-(``extra["conformance"]``).
+(``result.conformance``).
 """
 
 from __future__ import annotations

@@ -448,10 +448,10 @@ class EvaluationSpec:
         StudyError
             A parameter is missing, not a number, or not one of ``parameter_names``.
         """
-        extra = [n for n in parameters if n not in self.parameter_names]
-        if extra:
+        unknown = [n for n in parameters if n not in self.parameter_names]
+        if unknown:
             raise StudyError(
-                f"unknown parameter {extra[0]!r} in a parameter set; the evaluation's "
+                f"unknown parameter {unknown[0]!r} in a parameter set; the evaluation's "
                 f"parameters are {', '.join(self.parameter_names) or 'none'}"
             )
         try:

@@ -25,7 +25,7 @@ from tsid_fmu.report.style import (
     with_unit,
 )
 from tsid_fmu.search.record import IterationRecord
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 
 __all__ = ["MainEffects", "convergence_figure", "trajectory_figure"]
 
@@ -178,7 +178,7 @@ def points(result: Any) -> dict[str, int]:
     """
     stages = result.stages
     best = sum(len(s.records) for s in stages)
-    best += sum(1 for s in stages if not s.records and s.kind == "refinement")
+    best += sum(1 for s in stages if not s.records and s.kind == StageKind.REFINEMENT)
     return {"convergence.png": best, "parameters.png": len(result.iterations)}
 
 
@@ -195,7 +195,7 @@ def convergence_figure(stages: Sequence[StageResult], cost_name: str = "cost") -
     measures: dict[tuple[str, ...], list[tuple[StageResult, int]]] = {}
     total = 0
     for st in stages:
-        if st.records or (st.kind == "refinement" and math.isfinite(st.cost)):
+        if st.records or (st.kind == StageKind.REFINEMENT and math.isfinite(st.cost)):
             measures.setdefault(_measure(st), []).append((st, total))
         total += st.nfev
     n = max(len(measures), 1)

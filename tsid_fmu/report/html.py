@@ -23,6 +23,7 @@ from tsid_fmu.report.render import Figures, iteration_folders
 from tsid_fmu.report.scored import experiment_notes
 from tsid_fmu.report.style import cost_name, counted, fmt, input_contribution
 from tsid_fmu.result import PAUSED, STATUS, IdentificationResult
+from tsid_fmu.search.stage import StageKind
 from tsid_fmu.study.units import study_units
 from tsid_fmu.trail.files import atomic_write
 from tsid_fmu.uncertainty.assess import NOISE_SOURCES
@@ -180,7 +181,7 @@ def _validation(result: IdentificationResult, cost: str) -> str:
 def _contribution(result: IdentificationResult) -> str:
     parts = []
     for st in result.stages:
-        if st.kind != "contribution":
+        if st.kind != StageKind.CONTRIBUTION:
             continue
         percent = st.contribution.percent if st.contribution is not None else {}
         if percent:
@@ -202,7 +203,7 @@ def _contribution(result: IdentificationResult) -> str:
 
 def _structure(result: IdentificationResult) -> str:
     """Return the structures side by side, the choice and why, the discrete factors' responses."""
-    found = result.extra.get("structure") or {}
+    found = result.structure or {}
     frame = result.structures_table()
     parts = [
         f"<p><b>Chosen: {esc(found.get('chosen', ''))}</b>: {esc(found.get('why', ''))}</p>",
@@ -267,11 +268,7 @@ def html_report(result: IdentificationResult, figures: Figures | None = None) ->
         f"<h1>Identification report: {esc(study.name if study else 'study')}</h1>",
         _headline(result, cost),
         _section("Identified parameters", _parameters(result, images), "parameters"),
-        *(
-            [_section("Structure", _structure(result), "structure")]
-            if result.extra.get("structure")
-            else []
-        ),
+        *([_section("Structure", _structure(result), "structure")] if result.structure else []),
         _section(
             "Stages",
             (table_from_frame(stages) if len(stages) else "")

@@ -20,7 +20,7 @@ from tsid_fmu.report.style import (
 )
 from tsid_fmu.result import STATUS, IdentificationResult
 from tsid_fmu.search.record import IterationRecord
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.story import interval_text, listed_combinations, weak_reason
 from tsid_fmu.study.units import study_units
 from tsid_fmu.uncertainty.assess import NOISE_SOURCES, mismatch_warning, mismatches
@@ -86,9 +86,9 @@ def _parameters(result: IdentificationResult) -> Any:
 
 
 def _stage_folder(stage: StageResult, index: int) -> str:
-    if stage.kind == "taguchi":
+    if stage.kind == StageKind.TAGUCHI:
         return ""
-    if stage.kind == "phase":
+    if stage.kind == StageKind.PHASE:
         return f"phase_{index:02d}/"
     return f"{stage.kind}/"
 
@@ -110,7 +110,7 @@ def _stages(result: IdentificationResult) -> list[str]:
     for st in result.stages:
         if not st.records:
             continue
-        phase += st.kind == "phase"
+        phase += st.kind == StageKind.PHASE
         folder = _stage_folder(st, phase)
         lines += [
             f"### {escape(st.name)}",
@@ -222,7 +222,7 @@ def _uncertainty(result: IdentificationResult) -> list[str]:
 
 
 def _fidelity(result: IdentificationResult) -> list[str]:
-    record = result.extra.get("fidelity")
+    record = result.fidelity
     if not record:
         return []
     if record.get("checked") is False:  # [method] fidelity = false
@@ -298,7 +298,7 @@ def markdown_report(result: IdentificationResult) -> str:
     if result.warnings:
         lines += ["## Warnings", "", *[f"- {escape(w)}" for w in result.warnings], ""]
     lines += ["## Identified parameters", "", markdown_table(_parameters(result)), ""]
-    found = result.extra.get("structure")
+    found = result.structure
     if found:
         lines += [
             "## Structure",
@@ -318,7 +318,7 @@ def markdown_report(result: IdentificationResult) -> str:
     lines += _uncertainty(result) + _fit(result) + _fidelity(result) + _stages(result)
     lines += _failed_runs(result.iterations)
     if result.validation:
-        phased = any(st.kind in ("contribution", "phase") for st in result.stages)
+        phased = any(st.kind in (StageKind.CONTRIBUTION, StageKind.PHASE) for st in result.stages)
         lines += [
             "## Superposition check: validation experiments with all inputs together"
             if phased
@@ -337,7 +337,7 @@ def markdown_report(result: IdentificationResult) -> str:
                 )
             )
         lines.append("")
-    comp = result.extra.get("comparison")
+    comp = result.comparison
     if comp:
         ph, un = comp["phased"], comp["ungrouped"]
         lines += [

@@ -117,7 +117,7 @@ def parameter_rows(result: Any) -> list[list[Any]]:
     params = result.study.identified_parameters() if result.study else []
     # a parameter with no effect in the chosen structure is not in the answer: no row
     names = [p.name for p in params if p.name in result.params] or result.names
-    structure = result.extra.get("structure") or {}
+    structure = result.structure or {}
     factors = structure.get("factors", [])
     names = [n for n in names if n not in {f["name"] for f in factors}]  # rows of their own
     units = study_units(result.study)  # the study's, else the FMU's declared ones

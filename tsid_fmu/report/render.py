@@ -24,7 +24,7 @@ from tsid_fmu.report.fitfig import FitFigure
 from tsid_fmu.report.style import cost_name, png_bytes
 from tsid_fmu.report.svgfig import fit_svg, main_effects_svg
 from tsid_fmu.search.record import IterationRecord
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.trail.files import atomic_write
 
 __all__ = ["Figures", "cost_name", "draw_study", "iteration_folders"]
@@ -52,8 +52,8 @@ def iteration_folders(stages: Sequence[StageResult]) -> list[tuple[str, Iteratio
     """Return ``(folder, record)`` of every iteration, folders relative to the output."""
     out, phase = [], 0
     for st in stages:
-        phase += st.kind == "phase"
-        base = f"phase_{phase:02d}/" if st.kind == "phase" else ""
+        phase += st.kind == StageKind.PHASE
+        base = f"phase_{phase:02d}/" if st.kind == StageKind.PHASE else ""
         out += [(f"{base}iteration_{r.index:02d}", r) for r in st.records]
     return out
 

@@ -15,6 +15,7 @@ from typing import Any
 from tsid_fmu.report.notebook import parameter_columns, parameter_rows, sampled_note
 from tsid_fmu.report.style import cost_name, fit_text, fmt, fmt_levels
 from tsid_fmu.result import register_views
+from tsid_fmu.search.stage import StageKind
 from tsid_fmu.story import determination, interval_text, near_zero
 
 __all__ = ["MIN_CORREL", "fit_report", "fit_statistics", "text_report"]
@@ -59,7 +60,7 @@ def text_report(result: Any, verbose: bool = False) -> str:
         f"stage {s.name} ({s.kind}): cost {fmt(s.cost)}, {s.nfev} simulations"
         for s in result.stages
     ]
-    structure = result.extra.get("structure")
+    structure = result.structure
     if structure:
         lines.append(f"structure: {structure['chosen']}: {structure['why']}")
     lines.append("")
@@ -118,7 +119,9 @@ def fit_statistics(result: Any) -> dict[str, Any]:
 def _statistics_lines(result: Any) -> list[str]:
     st = fit_statistics(result)
     kinds = [s.kind for s in result.stages]
-    method = "Taguchi arrays, then least squares" if "refinement" in kinds else "Taguchi arrays"
+    method = (
+        "Taguchi arrays, then least squares" if StageKind.REFINEMENT in kinds else "Taguchi arrays"
+    )
     weighted = cost_name(result.study)
     if math.isfinite(st["chisqr"]):
         chi = f"{fmt(st['chisqr'], 7)}  ({weighted})"

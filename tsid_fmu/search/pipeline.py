@@ -26,7 +26,7 @@ from tsid_fmu.search.local.flow import check, local_search
 from tsid_fmu.search.phases.stage import Evaluators, centre_values, joint_levels, plan_phases
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.search.taguchi.frame import Frame
 from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.search.taguchi.stage import TaguchiRun, frame_from_run, taguchi_stage
@@ -59,7 +59,7 @@ def _taguchi(
     ctx: Context,
     key: str,
     name: str,
-    kind: str,
+    kind: StageKind,
     params: list[Parameter],
     exps: list[str],
     current: Mapping[str, float],
@@ -167,7 +167,15 @@ def _phase_stage(
         method = dataclasses.replace(ctx.study.method, array=array)
         sub = dataclasses.replace(ctx, study=dataclasses.replace(ctx.study, method=method))
     return _taguchi(
-        sub, key, name, "phase", params, exps, current, nfev, ctx.control.max_iterations or limit
+        sub,
+        key,
+        name,
+        StageKind.PHASE,
+        params,
+        exps,
+        current,
+        nfev,
+        ctx.control.max_iterations or limit,
     )
 
 
@@ -285,7 +293,18 @@ def _single(
     held = held_copies(ctx.study)
     limit = ctx.control.max_iterations
     return _taguchi(
-        ctx, "", "taguchi", "taguchi", params, exps, held, 0, limit, handover, records, below
+        ctx,
+        "",
+        "taguchi",
+        StageKind.TAGUCHI,
+        params,
+        exps,
+        held,
+        0,
+        limit,
+        handover,
+        records,
+        below,
     )
 
 
@@ -305,7 +324,7 @@ def _run_ungrouped(ctx: Context) -> StageResult:
         ctx,
         "ungrouped",
         "ungrouped comparison",
-        "taguchi",
+        StageKind.TAGUCHI,
         list(study.parameters),
         exps,
         {},

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 from tsid_fmu.search.outcome import LocalStop, SolverNotes, Stationarity
@@ -20,25 +21,39 @@ from tsid_fmu.search.record import (
 )
 from tsid_fmu.study.schema import Phase
 
-__all__ = ["KINDS", "StageResult"]
+__all__ = ["KINDS", "StageKind", "StageResult"]
 
-KINDS = (
-    "taguchi",
-    "refinement",
-    "phase",
-    "contribution",
-    "check",
-    "horizon",
-    "structure",
-    "candidate",
-    "comparison",
-)
-"""Kinds of stage: the papers' Taguchi procedure; an optional local least-squares polish;
-a phase of a phased (MISO) study, itself a Taguchi procedure on a parameter group; the
-MISO paper's one-at-a-time contribution runs; the local probe test of an answer that no
-refinement tested (:mod:`tsid_fmu.search.verdict`); in structure identification, the mixed
-arrays of Real and discrete factors, one stage per candidate structure not chosen, and
-the comparison of the structures (:mod:`tsid_fmu.search.structure.compare`)."""
+
+class StageKind(StrEnum):
+    """The kind of a stage; its value is what ``result.json`` and the trail write.
+
+    A :class:`~enum.StrEnum`, so a kind equals its string (``StageKind.TAGUCHI ==
+    "taguchi"``) and reads back from it; the search decides by the members, never by a
+    string it spells itself.
+    """
+
+    TAGUCHI = "taguchi"
+    """The papers' Taguchi procedure (orthogonal arrays, S/N ratios, re-leveling)."""
+    REFINEMENT = "refinement"
+    """A local least-squares refinement (a restart is one too)."""
+    PHASE = "phase"
+    """A phase of a phased (MISO) study: a Taguchi procedure on a parameter group."""
+    CONTRIBUTION = "contribution"
+    """The MISO paper's one-at-a-time contribution runs."""
+    CHECK = "check"
+    """The local probe test of an answer no refinement tested (:mod:`~tsid_fmu.search.verdict`)."""
+    HORIZON = "horizon"
+    """A refinement on the first share of the samples (a waypoint of a continuation)."""
+    STRUCTURE = "structure"
+    """Structure identification: the mixed arrays of Real and discrete factors."""
+    CANDIDATE = "candidate"
+    """Structure identification: a candidate structure not chosen, at its own optimum."""
+    COMPARISON = "comparison"
+    """Structure identification: the comparison of the candidates (:mod:`.structure.compare`)."""
+
+
+KINDS = tuple(k.value for k in StageKind)
+"""The kinds' values, in :class:`StageKind`'s order."""
 
 
 @dataclass
@@ -49,8 +64,8 @@ class StageResult:
     ----------
     name : str
         ``"taguchi"``, ``"refinement"``, ``"phase 1: m1, K_s"``, ...
-    kind : str
-        One of :data:`KINDS`.
+    kind : StageKind
+        What the stage is (given as a member or its string).
     x : dict
         The stage's answer (the best parameter set it saw, including the parameters it
         did not vary).
@@ -117,7 +132,7 @@ class StageResult:
     """
 
     name: str
-    kind: str
+    kind: StageKind
     x: dict[str, float]
     cost: float
     nfev: int
@@ -143,6 +158,9 @@ class StageResult:
     solver: SolverNotes | None = None
     fraction: float | None = None
 
+    def __post_init__(self) -> None:
+        self.kind = StageKind(self.kind)  # a string reads as its member; another is an error
+
     @property
     def converged(self) -> bool:
         """True if the stage stopped because it converged."""
@@ -152,7 +170,7 @@ class StageResult:
         """Return the summary written into ``result.json`` (records are kept apart)."""
         return {
             "name": self.name,
-            "kind": self.kind,
+            "kind": str(self.kind),
             "x": dict(self.x),
             "cost": json_float(self.cost),
             "nfev": self.nfev,
@@ -166,7 +184,7 @@ class StageResult:
     def _extra_json(self) -> dict[str, Any]:
         """Return ``extra`` with the typed outcomes in their JSON form."""
         out = kept_json(self, _KEPT, self.extra)
-        if self.kind == "refinement":
+        if self.kind == StageKind.REFINEMENT:
             out["stop"] = self.stop.value  # a refinement always says why it stopped
         return out
 
@@ -181,7 +199,7 @@ class StageResult:
         extra = dict(d.get("extra", {}))
         return cls(
             name=str(d["name"]),
-            kind=str(d["kind"]),
+            kind=StageKind(d["kind"]),
             x={k: float(v) for k, v in d["x"].items()},
             cost=unjson_float(d["cost"]),
             nfev=int(d["nfev"]),

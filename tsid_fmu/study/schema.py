@@ -395,7 +395,7 @@ class Method:
         Check the solver's fidelity at the start point and at the answer (a few
         simulations with a reference solver each; see ``interface``). Default true.
         ``false`` skips both checks: ``"auto"`` then simulates with Co-Simulation where
-        the FMU has it, and ``result.extra["fidelity"]`` says that nothing was checked.
+        the FMU has it, and ``result.fidelity`` says that nothing was checked.
     uncertainty, uncertainty_replicates : str, int
         Sampled intervals beside the primary ones (:mod:`tsid_fmu.uncertainty.sampled`,
         ``sse`` only): ``"bootstrap"`` (block bootstrap of the residuals) or

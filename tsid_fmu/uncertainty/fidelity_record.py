@@ -1,7 +1,7 @@
 """What a solver-fidelity check found, and what a study keeps of it.
 
 :class:`Fidelity` is the answer of :func:`~tsid_fmu.uncertainty.fidelity.check_fidelity`;
-the functions here put it into a result (``extra["fidelity"]``, the warnings) and read
+the functions here put it into a result (``result.fidelity``, the warnings) and read
 back what later commands reuse: the interface and the Co-Simulation tolerance the study
 chose. They live apart from the check so that readers of a result need not import it.
 """
@@ -167,7 +167,7 @@ def study_noise(study: Study) -> dict[str, dict[str, float]]:
 
 
 def fidelity_record(start: Fidelity, answer: Fidelity | None) -> dict[str, Any]:
-    """Return ``result.extra["fidelity"]``: the interface used, why, and both checks."""
+    """Return ``result.fidelity``: the interface used, why, and both checks."""
     return {
         "requested": start.requested,
         "interface": start.interface,
@@ -180,24 +180,25 @@ def fidelity_record(start: Fidelity, answer: Fidelity | None) -> dict[str, Any]:
     }
 
 
-def chosen_interface(extra: Mapping[str, Any] | None) -> str | None:
+def chosen_interface(fidelity: Mapping[str, Any] | None) -> str | None:
     """Return the interface a result's fidelity check chose, or ``None`` where none ran.
 
-    ``extra`` is ``result.extra`` (or a saved result's ``"extra"``). Whatever simulates
-    at the answer again (``tsid simulate --result``, ``tsid design``) uses it: OpenModelica's
-    ``Mass_Damper`` simulated by its Co-Simulation (a fixed explicit Euler step) left
-    residuals 330 times the noise where the identification had chosen Model Exchange.
+    ``fidelity`` is ``result.fidelity`` (or ``result.json``'s ``["extra"]["fidelity"]``).
+    Whatever simulates at the answer again (``tsid simulate --result``, ``tsid design``)
+    uses it: OpenModelica's ``Mass_Damper`` simulated by its Co-Simulation (a fixed
+    explicit Euler step) left residuals 330 times the noise where the identification had
+    chosen Model Exchange.
     """
-    return ((extra or {}).get("fidelity") or {}).get("interface")
+    return (fidelity or {}).get("interface")
 
 
-def chosen_cs_tolerance(extra: Mapping[str, Any] | None) -> float | None:
+def chosen_cs_tolerance(fidelity: Mapping[str, Any] | None) -> float | None:
     """Return the Co-Simulation tolerance a result's fidelity check chose (or the study's).
 
     None where none was passed or no check ran; whatever simulates at the answer again
     uses it, as :func:`chosen_interface`.
     """
-    return ((extra or {}).get("fidelity") or {}).get("cs_tolerance")
+    return (fidelity or {}).get("cs_tolerance")
 
 
 def fidelity_warnings(start: Fidelity, answer: Fidelity | None) -> list[str]:

@@ -53,7 +53,7 @@ import numpy as np
 
 from tsid_fmu.numerics.tuning import AGREE, RESTART_SEPARATION
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 
 __all__ = [
     "AGREE",
@@ -71,7 +71,7 @@ HORIZONS = (1 / 8, 1 / 4, 1 / 2)
 before it refines on all of them (a stage of kind ``"horizon"`` each)."""
 
 
-_ANSWERS = ("taguchi", "refinement", "check")
+_ANSWERS = (StageKind.TAGUCHI, StageKind.REFINEMENT, StageKind.CHECK)
 
 
 def answer_stage(stages: Sequence[StageResult]) -> StageResult:
@@ -104,7 +104,7 @@ def _points(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float]
     """Every parameter set the Taguchi stages scored on the full cost, with its cost."""
     out = []
     for st in stages:
-        if st.kind != "taguchi":
+        if st.kind != StageKind.TAGUCHI:
             continue
         for rec in st.records:
             costs = rec.measured_costs
@@ -118,7 +118,7 @@ def _points(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float]
 
 def start_sets(stages: Sequence[StageResult]) -> list[tuple[float, dict[str, float], str]]:
     """Return the start points the first Taguchi stage scored: (cost, set, source)."""
-    first = next((s for s in stages if s.kind == "taguchi" and s.records), None)
+    first = next((s for s in stages if s.kind == StageKind.TAGUCHI and s.records), None)
     starts = first.records[0].starts if first is not None else []
     out = [(float(s["cost"]), dict(s["x"]), str(s["source"])) for s in starts if s.get("cost")]
     return sorted((p for p in out if math.isfinite(p[0])), key=lambda p: p[0])

@@ -39,7 +39,7 @@ from tsid_fmu.numerics.tuning import MATCHED as _MATCHED
 from tsid_fmu.search.local.adaptive import answer_stage
 from tsid_fmu.search.local.columns import PARALLEL, parallel_pairs
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.search.structure.optima import settle, short
 from tsid_fmu.search.verdict import (
     GATE_RTOL,
@@ -342,7 +342,7 @@ def refine_in_combinations(
     name = f"refinement in the combinations the data fix: {what}"
     if gate is not None and gate.holds:
         message = f"least squares in the combinations; stationary: {gate.detail}"
-        lower = StageResult(name, "refinement", xb, cost, 0, message, 0, stationarity=gate)
+        lower = StageResult(name, StageKind.REFINEMENT, xb, cost, 0, message, 0, stationarity=gate)
         lower.start_cost = float(answer.cost)
     else:  # the test in the usual coordinates decides
         lower = settle(name, short(study), xb, ev, progress)

@@ -17,7 +17,7 @@ from tsid_fmu.search.local.combined import refine_in_combinations
 from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.search.verdict import POOR_FIT, noise_floor, probe_test
 
 __all__ = ["check", "local_search"]
@@ -56,7 +56,7 @@ def _collapsed(refined: StageResult) -> str | None:
     the arrays cost the generalisation seeds simulations and gained no success, and on
     the SISO rig family it changed no run (``docs/benchmarks/generalisation.md``).
     """
-    if refined.kind == "refinement" and refined.stop is LocalStop.LIMIT:
+    if refined.kind == StageKind.REFINEMENT and refined.stop is LocalStop.LIMIT:
         return "the refinement ran out of simulations before its own tests ended it"
     return None
 
@@ -83,7 +83,7 @@ def local_search(
         # continues one which crawled is merged into it (the count stays the same)
         stages = _in_combinations(ctx, stages, exps, "combinations_first")
         why = _unsettled(stages, floor) or _collapsed(stages[-1])
-    if why and first.kind == "taguchi" and any(r.handover for r in first.records):
+    if why and first.kind == StageKind.TAGUCHI and any(r.handover for r in first.records):
         note(ctx, f"{why}: the Taguchi stage goes on")
         stages[0] = resume(first.records, stages[-1].cost)
         stages[0].resumed = why
@@ -114,7 +114,7 @@ def _handed_over(stages: list[StageResult]) -> dict[str, float]:
     starts where it did, so that it is read back rather than run again from elsewhere.
     """
     first = stages[0]
-    if first.kind == "taguchi":
+    if first.kind == StageKind.TAGUCHI:
         handed = [r for r in first.records if r.handover]
         if handed and handed[0] is not first.records[-1]:
             return {**first.x, **handed[0].best_x}
@@ -222,7 +222,7 @@ def _horizons(ctx: Context, stages: list[StageResult], floor: float, exps: list[
     before = answer_stage(stages)
     study = ctx.study
     names = study.parameter_names
-    arrays = [s for s in stages if s.kind == "taguchi" and math.isfinite(s.cost)]
+    arrays = [s for s in stages if s.kind == StageKind.TAGUCHI and math.isfinite(s.cost)]
     x = dict((min(arrays, key=lambda s: s.cost) if arrays else answer_stage(stages)).x)
     note(ctx, f"{why}: the refinement follows the data's first part to its end")
     samples = sum(len(e.measured) for e in ctx.evaluators.spec(names, exps, {}).experiments)
@@ -257,7 +257,7 @@ def _horizon_stage(
     share = f"{100 * fraction:.3g} %"
     name = f"refinement on the first {share} of the data"
     result = polish(name, ctx.study, start, evaluator, ctx.progress, waypoint=True)
-    result.kind = "horizon"
+    result.kind = StageKind.HORIZON
     result.message = f"cost over the first {share} of each experiment's samples; {result.message}"
     result.start = start
     result.fraction = fraction
@@ -280,7 +280,7 @@ def _restarts(ctx: Context, stages: list[StageResult], floor: float, exps: list[
         if why is None:
             break
         explored = [s.start for s in stages if s.start is not None]
-        explored += [s.x for s in stages if s.kind == "refinement"]
+        explored += [s.x for s in stages if s.kind == StageKind.REFINEMENT]
         found = restart_start(stages, space, explored, starts_first=True)
         if found is None:
             break
@@ -306,7 +306,7 @@ def check(ctx: Context, last: StageResult) -> StageResult:
     test, best, cost = probe_test(evaluator, space, x, last.cost, step)
     result = StageResult(
         name="stationarity check",
-        kind="check",
+        kind=StageKind.CHECK,
         x=best,
         cost=cost,
         nfev=evaluator.nfev - n0,

@@ -28,7 +28,7 @@ from tsid_fmu.search.local.problem import (
 )
 from tsid_fmu.search.outcome import LocalStop, SolverNotes
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.search.taguchi.iteration import ProgressCallback
 from tsid_fmu.search.verdict import (
     GN_TRIED,
@@ -332,7 +332,7 @@ def refine_stage(
         progress("refinement done", {"stage": name, "cost": cost, "nfev": nfev})
     return StageResult(
         name=name,
-        kind="refinement",
+        kind=StageKind.REFINEMENT,
         x={**(fixed or {}), **x},
         cost=cost,
         nfev=nfev,

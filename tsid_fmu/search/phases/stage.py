@@ -29,7 +29,7 @@ from tsid_fmu.search.phases.contribution import (
     oat_values,
     parameter_contribution,
 )
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.study.definition import Study
 from tsid_fmu.study.schema import Parameter, Phase
 
@@ -129,7 +129,7 @@ def plan_phases(study: Study, evaluators: Evaluators) -> StageResult:
     )
     return StageResult(
         name="contribution",
-        kind="contribution",
+        kind=StageKind.CONTRIBUTION,
         x=dict(centre),
         cost=float("nan"),
         nfev=nfev,

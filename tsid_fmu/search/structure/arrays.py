@@ -36,7 +36,7 @@ from tsid_fmu.numerics.tuning import ARRAYS_ALPHA as ALPHA
 from tsid_fmu.numerics.tuning import MAX_ITERATIONS
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.search.taguchi.frame import Frame
 from tsid_fmu.search.taguchi.iteration import Best, ProgressCallback, predict
 from tsid_fmu.search.taguchi.nextlevels import next_frame
@@ -363,7 +363,7 @@ def structure_stage(
     levels = real.level_values(_real_space(run))
     stage = StageResult(
         name="structure",
-        kind="structure",
+        kind=StageKind.STRUCTURE,
         x=dict(best.x) if best else {},
         cost=best.cost if best else math.inf,
         nfev=nfev - run.nfev_before,

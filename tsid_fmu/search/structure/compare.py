@@ -50,7 +50,7 @@ from tsid_fmu.search.local.combined import refine_in_combinations
 from tsid_fmu.search.phases.stage import Evaluators
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.search.structure.arrays import DiscreteFactor, StructureRun, structure_stage
 from tsid_fmu.search.structure.boundary import score_step, significant, tried
 from tsid_fmu.search.structure.candidates import (
@@ -100,7 +100,7 @@ class StructureResult:
         return [c.row() for c in self.candidates]
 
     def summary(self) -> dict[str, Any]:
-        """Return the choice with its reason, as JSON data (``result.extra["structure"]``)."""
+        """Return the choice with its reason, as JSON data (``result.structure``)."""
         if not self.candidates:
             return {}
         pick = self.candidates[self.chosen]
@@ -323,7 +323,7 @@ def _result(
     stages.append(
         StageResult(
             name="structure comparison",
-            kind="comparison",
+            kind=StageKind.COMPARISON,
             x={**pick.x, **pick.values},
             cost=pick.cost,
             nfev=checks,
@@ -346,7 +346,7 @@ def _summary(cand: Candidate, stages: list[StageResult]) -> StageResult:
     """One stage standing for a structure not chosen (its stages lie in its folder)."""
     return StageResult(
         name=f"structure {cand.label}",
-        kind="candidate",
+        kind=StageKind.CANDIDATE,
         x={**cand.x, **cand.values},
         cost=cand.cost,
         nfev=cand.nfev,

@@ -23,7 +23,7 @@ from tsid_fmu.evaluate.timelimit import timed_out
 from tsid_fmu.numerics.tuning import RERUN_AFTER
 from tsid_fmu.search.record import IterationRecord, Rerun, json_float
 from tsid_fmu.search.space import Space
-from tsid_fmu.search.stage import StageResult
+from tsid_fmu.search.stage import StageKind, StageResult
 from tsid_fmu.search.taguchi.frame import Frame
 from tsid_fmu.search.taguchi.iteration import Best, ProgressCallback, run_iteration
 from tsid_fmu.search.taguchi.nextlevels import next_frame
@@ -384,7 +384,7 @@ def _result(
     x = {**run.fixed, **(best.x if best else {})}
     return StageResult(
         name=run.name,
-        kind="taguchi",
+        kind=StageKind.TAGUCHI,
         x=x,
         cost=best.cost if best else float("inf"),
         nfev=nfev - run.nfev_before,
