@@ -14,6 +14,7 @@ from tsid_fmu.evaluate.protocol import Evaluator
 from tsid_fmu.search.context import Context, note, polish, refinement
 from tsid_fmu.search.local.adaptive import AGREE, HORIZONS, answer_stage, restart_start
 from tsid_fmu.search.local.combined import refine_in_combinations
+from tsid_fmu.search.local.restarts import Restarts
 from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.record import IterationRecord
 from tsid_fmu.search.space import Space
@@ -268,27 +269,34 @@ def _horizon_stage(
 def _restarts(ctx: Context, stages: list[StageResult], floor: float, exps: list[str]) -> int:
     """Refine from the start points, then from the next-best runs, while unsettled.
 
-    At most ``max_reruns`` restarts; returns how many ran. An answer still a poor fit
-    after the search is recorded (``poor_fit``): the warnings then say that
-    the search found no better basin.
+    At most ``max_reruns`` restarts (:class:`~tsid_fmu.search.local.restarts.Restarts`);
+    returns how many ran. An answer still a poor fit after the search is recorded
+    (``poor_fit``): the warnings then say that the search found no better basin.
     """
     study = ctx.study
     space = Space(study.first_levels(), study.bounds(), study.method.leveling)
-    k = 0
-    while k < study.method.max_reruns:
+
+    def pick() -> tuple[dict[str, float], tuple[str, str, float]] | None:
         why = _unsettled(stages, floor)
         if why is None:
-            break
+            return None
         explored = [s.start for s in stages if s.start is not None]
         explored += [s.x for s in stages if s.kind == StageKind.REFINEMENT]
         found = restart_start(stages, space, explored, starts_first=True)
         if found is None:
-            break
-        k += 1
-        note(ctx, f"{why}: restart {k} from {found[2]} (cost {found[1]:.6g})")
-        name = f"restart {k} from {found[2]}"
-        stages.append(refinement(ctx, found[0], exps, f"restart_{k:02d}", name))
-    return k
+            return None
+        return found[0], (why, found[2], found[1])
+
+    def refine(start: dict[str, float], k: int, why: tuple[str, str, float]) -> StageResult:
+        reason, origin, cost = why
+        note(ctx, f"{reason}: restart {k} from {origin} (cost {cost:.6g})")
+        stage = refinement(ctx, start, exps, f"restart_{k:02d}", f"restart {k} from {origin}")
+        stages.append(stage)  # where the next pick judges the answer
+        return stage
+
+    loop = Restarts(study.method.max_reruns)
+    loop.loop(pick, refine)
+    return loop.count
 
 
 def check(ctx: Context, last: StageResult) -> StageResult:

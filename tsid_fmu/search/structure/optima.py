@@ -39,6 +39,7 @@ import numpy as np
 from tsid_fmu.numerics.tuning import ACTIVE_STEP, MAX_ROUNDS, PATH_STEPS, WARM_NFEV
 from tsid_fmu.search.context import polish
 from tsid_fmu.search.local.refine import refine_stage
+from tsid_fmu.search.local.restarts import Restarts
 from tsid_fmu.search.outcome import LocalStop
 from tsid_fmu.search.space import Space
 from tsid_fmu.search.stage import StageResult
@@ -187,7 +188,7 @@ def warm_start(
 def settle(
     name: str, study: Study, start: Mapping[str, float], ev: Any, progress: Any = None
 ) -> StageResult:
-    """Refine from ``start``; once more from its answer where its own test found lower.
+    """Refine from ``start``; restart once from its answer where its own test found lower.
 
     A refinement that stops at its tolerances, but whose stationarity test then finds a
     lower point along the Gauss-Newton step (status 1: not shown to be an optimum), is
@@ -203,7 +204,14 @@ def settle(
     if stage.status != 1 or not stopped or test is None or test.holds:
         return stage
     x = {n: float(stage.x[n]) for n in study.parameter_names}
-    again = polish(name, study, x, ev, progress)
+
+    def refine(point: dict[str, float], k: int, why: str) -> StageResult:
+        return polish(name, study, point, ev, progress)
+
+    # one restart, from its own answer (:mod:`~tsid_fmu.search.local.restarts`)
+    again = Restarts(limit=1, tried=[dict(start)]).run(x, refine)
+    if again is None:
+        return stage  # it never moved from its start: a second run would repeat it
     again.nfev += stage.nfev
     again.message = f"refined twice (the first stopped short of its test): {again.message}"
     again.start_cost = stage.start_cost

@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from tsid_fmu.search.context import Context
+from tsid_fmu.search.local.restarts import Restarts
 from tsid_fmu.search.phases.stage import Evaluators
 from tsid_fmu.search.stage import StageResult
 from tsid_fmu.search.structure.arrays import DiscreteFactor
@@ -112,20 +113,29 @@ class Pool:
         return out
 
     def restart(self, i: int, start: dict[str, float], why: str) -> bool:
-        """Refine candidate ``i`` again from ``start``; return whether its answer is lower."""
+        """Refine candidate ``i`` again from ``start``; return whether its answer is lower.
+
+        The candidate's :class:`~tsid_fmu.search.local.restarts.Restarts` shares its
+        ``tried`` starts: one refined from already is not refined from again (the nesting
+        unchanged since). The restart's number counts the kept ones, as the trail names
+        their folders.
+        """
         ctx, cand = self.ctx, self.cands[i]
         names = self.studies[i].parameter_names
-        if start in cand.tried:
-            return False  # refined from there already (the nesting unchanged since)
         ev = self.evs[i].get(names, self.studies[i].identify_names(), {})
-        n_restart = sum(1 for s in self.stages[i] if s.name.startswith("restart")) + 1
+        kept = sum(1 for s in self.stages[i] if s.name.startswith("restart"))
         study = short(self.studies[i])
-        stage = settle(f"restart {n_restart}: {why}", study, start, ev, ctx.progress)
-        cand.tried.append(dict(start))
+
+        def refine(point: dict[str, float], k: int, reason: str) -> StageResult:
+            return settle(f"restart {k}: {reason}", study, point, ev, ctx.progress)
+
+        stage = Restarts(tried=cand.tried, count=kept).run(start, refine, why)
+        if stage is None:
+            return False
         cand.nfev += stage.nfev
         if not stage.cost < cand.cost:
             return False
-        ctx.store.write_stage(f"{cand.folder}/restart_{n_restart:02d}", stage)
+        ctx.store.write_stage(f"{cand.folder}/restart_{kept + 1:02d}", stage)
         self.stages[i].append(stage)
         update(cand, measure_in(ctx.study, self.evs[i], stage.x))
         cand.origin += f"; restarted {why}"
